@@ -1,0 +1,153 @@
+"""The bench clock: procedures ask it for time and waits, never `time` directly.
+
+`RealClock` is the wall clock (a real bench).  `SimClock` is the simulated world's clock: in
+lockstep mode a wait advances the world by exactly that much virtual time (as fast as the CPU
+allows, bit-for-bit reproducible); in real-time mode a thread advances the world at `speed` x
+the wall clock and waits block until the world gets there.  Transport timeouts are wall time and
+never go through this clock.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import Protocol, runtime_checkable
+
+
+@runtime_checkable
+class Clock(Protocol):
+    """What procedures and drivers may ask of time."""
+
+    def now(self) -> float:
+        """Seconds on this clock (virtual seconds on a simulated bench)."""
+        ...
+
+    def sleep(self, dt_s: float) -> None: ...
+
+    def wait_until(self, condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
+        """Poll condition every poll_s (clock time) until true or timeout_s passes; True if met."""
+        ...
+
+
+def _check_dt(dt_s: float) -> float:
+    if not math.isfinite(dt_s) or dt_s < 0:
+        raise ValueError(f"clock wait dt_s={dt_s!r} must be finite and >= 0")
+    return float(dt_s)
+
+
+class _PollingWait:
+    def wait_until(self, condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
+        _check_dt(timeout_s)
+        if poll_s <= 0:
+            raise ValueError(f"poll_s={poll_s!r} must be > 0")
+        deadline = self.now() + timeout_s  # type: ignore[attr-defined]
+        while True:
+            if condition():
+                return True
+            remaining = deadline - self.now()  # type: ignore[attr-defined]
+            if remaining <= 1e-12:
+                return bool(condition())
+            self.sleep(min(poll_s, remaining))  # type: ignore[attr-defined]
+
+
+class RealClock(_PollingWait):
+    """Wall-clock time for a real bench."""
+
+    def __init__(self) -> None:
+        self._t0 = time.monotonic()
+
+    def now(self) -> float:
+        return time.monotonic() - self._t0
+
+    def sleep(self, dt_s: float) -> None:
+        time.sleep(_check_dt(dt_s))
+
+
+class SimClock(_PollingWait):
+    """The World's clock.  speed=math.inf is lockstep (the default); a finite speed runs a thread
+    that advances the world at speed x real time.  The speed can change while running (the GUI's
+    speed control)."""
+
+    def __init__(self, world, *, speed: float = math.inf, tick_s: float = 0.01) -> None:
+        self.world = world
+        self._tick_s = tick_s
+        self._cond = threading.Condition()
+        self._speed = math.inf
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        world.add_listener(self._on_world_advanced)
+        self.set_speed(speed)
+
+    # --- speed -----------------------------------------------------------------------------
+    @property
+    def speed(self) -> float:
+        return self._speed
+
+    @property
+    def lockstep(self) -> bool:
+        return math.isinf(self._speed)
+
+    def set_speed(self, speed: float) -> None:
+        """inf = lockstep (as fast as the CPU allows); a finite value > 0 = x real time."""
+        if not (speed > 0):
+            raise ValueError(f"clock speed={speed!r} must be > 0 (math.inf for lockstep)")
+        with self._cond:
+            self._speed = float(speed)
+            self._cond.notify_all()
+        if not self.lockstep and self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run_realtime, name="sim-clock", daemon=True)
+            self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        with self._cond:
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
+    # --- clock -----------------------------------------------------------------------------
+    def now(self) -> float:
+        return self.world.t_s
+
+    def sleep(self, dt_s: float) -> None:
+        dt_s = _check_dt(dt_s)
+        target = self.world.t_s + dt_s
+        if self.lockstep:
+            self.world.advance(dt_s)
+            return
+        half_sample = 0.5 * self.world.sample_period_s
+        with self._cond:
+            while self.world.t_s < target - half_sample and not self._stop.is_set():
+                if self.lockstep:  # speed switched to lockstep while waiting
+                    break
+                self._cond.wait(timeout=0.05)
+        if self.lockstep and self.world.t_s < target:
+            self.world.advance(max(0.0, target - self.world.t_s))
+
+    # --- real-time thread --------------------------------------------------------------------
+    def _on_world_advanced(self, _world) -> None:
+        with self._cond:
+            self._cond.notify_all()
+
+    def _run_realtime(self) -> None:
+        last = time.monotonic()
+        owed_s = 0.0
+        while not self._stop.is_set():
+            time.sleep(self._tick_s)
+            now = time.monotonic()
+            wall = now - last
+            last = now
+            if self.lockstep:
+                owed_s = 0.0
+                continue
+            owed_s += wall * self._speed
+            # cap the debt so a stall (a breakpoint, a slow CPU) does not cause a burst
+            owed_s = min(owed_s, max(1.0, 0.5 * self._speed))
+            step = math.floor(owed_s / self.world.sample_period_s) * self.world.sample_period_s
+            if step > 0:
+                self.world.advance(step)
+                owed_s -= step

@@ -1,0 +1,1 @@
+"""Calibration procedures, one module a procedure."""

@@ -1,0 +1,1 @@
+"""Resonator physics: parameters, the averaged slow-variable model, a carrier-level integrator."""

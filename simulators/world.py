@@ -1,0 +1,189 @@
+"""The simulated world: one resonator shared by every simulated device, advanced in virtual time.
+
+Devices attach to the World and take part in every block of the advance:
+  * `max_block_samples(world)` (optional): the largest block the device tolerates now (a table
+    that is accelerating asks for one-sample blocks; loops ask for their control period);
+  * `before_block(world, t_s, n, dt_s)`: set the inputs held over the block (case rate and
+    ripple, forcing per source, reference frequency);
+  * `after_block(world, block)`: consume the samples (the FPGA demodulates and streams them).
+All of it runs under `world.lock`, so device servers in other threads read a consistent state.
+Time is quantised to the sample grid: `t_s = sample_index * sample_period_s` exactly.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from .physics.averaged import Resonator
+from .physics.params import ResonatorParams
+
+
+@dataclass(frozen=True)
+class SampleBlock:
+    """The samples of one block: index and time of each sample end, true and measured states,
+    case rate and case angle."""
+
+    index: np.ndarray  # (n,) int64, sample number since the world started
+    t_s: np.ndarray  # (n,)
+    q_true: np.ndarray  # (n, 4) cx, sx, cy, sy without noise
+    q_meas: np.ndarray  # (n, 4) with the pickoff noise
+    rate_dps: np.ndarray  # (n,) case rate (with ripple)
+    angle_deg: np.ndarray  # (n,) case angle
+
+
+class WorldDevice(Protocol):
+    """What a simulated device implements to take part in the world's advance."""
+
+    def before_block(self, world: World, t_s: float, n: int, dt_s: float) -> None: ...
+
+    def after_block(self, world: World, block: SampleBlock) -> None: ...
+
+
+class World:
+    """Owns the resonator and the simulated devices; `advance(dt)` moves virtual time."""
+
+    def __init__(
+        self,
+        params: ResonatorParams | Resonator,
+        *,
+        seed: int = 0,
+        sample_period_s: float = 1e-3,
+        max_block_s: float = 0.1,
+    ) -> None:
+        if not (math.isfinite(sample_period_s) and sample_period_s > 0):
+            raise ValueError(f"sample_period_s={sample_period_s!r} must be > 0")
+        self.resonator = params if isinstance(params, Resonator) else Resonator(params, seed=seed)
+        self.params = self.resonator.params
+        self.seed = seed
+        self.sample_period_s = float(sample_period_s)
+        self.max_block_samples = max(1, int(round(max_block_s / sample_period_s)))
+        self.lock = threading.RLock()
+        self.sample_index = 0
+        self._pending_s = 0.0  # sub-sample remainder of requested advances
+        self.devices: list[Any] = []
+        # inputs held over a block, set by devices in before_block
+        self.case_rate_dps = 0.0
+        self.case_angle_deg = 0.0
+        self.ripple_angle_rad: np.ndarray | None = None
+        self.ref_freq_hz = self.params.f0_hz
+        self._forces: dict[str, np.ndarray] = {}
+        self.last_block: SampleBlock | None = None
+        self._listeners: list[Any] = []
+
+    # --- time ------------------------------------------------------------------------------
+    @property
+    def t_s(self) -> float:
+        return self.sample_index * self.sample_period_s
+
+    def attach(self, device: Any) -> None:
+        with self.lock:
+            self.devices.append(device)
+
+    def detach(self, device: Any) -> None:
+        with self.lock:
+            if device in self.devices:
+                self.devices.remove(device)
+
+    def add_listener(self, callback: Any) -> None:
+        """callback(world) after every block: clocks waiting in real-time mode use it."""
+        self._listeners.append(callback)
+
+    # --- inputs ----------------------------------------------------------------------------
+    def set_force(self, source: str, force: np.ndarray | None) -> None:
+        """Forcing u (model units, 1/s x amplitude) applied by one source; None removes it."""
+        with self.lock:
+            if force is None:
+                self._forces.pop(source, None)
+            else:
+                self._forces[source] = np.asarray(force, dtype=float).reshape(4)
+
+    @property
+    def total_force(self) -> np.ndarray:
+        total = np.zeros(4)
+        for f in self._forces.values():
+            total = total + f
+        return total
+
+    # --- advance ---------------------------------------------------------------------------
+    def advance(self, dt_s: float) -> int:
+        """Advance by dt_s of virtual time (rounded to whole samples, remainder carried over).
+        Returns the number of samples produced."""
+        if not math.isfinite(dt_s) or dt_s < 0:
+            raise ValueError(f"advance dt_s={dt_s!r} must be finite and >= 0")
+        with self.lock:
+            self._pending_s += dt_s
+            n_total = int(math.floor(self._pending_s / self.sample_period_s + 1e-9))
+            self._pending_s = max(0.0, self._pending_s - n_total * self.sample_period_s)
+            done = 0
+            while done < n_total:
+                n = min(n_total - done, self._block_limit())
+                self._run_block(n)
+                done += n
+            return n_total
+
+    def advance_samples(self, n_samples: int) -> None:
+        self.advance(n_samples * self.sample_period_s)
+
+    def _block_limit(self) -> int:
+        limit = self.max_block_samples
+        for dev in self.devices:
+            fn = getattr(dev, "max_block_samples", None)
+            if fn is not None:
+                m = fn(self)
+                if m is not None:
+                    limit = min(limit, max(1, int(m)))
+        return limit
+
+    def _run_block(self, n: int) -> None:
+        dt = self.sample_period_s
+        t0 = self.t_s
+        self.ripple_angle_rad = None
+        for dev in self.devices:
+            dev.before_block(self, t0, n, dt)
+        rate = self.case_rate_dps
+        q_true = self.resonator.step_block(
+            n,
+            dt,
+            rate_rad_s=math.radians(rate),
+            force=self.total_force,
+            ref_freq_hz=self.ref_freq_hz,
+            ripple_angle_rad=self.ripple_angle_rad,
+        )
+        index = self.sample_index + np.arange(1, n + 1, dtype=np.int64)
+        t = index * dt
+        angle0 = self.case_angle_deg
+        angle = angle0 + rate * (t - t0)
+        rate_arr = np.full(n, rate)
+        if self.ripple_angle_rad is not None:
+            ripple_deg = np.degrees(self.ripple_angle_rad)
+            angle = angle + ripple_deg
+            rate_arr = rate_arr + np.gradient(ripple_deg, dt) if n > 1 else rate_arr
+        block = SampleBlock(
+            index=index,
+            t_s=t,
+            q_true=q_true,
+            q_meas=self.resonator.measure(q_true),
+            rate_dps=rate_arr,
+            angle_deg=angle,
+        )
+        self.sample_index += n
+        self.case_angle_deg = angle0 + rate * n * dt
+        self.last_block = block
+        for dev in self.devices:
+            dev.after_block(self, block)
+        for cb in self._listeners:
+            cb(self)
+
+    # --- truth -----------------------------------------------------------------------------
+    def truth(self) -> dict[str, float]:
+        """Ground truth for reports and tests; never travels over a device protocol."""
+        return self.params.truth()
+
+    def state(self) -> np.ndarray:
+        with self.lock:
+            return self.resonator.state
