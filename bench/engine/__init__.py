@@ -1,0 +1,2 @@
+"""The procedure engine: events, typed parameters, procedures as named steps, the runner and
+the safe state."""
