@@ -60,7 +60,8 @@ def run_decay_demo(*, seed: int = 0, rate_dps: float = 500.0, duration_s: float 
         "tau_true_s": params.tau_s,
     }
     print(f"Simulated HRG free decay: {duration_s:.0f} s at {rate_dps:g} deg/s, 1 kHz, seed {seed}")
-    print(f"  E: {summary['E_start']:.4f} -> {summary['E_end']:.4f} (exp(-2T/tau) = {math.exp(-2 * duration_s / params.tau_s):.4f})")
+    expected = math.exp(-2 * duration_s / params.tau_s)
+    print(f"  E: {summary['E_start']:.4f} -> {summary['E_end']:.4f} (exp(-2T/tau) = {expected:.4f})")
     print(f"  theta at end: {summary['theta_end_deg']:.2f} deg  (wave lags the case at -K Omega)")
     print(f"  tau: fitted {tau_fit:.2f} s, true {params.tau_s:.2f} s")
     return summary

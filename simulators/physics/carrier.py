@@ -75,7 +75,9 @@ def integrate_carrier(
     return sol.t, sol.y[0], sol.y[2]
 
 
-def iq_demodulate(t_s: np.ndarray, signal: np.ndarray, ref_freq_hz: float, fs_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def iq_demodulate(
+    t_s: np.ndarray, signal: np.ndarray, ref_freq_hz: float, fs_hz: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Software I/Q demodulator: mix with 2 cos wt and 2 sin wt and average over exactly one
     reference period (a boxcar whose nulls fall on the 2w image).  Returns (t_center, c, s),
     c and s the envelopes of signal = c cos wt + s sin wt at the window centres."""
