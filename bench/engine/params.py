@@ -1,0 +1,130 @@
+"""Typed procedure parameters with units, defaults and limits, validated before any device moves.
+
+A parameter is declared once, at class level, where it is documented:
+
+    rate_dps = Param(100.0, unit="deg/s", low=-500.0, high=500.0, doc="table rate")
+
+Reading `self.rate_dps` on a procedure instance gives the validated value for this run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+
+class ParamError(ValueError):
+    """A procedure parameter is unknown, of the wrong type or outside its limits.  The message
+    names the parameter, the value and the limit."""
+
+    def __init__(self, name: str, value: Any, limit: str) -> None:
+        self.name, self.value, self.limit = name, value, limit
+        super().__init__(f"parameter {name}={value!r} is outside the limit {limit}")
+
+
+_MISSING = object()
+
+
+@dataclass
+class Param:
+    """A typed parameter: default, unit, inclusive limits [low, high], optional choices."""
+
+    default: Any
+    unit: str = ""
+    low: float | None = None
+    high: float | None = None
+    doc: str = ""
+    choices: tuple[Any, ...] | None = None
+    type: type | None = None
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if self.type is None:
+            self.type = type(self.default)
+        if self.type is int and isinstance(self.default, bool):
+            self.type = bool
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: Any, objtype: type | None = None) -> Any:
+        if obj is None:
+            return self
+        return obj.params.get(self.name, self.default)
+
+    def limit_text(self) -> str:
+        """The allowed range as text, for errors and `gyrobench list`."""
+        if self.choices is not None:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        u = f" {self.unit}" if self.unit else ""
+        lo = "-inf" if self.low is None else f"{self.low:g}"
+        hi = "inf" if self.high is None else f"{self.high:g}"
+        if self.type in (int, float):
+            return f"[{lo}, {hi}]{u}"
+        return f"a {self.type.__name__}"
+
+    def convert(self, value: Any) -> Any:
+        """Parse (a string from `--set name=value`) and check a value; ParamError if bad."""
+        typ = self.type
+        try:
+            if isinstance(value, str) and typ is not str:
+                if typ is bool:
+                    low = value.strip().lower()
+                    if low not in ("1", "0", "true", "false", "yes", "no", "on", "off"):
+                        raise ValueError(value)
+                    value = low in ("1", "true", "yes", "on")
+                elif typ is int:
+                    value = int(value, 0)
+                else:
+                    value = typ(value)
+            elif typ is float and isinstance(value, (int, float)) and not isinstance(value, bool):
+                value = float(value)
+            elif typ is int and isinstance(value, float) and value.is_integer():
+                value = int(value)
+            if not isinstance(value, typ):
+                raise TypeError(value)
+        except (TypeError, ValueError):
+            raise ParamError(self.name, value, self.limit_text()) from None
+        if self.choices is not None and value not in self.choices:
+            raise ParamError(self.name, value, self.limit_text())
+        if typ in (int, float):
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ParamError(self.name, value, self.limit_text())
+            if (self.low is not None and value < self.low) or (self.high is not None and value > self.high):
+                raise ParamError(self.name, value, self.limit_text())
+        return value
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "default": self.default,
+            "unit": self.unit,
+            "low": self.low,
+            "high": self.high,
+            "choices": list(self.choices) if self.choices is not None else None,
+            "doc": self.doc,
+        }
+
+
+def declared_params(cls: type) -> dict[str, Param]:
+    """Every Param of a procedure class (base classes first), by name."""
+    out: dict[str, Param] = {}
+    for klass in reversed(cls.__mro__):
+        for name, value in vars(klass).items():
+            if isinstance(value, Param):
+                out[name] = value
+    return out
+
+
+def resolve_params(cls: type, given: dict[str, Any] | None) -> dict[str, Any]:
+    """Defaults overlaid with `given`, each converted and checked; ParamError on the first bad one."""
+    decl = declared_params(cls)
+    given = dict(given or {})
+    unknown = sorted(set(given) - set(decl))
+    if unknown:
+        raise ParamError(unknown[0], given[unknown[0]], "a declared parameter: " + ", ".join(sorted(decl)))
+    values: dict[str, Any] = {}
+    for name, p in decl.items():
+        values[name] = p.convert(given[name]) if name in given else p.convert(p.default)
+    return values

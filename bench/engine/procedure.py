@@ -1,0 +1,121 @@
+"""Procedures: classes with typed parameters and named steps; the engine runs them.
+
+A procedure declares its parameters (`Param`: default, unit, limits; checked before any device
+moves) and its steps (methods marked `@step`, run in the order they are written).  Each step
+gets a `RunContext` (`bench.engine.context`): the station's devices, the bench clock, the
+recorder, a logger and `measure(...)`.  The engine (`bench.engine.runner.Runner`), not the
+procedure, owns pause, resume, abort and the safe state: every wait on `ctx.clock` (and every
+driver wait, since drivers share that clock) is a checkpoint where a pause holds and an abort
+raises `RunAborted`.  Do not catch `RunAborted`; clean-up is the engine's job.
+
+Example (procedures/examples/table_spin.py is the full file):
+
+    from bench.engine import Param, Procedure, step
+
+    class TableSpin(Procedure):
+        '''Spin the table and check the rate it reports.'''
+
+        name = "table-spin"
+        rate_dps = Param(100.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate")
+        hold_s = Param(2.0, unit="s", low=0.1, high=600.0, doc="time at rate")
+
+        @step("Spin up")
+        def spin_up(self, ctx):
+            ctx.devices.table.enable()
+            ctx.devices.table.set_rate(self.rate_dps)
+            ctx.devices.table.wait_at_rate(tolerance_dps=0.1, stable_for_s=0.2, timeout_s=60.0)
+
+        @step("Hold")
+        def hold(self, ctx):
+            ctx.sleep(self.hold_s)
+            rate = ctx.devices.table.status().rate_dps
+            ctx.measure("table_rate_dps", rate, "deg/s", limits=(self.rate_dps - 0.5, self.rate_dps + 0.5))
+
+An optional analysis hook `analysis(self, data) -> list[Result]` works on recorded data (a
+`bench.recorder.RunData`, the same during a run via `ctx.data()` and afterwards from the HDF5
+file), so `gyrobench analyze RUN` re-fits a recorded run with the same code.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from typing import Any, ClassVar
+
+from .measurement import Result
+from .params import Param, declared_params, resolve_params
+
+_STEP_ATTR = "_gyrobench_step_title"
+
+
+def step(title: str | Callable | None = None):
+    """Mark a method `def name(self, ctx)` as a step; `@step` or `@step("Title")`."""
+    if callable(title):
+        setattr(title, _STEP_ATTR, title.__name__.replace("_", " ").capitalize())
+        return title
+
+    def mark(fn: Callable) -> Callable:
+        setattr(fn, _STEP_ATTR, title or fn.__name__.replace("_", " ").capitalize())
+        return fn
+
+    return mark
+
+
+def _kebab(name: str) -> str:
+    return re.sub(r"(?<!^)(?=[A-Z])", "-", name).lower()
+
+
+class Procedure:
+    """Base class of every procedure.  Subclasses set `name`, declare `Param`s and `@step`s."""
+
+    name: ClassVar[str] = ""
+    #: device roles the procedure needs on its station ("table", "frontend", "fpga")
+    requires: ClassVar[tuple[str, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if not cls.__dict__.get("name"):
+            cls.name = _kebab(cls.__name__)
+
+    def __init__(self, params: dict[str, Any] | None = None) -> None:
+        self.params: dict[str, Any] = resolve_params(type(self), params)
+
+    # --- introspection -------------------------------------------------------------------
+    @classmethod
+    def param_specs(cls) -> dict[str, Param]:
+        return declared_params(cls)
+
+    @classmethod
+    def step_specs(cls) -> list[tuple[str, str]]:
+        """(method name, title) of every step, base classes first, in the order written."""
+        out: dict[str, str] = {}
+        for klass in reversed(cls.__mro__):
+            for attr, value in vars(klass).items():
+                title = getattr(value, _STEP_ATTR, None)
+                if title is not None:
+                    out[attr] = title
+        return list(out.items())
+
+    @classmethod
+    def title(cls) -> str:
+        doc = (cls.__doc__ or "").strip()
+        return doc.splitlines()[0] if doc else cls.name
+
+    @classmethod
+    def describe(cls) -> dict[str, Any]:
+        return {
+            "name": cls.name,
+            "title": cls.title(),
+            "requires": list(cls.requires),
+            "steps": [s for s, _ in cls.step_specs()],
+            "params": [p.describe() for p in cls.param_specs().values()],
+        }
+
+    # --- analysis hook ---------------------------------------------------------------------
+    def analysis(self, data: Any) -> list[Result]:
+        """Estimate the measurements from recorded data; override to support `analyze`."""
+        raise NotImplementedError(f"procedure {self.name!r} has no analysis hook")
+
+    @classmethod
+    def has_analysis(cls) -> bool:
+        return cls.analysis is not Procedure.analysis

@@ -1,0 +1,307 @@
+"""The run engine: validates parameters, runs the steps, owns pause / resume / abort, brings the
+station to its safe state whatever happened, and records why the run ended.
+
+    runner = Runner(station, runs_dir="runs", store=store)
+    record = runner.run(TableSpin, {"rate_dps": 200.0})
+    record.outcome, record.end_reason, record.safe_state, record.as_json()
+
+`abort(reason)`, `pause()`, `resume()` may be called from any thread (a GUI, a signal handler);
+they take effect at the next checkpoint (any bench-clock wait, `ctx.progress`, a step boundary).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import functools
+import subprocess
+import threading
+import time
+import traceback
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from drivers.errors import LinkLostError, SafetyTripError
+
+from . import events as ev
+from .context import GuardedClock, RunAborted, RunContext
+from .measurement import ABORTED, COMPLETE, ERROR, Result, combine_outcomes
+from .procedure import Procedure
+from .safety import SafeStateReport
+
+
+@functools.cache
+def software_version() -> str:
+    """Package version, plus the git commit when running from a checkout."""
+    from bench import __version__
+
+    try:
+        rev = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+        if rev.returncode == 0 and rev.stdout.strip():
+            return f"{__version__}+g{rev.stdout.strip()}"
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return __version__
+
+
+def new_run_id() -> str:
+    return _dt.datetime.now().strftime("%Y%m%d-%H%M%S-") + uuid.uuid4().hex[:6]
+
+
+@dataclass
+class RunRecord:
+    """Everything the results store, the CLI's --json and the report need about a run."""
+
+    run_id: str
+    procedure: str
+    params: dict[str, Any]
+    station_id: str
+    simulated: bool
+    outcome: str = COMPLETE
+    end_reason: str = ""
+    safe_state: bool = False
+    safe_detail: dict[str, Any] = field(default_factory=dict)
+    measurements: list[Result] = field(default_factory=list)
+    truth: dict[str, float] | None = None
+    simulated_s: float = 0.0
+    wall_s: float = 0.0
+    raw_file: str | None = None
+    started_at: str = ""
+    finished_at: str = ""
+    software_version: str = ""
+    operator: str = ""
+    duts: list[str] = field(default_factory=list)
+    seed: int | None = None
+    failed_step: str | None = None
+    traceback: str | None = None
+
+    def as_json(self) -> dict[str, Any]:
+        """The shape of `gyrobench run --json`."""
+        meas: dict[str, Any] = {}
+        for r in self.measurements:
+            key = r.name if r.dut is None else f"{r.dut}:{r.name}"
+            meas[key] = r.as_json()
+        return {
+            "run_id": self.run_id,
+            "procedure": self.procedure,
+            "outcome": self.outcome,
+            "measurements": meas,
+            "truth": None if self.truth is None else {k: float(v) for k, v in self.truth.items()},
+            "simulated_s": float(self.simulated_s),
+            "wall_s": float(self.wall_s),
+            "safe_state": bool(self.safe_state),
+            "end_reason": self.end_reason,
+            "raw_file": self.raw_file,
+        }
+
+
+class Runner:
+    """Runs procedures on one station.  One run at a time."""
+
+    def __init__(
+        self,
+        station: Any,
+        *,
+        bus: ev.EventBus | None = None,
+        runs_dir: str | Path | None = None,
+        store: Any = None,
+        operator: str = "",
+        duts: list[str] | tuple[str, ...] = (),
+    ) -> None:
+        self.station = station
+        self.bus = bus or ev.EventBus()
+        self.runs_dir = None if runs_dir is None else Path(runs_dir)
+        self.store = store
+        self.operator = operator
+        self.duts = list(duts)
+        self._abort_reason: str | None = None
+        self._running = threading.Event()
+        self._running.set()
+        self._in_run = False
+        self.record: RunRecord | None = None
+
+    # --- control, from any thread ------------------------------------------------------------
+    def abort(self, reason: str = "abort requested") -> None:
+        if self._abort_reason is None:
+            self._abort_reason = reason
+        self._running.set()
+
+    def pause(self) -> None:
+        self._running.clear()
+
+    def resume(self) -> None:
+        self._running.set()
+
+    @property
+    def paused(self) -> bool:
+        return not self._running.is_set()
+
+    def checkpoint(self) -> None:
+        """Raise RunAborted after an abort, hold while paused, raise a lost link the station saw."""
+        while True:
+            if self._abort_reason is not None:
+                raise RunAborted(self._abort_reason)
+            if self._running.wait(0.05):
+                break
+        if self._abort_reason is not None:
+            raise RunAborted(self._abort_reason)
+        check = getattr(self.station, "check_links", None)
+        if check is not None:
+            check()
+
+    # --- the run -----------------------------------------------------------------------------
+    def run(self, procedure: type[Procedure] | Procedure, params: dict[str, Any] | None = None) -> RunRecord:
+        """Run a procedure; ParamError (before anything moves) if a parameter is bad."""
+        proc = procedure if isinstance(procedure, Procedure) else procedure(params)
+        if self._in_run:
+            raise RuntimeError("this runner is already running a procedure")
+        self._in_run = True
+        try:
+            return self._run(proc)
+        finally:
+            self._in_run = False
+
+    def _run(self, proc: Procedure) -> RunRecord:
+        self._abort_reason = None
+        self._running.set()
+        st = self.station
+        clock: GuardedClock = st.clock
+        run_id = new_run_id()
+        rec = RunRecord(
+            run_id=run_id,
+            procedure=proc.name,
+            params=dict(proc.params),
+            station_id=st.id,
+            simulated=bool(st.simulated),
+            started_at=_dt.datetime.now(_dt.UTC).isoformat(),
+            software_version=software_version(),
+            operator=self.operator,
+            duts=list(self.duts),
+            seed=getattr(st, "seed", None),
+            truth=st.truth() if st.simulated else None,
+        )
+        self.record = rec
+        steps = proc.step_specs()
+        t0_sim, t0_wall = clock.now(), time.monotonic()
+
+        recorder = None
+        unsubscribe_rec = None
+        if self.runs_dir is not None:
+            from bench.recorder import Recorder
+
+            recorder = Recorder.for_run(self.runs_dir, rec, station=st.describe())
+            rec.raw_file = str(recorder.path)
+            unsubscribe_rec = self.bus.subscribe(recorder.on_event)
+        ctx = RunContext(
+            run_id=run_id,
+            params=proc.params,
+            devices=st.devices,
+            clock=clock,
+            bus=self.bus,
+            recorder=recorder,
+            checkpoint=self.checkpoint,
+            station=st,
+        )
+        ctx.publish(
+            ev.RunStarted,
+            procedure=proc.name,
+            params=dict(proc.params),
+            station=st.id,
+            simulated=bool(st.simulated),
+            steps=tuple(s for s, _ in steps),
+        )
+        stop_streams = None
+        outcome: str | None = None
+        current = ""
+        try:
+            clock.guard = self.checkpoint
+            stop_streams = st.start_streams(ctx) if hasattr(st, "start_streams") else None
+            for index, (name, title) in enumerate(steps):
+                current = name
+                self.checkpoint()
+                ctx.publish(ev.StepStarted, name=name, index=index, total=len(steps), title=title)
+                getattr(proc, name)(ctx)
+                ctx.publish(ev.StepFinished, name=name, index=index, status="done")
+            rec.end_reason = "completed"
+        except RunAborted as exc:
+            outcome, rec.end_reason = ABORTED, f"aborted: {exc.reason}"
+            self._step_failed(ctx, steps, current, "aborted")
+        except KeyboardInterrupt:
+            outcome, rec.end_reason = ABORTED, "aborted: SIGINT"
+            self._step_failed(ctx, steps, current, "aborted")
+        except LinkLostError as exc:
+            outcome, rec.end_reason = ERROR, f"link lost: {exc}"
+            self._step_failed(ctx, steps, current, "error")
+        except SafetyTripError as exc:
+            outcome, rec.end_reason = ERROR, f"safety trip: {exc}"
+            self._step_failed(ctx, steps, current, "error")
+        except Exception as exc:  # noqa: BLE001 - any failure must still reach the safe state
+            outcome, rec.end_reason = ERROR, f"{type(exc).__name__} in step {current!r}: {exc}"
+            rec.traceback = traceback.format_exc()
+            self._step_failed(ctx, steps, current, "error")
+        finally:
+            clock.guard = None
+            if outcome is not None:
+                rec.failed_step = current
+            report = self._safe_state(ctx)
+            if stop_streams is not None:
+                try:
+                    stop_streams()
+                except Exception as exc:  # noqa: BLE001
+                    ctx.log.warning(f"stopping the streams failed: {exc}")
+            rec.safe_state = report.confirmed
+            rec.safe_detail = {"devices": report.devices, "errors": report.errors, "order": report.order}
+            rec.measurements = list(ctx.results)
+            if outcome is None:
+                outcome = combine_outcomes(r.outcome for r in rec.measurements)
+                if not report.confirmed:
+                    outcome = ERROR
+                    rec.end_reason = "completed, but the safe state was not confirmed"
+            rec.outcome = outcome
+            rec.simulated_s = clock.now() - t0_sim
+            rec.wall_s = time.monotonic() - t0_wall
+            rec.finished_at = _dt.datetime.now(_dt.UTC).isoformat()
+            ctx.publish(
+                ev.RunFinished,
+                outcome=rec.outcome,
+                end_reason=rec.end_reason,
+                safe_state=rec.safe_state,
+                raw_file=rec.raw_file,
+            )
+            if recorder is not None:
+                if unsubscribe_rec is not None:
+                    unsubscribe_rec()
+                recorder.close(rec)
+            ctx.close()
+            if self.store is not None:
+                try:
+                    self.store.save_run(rec)
+                except Exception as exc:  # noqa: BLE001 - the raw file is still there
+                    rec.end_reason += f" (results store failed: {exc})"
+        return rec
+
+    def _step_failed(self, ctx: RunContext, steps: list, current: str, status: str) -> None:
+        names = [s for s, _ in steps]
+        idx = names.index(current) if current in names else -1
+        ctx.publish(ev.StepFinished, name=current, index=idx, status=status)
+
+    def _safe_state(self, ctx: RunContext) -> SafeStateReport:
+        try:
+            report = self.station.safe_state()
+        except Exception as exc:  # noqa: BLE001
+            report = SafeStateReport(confirmed=False, errors={"station": f"{type(exc).__name__}: {exc}"})
+        level = "INFO" if report.confirmed else "ERROR"
+        ctx.publish(
+            ev.Log,
+            level=level,
+            message=f"safe state {'confirmed' if report.confirmed else 'NOT confirmed'}: {report.devices}"
+            + (f" errors {report.errors}" if report.errors else ""),
+        )
+        return report
