@@ -1,0 +1,141 @@
+"""`gyrobench gui`: build the backend for a station, open the window, or run a procedure
+headless and save a screenshot of the window at a chosen simulated second."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from pathlib import Path
+
+from .backend import GuiBackend
+
+SIM_WORLD = "sim-world"
+
+
+def make_backend(station: str | None, *, seed: int = 0) -> GuiBackend:
+    """The engine on a station (name or file); `sim-world` (or none, before an engine station
+    exists) is the in-process HRG world source."""
+    if station in (None, SIM_WORLD):
+        try:
+            from .engine_backend import EngineBackend, default_station
+        except ImportError:
+            EngineBackend = None  # noqa: N806 - the engine is not there yet
+        if station is None and EngineBackend is not None:
+            return EngineBackend(default_station(), seed=seed)
+        from .sim_backend import SimWorldBackend
+
+        return SimWorldBackend(seed=seed)
+    from .engine_backend import EngineBackend
+
+    return EngineBackend(station, seed=seed)
+
+
+def _app():
+    from PySide6.QtWidgets import QApplication
+
+    app = QApplication.instance()
+    return app if app is not None else QApplication(["gyrobench"])
+
+
+def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | None = None,
+                    params: dict | None = None, timeout_s: float = 600.0) -> Path:
+    """Run `procedure` on the window's backend; when an event reaches simulated second `at_s`
+    (or the run ends), hold the engine there, draw everything received, save the window as a
+    PNG, then abort the run and wait for its safe state.  Returns the PNG's path."""
+    from PySide6.QtWidgets import QApplication
+
+    from bench.engine.events import RunFinished
+
+    path = Path(path)
+    reached = threading.Event()
+    release = threading.Event()
+
+    def gate(event) -> None:  # engine thread: holds the run at the chosen second
+        if at_s is not None and not reached.is_set() and event.t_sim_s >= at_s and not isinstance(event, RunFinished):
+            reached.set()
+            release.wait(timeout_s)
+
+    backend = window.backend
+    window.bridge.set_gate(gate)
+    window.show()
+    if params:
+        for k, v in params.items():
+            window.form.set_value(k, v)
+    idx = window.procedure.findText(procedure)
+    if idx < 0:
+        names = [window.procedure.itemText(i) for i in range(window.procedure.count())]
+        raise ValueError(f"procedure {procedure!r} is not one of {names}")
+    window.procedure.setCurrentIndex(idx)
+    if not window.form.is_valid():
+        raise ValueError(f"invalid parameters for {procedure}: {window.form.errors}")
+    window.start()
+    if not window.run_active:
+        raise RuntimeError(f"{procedure} did not start (see the log)")
+    deadline = time.monotonic() + timeout_s
+    try:
+        while time.monotonic() < deadline and not reached.is_set() and window.run_active:
+            QApplication.processEvents()
+            time.sleep(0.002)
+        window.bridge.drain()
+        QApplication.processEvents()
+        window.plots.refresh(force=True)
+        QApplication.processEvents()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if not window.grab().save(str(path), "PNG"):
+            raise OSError(f"could not write the screenshot {path}")
+    finally:
+        window.bridge.set_gate(None)
+        if window.run_active:
+            backend.abort()
+        release.set()
+        while window.run_active and time.monotonic() < deadline:
+            QApplication.processEvents()
+            time.sleep(0.005)
+    return path
+
+
+def run_gui(station: str | None = None, *, run: str | None = None, screenshot: str | None = None,
+            at_s: float | None = None, seed: int = 0, speed: float | None = None) -> int:
+    """Open the window (blocking until it closes), or with `screenshot`, run headless and exit."""
+    app = _app()
+    from .main_window import MainWindow
+
+    backend = make_backend(station, seed=seed)
+    window = MainWindow(backend)
+    code = 0
+    try:
+        if speed is not None and backend.simulated:
+            window.station.set_speed(speed)
+        elif backend.simulated and screenshot is None:
+            window.station.set_speed(1.0)  # an interactive demo starts in real time
+        if screenshot is not None:
+            if run is None:
+                window.show()
+                app.processEvents()
+                window.plots.refresh(force=True)
+                window.grab().save(str(screenshot), "PNG")
+            else:
+                out = take_screenshot(window, run, screenshot, at_s=at_s)
+                fin = window.last_finished
+                print(f"screenshot {out} at t = {window.t_sim_s:.1f} s"
+                      + (f"; run {fin.outcome}, safe state {'confirmed' if fin.safe_state else 'NOT confirmed'}"
+                         if fin else ""))
+        else:
+            if run is not None:
+                idx = window.procedure.findText(run)
+                if idx >= 0:
+                    window.procedure.setCurrentIndex(idx)
+            window.show()
+            code = int(app.exec())
+    finally:
+        backend.close()
+        window.close()
+        window.deleteLater()
+        app.processEvents()
+    return code
+
+
+def parse_speed(text: str) -> float:
+    """'1', '10', '100' or 'max' -> x real time (inf for max)."""
+    return math.inf if text.lower() in ("max", "inf") else float(text)

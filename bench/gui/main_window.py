@@ -1,0 +1,242 @@
+"""The lab engineer's main window: station, procedure and parameters, Start/Pause/Abort, steps,
+live plots, log and results, all fed by the engine's events through the bridge."""
+
+from __future__ import annotations
+
+from PySide6.QtCore import Qt, QUrl
+from PySide6.QtGui import QAction, QDesktopServices
+from PySide6.QtWidgets import (
+    QComboBox,
+    QFileDialog,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QMainWindow,
+    QMessageBox,
+    QPushButton,
+    QSplitter,
+    QTabWidget,
+    QVBoxLayout,
+    QWidget,
+)
+
+from bench.engine import events as ev
+
+from .backend import GuiBackend
+from .bridge import EventBridge
+from .panels import LogPane, ResultsTable, StationPanel, StepList
+from .param_form import ParameterForm
+from .plots import LivePlots
+
+
+class MainWindow(QMainWindow):
+    """One station, one run at a time; everything the engine says arrives as events."""
+
+    def __init__(self, backend: GuiBackend, parent: QWidget | None = None, *, refresh_hz: float = 25.0) -> None:
+        super().__init__(parent)
+        self.backend = backend
+        self.setWindowTitle(f"gyrobench - {backend.station_name}")
+        self.resize(1400, 900)
+        self.run_active = False
+        self.paused = False
+        self.last_finished: ev.RunFinished | None = None
+        self.t_sim_s = 0.0
+
+        self.station = StationPanel(backend.station_name, backend.simulated)
+        self.station.speed_changed.connect(self._on_speed)
+        self.procedure = QComboBox()
+        self.procedure.setObjectName("procedure")
+        self.procedure.addItems(list(backend.procedures()))
+        self.form = ParameterForm()
+        self.start_button = QPushButton("Start")
+        self.pause_button = QPushButton("Pause")
+        self.abort_button = QPushButton("Abort")
+        self.abort_button.setStyleSheet("QPushButton:enabled { background: #c00000; color: white; font-weight: bold; }")
+        self.safe_label = QLabel("")
+        self.steps = StepList()
+        self.plots = LivePlots(refresh_hz=refresh_hz)
+        self.log = LogPane()
+        self.results = ResultsTable()
+
+        left = QWidget()
+        left_lay = QVBoxLayout(left)
+        box = QGroupBox("Station")
+        QVBoxLayout(box).addWidget(self.station)
+        left_lay.addWidget(box)
+        proc_box = QGroupBox("Procedure")
+        proc_lay = QVBoxLayout(proc_box)
+        proc_lay.addWidget(self.procedure)
+        proc_lay.addWidget(self.form)
+        buttons = QHBoxLayout()
+        for b in (self.start_button, self.pause_button, self.abort_button):
+            buttons.addWidget(b)
+        proc_lay.addLayout(buttons)
+        proc_lay.addWidget(self.safe_label)
+        left_lay.addWidget(proc_box)
+        step_box = QGroupBox("Steps")
+        QVBoxLayout(step_box).addWidget(self.steps)
+        left_lay.addWidget(step_box, 1)
+        left.setMinimumWidth(320)
+        left.setMaximumWidth(420)
+
+        tabs = QTabWidget()
+        tabs.addTab(self.results, "Results")
+        tabs.addTab(self.log, "Log")
+        self.tabs = tabs
+        right = QSplitter(Qt.Orientation.Vertical)
+        right.addWidget(self.plots)
+        right.addWidget(tabs)
+        right.setStretchFactor(0, 4)
+        right.setStretchFactor(1, 1)
+        central = QSplitter(Qt.Orientation.Horizontal)
+        central.addWidget(left)
+        central.addWidget(right)
+        central.setStretchFactor(1, 1)
+        self.setCentralWidget(central)
+
+        open_action = QAction("&Open recorded run...", self)
+        open_action.triggered.connect(self._open_dialog)
+        self.menuBar().addMenu("&File").addAction(open_action)
+        self.statusBar().showMessage("ready")
+
+        self.procedure.currentTextChanged.connect(self._on_procedure)
+        self.form.validity_changed.connect(lambda _v: self._update_buttons())
+        self.start_button.clicked.connect(self.start)
+        self.pause_button.clicked.connect(self.toggle_pause)
+        self.abort_button.clicked.connect(self.abort)
+        self.results.report_button.clicked.connect(self._open_report)
+
+        self.bridge = EventBridge(backend.bus, self)
+        self.bridge.events.connect(self.on_events)
+        self._on_procedure(self.procedure.currentText())
+
+    # --- controls --------------------------------------------------------------------------
+    def _on_procedure(self, name: str) -> None:
+        self.form.set_specs(self.backend.procedures().get(name, ()))
+        self._update_buttons()
+
+    def _update_buttons(self) -> None:
+        self.start_button.setEnabled(self.form.is_valid() and not self.run_active)
+        self.form.setEnabled(not self.run_active)
+        self.procedure.setEnabled(not self.run_active)
+        self.pause_button.setEnabled(self.run_active)
+        self.pause_button.setText("Resume" if self.paused else "Pause")
+        self.abort_button.setEnabled(self.run_active)
+
+    def _on_speed(self, speed: float) -> None:
+        if self.backend.simulated:
+            self.backend.set_speed(speed)
+
+    def start(self) -> None:
+        """Start the selected procedure with the form's values (refused while one is invalid)."""
+        if not self.form.validate() or self.run_active:
+            return
+        try:
+            self.backend.start(self.procedure.currentText(), self.form.values())
+        except (ValueError, RuntimeError) as exc:
+            self.log.add(self.t_sim_s, "ERROR", str(exc))
+            self.statusBar().showMessage(str(exc))
+            return
+        self.run_active = True
+        self.paused = False
+        self.safe_label.setText("")
+        self._update_buttons()
+
+    def toggle_pause(self) -> None:
+        if not self.run_active:
+            return
+        if self.paused:
+            self.backend.resume()
+        else:
+            self.backend.pause()
+        self.paused = not self.paused
+        self.statusBar().showMessage("paused" if self.paused else "running")
+        self._update_buttons()
+
+    def abort(self) -> None:
+        if self.run_active:
+            self.backend.abort()
+            self.safe_label.setText("aborting: waiting for the safe state...")
+            self.statusBar().showMessage("aborting")
+
+    # --- events ----------------------------------------------------------------------------
+    def on_events(self, batch: list[ev.Event]) -> None:
+        """GUI thread: apply a batch of engine events to the widgets."""
+        for e in batch:
+            self.t_sim_s = max(self.t_sim_s, e.t_sim_s)
+            if isinstance(e, ev.SampleBlock):
+                self.plots.add_samples(e.stream, e.columns, e.data)
+            elif isinstance(e, ev.FitUpdate):
+                self.plots.set_fit(e.name, e.curves)
+            elif isinstance(e, ev.Progress):
+                self.steps.set_progress(e.fraction, e.message)
+            elif isinstance(e, ev.StepStarted):
+                self.steps.set_status(e.name, "running")
+                self.statusBar().showMessage(f"step {e.index + 1}/{e.total}: {e.title or e.name}")
+            elif isinstance(e, ev.StepFinished):
+                self.steps.set_status(e.name, e.status)
+            elif isinstance(e, ev.Measurement):
+                self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut)
+            elif isinstance(e, ev.Log):
+                self.log.add(e.t_sim_s, e.level, e.message)
+            elif isinstance(e, ev.StationStatus):
+                self.station.update_devices(e.devices)
+            elif isinstance(e, ev.RunStarted):
+                self._on_run_started(e)
+            elif isinstance(e, ev.RunFinished):
+                self._on_run_finished(e)
+        self.station.set_time(self.t_sim_s)
+
+    def _on_run_started(self, e: ev.RunStarted) -> None:
+        self.plots.clear()
+        self.results.clear()
+        self.steps.set_steps(e.steps)
+        self.run_active = True
+        self.last_finished = None
+        self.log.add(e.t_sim_s, "INFO", f"run {e.run_id} started: {e.procedure} {e.params}")
+        self._update_buttons()
+
+    def _on_run_finished(self, e: ev.RunFinished) -> None:
+        self.run_active = False
+        self.paused = False
+        self.last_finished = e
+        self.results.set_outcome(e.outcome, e.safe_state, e.end_reason)
+        report = getattr(self.backend, "report_path", None)
+        self.results.set_report(report(e.run_id) if callable(report) else None)
+        self.safe_label.setText("safe state confirmed" if e.safe_state else "SAFE STATE NOT CONFIRMED")
+        self.safe_label.setStyleSheet("color: #207020;" if e.safe_state else "color: #c00000; font-weight: bold;")
+        self.log.add(e.t_sim_s, "INFO", f"run {e.run_id} finished: {e.outcome} ({e.end_reason})")
+        self.statusBar().showMessage(f"{e.outcome}: {e.end_reason}")
+        self.plots.refresh(force=True)
+        self._update_buttons()
+
+    # --- replay and report -----------------------------------------------------------------
+    def _open_dialog(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Open recorded run", "runs", "HDF5 runs (*.h5 *.hdf5)")
+        if path:
+            self.open_run(path)
+
+    def open_run(self, path: str) -> None:
+        """Replay a recorded run into the plots, results and log (with its fit)."""
+        from .replay import replay_events
+
+        if self.run_active:
+            QMessageBox.warning(self, "gyrobench", "A run is going on: abort it before opening a recorded run.")
+            return
+        try:
+            events = replay_events(path)
+        except (OSError, ValueError, KeyError) as exc:
+            self.log.add(self.t_sim_s, "ERROR", f"cannot open {path}: {exc}")
+            return
+        self.on_events(events)
+        self.plots.refresh(force=True)
+        self.statusBar().showMessage(f"replayed {path}")
+
+    def _open_report(self) -> None:
+        if self.results.report_path:
+            QDesktopServices.openUrl(QUrl.fromLocalFile(self.results.report_path))
+
+    def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        self.plots.timer.stop()
+        self.bridge.detach()
+        super().closeEvent(event)

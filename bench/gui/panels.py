@@ -1,0 +1,211 @@
+"""The small panels around the plots: station, steps, log, results."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtGui import QBrush, QColor
+from PySide6.QtWidgets import (
+    QComboBox,
+    QHBoxLayout,
+    QLabel,
+    QPlainTextEdit,
+    QProgressBar,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QTreeWidget,
+    QTreeWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+from .backend import SPEEDS
+
+OUTCOME_COLOURS = {"PASS": "#b7e4b7", "FAIL": "#f4b6b6", "MARGINAL": "#ffe29a", "ERROR": "#f4b6b6",
+                   "ABORTED": "#dddddd", "COMPLETE": "#ffffff"}
+STATUS_MARKS = {"running": "\u25b6", "done": "\u2713", "error": "\u2717", "aborted": "\u25a0", "skipped": "-",
+                "pending": " "}
+
+
+class StationPanel(QWidget):
+    """Devices of the station (connected, table rate and angle, drive, link counters) and, on a
+    simulated station, the clock speed control."""
+
+    speed_changed = Signal(float)
+
+    def __init__(self, station: str, simulated: bool, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        self.title = QLabel(f"<b>{station}</b> ({'simulated' if simulated else 'real'})")
+        lay.addWidget(self.title)
+        self.tree = QTreeWidget()
+        self.tree.setHeaderLabels(["device", "value"])
+        self.tree.setRootIsDecorated(True)
+        self.tree.setMinimumHeight(120)
+        self.tree.setColumnWidth(0, 150)
+        lay.addWidget(self.tree)
+        row = QHBoxLayout()
+        row.addWidget(QLabel("speed"))
+        self.speed = QComboBox()
+        self.speed.setObjectName("speed")
+        for label, value in SPEEDS:
+            self.speed.addItem(label, value)
+        self.speed.setCurrentIndex(len(SPEEDS) - 1)
+        self.speed.setEnabled(simulated)
+        self.speed.currentIndexChanged.connect(lambda i: self.speed_changed.emit(float(self.speed.itemData(i))))
+        row.addWidget(self.speed)
+        self.sim_time = QLabel("t = 0.0 s")
+        row.addWidget(self.sim_time)
+        lay.addLayout(row)
+        self._items: dict[str, QTreeWidgetItem] = {}
+
+    def set_speed(self, speed: float) -> None:
+        for i in range(self.speed.count()):
+            v = float(self.speed.itemData(i))
+            if v == speed or (math.isinf(v) and math.isinf(speed)):
+                self.speed.setCurrentIndex(i)
+
+    def set_time(self, t_sim_s: float) -> None:
+        self.sim_time.setText(f"t = {t_sim_s:.1f} s")
+
+    def update_devices(self, devices: dict[str, dict[str, Any]]) -> None:
+        for name, fields in devices.items():
+            item = self._items.get(name)
+            if item is None:
+                item = QTreeWidgetItem([name, ""])
+                self.tree.addTopLevelItem(item)
+                self._items[name] = item
+                item.setExpanded(True)
+            connected = fields.get("connected")
+            item.setText(1, "connected" if connected else ("disconnected" if connected is not None else ""))
+            if connected is not None:
+                item.setForeground(1, QBrush(QColor("#207020" if connected else "#c00000")))
+            existing = {item.child(i).text(0): item.child(i) for i in range(item.childCount())}
+            for key, value in fields.items():
+                if key == "connected":
+                    continue
+                text = f"{value:.3f}" if isinstance(value, float) else str(value)
+                child = existing.get(key)
+                if child is None:
+                    item.addChild(QTreeWidgetItem([key, text]))
+                else:
+                    child.setText(1, text)
+
+
+class StepList(QWidget):
+    """The run's steps with a mark for each and a progress bar for the current one."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        self.tree = QTreeWidget()
+        self.tree.setHeaderLabels(["", "step"])
+        self.tree.setRootIsDecorated(False)
+        self.tree.setColumnWidth(0, 24)
+        lay.addWidget(self.tree)
+        self.progress = QProgressBar()
+        self.progress.setRange(0, 1000)
+        self.message = QLabel("")
+        lay.addWidget(self.progress)
+        lay.addWidget(self.message)
+        self.status: dict[str, str] = {}
+
+    def set_steps(self, steps: tuple[str, ...]) -> None:
+        self.tree.clear()
+        self.status = {}
+        for s in steps:
+            self.tree.addTopLevelItem(QTreeWidgetItem([STATUS_MARKS["pending"], s]))
+            self.status[s] = "pending"
+        self.progress.setValue(0)
+        self.message.setText("")
+
+    def _item(self, name: str) -> QTreeWidgetItem:
+        for i in range(self.tree.topLevelItemCount()):
+            it = self.tree.topLevelItem(i)
+            if it.text(1) == name:
+                return it
+        it = QTreeWidgetItem([STATUS_MARKS["pending"], name])
+        self.tree.addTopLevelItem(it)
+        return it
+
+    def set_status(self, name: str, status: str) -> None:
+        self.status[name] = status
+        self._item(name).setText(0, STATUS_MARKS.get(status, "?"))
+        if status == "running":
+            self.progress.setValue(0)
+
+    def set_progress(self, fraction: float, message: str) -> None:
+        self.progress.setValue(int(round(1000 * min(1.0, max(0.0, fraction)))))
+        self.message.setText(message)
+
+
+class LogPane(QPlainTextEdit):
+    """The run's log, newest last, bounded so a chatty run cannot eat the memory."""
+
+    def __init__(self, parent: QWidget | None = None, max_lines: int = 5000) -> None:
+        super().__init__(parent)
+        self.setReadOnly(True)
+        self.setMaximumBlockCount(max_lines)
+
+    def add(self, t_sim_s: float, level: str, message: str) -> None:
+        self.appendPlainText(f"{t_sim_s:9.3f}  {level:<7} {message}")
+
+
+class ResultsTable(QWidget):
+    """Measurements with value, limits and a PASS/FAIL/MARGINAL colour; a button opens the
+    run's report when there is one."""
+
+    HEADERS = ("measurement", "value", "unit", "low", "high", "outcome")
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        self.table = QTableWidget(0, len(self.HEADERS))
+        self.table.setHorizontalHeaderLabels(self.HEADERS)
+        self.table.verticalHeader().setVisible(False)
+        lay.addWidget(self.table)
+        row = QHBoxLayout()
+        self.outcome = QLabel("")
+        row.addWidget(self.outcome)
+        row.addStretch(1)
+        self.report_button = QPushButton("Open report")
+        self.report_button.setEnabled(False)
+        row.addWidget(self.report_button)
+        lay.addLayout(row)
+        self.report_path: str | None = None
+
+    def clear(self) -> None:
+        self.table.setRowCount(0)
+        self.outcome.setText("")
+        self.report_path = None
+        self.report_button.setEnabled(False)
+
+    def add(self, name: str, value: float, unit: str, low: float | None, high: float | None, outcome: str,
+            dut: str | None = None) -> None:
+        r = self.table.rowCount()
+        self.table.insertRow(r)
+        label = name if dut is None else f"{name} [{dut}]"
+        cells = (label, f"{value:.6g}", unit, "" if low is None else f"{low:.6g}",
+                 "" if high is None else f"{high:.6g}", outcome)
+        colour = QColor(OUTCOME_COLOURS.get(outcome, "#ffffff"))
+        for c, text in enumerate(cells):
+            item = QTableWidgetItem(text)
+            item.setFlags(item.flags() & ~Qt.ItemFlag.ItemIsEditable)
+            item.setBackground(QBrush(colour))
+            self.table.setItem(r, c, item)
+
+    def set_outcome(self, outcome: str, safe_state: bool, reason: str) -> None:
+        safe = "safe state confirmed" if safe_state else "SAFE STATE NOT CONFIRMED"
+        colour = OUTCOME_COLOURS.get(outcome, "#ffffff")
+        self.outcome.setText(f"<b>{outcome}</b> - {reason} - {safe}")
+        self.outcome.setStyleSheet(f"background: {colour}; padding: 2px;")
+
+    def set_report(self, path: str | None) -> None:
+        self.report_path = path
+        self.report_button.setEnabled(path is not None)

@@ -1,0 +1,188 @@
+"""Live plots of a run: cx, sx, cy, sy; E on a log axis with its fit; wave angle theta; table
+rate; and the sweep's amplitude and phase against frequency, filling in point by point.
+
+Samples go into ring buffers as they arrive (cheap); the curves are redrawn from the buffers by
+a QTimer at `refresh_hz`, decimated to `max_points` per curve, never per event.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import QTimer
+from PySide6.QtWidgets import QVBoxLayout, QWidget
+
+from bench.analysis.slow_model import orbit_elements
+
+from .ringbuffer import RingBuffer, decimate_minmax
+
+FPGA_COLS = ("t_s", "cx", "sx", "cy", "sy", "E", "theta_deg")
+TABLE_COLS = ("t_s", "rate_dps", "angle_deg")
+SWEEP_COLS = ("freq_hz", "amplitude", "phase_deg")
+PEN_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
+
+
+def _columns(columns: tuple[str, ...], data: np.ndarray, wanted: tuple[str, ...]) -> np.ndarray | None:
+    """data's columns named `wanted`, in that order, or None if one is missing."""
+    try:
+        idx = [columns.index(c) for c in wanted]
+    except ValueError:
+        return None
+    return np.asarray(data, dtype=float)[:, idx]
+
+
+class LivePlots(QWidget):
+    """The plot area; feed it with `add_samples` and `set_fit`, it redraws itself."""
+
+    def __init__(self, parent: QWidget | None = None, *, history_s: float = 300.0, rate_hz: float = 1000.0,
+                 refresh_hz: float = 25.0, max_points: int = 2000) -> None:
+        super().__init__(parent)
+        pg.setConfigOptions(antialias=False, background="w", foreground="k")
+        capacity = int(history_s * rate_hz * 1.1)
+        self.fpga = RingBuffer(capacity, len(FPGA_COLS))
+        self.table = RingBuffer(capacity, len(TABLE_COLS))
+        self.sweep = RingBuffer(100_000, len(SWEEP_COLS))
+        self.max_points = max_points
+        self.fits: dict[str, dict[str, np.ndarray]] = {}
+        self.refresh_count = 0
+        self.refresh_times: deque[float] = deque(maxlen=2000)  # wall monotonic of each redraw
+        self.refresh_cost_s: deque[float] = deque(maxlen=2000)
+        self._dirty = False
+        self._theta_last_rad: float | None = None
+
+        self.view = pg.GraphicsLayoutWidget()
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(self.view)
+
+        self.p_q = self.view.addPlot(row=0, col=0, title="cx, sx, cy, sy")
+        self.p_q.addLegend(offset=(5, 5))
+        self.c_q = [self.p_q.plot(pen=pg.mkPen(c, width=1), name=n)
+                    for c, n in zip(PEN_COLOURS, ("cx", "sx", "cy", "sy"), strict=True)]
+        self.p_e = self.view.addPlot(row=0, col=1, title="E (log) and fit")
+        self.p_e.setLogMode(x=False, y=True)
+        self.c_e = self.p_e.plot(pen=pg.mkPen("#1f77b4", width=1))
+        self.c_fit = self.p_e.plot(pen=pg.mkPen("#d62728", width=2, style=pg.QtCore.Qt.PenStyle.DashLine))
+        self.p_theta = self.view.addPlot(row=1, col=0, title="wave angle theta (deg)")
+        self.c_theta = self.p_theta.plot(pen=pg.mkPen("#9467bd", width=1))
+        self.p_rate = self.view.addPlot(row=1, col=1, title="table rate (deg/s)")
+        self.c_rate = self.p_rate.plot(pen=pg.mkPen("#8c564b", width=1))
+        self.p_amp = self.view.addPlot(row=2, col=0, title="sweep amplitude")
+        self.c_amp = self.p_amp.plot(pen=pg.mkPen("#1f77b4"), symbol="o", symbolSize=5, symbolBrush="#1f77b4")
+        self.c_amp_fit = self.p_amp.plot(pen=pg.mkPen("#d62728", width=2))
+        self.p_phase = self.view.addPlot(row=2, col=1, title="sweep phase (deg)")
+        self.c_phase = self.p_phase.plot(pen=pg.mkPen("#ff7f0e"), symbol="o", symbolSize=5, symbolBrush="#ff7f0e")
+        self.c_phase_fit = self.p_phase.plot(pen=pg.mkPen("#d62728", width=2))
+        for p in (self.p_q, self.p_e, self.p_theta, self.p_rate):
+            p.setLabel("bottom", "t", units="s")
+            p.showGrid(x=True, y=True, alpha=0.3)
+        for p in (self.p_amp, self.p_phase):
+            p.setLabel("bottom", "f", units="Hz")
+            p.showGrid(x=True, y=True, alpha=0.3)
+
+        self.timer = QTimer(self)
+        self.timer.setInterval(max(1, int(round(1000.0 / refresh_hz))))
+        self.timer.timeout.connect(self.refresh)
+        self.timer.start()
+
+    # --- data in ---------------------------------------------------------------------------
+    def clear(self) -> None:
+        self.fpga.clear()
+        self.table.clear()
+        self.sweep.clear()
+        self.fits.clear()
+        self._theta_last_rad = None
+        for c in (*self.c_q, self.c_e, self.c_fit, self.c_theta, self.c_rate, self.c_amp, self.c_phase,
+                  self.c_amp_fit, self.c_phase_fit):
+            c.setData([], [])
+        self._dirty = True
+
+    def add_samples(self, stream: str, columns: tuple[str, ...], data: np.ndarray) -> None:
+        """One SampleBlock's rows; streams and columns the plots do not show are ignored."""
+        data = np.asarray(data, dtype=float)
+        if data.ndim != 2 or data.shape[0] == 0:
+            return
+        columns = tuple(columns)
+        q = _columns(columns, data, ("t_s", "cx", "sx", "cy", "sy"))
+        if q is not None:
+            el = orbit_elements(q[:, 1:5])
+            self.fpga.append(np.column_stack((q, el["E"], self._unwrapped_theta_deg(el["theta_rad"]))))
+            self._dirty = True
+        rate = _columns(columns, data, ("t_s", "rate_dps"))
+        if rate is not None:
+            angle = _columns(columns, data, ("angle_deg",))
+            angle = np.full((len(data), 1), np.nan) if angle is None else angle
+            self.table.append(np.column_stack((rate, angle)))
+            self._dirty = True
+        sweep = _columns(columns, data, ("freq_hz", "amplitude"))
+        if sweep is not None:
+            phase = _columns(columns, data, ("phase_deg",))
+            phase = np.full((len(data), 1), np.nan) if phase is None else phase
+            self.sweep.append(np.column_stack((sweep, phase)))
+            self._dirty = True
+
+    def _unwrapped_theta_deg(self, theta_rad: np.ndarray) -> np.ndarray:
+        """theta continues across its (-45, 45] deg wrap (a precessing wave is a line, not a saw)."""
+        prev = self._theta_last_rad
+        joined = np.unwrap(np.concatenate(([prev if prev is not None else theta_rad[0]], theta_rad)), period=np.pi / 2)
+        if prev is not None:
+            joined += prev - joined[0]
+        self._theta_last_rad = float(joined[-1])
+        return np.degrees(joined[1:])
+
+    def set_fit(self, name: str, curves: dict[str, np.ndarray]) -> None:
+        """A FitUpdate: an E(t) curve ({t_s, E}) or a sweep model ({freq_hz, amplitude[, phase_deg]})."""
+        self.fits[name] = {k: np.asarray(v, dtype=float) for k, v in curves.items()}
+        self._dirty = True
+
+    # --- drawing ---------------------------------------------------------------------------
+    def refresh(self, force: bool = False) -> None:
+        """Redraw from the buffers (the timer calls it; nothing happens when nothing changed)."""
+        if not (self._dirty or force):
+            return
+        t0 = time.perf_counter()
+        self._dirty = False
+        f = self.fpga.view()
+        if len(f):
+            t = f[:, 0]
+            for i, curve in enumerate(self.c_q):
+                curve.setData(*decimate_minmax(t, f[:, 1 + i], self.max_points))
+            e = f[:, 5]
+            ok = e > 0
+            curve_e = decimate_minmax(t[ok], e[ok], self.max_points)
+            self.c_e.setData(*curve_e)
+            self.c_theta.setData(*decimate_minmax(t, f[:, 6], self.max_points))
+        tb = self.table.view()
+        if len(tb):
+            self.c_rate.setData(*decimate_minmax(tb[:, 0], tb[:, 1], self.max_points))
+        sw = self.sweep.view()
+        if len(sw):
+            order = np.argsort(sw[:, 0], kind="stable")
+            self.c_amp.setData(sw[order, 0], sw[order, 1])
+            if np.isfinite(sw[:, 2]).any():
+                self.c_phase.setData(sw[order, 0], sw[order, 2])
+        for curves in self.fits.values():
+            if "t_s" in curves and "E" in curves:
+                ok = curves["E"] > 0
+                self.c_fit.setData(curves["t_s"][ok], curves["E"][ok])
+            if "freq_hz" in curves and "amplitude" in curves:
+                self.c_amp_fit.setData(curves["freq_hz"], curves["amplitude"])
+                if "phase_deg" in curves:
+                    self.c_phase_fit.setData(curves["freq_hz"], curves["phase_deg"])
+        self.refresh_count += 1
+        now = time.perf_counter()
+        self.refresh_times.append(now)
+        self.refresh_cost_s.append(now - t0)
+
+    def refresh_rate_hz(self, window_s: float = 2.0) -> float:
+        """Redraws per second over the last window_s of wall time."""
+        if len(self.refresh_times) < 2:
+            return 0.0
+        now = time.perf_counter()
+        recent = [t for t in self.refresh_times if now - t <= window_s]
+        if len(recent) < 2:
+            return 0.0
+        return (len(recent) - 1) / (recent[-1] - recent[0])
