@@ -15,6 +15,11 @@ REST_RATE_DPS = 0.05
 DEFAULT_POLL_S = 0.01
 
 
+def angle_error_deg(angle_deg: float, target_deg: float) -> float:
+    """angle - target folded into [-180, 180): the table reports angles in [0, 360)."""
+    return (angle_deg - target_deg + 180.0) % 360.0 - 180.0
+
+
 @dataclass(frozen=True)
 class TableLimits:
     """Station-file limits, checked before anything is written to the table."""
@@ -124,9 +129,9 @@ class RateTable(ABC):
         self.commanded_angle_deg = None
 
     def move_to(self, angle_deg: float, rate_dps: float | None = None, accel_dps2: float | None = None) -> None:
-        """Position mode: move to angle_deg (absolute) at most at rate_dps, ramping at accel_dps2."""
-        if not math.isfinite(angle_deg):
-            raise LimitError("angle_deg", angle_deg, "a finite angle", "deg")
+        """Position mode: move (shortest way) to angle_deg in [0, 360) at most at rate_dps, ramping at accel_dps2."""
+        if not (math.isfinite(angle_deg) and 0.0 <= angle_deg < 360.0):
+            raise LimitError("angle_deg", angle_deg, "[0, 360)", "deg")
         speed = self.limits.max_rate_dps if rate_dps is None else self._check_rate(rate_dps)
         if speed <= 0:
             raise LimitError("rate_dps", speed, f"(0, {self.limits.max_rate_dps}]", "deg/s")
@@ -180,7 +185,7 @@ class RateTable(ABC):
         deadline = self.clock.now() + timeout_s
         while True:
             st = self._checked_status()
-            if st.in_position and abs(st.angle_deg - self.commanded_angle_deg) <= tolerance_deg:
+            if st.in_position and abs(angle_error_deg(st.angle_deg, self.commanded_angle_deg)) <= tolerance_deg:
                 return st
             now = self.clock.now()
             if now >= deadline:

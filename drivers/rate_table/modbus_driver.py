@@ -1,0 +1,157 @@
+"""Rate table over Modbus (TCP, or RTU on a serial line) with pymodbus's sync client.
+
+Reads retry on timeout or a bad reply; writes are retried only when idempotent (enable,
+disable, stop, watchdog settings, heartbeat), never a motion command or a fault reset.
+Modbus exception responses become DeviceError naming the exception.
+"""
+
+from __future__ import annotations
+
+import threading
+
+from pymodbus import FramerType
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from pymodbus.exceptions import ConnectionException, ModbusIOException
+
+from drivers.errors import DeviceError, LinkLostError, ProtocolError
+
+from . import modbus_protocol as mp
+from .base import DEFAULT_POLL_S, RateTable, TableLimits, TableStatus
+from .heartbeat import Heartbeat
+
+
+class ModbusRateTable(RateTable):
+    """A Modbus rate-table controller (register map in modbus_protocol)."""
+
+    def __init__(
+        self,
+        host: str | None = None,
+        port: int = 502,
+        *,
+        limits: TableLimits,
+        clock,
+        device_id: int = 1,
+        timeout_s: float = 1.0,
+        read_retries: int = 2,
+        watchdog_s: float = 2.0,
+        heartbeat_s: float | None = None,
+        poll_s: float = DEFAULT_POLL_S,
+        client=None,
+    ) -> None:
+        super().__init__(limits=limits, clock=clock, poll_s=poll_s)
+        if client is None:
+            if host is None:
+                raise ValueError("ModbusRateTable needs host= (TCP) or use ModbusRateTable.rtu(port)")
+            client = ModbusTcpClient(host, port=port, timeout=timeout_s, retries=0)
+        self.client = client
+        self.device_id = device_id
+        self.read_retries = int(read_retries)
+        self.watchdog_s = float(watchdog_s)
+        self._io_lock = threading.Lock()
+        self.heartbeat = Heartbeat(self._beat, heartbeat_s if heartbeat_s else max(0.05, self.watchdog_s / 8))
+        self._beat_count = 0
+
+    @classmethod
+    def rtu(
+        cls,
+        port: str,
+        *,
+        limits: TableLimits,
+        clock,
+        device_id: int = 1,
+        baudrate: int = 115200,
+        timeout_s: float = 1.0,
+        **kw,
+    ) -> ModbusRateTable:
+        """RTU framing on a serial port: a device path, a pty, or a pyserial URL (`socket://h:p`)."""
+        client = ModbusSerialClient(port, framer=FramerType.RTU, baudrate=baudrate, timeout=timeout_s, retries=0)
+        return cls(limits=limits, clock=clock, device_id=device_id, client=client, **kw)
+
+    # --- link ----------------------------------------------------------------------------------
+    def connect(self) -> None:
+        if not self.client.connect():
+            raise LinkLostError(f"rate table: cannot connect to {self.client.comm_params.host}")
+        self._write(mp.HR_WATCHDOG_MS, [int(round(self.watchdog_s * 1000))], idempotent=True)
+        self.heartbeat.start()
+
+    def close(self) -> None:
+        self.heartbeat.stop()
+        self.client.close()
+
+    def _beat(self) -> None:
+        self._beat_count = (self._beat_count + 1) & 0xFFFF
+        self._write(mp.HR_HEARTBEAT, [self._beat_count], idempotent=True)
+
+    def _call(self, what: str, fn, *, attempts: int):
+        """One transaction (with the I/O lock), retried `attempts - 1` times on a lost reply."""
+        last: Exception | None = None
+        for _ in range(max(1, attempts)):
+            try:
+                with self._io_lock:
+                    rr = fn()
+            except (ModbusIOException, ConnectionException) as exc:
+                last = exc
+                continue
+            if rr.isError():
+                code = getattr(rr, "exception_code", None)
+                name = mp.EXCEPTION_NAMES.get(code, "unknown")
+                raise DeviceError(f"rate table refused {what}: Modbus exception {code} ({name})")
+            return rr
+        raise LinkLostError(f"rate table: no valid reply to {what} ({last})")
+
+    def _write(self, address: int, values: list[int], *, idempotent: bool) -> None:
+        self._call(
+            f"write of {values} at register {address}",
+            lambda: self.client.write_registers(address, values, device_id=self.device_id),
+            attempts=1 + (self.read_retries if idempotent else 0),
+        )
+        self.heartbeat.note_write()
+
+    # --- commands ------------------------------------------------------------------------------
+    def enable(self) -> None:
+        self._write(mp.HR_ENABLE, [1], idempotent=True)
+
+    def disable(self) -> None:
+        self._write(mp.HR_ENABLE, [0], idempotent=True)
+
+    def fault_reset(self) -> None:
+        self._write(mp.HR_FAULT_RESET, [1], idempotent=False)
+
+    def _write_rate(self, rate_dps: float, accel_dps2: float) -> None:
+        self._write(mp.HR_MODE, mp.encode_command(mp.MODE_RATE, rate_dps, 0.0, accel_dps2), idempotent=False)
+
+    def _write_move(self, angle_deg: float, rate_dps: float, accel_dps2: float) -> None:
+        block = mp.encode_command(mp.MODE_POSITION, rate_dps, angle_deg, accel_dps2)
+        self._write(mp.HR_MODE, block, idempotent=False)
+
+    def _write_stop(self, accel_dps2: float) -> None:
+        self._write(mp.HR_MODE, mp.encode_command(mp.MODE_STOP, 0.0, 0.0, accel_dps2), idempotent=True)
+
+    # --- read-back -----------------------------------------------------------------------------
+    def status(self) -> TableStatus:
+        """One FC4 read of 6 input registers: rate, angle, status bits, fault code."""
+        last: Exception | None = None
+        for _ in range(1 + self.read_retries):
+            rr = self._call(
+                "status read",
+                lambda: self.client.read_input_registers(mp.IR_RATE_ACT, count=mp.IR_COUNT, device_id=self.device_id),
+                attempts=1 + self.read_retries,
+            )
+            try:
+                rate, angle, bits, code = mp.decode_status(rr.registers)
+            except ValueError as exc:
+                last = exc
+                continue
+            return TableStatus(
+                rate_dps=rate,
+                angle_deg=angle,
+                enabled=bool(bits & mp.ST_ENABLED),
+                at_rate=bool(bits & mp.ST_AT_RATE),
+                in_position=bool(bits & mp.ST_IN_POSITION),
+                fault=bool(bits & mp.ST_FAULT),
+                estop=bool(bits & mp.ST_ESTOP),
+                interlock_open=bool(bits & mp.ST_INTERLOCK_OPEN),
+                watchdog_expired=bool(bits & mp.ST_WATCHDOG_EXPIRED),
+                fault_code=code,
+            )
+        raise ProtocolError(f"rate table: malformed status reply ({last})")

@@ -1,0 +1,346 @@
+"""Rate-table mechanics as a World device: the controller's profile generator, a first-order
+rate loop, angle integration, ripple and noise, and the safety behaviour (e-stop, drive fault,
+interlock, wall-clock watchdog).  Both table servers (Modbus, ASCII) drive one of these.
+
+Motion model, per sample of dt: the profile velocity `ref` moves toward its goal by at most
+accel*dt (goal = commanded rate; in position mode a sqrt(2 a |error|) approach law; 0 when
+stopping); the actual rate follows `ref` through a first-order lag of tau_s; the angle integrates
+the actual rate (trapezoid).  Trips brake at `brake_decel_dps2`; a watchdog expiry ramps down at
+the commanded acceleration, then disables.  The watchdog runs on the wall clock, so a bench that
+stops feeding it stops the table whatever the speed of virtual time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+from scipy.signal import lfilter
+
+from drivers.rate_table import modbus_protocol as mp
+
+
+class CommandRejected(Exception):
+    """A command the controller refuses; `bad_value` tells a range error from a state refusal."""
+
+    def __init__(self, message: str, *, bad_value: bool) -> None:
+        super().__init__(message)
+        self.bad_value = bad_value
+
+
+def wrap180(angle_deg: float) -> float:
+    """Angle difference folded into (-180, 180]."""
+    a = math.fmod(angle_deg, 360.0)
+    if a > 180.0:
+        a -= 360.0
+    elif a <= -180.0:
+        a += 360.0
+    return a
+
+
+class TableMechanics:
+    """Single-axis table: attach to a World (`world.attach(mech)`), command it from a server."""
+
+    def __init__(
+        self,
+        *,
+        max_rate_dps: float = 1000.0,
+        max_accel_dps2: float = 1000.0,
+        brake_decel_dps2: float | None = None,
+        tau_s: float = 0.02,
+        ripple_deg: tuple[float, float] = (1e-3, 5e-4),
+        noise_deg: float = 1e-4,
+        noise_tau_s: float = 0.01,
+        rate_noise_dps: float = 0.002,
+        at_rate_tol_dps: float = 0.05,
+        in_position_tol_deg: float = 0.005,
+        watchdog_s: float = 2.0,
+        accel_block_samples: int = 10,
+        seed: int = 0,
+        wall_clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.max_rate_dps = float(max_rate_dps)
+        self.max_accel_dps2 = float(max_accel_dps2)
+        self.brake_decel_dps2 = float(brake_decel_dps2 or max_accel_dps2)
+        self.tau_s = float(tau_s)
+        self.ripple_deg = (float(ripple_deg[0]), float(ripple_deg[1]))
+        self.noise_deg = float(noise_deg)
+        self.noise_tau_s = float(noise_tau_s)
+        self.rate_noise_dps = float(rate_noise_dps)
+        self.at_rate_tol_dps = float(at_rate_tol_dps)
+        self.in_position_tol_deg = float(in_position_tol_deg)
+        self.watchdog_s = float(watchdog_s)
+        self.accel_block_samples = int(accel_block_samples)
+        self.wall_clock = wall_clock
+        self._rng_noise = np.random.default_rng([seed, 1])
+        self._rng_meas = np.random.default_rng([seed, 2])
+        # motion state
+        self.ref_dps = 0.0  # profile velocity
+        self.rate_dps = 0.0  # actual (lagged) rate, without ripple
+        self.angle_deg = 0.0  # actual multi-turn angle, without ripple and noise
+        self.ref_angle_deg = 0.0  # profile angle (position mode)
+        self._noise_state = 0.0  # OU angle jitter, deg
+        self.t_s = 0.0
+        # commands
+        self.mode = mp.MODE_STOP
+        self.target_rate_dps = 0.0
+        self.target_angle_deg = 0.0  # as commanded, [0, 360)
+        self._target_unwrapped_deg = 0.0
+        self.traverse_dps = 0.0
+        self.accel_dps2 = min(100.0, self.max_accel_dps2)
+        self.enabled = False
+        # safety
+        self.estop_pressed = False
+        self.estop_latched = False
+        self.fault_latched = False
+        self.interlock_open = False
+        self.watchdog_expired = False
+        self.fault_code = mp.FAULT_NONE
+        self._last_feed_wall = wall_clock()
+        self._position_done = False
+
+    # --- commands (servers call these under world.lock) ---------------------------------------
+    def feed(self) -> None:
+        """Feed the watchdog (lock-free: a float store)."""
+        self._last_feed_wall = self.wall_clock()
+
+    @property
+    def tripped(self) -> bool:
+        return self.estop_pressed or self.estop_latched or self.fault_latched or self.interlock_open or (
+            self.watchdog_expired
+        )
+
+    def command(self, mode: int, rate_dps: float, angle_deg: float, accel_dps2: float) -> None:
+        """Mode and setpoints in one go (the Modbus command block, the ASCII MODE command)."""
+        if mode not in mp.MODES:
+            raise CommandRejected(f"mode {mode} is not one of {mp.MODES}", bad_value=True)
+        for name, v in (("rate", rate_dps), ("angle", angle_deg), ("accel", accel_dps2)):
+            if not math.isfinite(v):
+                raise CommandRejected(f"{name}={v!r} is not finite", bad_value=True)
+        if abs(rate_dps) > self.max_rate_dps:
+            raise CommandRejected(f"rate {rate_dps} deg/s beyond +/-{self.max_rate_dps}", bad_value=True)
+        if not 0.0 < accel_dps2 <= self.max_accel_dps2:
+            raise CommandRejected(f"accel {accel_dps2} deg/s^2 outside (0, {self.max_accel_dps2}]", bad_value=True)
+        if mode == mp.MODE_POSITION and not (0.0 <= angle_deg < 360.0 and rate_dps != 0.0):
+            raise CommandRejected(f"position target {angle_deg} outside [0, 360) or zero speed", bad_value=True)
+        if mode != mp.MODE_STOP and (not self.enabled or self.tripped):
+            raise CommandRejected("motion refused: drive not enabled or tripped", bad_value=False)
+        self.feed()
+        self.accel_dps2 = float(accel_dps2)
+        self.mode = mode
+        if mode == mp.MODE_RATE:
+            self.target_rate_dps = float(rate_dps)
+        elif mode == mp.MODE_POSITION:
+            self.target_angle_deg = float(angle_deg)
+            self.traverse_dps = abs(float(rate_dps))
+            self.ref_angle_deg = self.angle_deg
+            self._target_unwrapped_deg = self.ref_angle_deg + wrap180(angle_deg - self.ref_angle_deg)
+            self._position_done = False
+        else:
+            self.target_rate_dps = 0.0
+
+    def set_enabled(self, on: bool) -> None:
+        if on:
+            if self.tripped:
+                raise CommandRejected("enable refused: e-stop, fault, interlock or watchdog active", bad_value=False)
+            if not self.enabled:
+                self.mode = mp.MODE_STOP
+                self.target_rate_dps = 0.0
+            self.enabled = True
+            self.feed()
+        else:
+            self.enabled = False
+            self.mode = mp.MODE_STOP
+
+    def fault_reset(self) -> None:
+        """Clear latches whose cause is gone (a pressed e-stop stays latched)."""
+        if not self.estop_pressed:
+            self.estop_latched = False
+        self.fault_latched = False
+        self.watchdog_expired = False
+        if not self.tripped:
+            self.fault_code = mp.FAULT_NONE
+        self.feed()
+
+    def set_watchdog_s(self, watchdog_s: float) -> None:
+        if not (math.isfinite(watchdog_s) and watchdog_s >= 0):
+            raise CommandRejected(f"watchdog {watchdog_s} s must be >= 0", bad_value=True)
+        self.watchdog_s = float(watchdog_s)
+        self.feed()
+
+    # --- fault injection ---------------------------------------------------------------------
+    def inject(self, kind: str, code: int | None = None) -> None:
+        """kind: "estop" (button pressed), "fault" (drive fault latched), "interlock" (door open)."""
+        if kind == "estop":
+            self.estop_pressed = self.estop_latched = True
+            self._trip(mp.FAULT_ESTOP)
+        elif kind == "fault":
+            self.fault_latched = True
+            self._trip(mp.FAULT_DRIVE if code is None else int(code))
+        elif kind == "interlock":
+            self.interlock_open = True
+            self._trip(mp.FAULT_INTERLOCK)
+        else:
+            raise ValueError(f"inject kind={kind!r}: expected 'estop', 'fault' or 'interlock'")
+
+    def clear(self, kind: str) -> None:
+        """Release the e-stop button or close the interlock (latches stay until fault_reset)."""
+        if kind == "estop":
+            self.estop_pressed = False
+        elif kind == "interlock":
+            self.interlock_open = False
+        elif kind != "fault":
+            raise ValueError(f"clear kind={kind!r}: expected 'estop', 'fault' or 'interlock'")
+
+    def _trip(self, code: int) -> None:
+        if self.fault_code == mp.FAULT_NONE:
+            self.fault_code = code
+        self.enabled = False
+        self.mode = mp.MODE_STOP
+
+    def check_watchdog(self) -> None:
+        """Latch a watchdog expiry (wall clock) while the drive is enabled."""
+        if (
+            self.enabled
+            and self.watchdog_s > 0
+            and not self.watchdog_expired
+            and self.wall_clock() - self._last_feed_wall > self.watchdog_s
+        ):
+            self.watchdog_expired = True
+            if self.fault_code == mp.FAULT_NONE:
+                self.fault_code = mp.FAULT_WATCHDOG
+            self.mode = mp.MODE_STOP  # controlled ramp-down; disabled once at rest
+
+    # --- status ---------------------------------------------------------------------------------
+    def ripple_angle_deg(self, angle_deg: np.ndarray | float) -> np.ndarray | float:
+        """Periodic angle error of the drive: once and twice per revolution."""
+        th = np.radians(angle_deg)
+        return self.ripple_deg[0] * np.sin(th) + self.ripple_deg[1] * np.sin(2.0 * th)
+
+    def status(self) -> tuple[float, float, int, int]:
+        """(rate_dps, angle_deg in [0, 360), status bits, fault code) as the controller reports them."""
+        self.check_watchdog()
+        th = math.radians(self.angle_deg)
+        ripple_rate = (self.ripple_deg[0] * math.cos(th) + 2.0 * self.ripple_deg[1] * math.cos(2.0 * th)) * (
+            math.radians(self.rate_dps)
+        )
+        rate = self.rate_dps + ripple_rate + self.rate_noise_dps * float(self._rng_meas.standard_normal())
+        angle = (self.angle_deg + float(self.ripple_angle_deg(self.angle_deg)) + self._noise_state) % 360.0
+        bits = 0
+        if self.enabled:
+            bits |= mp.ST_ENABLED
+        if self.at_rate:
+            bits |= mp.ST_AT_RATE
+        if self.in_position:
+            bits |= mp.ST_IN_POSITION
+        if self.fault_latched:
+            bits |= mp.ST_FAULT
+        if self.estop_pressed or self.estop_latched:
+            bits |= mp.ST_ESTOP
+        if self.interlock_open:
+            bits |= mp.ST_INTERLOCK_OPEN
+        if self.watchdog_expired:
+            bits |= mp.ST_WATCHDOG_EXPIRED
+        if abs(self.rate_dps) > 1e-6 or self.ref_dps != 0.0:
+            bits |= mp.ST_MOVING
+        return rate, angle, bits, self.fault_code
+
+    @property
+    def at_rate(self) -> bool:
+        return (
+            self.enabled
+            and self.mode == mp.MODE_RATE
+            and self.ref_dps == self.target_rate_dps
+            and abs(self.rate_dps - self.target_rate_dps) <= self.at_rate_tol_dps
+        )
+
+    @property
+    def in_position(self) -> bool:
+        return (
+            self.enabled
+            and self.mode == mp.MODE_POSITION
+            and self._position_done
+            and abs(wrap180(self.target_angle_deg - self.angle_deg)) <= self.in_position_tol_deg
+            and abs(self.rate_dps) <= self.at_rate_tol_dps
+        )
+
+    # --- motion -------------------------------------------------------------------------------
+    def _goal(self, dt_s: float) -> tuple[float, float]:
+        """(goal velocity, acceleration used) of the profile for the next sample."""
+        if self.estop_pressed or self.estop_latched or self.fault_latched or self.interlock_open or not self.enabled:
+            return 0.0, self.brake_decel_dps2
+        if self.mode == mp.MODE_RATE:
+            return self.target_rate_dps, self.accel_dps2
+        if self.mode == mp.MODE_POSITION and not self._position_done:
+            a = self.accel_dps2
+            err = self._target_unwrapped_deg - self.ref_angle_deg
+            v = min(self.traverse_dps, math.sqrt(2.0 * a * abs(err)), abs(err) / dt_s)
+            return math.copysign(v, err), a
+        return 0.0, self.accel_dps2
+
+    def settled(self) -> bool:
+        """True when the profile and the lag are at rest on their goal (big blocks are exact)."""
+        if self.mode == mp.MODE_POSITION and self.enabled and not self._position_done:
+            return False
+        goal, _ = self._goal(1.0)
+        return self.ref_dps == goal and self.rate_dps == goal
+
+    def _step(self, n: int, dt_s: float) -> np.ndarray:
+        """Advance n samples; return the smooth angle at each sample end (n,)."""
+        if self.settled():
+            angles = self.angle_deg + self.rate_dps * dt_s * np.arange(1, n + 1)
+            self.angle_deg = float(angles[-1])
+            self.ref_angle_deg += self.ref_dps * dt_s * n
+            return angles
+        alpha = 1.0 - math.exp(-dt_s / self.tau_s)
+        angles = np.empty(n)
+        for k in range(n):
+            goal, a = self._goal(dt_s)
+            dv = a * dt_s
+            ref_old = self.ref_dps
+            self.ref_dps = goal if abs(goal - ref_old) <= dv else ref_old + math.copysign(dv, goal - ref_old)
+            self.ref_angle_deg += 0.5 * (ref_old + self.ref_dps) * dt_s
+            if self.mode == mp.MODE_POSITION and self.enabled and not self._position_done:
+                err = self._target_unwrapped_deg - self.ref_angle_deg
+                if abs(err) <= 1e-9 or (abs(err) <= a * dt_s * dt_s and abs(self.ref_dps) <= dv):
+                    self.ref_angle_deg, self.ref_dps, self._position_done = self._target_unwrapped_deg, 0.0, True
+            y_old = self.rate_dps
+            y = y_old + (self.ref_dps - y_old) * alpha
+            if abs(y - self.ref_dps) < 1e-9:
+                y = self.ref_dps
+            self.rate_dps = y
+            self.angle_deg += 0.5 * (y_old + y) * dt_s
+            if self.watchdog_expired and self.enabled and y == 0.0 and self.ref_dps == 0.0:
+                self.enabled = False
+            angles[k] = self.angle_deg
+        return angles
+
+    # --- World device ---------------------------------------------------------------------------
+    def max_block_samples(self, world) -> int | None:
+        self.check_watchdog()
+        return None if self.settled() else self.accel_block_samples
+
+    def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
+        """Move the table over the block; hand the world its mean rate and the in-block angle
+        deviation (profile curvature, ripple, jitter) as `ripple_angle_rad`."""
+        self.check_watchdog()
+        a0 = self.angle_deg
+        angles = self._step(n, dt_s)
+        t_rel = dt_s * np.arange(1, n + 1)
+        mean_rate = (angles[-1] - a0) / (n * dt_s)
+        if self.noise_deg > 0:
+            e = math.exp(-dt_s / self.noise_tau_s)
+            w = self._rng_noise.standard_normal(n) * self.noise_deg * math.sqrt(1.0 - e * e)
+            jitter, zf = lfilter([1.0], [1.0, -e], w, zi=[e * self._noise_state])
+            self._noise_state = float(jitter[-1])
+        else:
+            jitter = 0.0
+        dev_deg = angles - a0 - mean_rate * t_rel + self.ripple_angle_deg(angles) + jitter
+        world.case_rate_dps = float(mean_rate)
+        world.ripple_angle_rad = np.radians(dev_deg)
+        self.t_s = t_s + n * dt_s
+
+    def after_block(self, world, block) -> None:
+        pass
