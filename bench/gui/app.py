@@ -96,7 +96,8 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
 
 
 def run_gui(station: str | None = None, *, run: str | None = None, screenshot: str | None = None,
-            at_s: float | None = None, seed: int = 0, speed: float | None = None) -> int:
+            at_s: float | None = None, seed: int = 0, speed: float | None = None,
+            open_run: str | None = None) -> int:
     """Open the window (blocking until it closes), or with `screenshot`, run headless and exit."""
     app = _app()
     from .main_window import MainWindow
@@ -109,6 +110,8 @@ def run_gui(station: str | None = None, *, run: str | None = None, screenshot: s
             window.station.set_speed(speed)
         elif backend.simulated and screenshot is None:
             window.station.set_speed(1.0)  # an interactive demo starts in real time
+        if open_run is not None:
+            window.open_run(open_run)
         if screenshot is not None:
             if run is None:
                 window.show()

@@ -1,0 +1,28 @@
+"""The `gyrobench gui` subcommand's arguments (registered by bench.cli; no Qt import here)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_gui_subcommand(sub) -> argparse.ArgumentParser:
+    """Register `gui` on the CLI's subparsers."""
+    p = sub.add_parser("gui", help="the lab engineer's window (live plots, Start/Pause/Abort, replay)")
+    p.add_argument("--station", default=None, help="station name (sim-hrg, sim-mems, sim-world) or station file")
+    p.add_argument("--run", default=None, metavar="PROC", help="procedure to select (and run with --screenshot)")
+    p.add_argument("--screenshot", default=None, metavar="FILE", help="run headless, save a PNG of the window, exit")
+    p.add_argument("--at", dest="at_s", type=float, default=None, metavar="SECONDS",
+                   help="simulated second at which the screenshot is taken (default: end of the run)")
+    p.add_argument("--speed", default=None, help="simulated clock speed: 1, 10, 100 or max")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--open", dest="open_run", default=None, metavar="RUN.h5", help="replay a recorded run")
+    p.set_defaults(func=cmd_gui)
+    return p
+
+
+def cmd_gui(args: argparse.Namespace) -> int:
+    from .app import parse_speed, run_gui
+
+    speed = None if args.speed is None else parse_speed(args.speed)
+    return run_gui(args.station, run=args.run, screenshot=args.screenshot, at_s=args.at_s, seed=args.seed,
+                   speed=speed, open_run=args.open_run)
