@@ -13,6 +13,12 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_gui(sub) -> None:
+    from bench.gui.cli_args import add_gui_subcommand
+
+    add_gui_subcommand(sub)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gyrobench", description="Calibrate Coriolis vibratory gyroscopes.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -21,6 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--rate-dps", type=float, default=500.0)
     demo.add_argument("--duration-s", type=float, default=300.0)
     demo.set_defaults(func=_cmd_demo)
+    _add_gui(sub)
     return parser
 
 
