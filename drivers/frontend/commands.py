@@ -62,6 +62,7 @@ BLOCK_DTYPE = "<f4"
 NO_ERROR = (0, "No error")
 COMMAND_ERROR = -100
 SYNTAX_ERROR = -102
+DATA_TYPE_ERROR = -104
 PARAMETER_NOT_ALLOWED = -108
 MISSING_PARAMETER = -109
 UNDEFINED_HEADER = -113
@@ -70,11 +71,13 @@ EXECUTION_ERROR = -200
 SETTINGS_CONFLICT = -221
 DATA_OUT_OF_RANGE = -222
 ILLEGAL_PARAMETER_VALUE = -224
+DATA_STALE = -230
 QUEUE_OVERFLOW = -350
 QUERY_ERROR = -400
 ERROR_MESSAGES: dict[int, str] = {
     COMMAND_ERROR: "Command error",
     SYNTAX_ERROR: "Syntax error",
+    DATA_TYPE_ERROR: "Data type error",
     PARAMETER_NOT_ALLOWED: "Parameter not allowed",
     MISSING_PARAMETER: "Missing parameter",
     UNDEFINED_HEADER: "Undefined header",
@@ -83,6 +86,7 @@ ERROR_MESSAGES: dict[int, str] = {
     SETTINGS_CONFLICT: "Settings conflict",
     DATA_OUT_OF_RANGE: "Data out of range",
     ILLEGAL_PARAMETER_VALUE: "Illegal parameter value",
+    DATA_STALE: "Data corrupt or stale",
     QUEUE_OVERFLOW: "Queue overflow",
     QUERY_ERROR: "Query error",
 }
@@ -129,3 +133,22 @@ def block_header(n_bytes: int) -> bytes:
     if len(digits) > 9:
         raise ValueError(f"block of {n_bytes} bytes does not fit a definite-length header")
     return f"#{len(digits)}{digits}".encode("ascii")
+
+#: long-form header nodes the instrument also accepts (the driver always sends short forms)
+LONG_FORMS: dict[str, str] = {
+    "SOURCE": "SOUR",
+    "VOLTAGE": "VOLT",
+    "FREQUENCY": "FREQ",
+    "PHASE": "PHAS",
+    "OUTPUT": "OUTP",
+    "SENSE": "SENS",
+    "RANGE": "RANG",
+    "SRATE": "SRAT",
+    "LOCKIN": "LOCK",
+    "FETCH": "FETC",
+    "CAPTURE": "CAPT",
+    "POINTS": "POIN",
+    "INITIATE": "INIT",
+    "SYSTEM": "SYST",
+    "ERROR": "ERR",
+}

@@ -375,10 +375,12 @@ class ScpiFrontEnd:
                 with res.read_termination_context(None):
                     head = res.read_bytes(2)
                     if head[:1] != b"#" or not head[1:2].isdigit() or head[1:2] == b"0":
+                        self._lost = True  # the rest of the reply is still in flight: resynchronise
                         raise ProtocolError(f"{query!r}: expected a definite-length block, got {head!r}")
                     n_digits = int(head[1:2])
                     count_text = res.read_bytes(n_digits)
                     if not count_text.isdigit():
+                        self._lost = True
                         raise ProtocolError(f"{query!r}: bad block length {count_text!r}")
                     n_bytes = int(count_text)
                     payload = res.read_bytes(n_bytes + 1, chunk_size=n_bytes + 1)
@@ -387,6 +389,9 @@ class ScpiFrontEnd:
         if payload[-1:] != cmd.TERMINATION.encode():
             self._lost = True  # the stream is out of step: reconnect before trusting it again
             raise ProtocolError(f"{query!r}: block of {n_bytes} bytes not followed by the terminator")
+        if n_bytes == 0:
+            errors = self.check_errors()
+            raise DeviceError(f"{query!r}: empty block; instrument errors {errors}")
         itemsize = np.dtype(cmd.BLOCK_DTYPE).itemsize
         if n_bytes % itemsize:
             raise ProtocolError(f"{query!r}: block of {n_bytes} bytes is not whole float32 samples")
