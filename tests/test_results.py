@@ -1,0 +1,82 @@
+"""The results store: migrations build the schema the code declares; runs, DUTs, measurements,
+truth and re-analyses round-trip; run ids resolve by prefix."""
+
+from __future__ import annotations
+
+import pytest
+from sqlalchemy import inspect
+
+from bench.engine import Limits, Result, RunRecord
+from bench.results import ResultsStore, to_url
+from bench.results.schema import metadata
+
+
+def _record(run_id: str, started: str, outcome: str = "PASS", duts=()) -> RunRecord:
+    return RunRecord(
+        run_id=run_id,
+        procedure="table-spin",
+        params={"rate_dps": 100.0},
+        station_id="sim-hrg",
+        simulated=True,
+        outcome=outcome,
+        end_reason="completed",
+        safe_state=True,
+        measurements=[
+            Result("tau_s", 2.5, "s", ci95=(2.4, 2.6), limits=Limits(1, 4, 1.5, 3.5)),
+            Result("bias_dph", float("nan"), "deg/h", dut="SN2"),
+        ],
+        truth={"tau_s": 2.51},
+        simulated_s=3.0,
+        wall_s=0.2,
+        started_at=started,
+        software_version="0.1.0",
+        operator="ana",
+        duts=list(duts),
+        seed=7,
+    )
+
+
+def test_migrated_schema_matches_declared_tables(tmp_path):
+    store = ResultsStore(tmp_path / "r.sqlite")
+    assert store.revision() == ResultsStore.head() == "0001"
+    insp = inspect(store.engine)
+    for table in metadata.sorted_tables:
+        cols = {c["name"] for c in insp.get_columns(table.name)}
+        assert cols == {c.name for c in table.columns}, table.name
+        idx = {i["name"] for i in insp.get_indexes(table.name)}
+        assert idx == {i.name for i in table.indexes}, table.name
+    ResultsStore(tmp_path / "r.sqlite")  # re-opening an up-to-date store is a no-op
+
+
+def test_roundtrip_runs_measurements_truth_duts(tmp_path):
+    store = ResultsStore(to_url(tmp_path / "r.sqlite"))
+    store.save_run(_record("20260101-000000-aaaaaa", "2026-01-01T00:00:00+00:00", duts=["SN1", "SN2"]))
+    store.save_run(_record("20260102-000000-bbbbbb", "2026-01-02T00:00:00+00:00", outcome="FAIL"))
+    rows = store.list_runs()
+    assert [r["run_id"] for r in rows] == ["20260102-000000-bbbbbb", "20260101-000000-aaaaaa"]
+    assert store.resolve("last") == "20260102-000000-bbbbbb"
+    run = store.get_run("20260101")
+    assert run["duts"] == ["SN1", "SN2"] and run["truth"] == {"tau_s": 2.51} and run["params"] == {"rate_dps": 100.0}
+    m = {x["name"]: x for x in run["measurements"]}
+    assert m["tau_s"]["outcome"] == "PASS" and m["tau_s"]["marginal_high"] == 3.5 and m["tau_s"]["ci95_low"] == 2.4
+    assert m["bias_dph"]["value"] is None and m["bias_dph"]["dut"] == "SN2"
+    store.save_analysis(run["run_id"], [Result("tau_s", 2.49, "s")])
+    store.save_analysis(run["run_id"], [Result("tau_s", 2.48, "s")])  # replaces the earlier re-analysis
+    srcs = [(x["source"], x["value"]) for x in store.get_run(run["run_id"])["measurements"]]
+    assert srcs.count(("analyze", 2.48)) == 1 and ("analyze", 2.49) not in srcs
+    # saving a run again replaces it whole
+    store.save_run(_record("20260101-000000-aaaaaa", "2026-01-01T00:00:00+00:00", outcome="ERROR"))
+    again = store.get_run("20260101-000000-aaaaaa")
+    assert again["outcome"] == "ERROR" and again["duts"] == [] and len(again["measurements"]) == 2
+
+
+def test_unknown_and_ambiguous_run_ids(tmp_path):
+    store = ResultsStore(tmp_path / "r.sqlite")
+    with pytest.raises(KeyError, match="no runs yet"):
+        store.resolve("last")
+    store.save_run(_record("20260101-000000-aaaaaa", "2026-01-01T00:00:00+00:00"))
+    store.save_run(_record("20260101-000000-aaaabb", "2026-01-01T00:00:01+00:00"))
+    with pytest.raises(KeyError, match="ambiguous"):
+        store.resolve("20260101")
+    with pytest.raises(KeyError, match="no run 'zzz'"):
+        store.get_run("zzz")
