@@ -1,0 +1,384 @@
+"""FpgaLink: the FPGA register link driver (framed serial via pyserial `serial_for_url`).
+
+One reader thread owns the port's input: it parses every frame, answers waiting register
+commands (matched by sequence number) and hands stream blocks to subscribers.  Commands write
+from the caller's thread under a lock and wait (wall time) for their ACK; reads and writes are
+retried (every register write is an absolute value, so it is idempotent).  Callbacks run on the
+reader thread: they must be quick and must not call the link's commands.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import select
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import serial
+
+from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
+
+from . import protocol as p
+
+StreamCallback = Callable[[np.ndarray], None]
+
+
+@dataclass(frozen=True)
+class LinkStats:
+    """Stream counters: frames delivered, dropped (sequence gaps, whatever the cause), corrupt
+    (frames rejected by CRC or malformed), resyncs (times garbage was skipped)."""
+
+    frames: int
+    dropped: int
+    corrupt: int
+    resyncs: int
+    bytes_received: int
+    reader_cpu_s: float
+
+
+class FpgaLink:
+    """Driver of the FPGA register link; the same code runs on a real port, socket:// and a pty."""
+
+    def __init__(self, url: str, *, clock=None, timeout_s: float = 1.0, retries: int = 2) -> None:
+        if not (timeout_s > 0 and math.isfinite(timeout_s)):
+            raise LimitError("timeout_s", timeout_s, "(0, inf)", "s")
+        if retries < 0:
+            raise LimitError("retries", retries, ">= 0")
+        self.url = url
+        self.clock = clock
+        self.timeout_s = float(timeout_s)
+        self.retries = int(retries)
+        self._ser: serial.SerialBase | None = None
+        self._write_lock = threading.Lock()
+        self._cmd_lock = threading.Lock()  # one command in flight at a time
+        self._cond = threading.Condition()
+        self._replies: dict[int, p.Frame] = {}
+        self._seq = itertools.count(1)
+        self._reader: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._link_error: str | None = None
+        self._subscribers: list[StreamCallback] = []
+        self._parser = p.FrameParser()
+        self._frames = 0
+        self._dropped = 0
+        self._bytes = 0
+        self._reader_cpu_s = 0.0
+        self._expected_seq: int | None = None
+        self._last_index = -1
+        self._stream_start_index = 0
+        self._decimation = 1
+        self.sample_period_s = float("nan")
+
+    # --- connection ----------------------------------------------------------------------------
+    def connect(self) -> FpgaLink:
+        """Open the port, start the reader and check the device's identity."""
+        if self._ser is not None:
+            return self
+        try:
+            self._ser = serial.serial_for_url(self.url, timeout=0, write_timeout=self.timeout_s)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise LinkLostError(f"FPGA link {self.url}: cannot open ({exc})") from exc
+        self._stop.clear()
+        self._link_error = None
+        self._reader = threading.Thread(target=self._read_loop, name="fpga-link-reader", daemon=True)
+        self._reader.start()
+        ident = self.read_register("ID")
+        if ident != p.FPGA_ID:
+            self.close()
+            raise ProtocolError(f"FPGA link {self.url}: ID register is {ident:#x}, expected {p.FPGA_ID:#x}")
+        self.sample_period_s = float(self.read_register("SAMPLE_PERIOD_S"))
+        return self
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._reader is not None:
+            self._reader.join(timeout=2.0)
+            self._reader = None
+        if self._ser is not None:
+            try:
+                self._ser.close()
+            except (serial.SerialException, OSError):
+                pass
+            self._ser = None
+
+    def __enter__(self) -> FpgaLink:
+        return self.connect()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def connected(self) -> bool:
+        return self._ser is not None and self._link_error is None
+
+    # --- registers -----------------------------------------------------------------------------
+    def read_register(self, name_or_addr: str | int) -> float | int:
+        """Read one register (retried on timeout or a corrupted reply)."""
+        reg = p.register(name_or_addr)
+        if reg.access == "wo":
+            raise DeviceError(f"FPGA register {reg.name} is write-only")
+        reply = self._command(p.READ, reg.addr, b"", f"read {reg.name}")
+        return p.decode_value(reg, reply.payload)
+
+    def write_register(self, name_or_addr: str | int, value: float) -> float | int:
+        """Write one register after checking its limits; returns the value the device stored."""
+        reg = p.register(name_or_addr)
+        if reg.access == "ro":
+            raise LimitError(reg.name, value, "read-only register")
+        if not p.in_range(reg, value):
+            kind = " (an integer)" if reg.kind == "u" else ""
+            raise LimitError(reg.name, value, f"[{reg.lo:g}, {reg.hi:g}]{kind}", reg.unit)
+        reply = self._command(p.WRITE, reg.addr, p.encode_value(reg, value), f"write {reg.name}={value!r}")
+        return p.decode_value(reg, reply.payload)
+
+    def _command(self, ftype: int, addr: int, payload: bytes, what: str) -> p.Frame:
+        with self._cmd_lock:
+            attempts = self.retries + 1
+            for _ in range(attempts):
+                self._check_link(what)
+                seq = next(self._seq) % p.SEQ_MOD
+                self._send(p.encode_frame(ftype, seq, addr, payload), what)
+                reply = self._await_reply(seq)
+                if reply is None:
+                    continue
+                if reply.type == p.NACK:
+                    code = int.from_bytes(reply.payload[:8], "little") if reply.payload else 0
+                    raise DeviceError(f"FPGA {what}: NACK {code} ({p.NACK_REASONS.get(code, 'unknown')})")
+                if reply.addr != addr or len(reply.payload) != 8:
+                    raise ProtocolError(f"FPGA {what}: reply for address {reply.addr:#x}, {len(reply.payload)} bytes")
+                return reply
+            self._check_link(what)
+            raise LinkLostError(
+                f"FPGA link {self.url}: no answer to {what} in {attempts} attempts of {self.timeout_s:g} s"
+            )
+
+    def _send(self, data: bytes, what: str) -> None:
+        ser = self._ser
+        if ser is None:
+            raise LinkLostError(f"FPGA link {self.url}: not connected ({what})")
+        try:
+            with self._write_lock:
+                ser.write(data)
+        except (serial.SerialException, serial.SerialTimeoutException, OSError) as exc:
+            self._fail(f"write failed: {exc}")
+            raise LinkLostError(f"FPGA link {self.url}: {what}: write failed ({exc})") from exc
+
+    def _await_reply(self, seq: int) -> p.Frame | None:
+        deadline = time.monotonic() + self.timeout_s
+        with self._cond:
+            while seq not in self._replies:
+                left = deadline - time.monotonic()
+                if left <= 0 or self._link_error is not None:
+                    return None
+                self._cond.wait(left)
+            reply = self._replies.pop(seq)
+            self._replies.clear()  # anything else is a stale reply to an abandoned attempt
+            return reply
+
+    def _check_link(self, what: str) -> None:
+        if self._ser is None:
+            raise LinkLostError(f"FPGA link {self.url}: not connected ({what})")
+        if self._link_error is not None:
+            raise LinkLostError(f"FPGA link {self.url} lost: {self._link_error} ({what})")
+
+    # --- typed helpers -------------------------------------------------------------------------
+    def _set_bits(self, bits: int, on: bool) -> None:
+        self.write_register("CTRL_SET" if on else "CTRL_CLR", bits)
+
+    def set_drive_enabled(self, enabled: bool) -> None:
+        """Drive enable; False is "cut drive" (every force to zero at the next block)."""
+        self._set_bits(p.DRIVE_EN, enabled)
+
+    def set_agc(self, enabled: bool, setpoint: float | None = None) -> None:
+        """Amplitude loop on or off, optionally with a new amplitude setpoint."""
+        if setpoint is not None:
+            self.write_register("AGC_SETPOINT", setpoint)
+        self._set_bits(p.AGC_EN, enabled)
+
+    def set_pll(self, enabled: bool, ref_freq_hz: float | None = None) -> None:
+        """PLL on or off; ref_freq_hz sets the centre (starting) reference frequency first."""
+        if ref_freq_hz is not None:
+            self.write_register("REF_FREQ_HZ", ref_freq_hz)
+        self._set_bits(p.PLL_EN, enabled)
+
+    def set_quadrature_loop(self, enabled: bool) -> None:
+        self._set_bits(p.QUAD_EN, enabled)
+
+    def set_whole_angle(
+        self, enabled: bool, precession_cmd_dps: float = 0.0, fm_amplitude_hz: float = 0.0, fm_rate_hz: float = 0.0
+    ) -> None:
+        """Whole-angle mode with a precession command (wave angle rate, deg/s) and a frequency
+        modulation of the reference (amplitude and rate, Hz).  Every value is checked first."""
+        for name, value in (
+            ("PRECESSION_RATE_DPS", precession_cmd_dps),
+            ("FM_AMPLITUDE_HZ", fm_amplitude_hz),
+            ("FM_RATE_HZ", fm_rate_hz),
+        ):
+            reg = p.BY_NAME[name]
+            if not p.in_range(reg, value):
+                raise LimitError(name, value, f"[{reg.lo:g}, {reg.hi:g}]", reg.unit)
+        self.write_register("PRECESSION_RATE_DPS", precession_cmd_dps)
+        self.write_register("FM_AMPLITUDE_HZ", fm_amplitude_hz)
+        self.write_register("FM_RATE_HZ", fm_rate_hz)
+        self._set_bits(p.WHOLE_ANGLE, enabled)
+
+    def set_drift_compensation(self, enabled: bool, d_per_s: float = 0.0, theta_tau_deg: float = 0.0) -> None:
+        """Cancel the damping drift (D/4) sin 4(theta - theta_tau) with a precession force
+        (whole-angle mode); D and theta_tau as identified by the bench."""
+        for name, value in (("DRIFT_D_PER_S", d_per_s), ("DRIFT_THETA_TAU_DEG", theta_tau_deg)):
+            reg = p.BY_NAME[name]
+            if not p.in_range(reg, value):
+                raise LimitError(name, value, f"[{reg.lo:g}, {reg.hi:g}]", reg.unit)
+        self.write_register("DRIFT_D_PER_S", d_per_s)
+        self.write_register("DRIFT_THETA_TAU_DEG", theta_tau_deg)
+        self._set_bits(p.DRIFT_COMP_EN, enabled)
+
+    def safe_state(self) -> bool:
+        """Cut drive and switch every loop off; True only when the read-back confirms it."""
+        try:
+            self.write_register("CTRL_CLR", p.DRIVE_EN | p.LOOP_BITS)
+            ctrl = int(self.read_register("CTRL"))
+            status = int(self.read_register("STATUS"))
+        except (LinkLostError, DeviceError):
+            return False
+        return (ctrl & (p.DRIVE_EN | p.LOOP_BITS)) == 0 and not status & p.ST_DRIVE_ON
+
+    # --- stream --------------------------------------------------------------------------------
+    def start_stream(self, decimation: int = 1) -> None:
+        """Stream every `decimation`-th sample; counters restart from this point."""
+        reg = p.BY_NAME["STREAM_DECIMATION"]
+        if not p.in_range(reg, decimation):
+            raise LimitError("decimation", decimation, f"[{reg.lo:g}, {reg.hi:g}] (an integer)")
+        self._set_bits(p.STREAM_EN, False)
+        self.write_register("STREAM_DECIMATION", decimation)
+        with self._cond:
+            self._expected_seq = 0
+            self._last_index = -1
+            self._decimation = int(decimation)
+        self._set_bits(p.STREAM_EN, True)
+        start = int(self.read_register("STREAM_START_INDEX"))
+        with self._cond:
+            self._stream_start_index = start
+            self._last_index = max(self._last_index, start)
+
+    def stop_stream(self) -> None:
+        self._set_bits(p.STREAM_EN, False)
+
+    def subscribe(self, callback: StreamCallback) -> Callable[[], None]:
+        """callback(block) for every parsed block, shape (n, 10) in STREAM_COLUMNS order;
+        returns the function that unsubscribes it."""
+        with self._cond:
+            self._subscribers.append(callback)
+
+        def unsubscribe() -> None:
+            with self._cond:
+                if callback in self._subscribers:
+                    self._subscribers.remove(callback)
+
+        return unsubscribe
+
+    def wait_for_sample(self, index_or_time: int | float, timeout_wall_s: float = 5.0) -> None:
+        """Block until every stream frame up to a sample index (int) or a time in seconds (float)
+        has been delivered (or counted dropped); LinkLostError if that takes over timeout_wall_s."""
+        if isinstance(index_or_time, (int, np.integer)):
+            target = int(index_or_time)
+        else:
+            target = int(round(float(index_or_time) / self.sample_period_s))
+        deadline = time.monotonic() + timeout_wall_s
+        with self._cond:
+            need = target - target % self._decimation
+            while self._last_index < need:
+                if self._link_error is not None:
+                    raise LinkLostError(f"FPGA link {self.url} lost: {self._link_error} (waiting for sample {target})")
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise LinkLostError(
+                        f"FPGA link {self.url}: stream reached sample {self._last_index}, not {need}, "
+                        f"within {timeout_wall_s:g} s"
+                    )
+                self._cond.wait(min(left, 0.1))
+
+    @property
+    def last_index(self) -> int:
+        return self._last_index
+
+    @property
+    def stats(self) -> LinkStats:
+        return LinkStats(
+            frames=self._frames,
+            dropped=self._dropped,
+            corrupt=self._parser.corrupt,
+            resyncs=self._parser.resyncs,
+            bytes_received=self._bytes,
+            reader_cpu_s=self._reader_cpu_s,
+        )
+
+    # --- reader thread -------------------------------------------------------------------------
+    def _fail(self, why: str) -> None:
+        with self._cond:
+            if self._link_error is None:
+                self._link_error = why
+            self._cond.notify_all()
+
+    def _read_loop(self) -> None:
+        ser = self._ser
+        assert ser is not None
+        try:
+            fd = ser.fileno()
+        except (AttributeError, NotImplementedError, serial.SerialException, OSError):
+            fd = None
+        cpu0 = time.thread_time()
+        while not self._stop.is_set():
+            try:
+                if fd is not None:
+                    ready, _, _ = select.select([fd], [], [], 0.05)
+                    if not ready:
+                        continue
+                    data = ser.read(1 << 16)
+                else:
+                    ser.timeout = 0.05
+                    data = ser.read(max(1, ser.in_waiting))
+            except (serial.SerialException, OSError, TypeError, ValueError) as exc:
+                if not self._stop.is_set():
+                    self._fail(f"read failed: {exc}")
+                break
+            if not data:
+                continue
+            self._bytes += len(data)
+            self._dispatch(*self._parser.feed(data))
+            self._reader_cpu_s = time.thread_time() - cpu0
+        self._reader_cpu_s = time.thread_time() - cpu0
+
+    def _dispatch(self, streams: list[np.ndarray], frames: list[p.Frame]) -> None:
+        if frames:
+            with self._cond:
+                for f in frames:
+                    if f.type in (p.ACK, p.NACK):
+                        self._replies[f.seq] = f
+                self._cond.notify_all()
+        for arr in streams:
+            self._deliver(arr)
+
+    def _deliver(self, arr: np.ndarray) -> None:
+        seq = arr["seq"].astype(np.int64)
+        with self._cond:
+            expected = self._expected_seq
+            if expected is None:
+                expected = int(seq[0])
+            prev = np.empty_like(seq)
+            prev[0] = expected - 1
+            prev[1:] = seq[:-1]
+            gaps = (seq - prev - 1) % p.SEQ_MOD
+            self._dropped += int(gaps.sum())
+            self._expected_seq = (int(seq[-1]) + 1) % p.SEQ_MOD
+            self._frames += len(arr)
+            block = p.stream_rows(arr)
+            self._last_index = max(self._last_index, int(arr["index"][-1]))
+            subscribers = list(self._subscribers)
+            self._cond.notify_all()
+        for cb in subscribers:
+            cb(block)

@@ -1,0 +1,329 @@
+"""FPGA register link protocol: frame codec, register map and stream layout, shared by the
+driver and the simulator so the two cannot drift apart (docs/fpga_link.md describes it).
+
+Every frame, little-endian:
+    sync  u16  0x5AA5 (bytes A5 5A on the wire)
+    type  u8   READ=1, WRITE=2, ACK=3, NACK=4, STREAM=5
+    len   u8   payload length in bytes
+    seq   u32  command sequence number (echoed by ACK/NACK) or stream frame counter
+    addr  u16  register address (0 for stream frames)
+    payload    len bytes
+    crc   u16  CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor)
+               over type..payload (everything after the sync word)
+Register values travel as 8 bytes: uint64 for integer registers, float64 for real ones.
+A stream frame's payload (48 bytes) is the sample index (u64), its time (f64) and eight float32:
+cx, sx, cy, sy, amp_ctrl, freq_ctrl, quad_ctrl, prec_ctrl.
+"""
+
+from __future__ import annotations
+
+import struct
+from binascii import crc_hqx
+from dataclasses import dataclass
+
+import numpy as np
+
+SYNC = b"\xa5\x5a"
+SYNC_U16 = 0x5AA5
+CRC_INIT = 0xFFFF
+HEADER = struct.Struct("<HBBIH")  # sync, type, len, seq, addr
+HEADER_SIZE = HEADER.size  # 10
+CRC_SIZE = 2
+MAX_PAYLOAD = 255
+SEQ_MOD = 1 << 32
+
+READ, WRITE, ACK, NACK, STREAM = 1, 2, 3, 4, 5
+FRAME_TYPES = {READ: "read", WRITE: "write", ACK: "ack", NACK: "nack", STREAM: "stream"}
+
+# NACK error codes (payload of a NACK, u64)
+ERR_UNKNOWN_ADDRESS = 1
+ERR_READ_ONLY = 2
+ERR_OUT_OF_RANGE = 3
+ERR_BAD_LENGTH = 4
+ERR_WRITE_ONLY = 5
+NACK_REASONS = {
+    ERR_UNKNOWN_ADDRESS: "unknown register address",
+    ERR_READ_ONLY: "register is read-only",
+    ERR_OUT_OF_RANGE: "value out of range",
+    ERR_BAD_LENGTH: "bad payload length",
+    ERR_WRITE_ONLY: "register is write-only",
+}
+
+# --- control bits (register CTRL; CTRL_SET / CTRL_CLR set or clear bits idempotently) ---------
+DRIVE_EN = 0x01  # clearing it is "cut drive": every force goes to zero
+AGC_EN = 0x02
+PLL_EN = 0x04
+QUAD_EN = 0x08
+WHOLE_ANGLE = 0x10
+STREAM_EN = 0x20
+DRIFT_COMP_EN = 0x40
+CTRL_MASK = 0x7F
+LOOP_BITS = AGC_EN | PLL_EN | QUAD_EN | WHOLE_ANGLE | DRIFT_COMP_EN
+
+# --- status bits (register STATUS) ------------------------------------------------------------
+ST_DRIVE_ON = 0x01
+ST_AGC_SETTLED = 0x02  # amplitude within 1 % of the setpoint
+ST_PLL_LOCKED = 0x04  # phase error under 0.05 rad
+ST_STREAMING = 0x08
+
+FPGA_ID = 0x46504741  # "FPGA"
+PROTOCOL_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Register:
+    """One register: address, value kind ('u' uint64 or 'f' float64), access, limits, unit."""
+
+    name: str
+    addr: int
+    kind: str
+    access: str  # "ro", "rw", "wo"
+    lo: float = 0.0
+    hi: float = 0.0
+    unit: str = ""
+    default: float = 0.0
+    doc: str = ""
+
+
+_U64_MAX = float(2**64 - 1)
+
+REGISTERS: tuple[Register, ...] = (
+    Register("ID", 0x00, "u", "ro", doc="constant 0x46504741 ('FPGA')"),
+    Register("VERSION", 0x01, "u", "ro", doc="protocol version"),
+    Register("STATUS", 0x02, "u", "ro", doc="status bits ST_*"),
+    Register("CTRL", 0x03, "u", "rw", 0, CTRL_MASK, doc="control bits (DRIVE_EN, AGC_EN, ...)"),
+    Register("CTRL_SET", 0x04, "u", "wo", 0, CTRL_MASK, doc="write bits to set in CTRL"),
+    Register("CTRL_CLR", 0x05, "u", "wo", 0, CTRL_MASK, doc="write bits to clear in CTRL"),
+    Register("SAMPLE_PERIOD_S", 0x06, "f", "ro", unit="s", doc="demodulated sample period"),
+    Register("SAMPLE_INDEX", 0x07, "u", "ro", doc="index of the last sample processed"),
+    Register("STREAM_DECIMATION", 0x08, "u", "rw", 1, 100000, default=1,
+             doc="stream every Nth sample (sample index divisible by N)"),
+    Register("STREAM_START_INDEX", 0x09, "u", "ro", doc="SAMPLE_INDEX when the stream was enabled"),
+    Register("LOOP_PERIOD_S", 0x0A, "f", "rw", 1e-4, 1.0, "s", 0.01, "loop update period (max block)"),
+    Register("FORCE_LIMIT", 0x0B, "f", "rw", 0.0, 100.0, "1/s", 1.0, "clamp on each loop force"),
+    Register("DRIVE_FORCE", 0x0C, "f", "rw", -100.0, 100.0, "1/s", 0.0, "open-loop amplitude force, AGC off"),
+    Register("AGC_SETPOINT", 0x10, "f", "rw", 0.0, 100.0, "", 1.0, "amplitude setpoint a"),
+    Register("AGC_KP", 0x11, "f", "rw", 0.0, 1e4, "1/s", 2.0, "AGC proportional gain"),
+    Register("AGC_KI", 0x12, "f", "rw", 0.0, 1e4, "1/s^2", 1.0, "AGC integral gain"),
+    Register("REF_FREQ_HZ", 0x13, "f", "rw", 1.0, 1e6, "Hz", 0.0, "reference (centre) frequency"),
+    Register("PLL_KP", 0x14, "f", "rw", 0.0, 1e4, "Hz/rad", 1.0, "PLL proportional gain"),
+    Register("PLL_KI", 0x15, "f", "rw", 0.0, 1e4, "Hz/rad/s", 2.0, "PLL integral gain"),
+    Register("QUAD_KP", 0x16, "f", "rw", 0.0, 1e4, "1/s", 2.0, "quadrature loop proportional gain"),
+    Register("QUAD_KI", 0x17, "f", "rw", 0.0, 1e4, "1/s^2", 1.0, "quadrature loop integral gain"),
+    Register("PRECESSION_RATE_DPS", 0x18, "f", "rw", -1e4, 1e4, "deg/s", 0.0,
+             "whole-angle precession command: wave angle rate"),
+    Register("FM_AMPLITUDE_HZ", 0x19, "f", "rw", 0.0, 1e3, "Hz", 0.0, "reference frequency modulation amplitude"),
+    Register("FM_RATE_HZ", 0x1A, "f", "rw", 0.0, 1e3, "Hz", 0.0, "reference frequency modulation rate"),
+    Register("DRIFT_D_PER_S", 0x1B, "f", "rw", 0.0, 1e3, "1/s", 0.0, "drift compensation: damping anisotropy D"),
+    Register("DRIFT_THETA_TAU_DEG", 0x1C, "f", "rw", -360.0, 360.0, "deg", 0.0,
+             "drift compensation: damping axis theta_tau"),
+    Register("PLL_FREQ_HZ", 0x1D, "f", "ro", unit="Hz", doc="reference frequency now (PLL output, FM excluded)"),
+    Register("ERR_CRC", 0x20, "u", "ro", doc="command frames the FPGA rejected (CRC or malformed)"),
+    Register("ERR_CMD", 0x21, "u", "ro", doc="NACKs sent"),
+    Register("FRAMES_SENT", 0x22, "u", "ro", doc="stream frames produced since the stream was enabled"),
+)
+
+BY_NAME: dict[str, Register] = {r.name: r for r in REGISTERS}
+BY_ADDR: dict[int, Register] = {r.addr: r for r in REGISTERS}
+for _r in REGISTERS:
+    if _r.kind == "u" and _r.access == "ro":
+        object.__setattr__(_r, "hi", _U64_MAX)
+
+
+def register(name_or_addr: str | int) -> Register:
+    """Look a register up by name or address; KeyError names the unknown key."""
+    if isinstance(name_or_addr, str):
+        try:
+            return BY_NAME[name_or_addr.upper()]
+        except KeyError:
+            raise KeyError(f"unknown FPGA register {name_or_addr!r}") from None
+    try:
+        return BY_ADDR[int(name_or_addr)]
+    except KeyError:
+        raise KeyError(f"unknown FPGA register address {name_or_addr!r}") from None
+
+
+def encode_value(reg: Register, value: float) -> bytes:
+    """8-byte payload for a register value."""
+    if reg.kind == "u":
+        return struct.pack("<Q", int(value))
+    return struct.pack("<d", float(value))
+
+
+def decode_value(reg: Register, payload: bytes) -> float | int:
+    if len(payload) != 8:
+        raise ValueError(f"register payload of {len(payload)} bytes (expected 8)")
+    if reg.kind == "u":
+        return struct.unpack("<Q", payload)[0]
+    return struct.unpack("<d", payload)[0]
+
+
+def in_range(reg: Register, value: float) -> bool:
+    """Whether value is a valid write for reg (finite, within [lo, hi], integral for 'u')."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return False
+    if v != v or v in (float("inf"), float("-inf")):
+        return False
+    if reg.kind == "u" and v != int(v):
+        return False
+    return reg.lo <= v <= reg.hi
+
+
+# --- frames -----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Frame:
+    """A decoded command-path frame (read, write, ack, nack)."""
+
+    type: int
+    seq: int
+    addr: int
+    payload: bytes
+
+
+def crc16(data: bytes | memoryview) -> int:
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF)."""
+    return crc_hqx(data, CRC_INIT)
+
+
+def encode_frame(ftype: int, seq: int, addr: int, payload: bytes = b"") -> bytes:
+    if len(payload) > MAX_PAYLOAD:
+        raise ValueError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
+    body = HEADER.pack(SYNC_U16, ftype, len(payload), seq % SEQ_MOD, addr) + payload
+    return body + struct.pack("<H", crc16(body[2:]))
+
+
+# --- stream -----------------------------------------------------------------------------------
+STREAM_COLUMNS = ("index", "t_s", "cx", "sx", "cy", "sy", "amp_ctrl", "freq_ctrl", "quad_ctrl", "prec_ctrl")
+STREAM_PAYLOAD = 48
+STREAM_DTYPE = np.dtype(
+    [
+        ("sync", "<u2"),
+        ("type", "u1"),
+        ("len", "u1"),
+        ("seq", "<u4"),
+        ("addr", "<u2"),
+        ("index", "<u8"),
+        ("t_s", "<f8"),
+        ("ch", "<f4", (8,)),
+        ("crc", "<u2"),
+    ]
+)
+STREAM_FRAME_SIZE = STREAM_DTYPE.itemsize  # 60
+assert STREAM_FRAME_SIZE == HEADER_SIZE + STREAM_PAYLOAD + CRC_SIZE
+
+
+def encode_stream(seq0: int, index: np.ndarray, t_s: np.ndarray, channels: np.ndarray) -> bytes:
+    """Encode n stream frames at once (vectorised; CRC per frame): channels is (n, 8)."""
+    n = len(index)
+    arr = np.zeros(n, STREAM_DTYPE)
+    arr["sync"] = SYNC_U16
+    arr["type"] = STREAM
+    arr["len"] = STREAM_PAYLOAD
+    arr["seq"] = (seq0 + np.arange(n, dtype=np.int64)) % SEQ_MOD
+    arr["index"] = index
+    arr["t_s"] = t_s
+    arr["ch"] = channels
+    raw = arr.tobytes()
+    mv = memoryview(raw)
+    size = STREAM_FRAME_SIZE
+    arr["crc"] = [crc_hqx(mv[o + 2 : o + size - 2], CRC_INIT) for o in range(0, n * size, size)]
+    return arr.tobytes()
+
+
+def stream_rows(arr: np.ndarray) -> np.ndarray:
+    """Decoded stream frames -> (n, 10) float64 block in STREAM_COLUMNS order."""
+    out = np.empty((len(arr), len(STREAM_COLUMNS)))
+    out[:, 0] = arr["index"]
+    out[:, 1] = arr["t_s"]
+    out[:, 2:] = arr["ch"]
+    return out
+
+
+class FrameParser:
+    """Incremental parser: feed bytes, get stream frames (a structured array) and command frames.
+
+    Resynchronises after garbage by searching the next sync word; a frame whose CRC fails is
+    counted corrupt and the search resumes one byte later, so a corrupted byte can never become
+    a sample.  Runs of stream frames are checked and decoded vectorised.
+    """
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self.corrupt = 0  # frames rejected (CRC, bad type or length)
+        self.resyncs = 0  # times bytes were skipped to find a sync word
+        self.bytes_skipped = 0
+
+    def feed(self, data: bytes) -> tuple[list[np.ndarray], list[Frame]]:
+        buf = self._buf
+        buf += data
+        streams: list[np.ndarray] = []
+        frames: list[Frame] = []
+        pos = 0
+        n = len(buf)
+        size = STREAM_FRAME_SIZE
+        while True:
+            i = buf.find(SYNC, pos)
+            if i < 0:
+                keep = 1 if n > pos and buf[-1] == SYNC[0] else 0  # maybe the first half of a sync
+                if n - keep > pos:
+                    self._skip(n - keep - pos)
+                    pos = n - keep
+                break
+            if i > pos:
+                self._skip(i - pos)
+            pos = i
+            if n - i < HEADER_SIZE:
+                break
+            ftype, length = buf[i + 2], buf[i + 3]
+            if ftype not in FRAME_TYPES or (ftype == STREAM and length != STREAM_PAYLOAD):
+                self.corrupt += 1
+                pos = i + 1
+                continue
+            flen = HEADER_SIZE + length + CRC_SIZE
+            if n - i < flen:
+                break
+            if ftype == STREAM:
+                run = self._stream_run(buf, i, (n - i) // size)
+                if run is None:
+                    self.corrupt += 1
+                    pos = i + 1
+                    continue
+                streams.append(run)
+                pos = i + len(run) * size
+                continue
+            body = bytes(buf[i + 2 : i + flen - 2])
+            if crc16(body) != buf[i + flen - 2] | (buf[i + flen - 1] << 8):
+                self.corrupt += 1
+                pos = i + 1
+                continue
+            _, _, _, seq, addr = HEADER.unpack_from(buf, i)
+            frames.append(Frame(ftype, seq, addr, body[HEADER_SIZE - 2 :]))
+            pos = i + flen
+        del buf[:pos]
+        return streams, frames
+
+    def _skip(self, n: int) -> None:
+        self.resyncs += 1
+        self.bytes_skipped += n
+
+    @staticmethod
+    def _stream_run(buf: bytearray, i: int, k: int) -> np.ndarray | None:
+        """The longest run of valid stream frames starting at i (None if the first is bad)."""
+        size = STREAM_FRAME_SIZE
+        chunk = bytes(buf[i : i + k * size])  # a copy: frombuffer would pin the bytearray
+        arr = np.frombuffer(chunk, STREAM_DTYPE)
+        ok = (arr["sync"] == SYNC_U16) & (arr["type"] == STREAM) & (arr["len"] == STREAM_PAYLOAD)
+        if not ok.all():
+            k = int(np.argmin(ok))
+        crcs = arr["crc"]
+        mv = memoryview(chunk)
+        m = 0
+        for o in range(0, k * size, size):
+            if crc_hqx(mv[o + 2 : o + size - 2], CRC_INIT) != crcs[m]:
+                break
+            m += 1
+        if m == 0:
+            return None
+        return arr[:m]

@@ -1,0 +1,307 @@
+"""Serve the simulated FPGA over a loopback socket (`socket://127.0.0.1:PORT`) or a pty, with
+fault injection (corrupted bytes, dropped frames, stall, link drop).
+
+Stream frames are written from the World's thread inside `after_block`, with blocking writes:
+in lockstep a block's frames are all in the link before the next block begins (backpressure),
+and a wall timeout (`write_timeout_s`) drops a client that stopped reading instead of hanging
+the world.  Register commands are answered by a thread per connection.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import socket
+import threading
+import tty
+
+import numpy as np
+
+from drivers.fpga import protocol as p
+
+from .firmware import FpgaFirmware
+
+FAULT_KINDS = ("corrupt", "drop", "stall", "link-drop")
+
+
+class _Port:
+    """A byte pipe to one client: send with a wall timeout, receive with a poll timeout."""
+
+    def send(self, data: bytes, timeout_s: float) -> bool: ...
+
+    def recv(self, timeout_s: float) -> bytes | None: ...
+
+    def close(self) -> None: ...
+
+
+class _SocketPort(_Port):
+    def __init__(self, conn: socket.socket) -> None:
+        self.conn = conn
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        conn.setblocking(True)
+        self.closed = False
+
+    def send(self, data: bytes, timeout_s: float) -> bool:
+        try:
+            self.conn.settimeout(timeout_s)
+            self.conn.sendall(data)
+            return True
+        except OSError:
+            self.close()
+            return False
+
+    def recv(self, timeout_s: float) -> bytes | None:
+        try:
+            ready, _, _ = select.select([self.conn], [], [], timeout_s)
+            if not ready:
+                return b""
+            data = self.conn.recv(65536)
+        except (OSError, ValueError):
+            return None
+        return data or None
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            try:
+                self.conn.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            self.conn.close()
+
+
+class _PtyPort(_Port):
+    def __init__(self) -> None:
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        tty.setraw(self.master)
+        self.path = os.ttyname(self.slave)
+        self.closed = False
+
+    def send(self, data: bytes, timeout_s: float) -> bool:
+        view = memoryview(data)
+        try:
+            while view:
+                _, ready, _ = select.select([], [self.master], [], timeout_s)
+                if not ready:
+                    return False
+                n = os.write(self.master, view)
+                view = view[n:]
+            return True
+        except (OSError, ValueError):
+            return False
+
+    def recv(self, timeout_s: float) -> bytes | None:
+        try:
+            ready, _, _ = select.select([self.master], [], [], timeout_s)
+            if not ready:
+                return b""
+            return os.read(self.master, 65536) or None
+        except (OSError, ValueError):
+            return None
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            for fd in (self.master, self.slave):
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+
+
+class FpgaServer:
+    """The simulated FPGA on a transport; `serve_fpga` builds and starts one."""
+
+    def __init__(self, world, *, transport: str = "socket", seed: int = 0, write_timeout_s: float = 5.0) -> None:
+        if transport not in ("socket", "pty"):
+            raise ValueError(f"transport={transport!r} must be 'socket' or 'pty'")
+        self.world = world
+        self.transport = transport
+        self.write_timeout_s = float(write_timeout_s)
+        self.firmware = FpgaFirmware(world)
+        self.firmware.sink = self._send_stream
+        self.rng = np.random.default_rng(seed)
+        self._write_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._port: _Port | None = None
+        self._threads: list[threading.Thread] = []
+        self._listener: socket.socket | None = None
+        # faults
+        self.corrupt_rate = 0.0
+        self.drop_rate = 0.0
+        self.stalled = False
+        # counters of what the faults did (ground truth for tests)
+        self.frames_corrupted = 0
+        self.frames_dropped = 0
+        self.frames_lost = 0  # frames produced while no client, stalled or after a write timeout
+        self.url = ""
+
+    # --- lifecycle ------------------------------------------------------------------------------
+    def start(self) -> FpgaServer:
+        if self.transport == "socket":
+            self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self._listener.bind(("127.0.0.1", 0))
+            self._listener.listen(1)
+            self.url = f"socket://127.0.0.1:{self._listener.getsockname()[1]}"
+            self._spawn(self._accept_loop, "fpga-accept")
+        else:
+            port = _PtyPort()
+            self._port = port
+            self.url = port.path
+            self._spawn(lambda: self._command_loop(port), "fpga-commands")
+        self.world.attach(self.firmware)
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.world.detach(self.firmware)
+        with self.world.lock:
+            self.world.set_force("fpga", None)
+        if self._listener is not None:
+            self._listener.close()
+        port = self._port
+        if port is not None:
+            port.close()
+        for t in self._threads:
+            t.join(timeout=2.0)
+
+    def _spawn(self, target, name: str) -> None:
+        t = threading.Thread(target=target, name=name, daemon=True)
+        self._threads.append(t)
+        t.start()
+
+    # --- faults ---------------------------------------------------------------------------------
+    def inject(self, kind: str, rate: float = 0.01) -> None:
+        """'corrupt' (one byte of a frame altered, at a per-frame rate), 'drop' (stream frames
+        not sent, per-frame rate), 'stall' (no replies, no stream), 'link-drop' (close the link)."""
+        if kind not in FAULT_KINDS:
+            raise ValueError(f"fault kind {kind!r} is not one of {FAULT_KINDS}")
+        if kind in ("corrupt", "drop") and not 0.0 <= rate <= 1.0:
+            raise ValueError(f"fault rate={rate!r} must be in [0, 1]")
+        if kind == "corrupt":
+            self.corrupt_rate = rate
+        elif kind == "drop":
+            self.drop_rate = rate
+        elif kind == "stall":
+            self.stalled = True
+        else:
+            port = self._port
+            if port is not None:
+                port.close()
+
+    def clear_faults(self) -> None:
+        self.corrupt_rate = self.drop_rate = 0.0
+        self.stalled = False
+
+    # --- transport ------------------------------------------------------------------------------
+    def _accept_loop(self) -> None:
+        assert self._listener is not None
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._listener.accept()
+            except OSError:
+                return
+            old = self._port
+            port = _SocketPort(conn)
+            self._port = port
+            if old is not None:
+                old.close()
+            self._spawn(lambda port=port: self._command_loop(port), "fpga-commands")
+
+    def _write(self, data: bytes) -> bool:
+        port = self._port
+        if port is None or getattr(port, "closed", False):
+            return False
+        with self._write_lock:
+            return port.send(data, self.write_timeout_s)
+
+    def _send_stream(self, data: bytes, n: int) -> None:
+        """Stream sink of the firmware (World thread): apply faults, then a blocking write."""
+        if self.stalled or self._port is None or getattr(self._port, "closed", False):
+            self.frames_lost += n
+            return
+        size = p.STREAM_FRAME_SIZE
+        if self.drop_rate > 0.0:
+            keep = self.rng.random(n) >= self.drop_rate
+            if not keep.all():
+                self.frames_dropped += int(n - keep.sum())
+                frames = np.frombuffer(data, np.uint8).reshape(n, size)[keep]
+                data, n = frames.tobytes(), int(keep.sum())
+        if self.corrupt_rate > 0.0 and n:
+            data = self._corrupt(data, n, size)
+        if not self._write(data):
+            self.frames_lost += n
+
+    def _corrupt(self, data: bytes, n: int, size: int) -> bytes:
+        hit = np.flatnonzero(self.rng.random(n) < self.corrupt_rate)
+        if len(hit) == 0:
+            return data
+        buf = bytearray(data)
+        offsets = self.rng.integers(0, size, len(hit))
+        flips = self.rng.integers(1, 256, len(hit))
+        for j, off, flip in zip(hit, offsets, flips, strict=True):
+            buf[j * size + int(off)] ^= int(flip)
+        self.frames_corrupted += len(hit)
+        return bytes(buf)
+
+    def _command_loop(self, port: _Port) -> None:
+        parser = p.FrameParser()
+        while not self._stop.is_set() and not getattr(port, "closed", False):
+            data = port.recv(0.05)
+            if data is None:
+                if self.transport == "socket":
+                    port.close()
+                    return
+                continue  # a pty whose client closed: wait for the next one
+            if not data:
+                continue
+            _, frames = parser.feed(data)
+            with self.firmware.lock:
+                self.firmware.regs["ERR_CRC"] = parser.corrupt
+            if self.stalled:
+                continue
+            for frame in frames:
+                reply = self._handle(frame)
+                if reply is not None:
+                    if self.corrupt_rate > 0.0:
+                        reply = self._corrupt(reply, 1, len(reply))
+                    self._write(reply)
+
+    def _handle(self, frame: p.Frame) -> bytes | None:
+        fw = self.firmware
+        if frame.type not in (p.READ, p.WRITE):
+            return None
+        reg = p.BY_ADDR.get(frame.addr)
+        code = 0
+        if reg is None:
+            code = p.ERR_UNKNOWN_ADDRESS
+        elif frame.type == p.READ:
+            if reg.access == "wo":
+                code = p.ERR_WRITE_ONLY
+            elif frame.payload:
+                code = p.ERR_BAD_LENGTH
+            else:
+                return p.encode_frame(p.ACK, frame.seq, frame.addr, p.encode_value(reg, fw.read(reg)))
+        else:
+            if reg.access == "ro":
+                code = p.ERR_READ_ONLY
+            elif len(frame.payload) != 8:
+                code = p.ERR_BAD_LENGTH
+            else:
+                value = p.decode_value(reg, frame.payload)
+                if not p.in_range(reg, value):
+                    code = p.ERR_OUT_OF_RANGE
+                else:
+                    stored = fw.write(reg, value)
+                    return p.encode_frame(p.ACK, frame.seq, frame.addr, p.encode_value(reg, stored))
+        with fw.lock:
+            fw.regs["ERR_CMD"] += 1
+        return p.encode_frame(p.NACK, frame.seq, frame.addr, code.to_bytes(8, "little"))
+
+
+def serve_fpga(world, *, transport: str = "socket", seed: int = 0, write_timeout_s: float = 5.0) -> FpgaServer:
+    """Start the simulated FPGA on `world`; the handle has `.url`, `.stop()`, `.inject(kind)`,
+    `.clear_faults()`, `.firmware` and the fault counters."""
+    return FpgaServer(world, transport=transport, seed=seed, write_timeout_s=write_timeout_s).start()
