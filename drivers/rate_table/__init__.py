@@ -1,5 +1,7 @@
 """Rate-table drivers: the interface procedures use, and one driver per controller model."""
 
-from .base import RateTable, TableLimits, TableStatus
+from .ascii_driver import AsciiRateTable
+from .base import RateTable, TableLimits, TableStatus, angle_error_deg
+from .modbus_driver import ModbusRateTable
 
-__all__ = ["RateTable", "TableLimits", "TableStatus"]
+__all__ = ["AsciiRateTable", "ModbusRateTable", "RateTable", "TableLimits", "TableStatus", "angle_error_deg"]

@@ -108,8 +108,12 @@ class TableMechanics:
 
     @property
     def tripped(self) -> bool:
-        return self.estop_pressed or self.estop_latched or self.fault_latched or self.interlock_open or (
-            self.watchdog_expired
+        return (
+            self.estop_pressed
+            or self.estop_latched
+            or self.fault_latched
+            or self.interlock_open
+            or (self.watchdog_expired)
         )
 
     def command(self, mode: int, rate_dps: float, angle_deg: float, accel_dps2: float) -> None:

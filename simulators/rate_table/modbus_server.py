@@ -216,4 +216,3 @@ def serve_modbus_table(
     with world.lock:
         world.attach(mech)
     return ModbusTableServer(world, mech, host=host, port=port, framer=framer, device_id=device_id)
-
