@@ -1,0 +1,702 @@
+"""Stations: a TOML file -> devices (real or simulated) with limits, the safe state, link checks.
+
+A station file names each device by role (`table`, `frontend`, `fpga`) with a `driver` from the
+registry below, its address and its limits.  With a `[simulation]` table the station builds one
+World (physics preset + seed) and a SimClock, starts each device's simulator on loopback and
+points the same drivers at them.  A new instrument model is a new `DriverSpec`, not an engine
+change.  Example (`bench/stations/sim-hrg.toml`):
+
+    [station]
+    id = "sim-hrg"
+
+    [simulation]
+    preset = "hrg"
+    seed = 0
+
+    [devices.table]
+    driver = "modbus-table"
+    max_rate_dps = 1000.0
+    max_accel_dps2 = 500.0
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench.engine.context import GuardedClock
+from bench.engine.safety import SafeStateReport, ordered_roles
+from drivers.errors import LinkLostError, SafetyTripError
+
+BUILTIN_DIR = Path(__file__).resolve().parent / "stations"
+ROLES = ("table", "frontend", "fpga")
+#: station fault kinds (`--fault KIND@SECONDS`) -> (role, simulator inject kind)
+FAULTS: dict[str, tuple[str, str]] = {
+    "link-drop": ("fpga", "link-drop"),
+    "link-corrupt": ("fpga", "corrupt"),
+    "table-estop": ("table", "estop"),
+    "table-fault": ("table", "fault"),
+    "frontend-hang": ("frontend", "hang"),
+}
+#: wall seconds a simulated front-end hang lasts (its own watchdog then reboots it)
+FRONTEND_HANG_WALL_S = 3.0
+
+
+class StationError(ValueError):
+    """A station file is missing, malformed or has a value outside its allowed range; the message
+    names the file, the key, the value and the range."""
+
+
+# --- config keys ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Key:
+    """One allowed key of a device table: its type, range (inclusive) and default."""
+
+    type: type
+    default: Any = None
+    low: float | None = None
+    high: float | None = None
+    required: bool = False
+    doc: str = ""
+    choices: tuple[Any, ...] | None = None
+
+    def range_text(self) -> str:
+        if self.choices is not None:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        if self.type in (int, float):
+            lo = "-inf" if self.low is None else f"{self.low:g}"
+            hi = "inf" if self.high is None else f"{self.high:g}"
+            return f"[{lo}, {hi}]"
+        return f"a {self.type.__name__}"
+
+    def check(self, where: str, name: str, value: Any) -> Any:
+        ok = True
+        if self.type is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if not isinstance(value, self.type) or (self.type is int and isinstance(value, bool)):
+            ok = False
+        elif self.choices is not None and value not in self.choices:
+            ok = False
+        elif self.type in (int, float):
+            if not math.isfinite(value):
+                ok = False
+            elif (self.low is not None and value < self.low) or (self.high is not None and value > self.high):
+                ok = False
+        if not ok:
+            raise StationError(f"{where} {name} = {value!r} is outside the allowed range {self.range_text()}")
+        return value
+
+
+def check_table(where: str, table: dict[str, Any], keys: dict[str, Key]) -> dict[str, Any]:
+    """Check every key of a TOML table against its Key; defaults filled in."""
+    out: dict[str, Any] = {}
+    for name in table:
+        if name not in keys:
+            raise StationError(f"{where} unknown key {name!r} (allowed: {', '.join(sorted(keys))})")
+    for name, key in keys.items():
+        if name in table:
+            out[name] = key.check(where, name, table[name])
+        elif key.required:
+            raise StationError(f"{where} missing key {name!r} ({key.range_text()})")
+        else:
+            out[name] = key.default
+    return out
+
+
+# --- device registry -------------------------------------------------------------------------
+@dataclass(frozen=True)
+class DriverSpec:
+    """How to build one instrument model's driver and (optionally) its simulator.
+
+    build(cfg, clock) -> connected driver; serve(world, cfg) -> (simulator handle, address keys
+    for the driver); health(device) -> optional (n, k) rows for the role's stream, raising
+    LinkLostError / SafetyTripError when the device is gone or tripped."""
+
+    name: str
+    role: str
+    keys: dict[str, Key]
+    build: Callable[[dict[str, Any], Any], Any]
+    serve: Callable[[Any, dict[str, Any]], tuple[Any, dict[str, Any]]] | None = None
+    health: Callable[[Any], Any] | None = None
+    doc: str = ""
+
+
+DRIVERS: dict[str, DriverSpec] = {}
+
+
+def register_driver(spec: DriverSpec) -> DriverSpec:
+    if spec.role not in ROLES:
+        raise ValueError(f"driver {spec.name!r}: role {spec.role!r} is not one of {ROLES}")
+    DRIVERS[spec.name] = spec
+    return spec
+
+
+def _table_keys(address: dict[str, Key]) -> dict[str, Key]:
+    return {
+        "driver": Key(str, required=True),
+        "max_rate_dps": Key(float, 1000.0, 1e-3, 20000.0, doc="rate limit"),
+        "max_accel_dps2": Key(float, 500.0, 1e-3, 100000.0, doc="acceleration limit"),
+        "watchdog_s": Key(float, 2.0, 0.1, 60.0),
+        "timeout_s": Key(float, 1.0, 0.01, 30.0),
+        **address,
+    }
+
+
+def _table_health(table: Any) -> np.ndarray:
+    st = table.status()
+    if st.tripped:
+        raise SafetyTripError(f"rate table tripped: {st.trip_reason()}, rate={st.rate_dps:.3f} deg/s")
+    return np.array([[st.rate_dps, st.angle_deg]])
+
+
+def _build_modbus_table(cfg: dict[str, Any], clock: Any) -> Any:
+    from drivers.rate_table import TableLimits
+    from drivers.rate_table.modbus_driver import ModbusRateTable
+
+    limits = TableLimits(max_rate_dps=cfg["max_rate_dps"], max_accel_dps2=cfg["max_accel_dps2"])
+    kw = dict(limits=limits, clock=clock, device_id=cfg["device_id"], timeout_s=cfg["timeout_s"])
+    if cfg.get("serial_port"):
+        table = ModbusRateTable.rtu(cfg["serial_port"], watchdog_s=cfg["watchdog_s"], **kw)
+    else:
+        table = ModbusRateTable(cfg["host"], cfg["port"], watchdog_s=cfg["watchdog_s"], **kw)
+    table.connect()
+    return table
+
+
+def _serve_modbus_table(world: Any, cfg: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    from simulators.rate_table import serve_modbus_table
+
+    handle = serve_modbus_table(
+        world,
+        max_rate_dps=cfg["max_rate_dps"],
+        max_accel_dps2=cfg["max_accel_dps2"],
+        watchdog_s=cfg["watchdog_s"],
+        device_id=cfg["device_id"],
+    )
+    return handle, {"host": handle.host, "port": handle.port, "serial_port": ""}
+
+
+register_driver(
+    DriverSpec(
+        name="modbus-table",
+        role="table",
+        keys=_table_keys(
+            {
+                "host": Key(str, "127.0.0.1"),
+                "port": Key(int, 502, 1, 65535),
+                "serial_port": Key(str, "", doc="RTU on a serial port instead of TCP"),
+                "device_id": Key(int, 1, 0, 247),
+            }
+        ),
+        build=_build_modbus_table,
+        serve=_serve_modbus_table,
+        health=_table_health,
+        doc="rate table, Modbus TCP or RTU",
+    )
+)
+
+
+def _build_frontend(cfg: dict[str, Any], clock: Any) -> Any:
+    from drivers.frontend import FrontEndLimits, ScpiFrontEnd
+
+    fe = ScpiFrontEnd(
+        cfg["resource"],
+        clock=clock,
+        limits=FrontEndLimits(max_amplitude_v=cfg["max_amplitude_v"]),
+        timeout_s=cfg["timeout_s"],
+    )
+    fe.connect()
+    return fe
+
+
+def _serve_frontend(world: Any, cfg: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    from simulators.frontend import serve_frontend
+
+    handle = serve_frontend(world, seed=world.seed)
+    return handle, {"resource": handle.resource_name}
+
+
+def _frontend_health(fe: Any) -> None:
+    fe.idn  # noqa: B018 - a query that proves the instrument answers
+
+
+register_driver(
+    DriverSpec(
+        name="scpi-frontend",
+        role="frontend",
+        keys={
+            "driver": Key(str, required=True),
+            "resource": Key(str, "", doc="VISA resource name"),
+            "max_amplitude_v": Key(float, 5.0, 0.0, 10.0),
+            "timeout_s": Key(float, 2.0, 0.05, 60.0),
+        },
+        build=_build_frontend,
+        serve=_serve_frontend,
+        health=_frontend_health,
+        doc="DAC/ADC front end, SCPI over VISA",
+    )
+)
+
+
+def _build_fpga(cfg: dict[str, Any], clock: Any) -> Any:
+    from drivers.fpga.link import FpgaLink
+
+    link = FpgaLink(cfg["url"], clock=clock, timeout_s=cfg["timeout_s"])
+    link.connect()
+    return link
+
+
+def _serve_fpga(world: Any, cfg: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    from simulators.fpga import serve_fpga
+
+    handle = serve_fpga(world, seed=world.seed)
+    return handle, {"url": handle.url}
+
+
+class _FpgaHealth:
+    """Lost link, or a frame lost or rejected since the run began, is a link fault."""
+
+    def __call__(self, link: Any) -> None:
+        if not link.connected:
+            raise LinkLostError(f"FPGA link {link.url} lost")
+        s = link.stats
+        base = getattr(link, "_gyrobench_stats0", None)
+        if base is None:
+            link._gyrobench_stats0 = (s.dropped, s.corrupt)
+            return
+        if s.dropped > base[0] or s.corrupt > base[1]:
+            raise LinkLostError(
+                f"FPGA link {link.url}: stream frames lost ({s.dropped - base[0]}) or corrupt ({s.corrupt - base[1]})"
+            )
+
+
+register_driver(
+    DriverSpec(
+        name="fpga-link",
+        role="fpga",
+        keys={
+            "driver": Key(str, required=True),
+            "url": Key(str, "", doc="serial port or pyserial URL"),
+            "timeout_s": Key(float, 1.0, 0.01, 30.0),
+            "decimation": Key(int, 1, 1, 100000),
+        },
+        build=_build_fpga,
+        serve=_serve_fpga,
+        health=_FpgaHealth(),
+        doc="FPGA register link and demodulated stream",
+    )
+)
+
+STATION_KEYS = {
+    "id": Key(str, required=True),
+    "results": Key(str, "runs/results.sqlite", doc="SQLite file or database URL"),
+    "runs_dir": Key(str, "runs"),
+    "description": Key(str, ""),
+}
+SIM_KEYS = {
+    "preset": Key(str, "hrg", choices=("hrg", "mems")),
+    "seed": Key(int, 0, 0, 2**63 - 1),
+    "speed": Key(float, 0.0, 0.0, 1e6, doc="0 = lockstep, else x real time"),
+    "sample_period_s": Key(float, 1e-3, 1e-5, 0.1),
+}
+
+
+# --- the station ---------------------------------------------------------------------------
+@dataclass
+class StationConfig:
+    """A checked station file."""
+
+    source: str
+    station: dict[str, Any]
+    simulation: dict[str, Any] | None
+    devices: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    @property
+    def id(self) -> str:
+        return self.station["id"]
+
+
+def builtin_stations() -> dict[str, Path]:
+    return {p.stem: p for p in sorted(BUILTIN_DIR.glob("*.toml"))}
+
+
+def find_station_file(name_or_path: str | Path) -> Path:
+    """A built-in station name (`sim-hrg`) or a TOML file path."""
+    text = str(name_or_path)
+    builtin = builtin_stations()
+    if text in builtin:
+        return builtin[text]
+    path = Path(text)
+    if path.is_file():
+        return path
+    raise StationError(f"{text}: no such station file or built-in station (built-in: {', '.join(builtin)})")
+
+
+def load_config(name_or_path: str | Path) -> StationConfig:
+    """Read and check a station file; StationError names the file, key, value and range."""
+    path = find_station_file(name_or_path)
+    try:
+        raw = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise StationError(f"{path}: not valid TOML: {exc}") from None
+    for top in raw:
+        if top not in ("station", "simulation", "devices"):
+            raise StationError(f"{path}: unknown table [{top}] (allowed: station, simulation, devices)")
+    if "station" not in raw:
+        raise StationError(f'{path}: missing table [station] with id = "..."')
+    station = check_table(f"{path}: [station]", raw["station"], STATION_KEYS)
+    sim = check_table(f"{path}: [simulation]", raw["simulation"], SIM_KEYS) if "simulation" in raw else None
+    devices: dict[str, dict[str, Any]] = {}
+    for role, table in (raw.get("devices") or {}).items():
+        where = f"{path}: [devices.{role}]"
+        if role not in ROLES:
+            raise StationError(f"{path}: [devices.{role}] unknown role {role!r} (allowed: {', '.join(ROLES)})")
+        if not isinstance(table, dict):
+            raise StationError(f"{where} must be a table")
+        name = table.get("driver")
+        if name not in DRIVERS:
+            raise StationError(f"{where} driver = {name!r} is outside the allowed range: one of {sorted(DRIVERS)}")
+        spec = DRIVERS[name]
+        if spec.role != role:
+            raise StationError(f"{where} driver = {name!r} is a {spec.role!r} driver, not a {role!r} one")
+        cfg = check_table(where, table, spec.keys)
+        if sim is None:
+            missing = [k for k in ("resource", "url") if k in spec.keys and not cfg.get(k)]
+            if missing:
+                raise StationError(f"{where} missing key {missing[0]!r}: a real device needs its address")
+        devices[role] = cfg
+    if not devices:
+        raise StationError(f"{path}: no [devices.*] table (roles: {', '.join(ROLES)})")
+    return StationConfig(source=str(path), station=station, simulation=sim, devices=devices)
+
+
+class Station:
+    """Devices by role, the bench clock, the safe state and the link checks of one station."""
+
+    HEALTH_EVERY_SIM_S = 0.2
+    HEALTH_EVERY_WALL_S = 0.5
+
+    def __init__(self, config: StationConfig) -> None:
+        self.config = config
+        self.id = config.id
+        self.simulated = config.simulation is not None
+        self.devices: dict[str, Any] = {}
+        self.clock: GuardedClock = GuardedClock(self._make_clock())
+        self._last_health = (-math.inf, -math.inf)
+        self._health_rows: list[np.ndarray] = []
+        self._ctx: Any = None
+        self._lock = threading.RLock()
+
+    @classmethod
+    def load(cls, name_or_path: str | Path, **overrides: Any) -> Station:
+        """Check a station file and build its (unopened) station; simulated ones become SimStation."""
+        config = load_config(name_or_path)
+        if config.simulation is not None:
+            return SimStation(config, **overrides)
+        if overrides:
+            raise StationError(f"{config.source}: {sorted(overrides)} only apply to a simulated station")
+        return cls(config)
+
+    def _make_clock(self) -> Any:
+        from bench.clock import RealClock
+
+        return RealClock()
+
+    @property
+    def seed(self) -> int | None:
+        return None
+
+    @property
+    def results_url(self) -> str:
+        return self.config.station["results"]
+
+    @property
+    def runs_dir(self) -> str:
+        return self.config.station["runs_dir"]
+
+    # --- lifecycle -------------------------------------------------------------------------
+    def open(self) -> Station:
+        """Connect every device (starting the simulators first on a simulated station)."""
+        try:
+            for role, cfg in self.config.devices.items():
+                self.devices[role] = DRIVERS[cfg["driver"]].build(self._device_cfg(role, cfg), self.clock)
+        except Exception:
+            self.close()
+            raise
+        return self
+
+    def _device_cfg(self, role: str, cfg: dict[str, Any]) -> dict[str, Any]:
+        return cfg
+
+    def close(self) -> None:
+        for role in reversed(list(self.devices)):
+            try:
+                self.devices[role].close()
+            except Exception:  # noqa: BLE001 - closing must go on
+                pass
+        self.devices.clear()
+
+    def __enter__(self) -> Station:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- what the engine asks --------------------------------------------------------------
+    def truth(self) -> dict[str, float] | None:
+        return None
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "source": self.config.source,
+            "simulated": self.simulated,
+            "simulation": self.config.simulation,
+            "devices": self.config.devices,
+        }
+
+    def check_links(self) -> None:
+        """Called at every engine checkpoint: at most every 0.2 s (bench clock) or 0.5 s (wall)
+        ask each device for a sign of life; a lost link or a trip raises."""
+        now_sim, now_wall = self.clock.now(), time.monotonic()
+        last_sim, last_wall = self._last_health
+        if now_sim - last_sim < self.HEALTH_EVERY_SIM_S and now_wall - last_wall < self.HEALTH_EVERY_WALL_S:
+            return
+        self._last_health = (now_sim, now_wall)
+        for role in ordered_roles(self.devices):
+            spec = DRIVERS[self.config.devices[role]["driver"]]
+            if spec.health is None:
+                continue
+            rows = spec.health(self.devices[role])
+            if role == "table" and rows is not None and self._ctx is not None:
+                self._ctx.record("table", ("t_s", "rate_dps", "angle_deg"), np.column_stack([[now_sim], rows]))
+
+    def start_streams(self, ctx: Any) -> Callable[[], None]:
+        """Record the FPGA's stream (if any) into the run; returns the function that stops it."""
+        self._ctx = ctx
+        self._last_health = (-math.inf, -math.inf)
+        link = self.devices.get("fpga")
+        if link is None:
+            return lambda: setattr(self, "_ctx", None)
+        from drivers.fpga.protocol import STREAM_COLUMNS
+
+        if hasattr(link, "_gyrobench_stats0"):
+            del link._gyrobench_stats0
+        columns = tuple(STREAM_COLUMNS)
+        unsubscribe = link.subscribe(lambda block: ctx.record("fpga", columns, block))
+        link.start_stream(self.config.devices["fpga"]["decimation"])
+
+        def stop() -> None:
+            try:
+                if link.connected:
+                    link.wait_for_sample(float(self.clock.now()), timeout_wall_s=5.0)
+                    link.stop_stream()
+            finally:
+                unsubscribe()
+                self._ctx = None
+
+        return stop
+
+    def safe_state(self) -> SafeStateReport:
+        """Cut the drive, bring the table to rest, outputs off (SAFE_ORDER); a device that does not
+        confirm is reconnected and asked again (a dropped link), up to `attempts` times."""
+        report = SafeStateReport(confirmed=True)
+        for role in ordered_roles(self.devices):
+            report.order.append(role)
+            ok = False
+            for attempt in range(3):
+                dev = self.devices[role]
+                try:
+                    if attempt:
+                        self._reconnect(role)
+                        dev = self.devices[role]
+                    ok = bool(dev.safe_state())
+                except Exception as exc:  # noqa: BLE001 - the next device must still be made safe
+                    report.errors[role] = f"{type(exc).__name__}: {exc}"
+                    ok = False
+                if ok:
+                    report.errors.pop(role, None)
+                    break
+                time.sleep(0.5 * attempt)
+            report.devices[role] = ok
+            report.confirmed = report.confirmed and ok
+        return report
+
+    def _reconnect(self, role: str) -> None:
+        dev = self.devices[role]
+        try:
+            dev.close()
+        except Exception:  # noqa: BLE001
+            pass
+        cfg = self.config.devices[role]
+        self.devices[role] = DRIVERS[cfg["driver"]].build(self._device_cfg(role, cfg), self.clock)
+
+
+class _FaultScheduler:
+    """A World device that injects station faults at given simulated seconds (block-aligned)."""
+
+    def __init__(self, station: SimStation) -> None:
+        self.station = station
+        self.pending: list[tuple[float, str]] = []
+        self.fired: list[tuple[float, str]] = []
+
+    def add(self, kind: str, at_s: float) -> None:
+        self.pending.append((float(at_s), kind))
+        self.pending.sort()
+
+    def max_block_samples(self, world: Any) -> int | None:
+        if not self.pending:
+            return None
+        left = self.pending[0][0] - world.t_s
+        return max(1, int(math.ceil(left / world.sample_period_s - 1e-9)))
+
+    def before_block(self, world: Any, t_s: float, n: int, dt_s: float) -> None:
+        while self.pending and self.pending[0][0] <= t_s + 1e-9:
+            at, kind = self.pending.pop(0)
+            self.station.inject(kind)
+            self.fired.append((t_s, kind))
+
+    def after_block(self, world: Any, block: Any) -> None:
+        pass
+
+
+class SimStation(Station):
+    """A simulated station: one World + SimClock, the simulators on loopback, the real drivers.
+
+    `truth()` gives the true parameters (same names as the measurements); `inject(kind)` and
+    `schedule_fault(kind, at_s)` give the `--fault` kinds of FAULTS."""
+
+    def __init__(
+        self,
+        config: StationConfig | str | Path = "sim-hrg",
+        *,
+        seed: int | None = None,
+        speed: float | None = None,
+        preset: str | None = None,
+    ) -> None:
+        if not isinstance(config, StationConfig):
+            config = load_config(config)
+        if config.simulation is None:
+            raise StationError(f"{config.source}: not a simulated station (no [simulation] table)")
+        sim = dict(config.simulation)
+        if seed is not None:
+            sim["seed"] = SIM_KEYS["seed"].check(f"{config.source}: [simulation]", "seed", int(seed))
+        if speed is not None:
+            sim["speed"] = SIM_KEYS["speed"].check(f"{config.source}: [simulation]", "speed", float(speed))
+        if preset is not None:
+            sim["preset"] = SIM_KEYS["preset"].check(f"{config.source}: [simulation]", "preset", preset)
+        config = StationConfig(config.source, config.station, sim, config.devices)
+        from simulators.physics.params import preset as make_preset
+        from simulators.world import World
+
+        self.world = World(make_preset(sim["preset"]), seed=sim["seed"], sample_period_s=sim["sample_period_s"])
+        self.handles: dict[str, Any] = {}
+        self.addresses: dict[str, dict[str, Any]] = {}
+        self.faults = _FaultScheduler(self)
+        self.world.attach(self.faults)
+        self._timers: list[threading.Timer] = []
+        super().__init__(config)
+
+    def _make_clock(self) -> Any:
+        from bench.clock import SimClock
+
+        speed = self.config.simulation["speed"]
+        return SimClock(self.world, speed=math.inf if speed == 0 else speed)
+
+    @property
+    def seed(self) -> int:
+        return int(self.config.simulation["seed"])
+
+    def start_simulators(self) -> dict[str, dict[str, Any]]:
+        """Start each device's simulator on loopback; their addresses by role."""
+        for role, cfg in self.config.devices.items():
+            spec = DRIVERS[cfg["driver"]]
+            if spec.serve is None:
+                raise StationError(f"{self.config.source}: [devices.{role}] driver {spec.name!r} has no simulator")
+            if role not in self.handles:
+                self.handles[role], self.addresses[role] = spec.serve(self.world, cfg)
+        return self.addresses
+
+    def open(self) -> SimStation:
+        try:
+            self.start_simulators()
+        except Exception:
+            self.close()
+            raise
+        super().open()
+        return self
+
+    def _device_cfg(self, role: str, cfg: dict[str, Any]) -> dict[str, Any]:
+        return {**cfg, **self.addresses.get(role, {})}
+
+    def close(self) -> None:
+        super().close()
+        for t in self._timers:
+            t.cancel()
+        for handle in self.handles.values():
+            try:
+                handle.stop()
+            except Exception:  # noqa: BLE001
+                pass
+        self.handles.clear()
+        self.clock.close()
+
+    def truth(self) -> dict[str, float]:
+        return self.world.truth()
+
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        d["addresses"] = self.addresses
+        return d
+
+    # --- faults ----------------------------------------------------------------------------
+    def inject(self, kind: str) -> None:
+        """Inject a station fault now (one of FAULTS)."""
+        if kind not in FAULTS:
+            raise StationError(f"fault {kind!r} is not one of {', '.join(FAULTS)}")
+        role, sim_kind = FAULTS[kind]
+        handle = self.handles.get(role)
+        if handle is None:
+            raise StationError(f"fault {kind!r}: this station has no simulated {role}")
+        if kind == "link-corrupt":
+            handle.inject(sim_kind, 0.05)
+        else:
+            handle.inject(sim_kind)
+        if kind == "frontend-hang":
+            timer = threading.Timer(FRONTEND_HANG_WALL_S, handle.inject, args=("none",))
+            timer.daemon = True
+            timer.start()
+            self._timers.append(timer)
+
+    def schedule_fault(self, kind: str, at_s: float) -> None:
+        """Inject `kind` when the world reaches `at_s` simulated seconds."""
+        if kind not in FAULTS:
+            raise StationError(f"fault {kind!r} is not one of {', '.join(FAULTS)}")
+        if not (math.isfinite(at_s) and at_s >= 0):
+            raise StationError(f"fault {kind!r} at {at_s!r} s: the time must be >= 0")
+        with self.world.lock:
+            self.faults.add(kind, at_s)
+
+
+def parse_fault(text: str) -> tuple[str, float]:
+    """`KIND@SECONDS` -> (kind, seconds)."""
+    kind, sep, at = text.partition("@")
+    if not sep:
+        raise StationError(f"--fault {text!r}: expected KIND@SECONDS, e.g. link-drop@2.5")
+    if kind not in FAULTS:
+        raise StationError(f"--fault {text!r}: kind {kind!r} is not one of {', '.join(FAULTS)}")
+    try:
+        at_s = float(at)
+    except ValueError:
+        raise StationError(f"--fault {text!r}: {at!r} is not a number of seconds") from None
+    if not (math.isfinite(at_s) and at_s >= 0):
+        raise StationError(f"--fault {text!r}: {at_s!r} s is outside the allowed range [0, inf)")
+    return kind, at_s

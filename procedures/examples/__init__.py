@@ -1,0 +1,1 @@
+"""Small example procedures (the README shows table_spin)."""
