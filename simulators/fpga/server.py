@@ -144,6 +144,7 @@ class FpgaServer:
             self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             self._listener.bind(("127.0.0.1", 0))
             self._listener.listen(1)
+            self._listener.settimeout(0.1)  # so stop() is seen promptly
             self.url = f"socket://127.0.0.1:{self._listener.getsockname()[1]}"
             self._spawn(self._accept_loop, "fpga-accept")
         else:
@@ -201,6 +202,8 @@ class FpgaServer:
         while not self._stop.is_set():
             try:
                 conn, _ = self._listener.accept()
+            except TimeoutError:
+                continue
             except OSError:
                 return
             old = self._port

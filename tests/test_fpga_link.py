@@ -1,0 +1,199 @@
+"""FpgaLink against the simulated FPGA over real loopback transports (socket:// and a pty):
+register round trips, limits, NACKs, safe state, stream integrity under injected faults, and
+a link that drops or stalls raising within its wall timeout."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads only cost here
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from bench.clock import SimClock
+from drivers.errors import DeviceError, LimitError, LinkLostError
+from drivers.fpga import FpgaLink
+from drivers.fpga import protocol as p
+from simulators.fpga import serve_fpga
+from simulators.physics.params import preset
+from simulators.world import World
+
+
+@pytest.fixture(params=["socket", "pty"])
+def bench(request):
+    world = World(preset("hrg"), seed=0)
+    clock = SimClock(world)
+    server = serve_fpga(world, transport=request.param, seed=1)
+    link = FpgaLink(server.url, clock=clock, timeout_s=0.5, retries=2).connect()
+    yield world, clock, server, link
+    link.close()
+    server.stop()
+    clock.close()
+
+
+def _collect(link):
+    blocks: list[np.ndarray] = []
+    link.subscribe(blocks.append)
+    return blocks
+
+
+def test_register_round_trips(bench):
+    world, _, _, link = bench
+    assert link.read_register("ID") == p.FPGA_ID
+    assert link.sample_period_s == world.sample_period_s
+    for name, value in [("AGC_SETPOINT", 0.625), ("REF_FREQ_HZ", 5500.125), ("STREAM_DECIMATION", 7),
+                        ("DRIFT_THETA_TAU_DEG", -12.5), ("PRECESSION_RATE_DPS", 3.0)]:
+        assert link.write_register(name, value) == value
+        assert link.read_register(name) == value
+        assert link.read_register(p.BY_NAME[name].addr) == value
+    link.set_agc(True, 0.5)
+    link.set_pll(True)
+    assert link.read_register("CTRL") == p.AGC_EN | p.PLL_EN
+
+
+def test_bad_values_raise_before_anything_is_written(bench):
+    _, _, server, link = bench
+    before = server.firmware.regs["AGC_SETPOINT"]
+    with pytest.raises(LimitError, match=r"AGC_SETPOINT=-1.*\[0, 100\]"):
+        link.write_register("AGC_SETPOINT", -1.0)
+    with pytest.raises(LimitError, match="decimation=0"):
+        link.start_stream(0)
+    with pytest.raises(LimitError, match="FM_RATE_HZ=nan"):
+        link.set_whole_angle(True, 1.0, 0.1, float("nan"))
+    with pytest.raises(LimitError, match="read-only"):
+        link.write_register("STATUS", 1)
+    with pytest.raises(KeyError):
+        link.read_register("NO_SUCH_REGISTER")
+    assert server.firmware.regs["AGC_SETPOINT"] == before
+    assert server.firmware.regs["CTRL"] == 0  # the whole-angle call wrote nothing
+
+
+def test_device_nack_is_a_device_error(bench):
+    _, _, _, link = bench
+    # bypass the driver's own check to see the FPGA refuse an out-of-range value
+    with pytest.raises(DeviceError, match="NACK 3"):
+        link._command(p.WRITE, p.BY_NAME["STREAM_DECIMATION"].addr, (0).to_bytes(8, "little"), "raw write")
+    with pytest.raises(DeviceError, match="NACK 1"):
+        link._command(p.READ, 0x7F, b"", "raw read")
+    assert link.read_register("ERR_CMD") == 2
+
+
+def test_safe_state_cuts_drive_and_loops(bench):
+    world, clock, _, link = bench
+    link.set_agc(True, 1.0)
+    link.set_quadrature_loop(True)
+    link.set_whole_angle(True, 1.0)
+    link.set_drive_enabled(True)
+    clock.sleep(1.0)
+    assert link.read_register("STATUS") & p.ST_DRIVE_ON
+    assert np.any(world.total_force != 0)
+    assert link.safe_state() is True
+    assert link.read_register("CTRL") & (p.DRIVE_EN | p.LOOP_BITS) == 0
+    clock.sleep(0.1)
+    assert np.all(world.total_force == 0)
+
+
+def test_stream_is_complete_in_lockstep(bench):
+    world, clock, _, link = bench
+    blocks = _collect(link)
+    link.start_stream(1)
+    start = link.read_register("STREAM_START_INDEX")
+    clock.sleep(20.0)  # 20 000 frames
+    link.wait_for_sample(clock.now(), timeout_wall_s=10.0)
+    rows = np.vstack(blocks)
+    np.testing.assert_array_equal(rows[:, 0], np.arange(start + 1, world.sample_index + 1))
+    np.testing.assert_allclose(rows[:, 1], rows[:, 0] * world.sample_period_s)
+    np.testing.assert_allclose(rows[-1, 2:6], world.last_block.q_meas[-1], rtol=1e-6, atol=1e-7)  # float32
+    s = link.stats
+    assert (s.frames, s.dropped, s.corrupt) == (len(rows), 0, 0)
+
+
+def test_decimation_and_wait_for_time(bench):
+    world, clock, _, link = bench
+    blocks = _collect(link)
+    link.start_stream(25)
+    clock.sleep(1.0)
+    link.wait_for_sample(clock.now(), timeout_wall_s=10.0)
+    idx = np.vstack(blocks)[:, 0]
+    assert np.all(idx % 25 == 0) and idx[-1] == world.sample_index - world.sample_index % 25
+    assert len(idx) == 40
+
+
+def test_dropped_and_corrupted_frames_are_counted_never_wrong(bench):
+    """Faults at 2 % drop and 5 % corruption per frame: every delivered sample equals what the
+    world measured, and every missing frame is counted (dropped = frames sent - delivered)."""
+    world, clock, server, link = bench
+    truth: dict[int, np.ndarray] = {}
+
+    class Tap:  # records the world's measured samples: the ground truth of the stream
+        def before_block(self, *a):
+            pass
+
+        def after_block(self, w, block):
+            truth.update(zip(block.index.tolist(), block.q_meas, strict=True))
+
+    world.attach(Tap())
+    blocks = _collect(link)
+    link.start_stream(1)
+    server.inject("drop", 0.02)
+    server.inject("corrupt", 0.05)
+    clock.sleep(10.0)
+    server.clear_faults()
+    clock.sleep(0.5)  # clean frames after the faults, so a loss at the very end is seen as a gap
+    link.wait_for_sample(clock.now(), timeout_wall_s=10.0)
+    rows = np.vstack(blocks)
+    expected = np.array([truth[int(i)] for i in rows[:, 0]])
+    np.testing.assert_allclose(rows[:, 2:6], expected, rtol=1e-6, atol=1e-7)
+    s = link.stats
+    sent = int(link.read_register("FRAMES_SENT"))
+    assert s.frames == len(rows) and s.frames + s.dropped == sent
+    assert s.dropped >= server.frames_dropped > 100
+    assert s.corrupt > 0 and server.frames_corrupted > 300
+
+
+def test_link_drop_raises_within_timeout(bench):
+    _, clock, server, link = bench
+    link.start_stream(1)
+    clock.sleep(0.5)
+    server.inject("link-drop")
+    t0 = time.monotonic()
+    with pytest.raises(LinkLostError, match="FPGA link"):
+        for _ in range(10):
+            link.read_register("STATUS")
+            time.sleep(0.05)
+    assert time.monotonic() - t0 < 3 * link.timeout_s + 1.0
+    assert link.safe_state() is False  # cannot be confirmed
+
+
+def test_stall_raises_within_timeout_and_recovers(bench):
+    _, clock, server, link = bench
+    server.inject("stall")
+    t0 = time.monotonic()
+    with pytest.raises(LinkLostError, match="no answer to read STATUS in 3 attempts"):
+        link.read_register("STATUS")
+    elapsed = time.monotonic() - t0
+    assert 3 * link.timeout_s - 0.05 <= elapsed < 3 * link.timeout_s + 1.0
+    link.start_stream  # noqa: B018 - the link object stays usable after a stall
+    server.clear_faults()
+    assert link.read_register("ID") == p.FPGA_ID
+
+
+def test_stalled_stream_wait_raises(bench):
+    _, clock, server, link = bench
+    link.start_stream(1)
+    server.inject("stall")
+    clock.sleep(0.2)
+    with pytest.raises(LinkLostError, match="stream reached sample"):
+        link.wait_for_sample(clock.now(), timeout_wall_s=0.3)
+
+
+def test_open_fails_cleanly():
+    with pytest.raises(LinkLostError, match="cannot open"):
+        FpgaLink("socket://127.0.0.1:1", timeout_s=0.2).connect()
+    with pytest.raises(LimitError, match="timeout_s"):
+        FpgaLink("socket://127.0.0.1:1", timeout_s=-1)
+    assert math.isnan(FpgaLink("socket://127.0.0.1:1").sample_period_s)
