@@ -34,7 +34,7 @@ class Recorder:
     """Subscribes to the run's event bus and writes its raw streams and log to HDF5."""
 
     def __init__(self, path: str | Path, attrs: dict[str, Any] | None = None) -> None:
-        self.path = Path(path)
+        self.path = Path(path).resolve()
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._lock = threading.RLock()
         self._f = h5py.File(self.path, "w")  # default format: no open-for-write flag to clear after a crash

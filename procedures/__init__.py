@@ -1,1 +1,70 @@
-"""Calibration procedures, one module a procedure."""
+"""Calibration procedures, one module a procedure, and the registry that finds them.
+
+`all_procedures()` walks this package for `Procedure` subclasses (by their `name`);
+`find_procedure(text)` takes a registered name or a path to a `.py` file anywhere
+(`gyrobench run path/to/file.py`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import pkgutil
+import sys
+from pathlib import Path
+
+
+class ProcedureNotFound(LookupError):
+    """No procedure by that name or in that file."""
+
+
+def _procedures_in(module) -> list[type]:
+    from bench.engine import Procedure
+
+    return [
+        obj
+        for obj in vars(module).values()
+        if isinstance(obj, type)
+        and issubclass(obj, Procedure)
+        and obj is not Procedure
+        and obj.__module__ == module.__name__
+    ]
+
+
+def all_procedures() -> dict[str, type]:
+    """Every procedure in this package by name; a module that fails to import is skipped."""
+    found: dict[str, type] = {}
+    for info in pkgutil.walk_packages(__path__, prefix=__name__ + "."):
+        try:
+            module = importlib.import_module(info.name)
+        except Exception:  # noqa: BLE001 - one broken module must not hide the others
+            continue
+        for cls in _procedures_in(module):
+            found.setdefault(cls.name, cls)
+    return dict(sorted(found.items()))
+
+
+def load_file(path: str | Path) -> type:
+    """The procedure defined in a Python file (the only one, or the last one defined)."""
+    path = Path(path).resolve()
+    if not path.is_file():
+        raise ProcedureNotFound(f"{path}: no such file")
+    mod_name = f"gyrobench_user_{path.stem}_{abs(hash(str(path))) & 0xFFFFFF:x}"
+    spec = importlib.util.spec_from_file_location(mod_name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[mod_name] = module
+    spec.loader.exec_module(module)
+    procs = _procedures_in(module)
+    if not procs:
+        raise ProcedureNotFound(f"{path}: defines no Procedure subclass")
+    return procs[-1]
+
+
+def find_procedure(text: str) -> type:
+    """A registered procedure name or a path to a .py file."""
+    if text.endswith(".py") or "/" in text:
+        return load_file(text)
+    procs = all_procedures()
+    if text in procs:
+        return procs[text]
+    raise ProcedureNotFound(f"no procedure {text!r}; known: {', '.join(procs) or '(none)'}; or give a .py file")
