@@ -237,6 +237,6 @@ class MainWindow(QMainWindow):
             QDesktopServices.openUrl(QUrl.fromLocalFile(self.results.report_path))
 
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
-        self.plots.timer.stop()
         self.bridge.detach()
+        self.plots.shutdown()
         super().closeEvent(event)

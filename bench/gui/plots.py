@@ -177,6 +177,13 @@ class LivePlots(QWidget):
         self.refresh_times.append(now)
         self.refresh_cost_s.append(now - t0)
 
+    def shutdown(self) -> None:
+        """Stop redrawing and release the scene explicitly: left to the garbage collector, the
+        pyqtgraph scene can be torn down in the wrong order at interpreter exit."""
+        self.timer.stop()
+        self.view.clear()
+        self.view.close()
+
     def refresh_rate_hz(self, window_s: float = 2.0) -> float:
         """Redraws per second over the last window_s of wall time."""
         if len(self.refresh_times) < 2:

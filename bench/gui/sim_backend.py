@@ -45,6 +45,7 @@ class _StreamTap:
         self.backend = backend
         self.rate_dps = 0.0
         self.ref_freq_hz: float | None = None
+        self.publishing = True
 
     def before_block(self, world: World, t_s: float, n: int, dt_s: float) -> None:
         world.case_rate_dps = self.rate_dps
@@ -53,7 +54,7 @@ class _StreamTap:
 
     def after_block(self, world: World, block) -> None:
         b = self.backend
-        if b.run_id is None:
+        if b.run_id is None or not self.publishing:
             return
         q = block.q_meas
         fpga = np.column_stack((block.t_s, q))
@@ -95,6 +96,7 @@ class SimWorldBackend:
         parsed = {s.name: s.parse(s.format(values.get(s.name, s.default))) for s in specs}
         self._abort.clear()
         self._resume.set()
+        self.tap.publishing = True
         run_id = uuid.uuid4().hex[:12]
         target = self._run_decay if procedure == "demo-decay" else self._run_sweep
         self._thread = threading.Thread(target=self._run, args=(run_id, procedure, parsed, target),
@@ -157,6 +159,7 @@ class SimWorldBackend:
 
     def _safe_state(self) -> bool:
         """Table to rest, drive off; confirmed by reading the world back after a block."""
+        self.tap.publishing = False
         self.tap.rate_dps = 0.0
         self.tap.ref_freq_hz = None
         self.world.set_force("drive", None)
