@@ -20,3 +20,41 @@ def sim_world():
     clock = SimClock(world)
     yield world, clock
     clock.close()
+
+
+@pytest.fixture
+def sim_station(request):
+    """An opened simulated station (built-in `sim-hrg`, seed 0, lockstep), closed afterwards.
+    Choose another with `@pytest.mark.parametrize("sim_station", ["sim-mems"], indirect=True)`."""
+    from bench.station import SimStation
+
+    name = getattr(request, "param", "sim-hrg")
+    station = SimStation(name, seed=0).open()
+    try:
+        yield station
+    finally:
+        station.close()
+
+
+@pytest.fixture
+def sim_truth(sim_station):
+    """The true parameters of the simulated station, under the measurements' names."""
+    return sim_station.truth()
+
+
+@pytest.fixture
+def run_procedure(sim_station, tmp_path):
+    """run_procedure(ProcedureClass, {params}) -> RunRecord on the simulated station, with the
+    raw file and results store in a temporary directory."""
+    from bench.engine import Runner
+    from bench.results import ResultsStore
+
+    store = ResultsStore(tmp_path / "results.sqlite")
+
+    def run(procedure, params=None, *, faults=()):
+        for kind, at_s in faults:
+            sim_station.schedule_fault(kind, at_s)
+        return Runner(sim_station, runs_dir=tmp_path / "runs", store=store).run(procedure, params)
+
+    yield run
+    store.close()

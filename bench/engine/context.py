@@ -25,6 +25,8 @@ class GuardedClock:
     built with it, so a table's `wait_at_rate` can be aborted too.  With no guard set (outside a
     run, and during the safe state) it is the plain clock."""
 
+    MAX_SLICE_S = 0.1
+
     def __init__(self, base: Any) -> None:
         self.base = base
         self.guard: Callable[[], None] | None = None
@@ -38,9 +40,20 @@ class GuardedClock:
         return self.base.now()
 
     def sleep(self, dt_s: float) -> None:
+        """Sleep in slices of at most MAX_SLICE_S, checking between them: a 300 s recording
+        can still be paused or aborted within a tenth of a simulated second."""
+        if self.guard is None:
+            self.base.sleep(dt_s)
+            return
+        if not dt_s >= 0:
+            raise ValueError(f"clock wait dt_s={dt_s!r} must be finite and >= 0")
         self._check()
-        self.base.sleep(dt_s)
-        self._check()
+        remaining = float(dt_s)
+        while remaining > 1e-12:
+            piece = min(remaining, self.MAX_SLICE_S)
+            self.base.sleep(piece)
+            remaining -= piece
+            self._check()
 
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
         if not timeout_s >= 0 or poll_s <= 0:
