@@ -187,6 +187,30 @@ def crc16(data: bytes | memoryview) -> int:
     return crc_hqx(data, CRC_INIT)
 
 
+_CRC_TABLES: dict[int, tuple[np.ndarray, int]] = {}
+
+
+def _crc_table(length: int) -> tuple[np.ndarray, int]:
+    """Per-position contributions for messages of one length: the CRC is affine over GF(2), so
+    crc(m) = crc(zeros) ^ XOR_j T[j, m[j]] with T[j, v] = crc0(v at position j, zeros elsewhere)."""
+    if length not in _CRC_TABLES:
+        table = np.empty((length, 256), np.uint16)
+        for j in range(length):
+            msg = bytearray(length)
+            for v in range(256):
+                msg[j] = v
+                table[j, v] = crc_hqx(bytes(msg), 0)
+        _CRC_TABLES[length] = (table, crc_hqx(bytes(length), CRC_INIT))
+    return _CRC_TABLES[length]
+
+
+def crc16_rows(rows: np.ndarray) -> np.ndarray:
+    """CRC-16/CCITT-FALSE of every row of a (n, L) uint8 array at once (vectorised)."""
+    table, c0 = _crc_table(rows.shape[1])
+    contrib = table[np.arange(rows.shape[1]), rows]
+    return np.bitwise_xor.reduce(contrib, axis=1) ^ np.uint16(c0)
+
+
 def encode_frame(ftype: int, seq: int, addr: int, payload: bytes = b"") -> bytes:
     if len(payload) > MAX_PAYLOAD:
         raise ValueError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
@@ -225,10 +249,8 @@ def encode_stream(seq0: int, index: np.ndarray, t_s: np.ndarray, channels: np.nd
     arr["index"] = index
     arr["t_s"] = t_s
     arr["ch"] = channels
-    raw = arr.tobytes()
-    mv = memoryview(raw)
-    size = STREAM_FRAME_SIZE
-    arr["crc"] = [crc_hqx(mv[o + 2 : o + size - 2], CRC_INIT) for o in range(0, n * size, size)]
+    rows = arr.view(np.uint8).reshape(n, STREAM_FRAME_SIZE)
+    arr["crc"] = crc16_rows(rows[:, 2:-2])
     return arr.tobytes()
 
 
@@ -317,13 +339,11 @@ class FrameParser:
         ok = (arr["sync"] == SYNC_U16) & (arr["type"] == STREAM) & (arr["len"] == STREAM_PAYLOAD)
         if not ok.all():
             k = int(np.argmin(ok))
-        crcs = arr["crc"]
-        mv = memoryview(chunk)
-        m = 0
-        for o in range(0, k * size, size):
-            if crc_hqx(mv[o + 2 : o + size - 2], CRC_INIT) != crcs[m]:
-                break
-            m += 1
+        if k == 0:
+            return None
+        rows = np.frombuffer(chunk, np.uint8, count=k * size).reshape(k, size)
+        good = crc16_rows(rows[:, 2:-2]) == arr["crc"][:k]
+        m = k if good.all() else int(np.argmin(good))
         if m == 0:
             return None
         return arr[:m]
