@@ -197,3 +197,33 @@ def test_screenshot_writes_a_non_blank_png(qtbot, tmp_path):
     colours = {img.pixel(x, y) for x in range(0, img.width(), 7) for y in range(0, img.height(), 7)}
     assert len(colours) > 20  # plots, text and widgets, not one flat colour
     backend.close()
+
+
+def test_window_on_the_engine_station_runs_and_reports(qtbot, tmp_path, monkeypatch):
+    """The real engine on the built-in sim-hrg station (simulators on loopback): the form comes
+    from the procedure's declared Params, the run ends PASS with its safe state, the station
+    panel shows the table's rate and the report renders from the raw file."""
+    monkeypatch.chdir(tmp_path)
+    from bench.gui.engine_backend import EngineBackend
+
+    backend = EngineBackend("sim-hrg", seed=0)
+    win = MainWindow(backend)
+    qtbot.addWidget(win)
+    try:
+        win.procedure.setCurrentText("table-spin")
+        spec = {s.name: s for s in win.form.specs}["rate_dps"]
+        assert (spec.unit, spec.low, spec.high) == ("deg/s", -1000.0, 1000.0)
+        win.form.set_value("rate_dps", "5000")
+        assert not win.start_button.isEnabled()
+        _start(qtbot, win, "table-spin", rate_dps=50.0, hold_s=0.5)
+        qtbot.waitUntil(lambda: win.last_finished is not None, timeout=60_000)
+        assert win.last_finished.outcome == "PASS" and win.last_finished.safe_state
+        assert win.plots.fpga.total_rows > 0 and win.plots.table.total_rows > 0
+        table = win.station._items["table"]
+        rows = {table.child(i).text(0): table.child(i).text(1) for i in range(table.childCount())}
+        assert float(rows["rate_dps"]) == pytest.approx(50.0, abs=0.5)
+        assert win.results.report_button.isEnabled()
+        html = win.render_report()
+        assert html is not None and "table_rate_dps" in open(html).read()
+    finally:
+        backend.close()

@@ -14,21 +14,15 @@ SIM_WORLD = "sim-world"
 
 
 def make_backend(station: str | None, *, seed: int = 0) -> GuiBackend:
-    """The engine on a station (name or file); `sim-world` (or none, before an engine station
-    exists) is the in-process HRG world source."""
-    if station in (None, SIM_WORLD):
-        try:
-            from .engine_backend import EngineBackend, default_station
-        except ImportError:
-            EngineBackend = None  # noqa: N806 - the engine is not there yet
-        if station is None and EngineBackend is not None:
-            return EngineBackend(default_station(), seed=seed)
+    """The engine on a station (built-in name or file; sim-hrg when none is given), or
+    `sim-world`: the in-process HRG world source the GUI's own tests use."""
+    if station == SIM_WORLD:
         from .sim_backend import SimWorldBackend
 
         return SimWorldBackend(seed=seed)
-    from .engine_backend import EngineBackend
+    from .engine_backend import EngineBackend, default_station
 
-    return EngineBackend(station, seed=seed)
+    return EngineBackend(station or default_station(), seed=seed)
 
 
 def _app():
@@ -53,6 +47,7 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
 
     def gate(event) -> None:  # engine thread: holds the run at the chosen second
         if at_s is not None and not reached.is_set() and event.t_sim_s >= at_s and not isinstance(event, RunFinished):
+            backend.pause()  # the engine holds at its next checkpoint, whichever thread this is
             reached.set()
             release.wait(timeout_s)
 
@@ -88,6 +83,7 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
         window.bridge.set_gate(None)
         if window.run_active:
             backend.abort()
+        backend.resume()
         release.set()
         while window.run_active and time.monotonic() < deadline:
             QApplication.processEvents()

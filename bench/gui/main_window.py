@@ -3,6 +3,8 @@ live plots, log and results, all fed by the engine's events through the bridge."
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from PySide6.QtCore import Qt, QUrl
 from PySide6.QtGui import QAction, QDesktopServices
 from PySide6.QtWidgets import (
@@ -201,8 +203,7 @@ class MainWindow(QMainWindow):
         self.paused = False
         self.last_finished = e
         self.results.set_outcome(e.outcome, e.safe_state, e.end_reason)
-        report = getattr(self.backend, "report_path", None)
-        self.results.set_report(report(e.run_id) if callable(report) else None)
+        self.results.set_report(e.raw_file if e.raw_file and Path(e.raw_file).exists() else None)
         self.safe_label.setText("safe state confirmed" if e.safe_state else "SAFE STATE NOT CONFIRMED")
         self.safe_label.setStyleSheet("color: #207020;" if e.safe_state else "color: #c00000; font-weight: bold;")
         self.log.add(e.t_sim_s, "INFO", f"run {e.run_id} finished: {e.outcome} ({e.end_reason})")
@@ -232,9 +233,27 @@ class MainWindow(QMainWindow):
         self.plots.refresh(force=True)
         self.statusBar().showMessage(f"replayed {path}")
 
+    def render_report(self) -> str | None:
+        """Write the HTML report of the shown run next to its raw file; its path."""
+        raw = self.results.report_path
+        if not raw:
+            return None
+        from bench.recorder import open_run
+        from bench.report import render_report
+
+        out = Path(raw).with_suffix(".html")
+        with open_run(raw) as data:
+            out.write_text(render_report(data, None))
+        return str(out)
+
     def _open_report(self) -> None:
-        if self.results.report_path:
-            QDesktopServices.openUrl(QUrl.fromLocalFile(self.results.report_path))
+        try:
+            path = self.render_report()
+        except (OSError, KeyError, ValueError) as exc:
+            self.log.add(self.t_sim_s, "ERROR", f"report failed: {exc}")
+            return
+        if path:
+            QDesktopServices.openUrl(QUrl.fromLocalFile(path))
 
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
         self.bridge.detach()

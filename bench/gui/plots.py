@@ -109,7 +109,10 @@ class LivePlots(QWidget):
         q = _columns(columns, data, ("t_s", "cx", "sx", "cy", "sy"))
         if q is not None:
             el = orbit_elements(q[:, 1:5])
-            self.fpga.append(np.column_stack((q, el["E"], self._unwrapped_theta_deg(el["theta_rad"]))))
+            # the angle means something when the quadrature is small against the amplitude
+            defined = bool(np.median(np.abs(el["k"]) / np.maximum(el["a"], 1e-300)) < 0.3)
+            theta_deg = self._unwrapped_theta_deg(el["theta_rad"], defined)
+            self.fpga.append(np.column_stack((q, el["E"], theta_deg)))
             self._dirty = True
         rate = _columns(columns, data, ("t_s", "rate_dps"))
         if rate is not None:
@@ -124,9 +127,13 @@ class LivePlots(QWidget):
             self.sweep.append(np.column_stack((sweep, phase)))
             self._dirty = True
 
-    def _unwrapped_theta_deg(self, theta_rad: np.ndarray) -> np.ndarray:
-        """theta continues across its (-45, 45] deg wrap (a precessing wave is a line, not a saw)."""
+    def _unwrapped_theta_deg(self, theta_rad: np.ndarray, wave_defined: bool) -> np.ndarray:
+        """theta continues across its (-45, 45] deg wrap while a standing wave is there (a
+        precessing wave is a line, not a saw); on noise alone it stays wrapped."""
         prev = self._theta_last_rad
+        if not wave_defined:
+            self._theta_last_rad = None
+            return np.degrees(theta_rad)
         joined = np.unwrap(np.concatenate(([prev if prev is not None else theta_rad[0]], theta_rad)), period=np.pi / 2)
         if prev is not None:
             joined += prev - joined[0]

@@ -1,0 +1,141 @@
+"""The window on a real engine: a station (built-in name or file), the Runner in a worker
+thread, the procedures of the registry.  The runner's events go to the window through the bus;
+the station panel's StationStatus is built here from what needs no device I/O (the table stream,
+link counters, connection flags), so the GUI never talks to an instrument across threads."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench.engine import events as ev
+
+from .params import ParamSpec, spec_from_declared
+
+DEFAULT_STATION = "sim-hrg"
+STATUS_EVERY_WALL_S = 0.5
+
+
+def default_station() -> str:
+    return DEFAULT_STATION
+
+
+class EngineBackend:
+    """GuiBackend over `bench.engine.Runner` on a `bench.station.Station` (opened here)."""
+
+    def __init__(self, station: str, *, seed: int | None = None, runs_dir: str | Path | None = None,
+                 results_url: str | None = None, record: bool = True) -> None:
+        from bench.engine import Runner
+        from bench.station import SimStation, Station
+
+        overrides = {"seed": seed} if seed is not None else {}
+        self.station = Station.load(station, **overrides)
+        self.simulated = isinstance(self.station, SimStation)
+        self.station_name = self.station.id
+        self.bus = ev.EventBus()
+        store = None
+        if record:
+            try:
+                from bench.results import ResultsStore
+
+                store = ResultsStore(results_url or self.station.results_url)
+            except Exception:  # noqa: BLE001 - the window works without an index
+                store = None
+        self.runs_dir = Path(runs_dir or self.station.runs_dir) if record else None
+        self.runner = Runner(self.station, bus=self.bus, runs_dir=self.runs_dir, store=store)
+        self._thread: threading.Thread | None = None
+        self._table_row: tuple[float, float] | None = None
+        self._last_status_wall = 0.0
+        self.bus.subscribe(self._watch)
+        self.station.open()
+        self.publish_status()
+
+    # --- GuiBackend ------------------------------------------------------------------------
+    def procedures(self) -> dict[str, tuple[ParamSpec, ...]]:
+        from procedures import all_procedures
+
+        return {name: tuple(spec_from_declared(p, decl) for p, decl in cls.param_specs().items())
+                for name, cls in all_procedures().items()}
+
+    def start(self, procedure: str, values: dict[str, Any]) -> None:
+        from procedures import find_procedure
+
+        if self.running():
+            raise RuntimeError("a run is already going on")
+        proc = find_procedure(procedure)(values)  # ParamError (a ValueError) before anything moves
+        self._thread = threading.Thread(target=self._run, args=(proc,), name=f"run-{procedure}", daemon=True)
+        self._thread.start()
+
+    def _run(self, proc: Any) -> None:
+        try:
+            self.runner.run(proc)
+        except Exception as exc:  # noqa: BLE001 - the runner reports its own failures; this is the rest
+            self.bus.publish(ev.Log("", self.station.clock.now(), level="ERROR", message=f"run failed: {exc}"))
+        self.publish_status()
+
+    def pause(self) -> None:
+        self.runner.pause()
+
+    def resume(self) -> None:
+        self.runner.resume()
+
+    def abort(self) -> None:
+        self.runner.abort("abort from the window")
+
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def set_speed(self, speed: float) -> None:
+        self.station.clock.set_speed(speed)
+
+    def join(self, timeout_s: float = 30.0) -> bool:
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+        return not self.running()
+
+    def close(self) -> None:
+        if self.running():
+            self.abort()
+            self.join()
+        self.station.close()
+        clock = getattr(self.station.clock, "close", None)
+        if clock is not None:
+            clock()
+
+    # --- station panel ---------------------------------------------------------------------
+    def _watch(self, event: ev.Event) -> None:
+        """Engine thread: keep the table's last row; publish a StationStatus now and then."""
+        if isinstance(event, ev.SampleBlock) and event.stream == "table" and len(event.data):
+            cols = event.columns
+            if "rate_dps" in cols and "angle_deg" in cols:
+                row = np.asarray(event.data)[-1]
+                self._table_row = (float(row[cols.index("rate_dps")]), float(row[cols.index("angle_deg")]))
+        if not isinstance(event, ev.StationStatus) and time.monotonic() - self._last_status_wall > STATUS_EVERY_WALL_S:
+            self.publish_status(event.run_id)
+
+    def publish_status(self, run_id: str = "") -> None:
+        self._last_status_wall = time.monotonic()
+        devices: dict[str, dict[str, Any]] = {}
+        for role, cfg in self.station.config.devices.items():
+            dev = self.station.devices.get(role)
+            info: dict[str, Any] = {"connected": bool(dev is not None and getattr(dev, "connected", True)),
+                                    "driver": cfg.get("driver", "?"), "simulated": self.simulated}
+            stats = getattr(dev, "stats", None)
+            if callable(stats):
+                try:
+                    s = stats()
+                    info.update(frames=s.frames, dropped=s.dropped, corrupt=s.corrupt)
+                except Exception:  # noqa: BLE001 - counters are a courtesy
+                    pass
+            if role == "table" and self._table_row is not None:
+                info["rate_dps"], info["angle_deg"] = self._table_row
+            devices[role] = info
+        world = getattr(self.station, "world", None)
+        if world is not None and "frontend" in devices:
+            with world.lock:
+                devices["frontend"]["drive"] = bool(np.any(world.total_force))
+        self.bus.publish(ev.StationStatus(run_id, self.station.clock.now(), devices=devices))
