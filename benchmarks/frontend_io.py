@@ -1,10 +1,11 @@
 """Front-end I/O on loopback, the driver beside raw pyvisa-py against the same simulated
 instrument in the same run: query rate (driver vs raw `*IDN?`, target within 1.5x) and the
 throughput of a 1e5-sample float32 capture block (target >= 150 MB/s; the naive `\\n`-terminated
-read is shown for comparison).  The simulator runs in its own process (`python -m
-simulators.frontend`, real time at 1x) so it does not share the client's GIL; `--inprocess`
-serves it from a thread instead.  Runs are interleaved (raw, driver, raw, ...) so machine load
-hits both alike.  Usage: python benchmarks/frontend_io.py [seconds_per_run] [--inprocess]"""
+read is shown for comparison).  The simulator is served from a thread of this process with a
+lockstep world (nothing advances it while measuring); `--subprocess` runs it as its own process
+(`python -m simulators.frontend`, real time at 1x) instead.  Runs are interleaved (raw, driver,
+raw, ...) so machine load hits both alike.
+Usage: python benchmarks/frontend_io.py [seconds_per_run] [--subprocess]"""
 
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ from simulators.physics.params import preset
 from simulators.world import World
 
 N_SAMPLES = 100_000
-RUNS = 3
+RUNS = 5
 
 
 def rate(fn: Callable[[], object], seconds: float) -> float:
@@ -127,4 +128,4 @@ def main(seconds: float = 1.0, inprocess: bool = False) -> None:
 
 if __name__ == "__main__":
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    main(float(args[0]) if args else 1.0, inprocess="--inprocess" in sys.argv)
+    main(float(args[0]) if args else 1.0, inprocess="--subprocess" not in sys.argv)
