@@ -16,6 +16,7 @@ import numpy as np
 
 from bench.clock import SimClock
 from drivers.fpga import FpgaLink
+from drivers.fpga import protocol as p
 from simulators.fpga import serve_fpga
 from simulators.physics.params import preset
 from simulators.world import World
@@ -49,6 +50,35 @@ def throughput(transport: str, wall_s: float) -> dict[str, float]:
         "frames_per_cpu_s": s.frames / cpu, "cpu_per_wall": cpu / wall, "reader_cpu_s": s.reader_cpu_s,
         "wall_s": wall,
     }
+
+
+def driver_ceiling(transport: str, n_frames: int = 400_000) -> dict[str, float]:
+    """The driver alone: pre-encoded frames pushed through the server's write path as fast as
+    the link takes them (no world), parsed and delivered to a subscriber."""
+    world = World(preset("hrg"), seed=0)
+    server = serve_fpga(world, transport=transport)
+    link = FpgaLink(server.url, timeout_s=2.0).connect()
+    count = [0]
+    link.subscribe(lambda b: count.__setitem__(0, count[0] + len(b)))
+    link.start_stream(1)
+    chunk = 2000
+    rng = np.random.default_rng(0)
+    payload = [
+        p.encode_stream(k, np.arange(k + 1, k + chunk + 1), np.arange(k + 1, k + chunk + 1) * 1e-3,
+                        rng.normal(size=(chunk, 8)))
+        for k in range(0, n_frames, chunk)
+    ]
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    for data in payload:
+        server._send_stream(data, chunk)
+    link.wait_for_sample(n_frames, timeout_wall_s=30.0)
+    wall = time.perf_counter() - t0
+    cpu = time.process_time() - cpu0
+    s = link.stats
+    link.close()
+    server.stop()
+    return {"frames": s.frames, "dropped": s.dropped, "frames_per_s": s.frames / wall,
+            "frames_per_cpu_s": s.frames / cpu, "cpu_per_wall": cpu / wall}
 
 
 class _WriteStamp:
@@ -113,6 +143,11 @@ def main() -> None:
               f"dropped {r['dropped']}, corrupt {r['corrupt']}, CPU {r['cpu_per_wall']:.2f} cores "
               f"({r['frames_per_cpu_s']:.0f} frames per CPU second), "
               f"reader thread {r['reader_cpu_s'] / r['wall_s']:.2f} cores")
+    for transport in ("socket", "pty"):
+        r = driver_ceiling(transport)
+        print(f"driver alone {transport:6s}: {r['frames_per_s']:9.0f} frames/s, frames {r['frames']}, "
+              f"dropped {r['dropped']}, CPU {r['cpu_per_wall']:.2f} cores "
+              f"({r['frames_per_cpu_s']:.0f} frames per CPU second, server writes included)")
     r = realtime(args.wall_s)
     print(f"real-time 1 kHz socket: write->subscriber latency median {r['latency_median_ms']:.3f} ms, "
           f"p99 {r['latency_p99_ms']:.3f} ms, max {r['latency_max_ms']:.3f} ms over {r['blocks']} blocks; "

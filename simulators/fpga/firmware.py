@@ -113,7 +113,7 @@ class FpgaFirmware:
         self._a = 0.0
         self._elements = (0.0, 0.0, 0.0, 0.0)  # a, k, theta, chi
         self._out = np.zeros(4)  # amp, freq (Hz), quad, prec outputs
-        self._u = np.zeros(4)
+        self._u: np.ndarray | None = np.zeros(4)
 
     def max_block_samples(self, world) -> int | None:
         """Loops update once per block: while any loop runs, blocks last one loop period."""
@@ -134,17 +134,17 @@ class FpgaFirmware:
             self._out[1] = world.ref_freq_hz - self.regs["REF_FREQ_HZ"]
             if ctrl & p.DRIVE_EN:
                 world.set_force("fpga", self._u)
-            else:
-                self._u = np.zeros(4)
-                self._out[[0, 2, 3]] = 0.0
+            elif self._u is not None:
+                self._u = None
+                self._out[0] = self._out[2] = self._out[3] = 0.0
                 world.set_force("fpga", None)
 
     def after_block(self, world, block) -> None:
         with self.lock:
             self.regs["SAMPLE_INDEX"] = int(block.index[-1])
-            q = block.q_meas.mean(axis=0)
-            self._update_loops(q, len(block.index) * world.sample_period_s)
             ctrl = int(self.regs["CTRL"])
+            if ctrl & (p.DRIVE_EN | p.PLL_EN):  # nothing to update with the drive and PLL off
+                self._update_loops(block.q_meas.mean(axis=0), len(block.index) * world.sample_period_s)
             if ctrl & p.STREAM_EN:
                 self._emit(block)
 
