@@ -112,3 +112,16 @@ def test_nonlinear_columns_shapes_and_orbit_drift_uses_the_damping_axis_beta():
     th = [orbit_elements(q + s * h * slow_rhs(q, zg))["theta_rad"] for s in (-1, 1)]
     dtheta = (th[1] - th[0]) / (2 * h)
     assert dtheta == pytest.approx(0.25 * b_m * math.sin(4 * (math.radians(17.0) - beta)), rel=1e-6)
+
+
+@pytest.mark.parametrize("model", ["cubic", "quintic"])
+def test_analytic_jacobian_of_the_nonlinear_columns(model):
+    """Truth: central differences (step 1e-5, error ~1e-9 for these polynomials)."""
+    from bench.analysis.maslov_terms import nonlinear_jacobian, numeric_jacobian
+
+    jac = nonlinear_jacobian(RNG_STATES, model)
+    for col in range(jac.shape[-1]):
+        num = numeric_jacobian(lambda x, col=col: nonlinear_columns(x, model)[..., col], RNG_STATES, 1e-5)
+        np.testing.assert_allclose(jac[..., col], num, atol=1e-7)
+    weights = np.array([0.7, -1.3])[: jac.shape[-1]]
+    np.testing.assert_allclose(nonlinear_jacobian(RNG_STATES, model, weights), jac @ weights, atol=1e-12)

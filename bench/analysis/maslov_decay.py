@@ -28,7 +28,7 @@ from bench.analysis.maslov_result import (
     intervals,
     t_quantile,
 )
-from bench.analysis.maslov_terms import check_model, free_param_names, nonlinear_columns, numeric_jacobian
+from bench.analysis.maslov_terms import check_model, free_param_names, nonlinear_columns, nonlinear_jacobian
 from bench.analysis.slow_model import linear_matrix
 
 # Dg(q)[a, c] = _DG_SIGN[a, c] * q[_DG_INDEX[a, c]] (slow_model.regressor_linear, by table lookup)
@@ -71,19 +71,6 @@ def simpson_regressors(q: np.ndarray, dt_s: float, model: str) -> tuple[np.ndarr
     return x, q[2:] - q[:-2]
 
 
-def _model_rate(z: np.ndarray, model: str):
-    """dq/dt = (1/2) D(q) z as a vectorised function of q."""
-    a = linear_matrix(z[:8])
-
-    def rate(q: np.ndarray) -> np.ndarray:
-        out = q @ a.T
-        if model != "linear":
-            out = out + 0.5 * nonlinear_columns(q, model) @ z[8:]
-        return out
-
-    return rate, a
-
-
 def _padded_neighbours(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For every sample j = 0..N: (X_{j-1}, X_j, X_{j+1}) with zeros outside blocks 1..N-1."""
     n_blocks = x.shape[0]
@@ -123,30 +110,67 @@ def _linear_fit(q: np.ndarray, dt_s: float) -> dict[str, np.ndarray | float]:
     return {"z": z, "c": c, "resid": resid, "meat": meat, "lnorm": _error_map_norm(a, h3, qs.shape[0])}
 
 
+_CHUNK = 8192  # samples per chunk: keeps the (chunk, 4, k) temporaries in cache
+
+
+def _blocks(q: np.ndarray, dt_s: float, model: str, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+    """Simpson regressors and differences of the blocks with middle sample lo..hi-1 (1 <= lo)."""
+    return simpson_regressors(q[lo - 1 : hi + 1], dt_s, model)
+
+
+def _neighbour_blocks(q: np.ndarray, dt_s: float, model: str, s: int, e: int, k: int):
+    """(X_{j-1}, X_j, X_{j+1}) for samples j = s..e-1, zero for blocks outside 1..N-1."""
+    n_samples = q.shape[0]
+    lo, hi = max(s - 1, 1), min(e + 1, n_samples - 1)
+    xs = np.zeros((e - s + 2, 4, k))  # xs[m] holds block s - 1 + m
+    xb, _ = _blocks(q, dt_s, model, lo, hi)
+    xs[lo - (s - 1) : hi - (s - 1)] = xb
+    return xs[:-2], xs[1:-1], xs[2:]
+
+
 def _general_fit(q: np.ndarray, dt_s: float, model: str, recursive: bool, n_init: int | None) -> dict:
-    """Fit from the materialised (N-1, 4, k) Simpson regressors (nonlinear models, recursive form)."""
-    x, y = simpson_regressors(q, dt_s, model)
-    n_blocks, _, k = x.shape
-    x2 = x.reshape(-1, k)
+    """Fit from the Simpson regressors in chunks (nonlinear models) or materialised (recursive form)."""
+    n_samples = q.shape[0]
+    n_blocks = n_samples - 2
+    k = 8 + len(nonlinear_columns(q[:1], model)[0, 0])
     if recursive:
+        x, y = simpson_regressors(q, dt_s, model)
         m = n_init if n_init is not None else max(4 * k, n_blocks // 50)
         if not k <= m <= n_blocks:
             raise ValueError(f"n_init_blocks={m} must be between {k} and the {n_blocks} blocks")
         z, c = recursive_lsq(x, y, int(m))
     else:
-        xtx = x2.T @ x2
+        xtx, xty = np.zeros((k, k)), np.zeros(k)
+        for lo in range(1, n_samples - 1, _CHUNK):
+            x, y = _blocks(q, dt_s, model, lo, min(lo + _CHUNK, n_samples - 1))
+            x2 = x.reshape(-1, k)
+            xtx += x2.T @ x2
+            xty += x2.T @ y.reshape(-1)
         c = np.linalg.inv(xtx)
-        z = np.linalg.solve(xtx, x2.T @ y.reshape(-1))
-    resid = y - (x2 @ z).reshape(-1, 4)
-    rate, a = _model_rate(z, model)
-    jac = a if model == "linear" else numeric_jacobian(rate, q)
+        z = np.linalg.solve(xtx, xty)
+    a = linear_matrix(z[:8])
     h3 = dt_s / 3.0
-    x_prev, x_here, x_next = _padded_neighbours(x)
-    simp = x_prev + 4.0 * x_here + x_next
-    jt = np.swapaxes(jac, -1, -2)
-    f = (x_prev - x_next) - h3 * np.matmul(jt, simp)
-    f2 = f.reshape(-1, k)
-    return {"z": z, "c": c, "resid": resid, "meat": f2.T @ f2, "lnorm": _error_map_norm(jac, h3, n_blocks)}
+    resid = np.empty((n_blocks, 4))
+    meat = np.zeros((k, k))
+    jacs = []
+    for s in range(0, n_samples, _CHUNK):
+        e = min(s + _CHUNK, n_samples)
+        x_prev, x_here, x_next = _neighbour_blocks(q, dt_s, model, s, e, k)
+        lo, hi = max(s, 1), min(e, n_samples - 1)
+        if hi > lo:
+            yb = q[lo + 1 : hi + 1] - q[lo - 1 : hi - 1]
+            resid[lo - 1 : hi - 1] = yb - x_here[lo - s : hi - s] @ z
+        jac = a if model == "linear" else a + 0.5 * nonlinear_jacobian(q[s:e], model, z[8:])
+        jacs.append(jac)
+        simp = x_prev + 4.0 * x_here + x_next
+        f = x_prev - x_next
+        for b in range(4):  # f -= h3 J^T simp, per sample (a loop over 4 beats batched 4x4 matmul)
+            jb = jac[b] if jac.ndim == 2 else jac[:, b]
+            f -= h3 * jb[..., :, None] * simp[:, b, None, :]
+        f2 = f.reshape(-1, k)
+        meat += f2.T @ f2
+    jac_all = a if model == "linear" else np.concatenate(jacs)
+    return {"z": z, "c": c, "resid": resid, "meat": meat, "lnorm": _error_map_norm(jac_all, h3, n_blocks)}
 
 
 def recursive_lsq(x: np.ndarray, y: np.ndarray, n_init_blocks: int) -> tuple[np.ndarray, np.ndarray]:

@@ -156,3 +156,57 @@ def k_quintic_printed(q: np.ndarray, *, fix_k6_parenthesis: bool = False) -> np.
         + q2 * (5 * p2**4 + 5 * (q1**2 + q2**2) ** 2 + 2 * p2**2 * (3 * q1**2 + 5 * q2**2))
     )
     return np.stack([k5, k6, k7, k8], axis=-1)
+
+
+# ----------------------------------------------------------------------------------------------
+# Analytic Jacobians of the nonlinear columns (for the interval computations)
+
+# with s1 = (-p1, q1, -p2, q2) and s2 = (-q2, -p2, q1, p1): k_cubic = s1 e + s2 X (e = 3E/4,
+# X = (p2 q1 - p1 q2)/2) and k_quintic = s1 (5/8 E^2 - X'^2/2) + s2 X' E/2 (X' = 2X)
+_DS1 = np.array([[0, -1, 0, 0], [1, 0, 0, 0], [0, 0, 0, -1], [0, 0, 1, 0]], dtype=float)
+_DS2 = np.array([[0, 0, -1, 0], [0, 0, 0, -1], [1, 0, 0, 0], [0, 1, 0, 0]], dtype=float)
+
+
+def _jacobian_parts(q: np.ndarray, model: str) -> list[tuple[np.ndarray, ...]]:
+    """Per nonlinear column: (a, da, b, db) with column = s1 a + s2 b (see above)."""
+    q1, p1, q2, p2 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    energy = np.einsum("...a,...a->...", q, q)
+    xp = p2 * q1 - p1 * q2
+    dxp = np.stack([p2, -q2, -p1, q1], axis=-1)
+    d_energy = 2.0 * q
+    parts = []
+    if model in ("cubic", "quintic"):
+        parts.append((0.75 * energy, 0.75 * d_energy, 0.5 * xp, 0.5 * dxp))
+    if model == "quintic":
+        parts.append(
+            (
+                0.625 * energy**2 - 0.5 * xp**2,
+                1.25 * energy[..., None] * d_energy - xp[..., None] * dxp,
+                0.5 * xp * energy,
+                0.5 * (dxp * energy[..., None] + xp[..., None] * d_energy),
+            )
+        )
+    return parts
+
+
+def nonlinear_jacobian(q: np.ndarray, model: str, weights: np.ndarray | None = None) -> np.ndarray:
+    """d(nonlinear columns)/dq: shape (..., 4, 4, 0|1|2), [..., row, dq index, column]; with
+    weights (xi[, kappa]) the weighted sum over columns, shape (..., 4, 4)."""
+    q = np.asarray(q, dtype=float)
+    s1 = q @ _DS1.T
+    s2 = q @ _DS2.T
+    parts = _jacobian_parts(q, model)
+
+    def assemble(a, da, b, db):
+        return (a[..., None, None] * _DS1 + s1[..., :, None] * da[..., None, :]
+                + b[..., None, None] * _DS2 + s2[..., :, None] * db[..., None, :])
+
+    if weights is not None:
+        w = np.asarray(weights, dtype=float)
+        if not parts:
+            return np.zeros(q.shape[:-1] + (4, 4))
+        summed = [sum(wn * part[m] for wn, part in zip(w, parts, strict=True)) for m in range(4)]
+        return assemble(*summed)
+    if not parts:
+        return np.zeros(q.shape[:-1] + (4, 4, 0))
+    return np.stack([assemble(*part) for part in parts], axis=-1)
