@@ -27,12 +27,12 @@ def make_bench(model: str, *, watchdog_s: float = 2.0, timeout_s: float = 0.3):
     kw = dict(limits=LIMITS, clock=clock, timeout_s=timeout_s, watchdog_s=watchdog_s)
     if model.startswith("modbus"):
         framer = model.split("-")[1]
-        server = serve_modbus_table(world, framer=framer)
+        server = serve_modbus_table(world, framer=framer, use_pty=framer == "rtu")
         if framer == "tcp":
             table = ModbusRateTable(server.host, server.port, **kw)
         else:
-            # pymodbus's serial client polls in_waiting with sleeps of 4 character times: a fast
-            # baud rate keeps the simulated RTU line quick (115200 costs ~8 ms a transaction)
+            # RTU framing over a pty: pymodbus's serial client polls in_waiting, which a pty
+            # reports in full (on socket:// it says only 0 or 1: ~8 ms a transaction)
             table = ModbusRateTable.rtu(server.url, baudrate=921600, **kw)
     else:
         server = serve_ascii_table(world, use_pty=model.endswith("pty"))

@@ -16,6 +16,7 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 from drivers.rate_table import modbus_protocol as mp
 
 from .mechanics import CommandRejected, TableMechanics
+from .pty_bridge import PtyBridge
 
 _READ_FCS = (3, 4)
 _WRITE_FCS = (6, 16)
@@ -113,7 +114,9 @@ class _TableRegisters:
 class ModbusTableServer:
     """Handle of a running Modbus table: `.host`, `.port`, `.url`, `.mechanics`, `.stop()`."""
 
-    def __init__(self, world, mechanics: TableMechanics, *, host: str, port: int, framer: str, device_id: int):
+    def __init__(
+        self, world, mechanics: TableMechanics, *, host: str, port: int, framer: str, device_id: int, use_pty=False
+    ):
         if framer not in ("tcp", "rtu"):
             raise ValueError(f"framer={framer!r}: expected 'tcp' or 'rtu'")
         self.world, self.mechanics, self.framer, self.device_id = world, mechanics, framer, device_id
@@ -144,6 +147,7 @@ class ModbusTableServer:
             raise RuntimeError(f"Modbus table server did not start: {self._error!r}")
         sock = self._server.transport.sockets[0]
         self.host, self.port = sock.getsockname()[:2]
+        self._bridge = PtyBridge(self.host, self.port) if use_pty else None
 
     async def _start(self) -> None:
         self._server = ModbusTcpServer(self._device, **self._server_args)
@@ -163,8 +167,8 @@ class ModbusTableServer:
 
     @property
     def url(self) -> str:
-        """`socket://host:port`: what a serial (RTU) client opens through pyserial."""
-        return f"socket://{self.host}:{self.port}"
+        """What a serial (RTU) client opens through pyserial: the pty path, or `socket://host:port`."""
+        return self._bridge.path if self._bridge is not None else f"socket://{self.host}:{self.port}"
 
     def inject(self, kind: str, code: int | None = None) -> None:
         """Table fault: "estop", "fault" or "interlock"."""
@@ -183,6 +187,9 @@ class ModbusTableServer:
             self.link_faults.kind, self.link_faults.count = kind, int(count)
 
     def stop(self) -> None:
+        if self._bridge is not None:
+            self._bridge.close()
+            self._bridge = None
         if not self._thread.is_alive():
             return
         fut = asyncio.run_coroutine_threadsafe(self._server.shutdown(), self._loop)
@@ -208,11 +215,13 @@ def serve_modbus_table(
     port: int = 0,
     framer: str = "tcp",
     device_id: int = 1,
+    use_pty: bool = False,
     mechanics: TableMechanics | None = None,
     **mechanics_kw,
 ) -> ModbusTableServer:
-    """Attach a TableMechanics to the world and serve it over Modbus on loopback (port 0: any)."""
+    """Attach a TableMechanics to the world and serve it over Modbus on loopback (port 0: any);
+    use_pty (RTU): also open a pty wired to the server, its path in `.url`."""
     mech = mechanics if mechanics is not None else TableMechanics(seed=world.seed, **mechanics_kw)
     with world.lock:
         world.attach(mech)
-    return ModbusTableServer(world, mech, host=host, port=port, framer=framer, device_id=device_id)
+    return ModbusTableServer(world, mech, host=host, port=port, framer=framer, device_id=device_id, use_pty=use_pty)
