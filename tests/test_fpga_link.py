@@ -197,3 +197,42 @@ def test_open_fails_cleanly():
     with pytest.raises(LimitError, match="timeout_s"):
         FpgaLink("socket://127.0.0.1:1", timeout_s=-1)
     assert math.isnan(FpgaLink("socket://127.0.0.1:1").sample_period_s)
+
+
+def test_failing_subscriber_does_not_stop_the_link(bench):
+    _, clock, _, link = bench
+    good = _collect(link)
+
+    def bad(block):
+        raise RuntimeError("subscriber bug")
+
+    link.subscribe(bad)
+    link.start_stream(10)
+    clock.sleep(1.0)
+    link.sync(timeout_wall_s=10.0)
+    assert len(np.vstack(good)) == 100 and link.stats.callback_errors >= 1
+    assert link.read_register("ID") == p.FPGA_ID
+
+
+def test_a_client_that_stops_reading_cannot_hang_the_world():
+    """A client enables the stream and never reads: the server's blocking writes give up after
+    write_timeout_s, drop the client and count the frames lost; the world keeps going."""
+    import socket as socketlib
+
+    world = World(preset("hrg"), seed=0)
+    server = serve_fpga(world, write_timeout_s=0.3)
+    host, port = server.url.removeprefix("socket://").split(":")
+    raw = socketlib.create_connection((host, int(port)), timeout=2.0)
+    raw.setsockopt(socketlib.SOL_SOCKET, socketlib.SO_RCVBUF, 4096)
+    try:
+        raw.sendall(p.encode_frame(p.WRITE, 1, p.BY_NAME["CTRL_SET"].addr, p.STREAM_EN.to_bytes(8, "little")))
+        deadline = time.monotonic() + 5.0
+        while not server.firmware.regs["CTRL"] & p.STREAM_EN and time.monotonic() < deadline:
+            time.sleep(0.01)
+        t0 = time.monotonic()
+        world.advance(300.0)  # 300 000 frames, 18 MB: far more than the socket buffers hold
+        assert time.monotonic() - t0 < 10.0
+        assert server.frames_lost > 0
+    finally:
+        raw.close()
+        server.stop()

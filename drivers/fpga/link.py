@@ -10,6 +10,7 @@ reader thread: they must be quick and must not call the link's commands.
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 import select
 import threading
@@ -25,6 +26,7 @@ from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
 from . import protocol as p
 
 StreamCallback = Callable[[np.ndarray], None]
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,7 @@ class LinkStats:
     resyncs: int
     bytes_received: int
     reader_cpu_s: float
+    callback_errors: int = 0
 
 
 class FpgaLink:
@@ -67,6 +70,7 @@ class FpgaLink:
         self._dropped = 0
         self._bytes = 0
         self._reader_cpu_s = 0.0
+        self._callback_errors = 0
         self._expected_seq: int | None = None
         self._last_index = -1
         self._stream_start_index = 0
@@ -86,11 +90,14 @@ class FpgaLink:
         self._link_error = None
         self._reader = threading.Thread(target=self._read_loop, name="fpga-link-reader", daemon=True)
         self._reader.start()
-        ident = self.read_register("ID")
-        if ident != p.FPGA_ID:
+        try:
+            ident = self.read_register("ID")
+            if ident != p.FPGA_ID:
+                raise ProtocolError(f"FPGA link {self.url}: ID register is {ident:#x}, expected {p.FPGA_ID:#x}")
+            self.sample_period_s = float(self.read_register("SAMPLE_PERIOD_S"))
+        except BaseException:
             self.close()
-            raise ProtocolError(f"FPGA link {self.url}: ID register is {ident:#x}, expected {p.FPGA_ID:#x}")
-        self.sample_period_s = float(self.read_register("SAMPLE_PERIOD_S"))
+            raise
         return self
 
     def close(self) -> None:
@@ -302,6 +309,12 @@ class FpgaLink:
                     )
                 self._cond.wait(min(left, 0.1))
 
+    def sync(self, timeout_wall_s: float = 5.0) -> None:
+        """Lockstep helper: wait until every frame up to the bench clock's now is delivered."""
+        if self.clock is None:
+            raise DeviceError("FpgaLink.sync() needs the bench clock (FpgaLink(url, clock=...))")
+        self.wait_for_sample(float(self.clock.now()), timeout_wall_s)
+
     @property
     def last_index(self) -> int:
         return self._last_index
@@ -315,6 +328,7 @@ class FpgaLink:
             resyncs=self._parser.resyncs,
             bytes_received=self._bytes,
             reader_cpu_s=self._reader_cpu_s,
+            callback_errors=self._callback_errors,
         )
 
     # --- reader thread -------------------------------------------------------------------------
@@ -381,4 +395,8 @@ class FpgaLink:
             subscribers = list(self._subscribers)
             self._cond.notify_all()
         for cb in subscribers:
-            cb(block)
+            try:
+                cb(block)
+            except Exception:  # a subscriber's bug must not stop the reader (and every command)
+                self._callback_errors += 1
+                log.exception("FPGA stream subscriber %r failed", cb)
