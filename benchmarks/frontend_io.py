@@ -103,9 +103,9 @@ def main(seconds: float = 1.0, inprocess: bool = False) -> None:
                lambda: setattr(fe.ch1, "amplitude_v", 0.5)]
         rows = [(n, r, "q/s") for n, r in zip(names, interleaved_rates(fns, seconds), strict=True)]
         mb = n_bytes / 1e6
-        block_names = ["raw block, exact byte counts", "raw block, query_binary_values + \\n termination",
-                       "driver fetch_capture(1)"]
-        block_fns = [raw_block_exact, raw_block_naive, lambda: fe.fetch_capture(1)]
+        block_names = ["raw block, exact byte counts", "driver fetch_capture(1)",
+                       "raw block, query_binary_values + \\n termination"]
+        block_fns = [raw_block_exact, lambda: fe.fetch_capture(1), raw_block_naive]
         blocks = list(zip(block_names, interleaved_rates(block_fns, seconds), strict=True))
         where = "in-process thread" if inprocess else "own process"
         print(f"front end on loopback, simulator in its {where} ({RUNS} interleaved runs of {seconds:g} s, "
