@@ -29,7 +29,7 @@ def rate_per_s(fn, seconds: float) -> float:
     return n / dt
 
 
-def main(seconds: float = 2.0, runs: int = 3) -> None:
+def main(seconds: float = 2.0, runs: int = 5) -> None:
     world = World(preset("hrg"), seed=0)
     clock = SimClock(world)
     limits = TableLimits(500.0, 300.0)
