@@ -22,9 +22,9 @@ from simulators.physics.params import preset
 from simulators.world import World
 
 
-def throughput(transport: str, wall_s: float) -> dict[str, float]:
+def throughput(transport: str, wall_s: float, max_block_s: float = 0.1) -> dict[str, float]:
     """Lockstep world streaming every 1 kHz sample; frames/s delivered to a subscriber."""
-    world = World(preset("hrg"), seed=0)
+    world = World(preset("hrg"), seed=0, max_block_s=max_block_s)
     clock = SimClock(world)
     server = serve_fpga(world, transport=transport)
     link = FpgaLink(server.url, clock=clock, timeout_s=2.0).connect()
@@ -136,9 +136,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--wall-s", type=float, default=3.0)
     args = ap.parse_args()
-    for transport in ("socket", "pty"):
-        r = throughput(transport, args.wall_s)
-        print(f"lockstep {transport:6s}: {r['frames_per_s']:9.0f} frames/s ({r['values_per_s']:.3g} channel values/s, "
+    for transport, max_block_s in (("socket", 0.1), ("pty", 0.1), ("socket", 1.0)):
+        r = throughput(transport, args.wall_s, max_block_s)
+        print(f"lockstep {transport:6s} {max_block_s * 1000:4.0f}-sample blocks: {r['frames_per_s']:9.0f} frames/s "
+              f"({r['values_per_s']:.3g} channel values/s, "
               f"{r['x_realtime']:.0f}x a 1 kHz stream), frames {r['frames']}, lost {r['lost']}, "
               f"dropped {r['dropped']}, corrupt {r['corrupt']}, CPU {r['cpu_per_wall']:.2f} cores "
               f"({r['frames_per_cpu_s']:.0f} frames per CPU second), "
