@@ -113,6 +113,12 @@ def test_sequential_fit_converges_to_batch(method):
     assert widths[-1] < 0.5 * widths[10]  # 11 s -> 120 s of data: about 0.36x
     for name in ("delta_inv_tau_per_s", "theta_tau_deg", "tau_s"):
         assert abs(getattr(est, name) - getattr(batch, name)) < 0.1 * batch.std[name]
+    # the running integrals across block boundaries are the batch ones (same exact step rule)
+    full = seq.result()
+    reg = dm.decay_regressors(t, *qm.T)
+    assert np.allclose(-reg.x[:, 2], dm.decay_regressors(t, *qm.T).c_int_s)
+    assert np.allclose(full.theta_rad, 0.25 * reg.phi_rad, atol=1e-12, rtol=0)
+    assert full.energy_fit.shape == t.shape
     assert est.ci95["delta_inv_tau_per_s"][1] - est.ci95["delta_inv_tau_per_s"][0] == pytest.approx(
         batch.ci95["delta_inv_tau_per_s"][1] - batch.ci95["delta_inv_tau_per_s"][0], rel=0.05
     )

@@ -43,80 +43,108 @@ class DampingFitError(ValueError):
 # ----------------------------------------------------------------------------------------------
 # Regressors
 
+_MAX_STEP_RAD = 2.8  # 4 theta may turn at most this far between samples (beyond: aliasing)
+
 
 @dataclass(frozen=True)
 class DecayRegressors:
-    """Per-sample quantities of a decay: time since start, energy, unwrapped 4 theta, and the
-    cumulative damping integrals C, S of the chosen model."""
+    """Per-sample quantities of a decay: time since start, energy and its log, unwrapped 4 theta,
+    and the design matrix X = (1, -t, -C, -S), C and S the cumulative damping integrals."""
 
     t_rel_s: np.ndarray
     energy: np.ndarray
+    ln_e: np.ndarray
     phi_rad: np.ndarray  # 4 theta, unwrapped (rad)
-    c_int_s: np.ndarray  # integral of rho cos 4 theta (s)
-    s_int_s: np.ndarray  # integral of rho sin 4 theta (s)
+    xt: np.ndarray  # (4, n) transposed design matrix: ln E = (ln_e0, gamma, b_c, b_s) @ xt
+
+    @property
+    def x(self) -> np.ndarray:
+        """The design matrix X (n, 4), a view."""
+        return self.xt.T
+
+    @property
+    def c_int_s(self) -> np.ndarray:
+        """Integral of rho cos 4 theta since the first sample (s)."""
+        return -self.xt[2]
+
+    @property
+    def s_int_s(self) -> np.ndarray:
+        return -self.xt[3]
 
     def design(self) -> np.ndarray:
-        """X such that ln E = X @ (ln_e0, gamma, b_c, b_s)."""
-        return np.column_stack([np.ones_like(self.t_rel_s), -self.t_rel_s, -self.c_int_s, -self.s_int_s])
+        return self.x
 
 
-def _as_channels(t_s, cx, sx, cy, sy) -> tuple[np.ndarray, ...]:
+def _as_channels(t_s, cx, sx, cy, sy, *, min_samples: int = _MIN_SAMPLES) -> tuple[np.ndarray, ...]:
     arrays = [np.asarray(a, dtype=float).reshape(-1) for a in (t_s, cx, sx, cy, sy)]
     n = arrays[0].size
     for name, a in zip(("t_s", "cx", "sx", "cy", "sy"), arrays, strict=True):
         if a.size != n:
             raise DampingFitError(f"{name} has {a.size} samples but t_s has {n}; all five must match")
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise DampingFitError(f"{name} contains non-finite values")
-    if n < _MIN_SAMPLES:
-        raise DampingFitError(f"decay has {n} samples; at least {_MIN_SAMPLES} are needed")
-    if np.any(np.diff(arrays[0]) <= 0):
+    if n < min_samples:
+        raise DampingFitError(f"decay has {n} samples; at least {min_samples} are needed")
+    if n > 1 and not (np.diff(arrays[0]) > 0).all():
         raise DampingFitError("t_s must be strictly increasing")
     return tuple(arrays)
 
 
-def _step_integrals(dt: np.ndarray, phi: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Exact integrals of rho cos phi and rho sin phi over each step, phi linear within the step and
-    rho taken at the step's mean (it varies on the decay time scale only)."""
-    dphi = np.diff(phi)
-    mid = 0.5 * (phi[1:] + phi[:-1])
-    half = 0.5 * dphi
-    small = np.abs(half) < 1e-6
-    sinc = np.sin(half) / np.where(small, 1.0, half)
-    sinc[small] = 1.0 - half[small] ** 2 / 6.0
-    scale = dt * 0.5 * (rho[1:] + rho[:-1]) * sinc
-    return scale * np.cos(mid), scale * np.sin(mid)
-
-
-def _phase_and_rho(cx, sx, cy, sy) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    energy = cx * cx + sx * sx + cy * cy + sy * sy
-    r_inv = cx * cx + sx * sx - cy * cy - sy * sy
-    s_inv = 2.0 * (cx * cy + sx * sy)
-    if np.any(energy <= 0):
+def _sample_parts(cx, sx, cy, sy, model: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Energy, wrapped 4 theta, and the model's damping modulation (rho cos 4th, rho sin 4th):
+    (R/E, S/E) for the exact model, (cos 4th, sin 4th) for the patent's."""
+    xx = cx * cx + sx * sx
+    yy = cy * cy + sy * sy
+    energy = xx + yy
+    if not (energy > 0).all():
         raise DampingFitError("the energy E = cx^2+sx^2+cy^2+sy^2 is zero at some sample")
+    r_inv = xx - yy
+    s_inv = 2.0 * (cx * cy + sx * sy)
     phi = np.arctan2(s_inv, r_inv)
-    rho = np.sqrt(r_inv * r_inv + s_inv * s_inv) / energy
-    return energy, phi, rho
+    norm = energy if model == "exact" else np.sqrt(r_inv * r_inv + s_inv * s_inv)
+    return energy, phi, r_inv / norm, s_inv / norm
+
+
+def _step_integrals(dt, phi, mc, ms) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-step increments of 4 theta and the exact integrals of the modulation over each step.
+
+    With 4 theta linear within a step, integral of rho cos 4th = dt rho sin(h)/h cos(mid), h half
+    the step, which equals the trapezoid rule times tan(h)/h (PHYSICS.md pitfall (c))."""
+    d = np.diff(phi)
+    d = (d + math.pi) % (2.0 * math.pi) - math.pi
+    h = 0.5 * d
+    if h.size and np.abs(h).max() > 0.5 * _MAX_STEP_RAD:
+        raise DampingFitError(
+            f"the wave angle 4 theta turns {2 * np.abs(h).max():.2f} rad between two samples (limit "
+            f"{_MAX_STEP_RAD} rad): the stream is too slow for the table rate, or the signal is lost in noise"
+        )
+    small = np.abs(h) < 1e-4
+    f = np.tan(h) / np.where(small, 1.0, h)
+    f[small] = 1.0 + h[small] ** 2 / 3.0
+    g = 0.5 * dt * f
+    return d, g * (mc[1:] + mc[:-1]), g * (ms[1:] + ms[:-1])
 
 
 def decay_regressors(t_s, cx, sx, cy, sy, *, model: str = "exact") -> DecayRegressors:
-    """Energy, unwrapped 4 theta and the cumulative damping integrals of a recorded decay."""
+    """Energy, unwrapped 4 theta and the design matrix of a recorded decay."""
     if model not in MODELS:
         raise DampingFitError(f"model={model!r} is not one of {MODELS}")
     t, cx, sx, cy, sy = _as_channels(t_s, cx, sx, cy, sy)
-    energy, phi, rho = _phase_and_rho(cx, sx, cy, sy)
-    phi = np.unwrap(phi)
-    if model == "patent":
-        rho = np.ones_like(rho)
-    dc, ds = _step_integrals(np.diff(t), phi, rho)
-    zero = np.zeros(1)
-    return DecayRegressors(
-        t_rel_s=t - t[0],
-        energy=energy,
-        phi_rad=phi,
-        c_int_s=np.concatenate([zero, np.cumsum(dc)]),
-        s_int_s=np.concatenate([zero, np.cumsum(ds)]),
-    )
+    energy, phi, mc, ms = _sample_parts(cx, sx, cy, sy, model)
+    d, dc, ds = _step_integrals(np.diff(t), phi, mc, ms)
+    n = t.size
+    xt = np.empty((4, n))
+    xt[0] = 1.0
+    np.subtract(t[0], t, out=xt[1])
+    xt[2:, 0] = 0.0
+    np.cumsum(dc, out=xt[2, 1:])
+    np.cumsum(ds, out=xt[3, 1:])
+    xt[2:] *= -1.0
+    phi_u = np.empty(n)
+    phi_u[0] = phi[0]
+    np.cumsum(d, out=phi_u[1:])
+    phi_u[1:] += phi[0]
+    return DecayRegressors(t_rel_s=-xt[1], energy=energy, ln_e=np.log(energy), phi_rad=phi_u, xt=xt)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -236,11 +264,17 @@ def _make_result(
     model: str,
     iterations: int,
     converged: bool,
+    *,
+    curves: bool = True,
 ) -> DampingFit:
     n = reg.energy.size
     dof = n - len(PARAM_NAMES)
     value, std, ci = _physical(params, cov, dof)
-    ln_fit = reg.design() @ params
+    if curves:
+        ln_fit = _lin(params, reg.xt)
+        arrays = (np.array(t_s, dtype=float), reg.energy.copy(), np.exp(ln_fit), reg.ln_e - ln_fit, 0.25 * reg.phi_rad)
+    else:
+        arrays = tuple(np.empty(0) for _ in range(5))
     return DampingFit(
         theta_tau_deg=value["theta_tau_deg"],
         delta_inv_tau_per_s=value["delta_inv_tau_per_s"],
@@ -255,95 +289,103 @@ def _make_result(
         n_samples=n,
         iterations=iterations,
         converged=converged,
-        t_s=np.asarray(t_s, dtype=float).copy(),
-        energy=reg.energy,
-        energy_fit=np.exp(ln_fit),
-        residuals_ln_e=np.log(reg.energy) - ln_fit,
-        theta_rad=0.25 * reg.phi_rad,
+        t_s=arrays[0],
+        energy=arrays[1],
+        energy_fit=arrays[2],
+        residuals_ln_e=arrays[3],
+        theta_rad=arrays[4],
     )
 
 
 # ----------------------------------------------------------------------------------------------
-# Estimators on prepared regressors
+# Estimators on prepared regressors (design matrices kept transposed, (4, n), for fast products)
 
 
-def _weighted_ls(x: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Weighted least squares by column-scaled normal equations (4 columns, well conditioned once
-    scaled); returns params, (X^T W X)^-1 and the weighted residual sum."""
-    xw = x * w[:, None]
-    normal = xw.T @ x
+def _lin(p: np.ndarray, xt: np.ndarray) -> np.ndarray:
+    """p @ xt without BLAS (its gemv is slow for a 4 x n operand, and its threads spin on a busy
+    machine)."""
+    return np.einsum("i,in->n", p, xt)
+
+
+def _gram(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b.T for (4, n) operands, single-threaded."""
+    return np.einsum("in,jn->ij", a, b)
+
+
+def _scaled_inverse(normal: np.ndarray) -> np.ndarray:
+    """Inverse of a 4x4 normal matrix after scaling it to unit diagonal (columns differ by 1e6)."""
     scale = np.sqrt(np.diag(normal))
     scale[scale == 0] = 1.0
-    inv_s = np.linalg.inv(normal / np.outer(scale, scale))
-    p = (inv_s @ ((xw.T @ y) / scale)) / scale
-    r = y - x @ p
-    return p, inv_s / np.outer(scale, scale), float(np.dot(w * r, r))
+    return np.linalg.inv(normal / np.outer(scale, scale)) / np.outer(scale, scale)
+
+
+def _weighted_ls(xt: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Weighted least squares by scaled normal equations; returns params, (X^T W X)^-1 and the
+    weighted residual sum."""
+    xw = xt * w
+    inv = _scaled_inverse(_gram(xw, xt))
+    p = inv @ (xw @ y)
+    r = y - _lin(p, xt)
+    return p, inv, float(np.dot(w * r, r))
 
 
 def _fit_log_linear(reg: DecayRegressors, *, passes: int = 2) -> tuple[np.ndarray, np.ndarray, float]:
     """Weighted closed-form LS on ln E: weights E (var(ln E) = 4 s^2/E), first from the measured E,
     then from the fitted E so that the weights do not correlate with the noise."""
-    x = reg.design()
-    y = np.log(reg.energy)
-    w = reg.energy / np.max(reg.energy)
+    xt, y = reg.xt, reg.ln_e
+    e_ref = float(np.max(reg.energy))
+    w = reg.energy / e_ref
     p = inv = None
     rss = 0.0
-    for _ in range(max(1, passes)):
-        p, inv, rss = _weighted_ls(x, y, w)
-        w = np.exp(x @ p - np.max(x @ p))
-    dof = max(y.size - len(PARAM_NAMES), 1)
-    s2 = rss / dof  # estimates 4 sigma^2 / max(E)
-    e_ref = float(np.exp(np.max(x @ p)))
-    noise_sigma = math.sqrt(s2 * e_ref / 4.0)
-    return p, s2 * inv, noise_sigma
+    for i in range(max(1, passes)):
+        p, inv, rss = _weighted_ls(xt, y, w)
+        if i + 1 < passes:
+            w = np.exp(_lin(p, xt) - math.log(e_ref))
+    s2 = rss / max(y.size - len(PARAM_NAMES), 1)  # estimates 4 sigma^2 / e_ref
+    return p, s2 * inv, math.sqrt(s2 * e_ref / 4.0)
 
 
-def _gauss_newton_step(
-    x: np.ndarray, energy: np.ndarray, p: np.ndarray, weighted: bool
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """One Gauss-Newton increment on the residual E - E_model; returns (dp, J^T W J, model, w)."""
-    model = np.exp(x @ p)
+def _gauss_newton_step(xt: np.ndarray, energy: np.ndarray, p: np.ndarray, weighted: bool):
+    """One Gauss-Newton increment on the residual E - E_model: (dp, J^T W J, chi2 per dof)."""
+    model = np.exp(_lin(p, xt))
     r = energy - model
-    jac = model[:, None] * x  # d E_model / d params
-    w = 1.0 / model if weighted else np.ones_like(model)
-    jw = jac * w[:, None]
-    normal = jac.T @ jw
-    scale = np.sqrt(np.diag(normal))
-    scale[scale == 0] = 1.0
-    dp = np.linalg.solve(normal / np.outer(scale, scale), (jw.T @ r) / scale) / scale
-    return dp, normal, model, w
+    jt = xt * model  # (d E_model / d params)^T
+    jw = jt / model if weighted else jt  # = xt when weighted (W = 1/E_model)
+    normal = _gram(jw, jt)
+    dp = _scaled_inverse(normal) @ (jw @ r)
+    chi2 = float(np.dot(r, r / model if weighted else r)) / max(energy.size - len(PARAM_NAMES), 1)
+    return dp, normal, chi2
 
 
-def _gn_covariance(x: np.ndarray, energy: np.ndarray, p: np.ndarray, weighted: bool) -> tuple[np.ndarray, float]:
+def _gn_covariance(xt: np.ndarray, energy: np.ndarray, p: np.ndarray, weighted: bool) -> tuple[np.ndarray, float]:
     """Covariance of a Gauss-Newton fit with var(E_i) = c E_i (sandwich form when unweighted)."""
-    model = np.exp(x @ p)
+    model = np.exp(_lin(p, xt))
     r = energy - model
-    jac = model[:, None] * x
-    dof = max(energy.size - len(PARAM_NAMES), 1)
-    c = float(np.sum(r * r / model)) / dof  # estimates 4 sigma^2
+    jt = xt * model
+    c = float(np.dot(r, r / model)) / max(energy.size - len(PARAM_NAMES), 1)  # estimates 4 sigma^2
     if weighted:
-        normal = jac.T @ (jac / model[:, None])
-        cov = c * np.linalg.inv(normal)
+        cov = c * _scaled_inverse(_gram(jt, xt))
     else:
-        bread = np.linalg.inv(jac.T @ jac)
-        meat = jac.T @ (jac * (c * model)[:, None])
-        cov = bread @ meat @ bread
+        bread = _scaled_inverse(_gram(jt, jt))
+        cov = bread @ _gram(jt * (c * model), jt) @ bread
     return cov, math.sqrt(c / 4.0)
 
 
 def _initial_decay(reg: DecayRegressors) -> np.ndarray:
     """(ln E0, gamma) from a weighted two-parameter log-linear fit; b_c = b_s = 0 (the patent's start)."""
-    x = reg.design()[:, :2]
-    y = np.log(reg.energy)
     w = reg.energy / np.max(reg.energy)
-    p2, _, _ = _weighted_ls(x, y, w)
+    p2, _, _ = _weighted_ls(reg.xt[:2], reg.ln_e, w)
     return np.array([p2[0], p2[1], 0.0, 0.0])
 
 
+def _gn_converged(dp: np.ndarray, normal: np.ndarray, chi2: float) -> bool:
+    """The step moved the fit by under 1e-3 of its own standard error (normal / chi2 ~ information)."""
+    return float(dp @ normal @ dp) <= 1e-6 * max(chi2, 1e-300)
+
+
 def _fit_gauss_newton(
-    reg: DecayRegressors, *, weighted: bool, start: str, max_iter: int = 30, rtol: float = 1e-10
+    reg: DecayRegressors, *, weighted: bool, start: str, max_iter: int = 30
 ) -> tuple[np.ndarray, np.ndarray, float, int, bool]:
-    x = reg.design()
     if start == "zero":
         p = _initial_decay(reg)
     elif start == "log-linear":
@@ -353,13 +395,12 @@ def _fit_gauss_newton(
     converged = False
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 - the count is reported
-        dp, normal, _, _ = _gauss_newton_step(x, reg.energy, p, weighted)
+        dp, normal, chi2 = _gauss_newton_step(reg.xt, reg.energy, p, weighted)
         p = p + dp
-        # converged when the step is negligible against the parameter's own statistical scale
-        if float(dp @ normal @ dp) <= rtol * max(float(p @ normal @ p), 1e-300):
+        if _gn_converged(dp, normal, chi2):
             converged = True
             break
-    cov, noise_sigma = _gn_covariance(x, reg.energy, p, weighted)
+    cov, noise_sigma = _gn_covariance(reg.xt, reg.energy, p, weighted)
     return p, cov, noise_sigma, it, converged
 
 
@@ -409,12 +450,13 @@ def fit_free_decay_q(t_s, q, **kwargs) -> DampingFit:
 
 class SequentialDampingFit:
     """The patent's identification as data arrive: each `update` appends a block of samples and
-    returns the current estimate.
+    returns the current estimate (its plot arrays empty; `result()` gives them in full).
 
-    method "gauss-newton": one (or `iterations_per_update`) Gauss-Newton increment on the residuals
-    stacked over the growing window, started from D = 0 (PHYSICS.md pitfall (a)).
-    method "log-linear": exact recursive least squares on ln E (running normal equations), the
-    weights of each block predicted from the estimate before it.
+    method "gauss-newton": `iterations_per_update` Gauss-Newton increments on the residuals stacked
+    over the growing window (PHYSICS.md pitfall (a)), started from D = 0 with (ln E0, gamma) from
+    the first block; each costs one pass over the data so far.
+    method "log-linear": exact recursive least squares on ln E (running normal equations, O(block)
+    per update); each block is weighted by the energy the estimate before it predicts.
     """
 
     def __init__(self, *, method: str = "gauss-newton", model: str = "exact", iterations_per_update: int = 1) -> None:
@@ -427,133 +469,146 @@ class SequentialDampingFit:
         self.method = method
         self.model = model
         self.iterations_per_update = int(iterations_per_update)
-        self._t: list[np.ndarray] = []
-        self._e: list[np.ndarray] = []
-        self._phi: list[np.ndarray] = []
-        self._c: list[np.ndarray] = []
-        self._s: list[np.ndarray] = []
-        self._last: tuple[float, float, float, float, float] | None = None  # t, phi, rho, C, S
+        self._n = 0
+        self._cap = 0
+        self._t = np.empty(0)
+        self._e = np.empty(0)
+        self._ln = np.empty(0)
+        self._phi = np.empty(0)
+        self._xt = np.empty((4, 0))
+        self._last: tuple[float, float, float, float] | None = None  # t, wrapped phi, mc, ms
         self._p: np.ndarray | None = None
         self._normal = np.zeros((4, 4))
         self._rhs = np.zeros(4)
-        self._n = 0
+        self._yy = 0.0
+        self._y0 = 0.0
         self._iterations = 0
+        self._converged = False
         self._estimate: DampingFit | None = None
 
     @property
     def n_samples(self) -> int:
         return self._n
 
-    def result(self) -> DampingFit | None:
-        return self._estimate
+    def _grow(self, need: int) -> None:
+        if need <= self._cap:
+            return
+        cap = max(need, 2 * self._cap, 4096)
+        for name in ("_t", "_e", "_ln", "_phi"):
+            new = np.empty(cap)
+            new[: self._n] = getattr(self, name)[: self._n]
+            setattr(self, name, new)
+        xt = np.empty((4, cap))
+        xt[:, : self._n] = self._xt[:, : self._n]
+        self._xt = xt
+        self._cap = cap
 
     def update(self, t_s, cx, sx, cy, sy) -> DampingFit | None:
         """Append a block of samples; return the current estimate (None until enough samples)."""
-        arrays = [np.asarray(a, dtype=float).reshape(-1) for a in (t_s, cx, sx, cy, sy)]
-        n = arrays[0].size
-        if n == 0:
+        t, cx, sx, cy, sy = _as_channels(t_s, cx, sx, cy, sy, min_samples=0)
+        m = t.size
+        if m == 0:
             return self._estimate
-        for name, a in zip(("t_s", "cx", "sx", "cy", "sy"), arrays, strict=True):
-            if a.size != n:
-                raise DampingFitError(f"{name} has {a.size} samples but t_s has {n}; all five must match")
-            if not np.all(np.isfinite(a)):
-                raise DampingFitError(f"{name} contains non-finite values")
-        t = arrays[0]
         if self._last is not None and t[0] <= self._last[0]:
             raise DampingFitError(f"block starts at t={t[0]!r} s, not after the previous sample at {self._last[0]!r} s")
-        if np.any(np.diff(t) <= 0):
-            raise DampingFitError("t_s must be strictly increasing")
-        energy, phi, rho = _phase_and_rho(*arrays[1:])
-        if self.model == "patent":
-            rho = np.ones_like(rho)
+        energy, phi, mc, ms = _sample_parts(cx, sx, cy, sy, self.model)
+        self._grow(self._n + m)
+        n0 = self._n
+        sl = slice(n0, n0 + m)
         if self._last is None:
-            phi = np.unwrap(phi)
-            t_all, phi_all, rho_all = t, phi, rho
-            c0 = s0 = 0.0
+            t_all, phi_all, mc_all, ms_all = t, phi, mc, ms
+            base = np.array([phi[0], 0.0, 0.0])
+            self._t0_s = float(t[0])
+            self._y0 = float(np.log(energy[0]))
         else:
-            t_prev, phi_prev, rho_prev, c0, s0 = self._last
-            phi_all = np.unwrap(np.concatenate([[phi_prev], phi]))
-            phi = phi_all[1:]
-            t_all = np.concatenate([[t_prev], t])
-            rho_all = np.concatenate([[rho_prev], rho])
-        dc, ds = _step_integrals(np.diff(t_all), phi_all, rho_all)
-        if self._last is None:
-            c = np.concatenate([[0.0], np.cumsum(dc)])
-            s = np.concatenate([[0.0], np.cumsum(ds)])
-        else:
-            c = c0 + np.cumsum(dc)
-            s = s0 + np.cumsum(ds)
-        self._last = (float(t[-1]), float(phi[-1]), float(rho[-1]), float(c[-1]), float(s[-1]))
-        self._t.append(t)
-        self._e.append(energy)
-        self._phi.append(phi)
-        self._c.append(c)
-        self._s.append(s)
-        self._n += n
+            tp, php, mcp, msp = self._last
+            t_all = np.concatenate([[tp], t])
+            phi_all = np.concatenate([[php], phi])
+            mc_all = np.concatenate([[mcp], mc])
+            ms_all = np.concatenate([[msp], ms])
+            base = np.array([self._phi[n0 - 1], -self._xt[2, n0 - 1], -self._xt[3, n0 - 1]])
+        d, dc, ds = _step_integrals(np.diff(t_all), phi_all, mc_all, ms_all)
+        first = 1 if self._last is None else 0  # the very first sample starts every integral at 0
+        k = slice(n0 + first, n0 + m)
+        self._phi[n0] = base[0]
+        self._phi[k] = base[0] + np.cumsum(d)
+        self._xt[0, sl] = 1.0
+        self._xt[1, sl] = self._t0_s - t
+        self._xt[2:, n0] = -base[1:]
+        self._xt[2, k] = -(base[1] + np.cumsum(dc))
+        self._xt[3, k] = -(base[2] + np.cumsum(ds))
+        self._t[sl] = t
+        self._e[sl] = energy
+        self._ln[sl] = np.log(energy)
+        self._last = (float(t[-1]), float(phi[-1]), float(mc[-1]), float(ms[-1]))
+        self._n += m
         if self.method == "log-linear":
-            self._accumulate(t, energy, c, s)
+            xb = self._xt[:, sl]
+            w = np.exp(_lin(self._p, xb)) if self._p is not None else energy  # predicted E: independent of this noise
+            y = self._ln[sl] - self._y0
+            xw = xb * w
+            self._normal += _gram(xw, xb)
+            self._rhs += xw @ y
+            self._yy += float(np.dot(w * y, y))
         if self._n < _MIN_SAMPLES:
             return self._estimate
-        self._estimate = self._solve()
+        self._estimate = self._solve(curves=False)
         return self._estimate
 
+    def result(self) -> DampingFit | None:
+        """The current estimate with its plot arrays (energy, fit, residuals, theta) over all data."""
+        if self._n < _MIN_SAMPLES or self._p is None:
+            return None
+        return self._finish(curves=True)
+
     def _regressors(self) -> DecayRegressors:
-        t = np.concatenate(self._t)
-        return DecayRegressors(
-            t_rel_s=t - t[0],
-            energy=np.concatenate(self._e),
-            phi_rad=np.concatenate(self._phi),
-            c_int_s=np.concatenate(self._c),
-            s_int_s=np.concatenate(self._s),
-        )
+        n = self._n
+        return DecayRegressors(t_rel_s=-self._xt[1, :n], energy=self._e[:n], ln_e=self._ln[:n],
+                               phi_rad=self._phi[:n], xt=self._xt[:, :n])
 
-    def _t0(self) -> float:
-        return float(self._t[0][0])
-
-    def _accumulate(self, t, energy, c, s) -> None:
-        x = np.column_stack([np.ones_like(t), -(t - self._t0()), -c, -s])
-        if self._p is not None:
-            w = np.exp(x @ self._p)  # predicted E: weights independent of this block's noise
-        else:
-            w = energy
-        self._normal += x.T @ (x * w[:, None])
-        self._rhs += x.T @ (w * np.log(energy))
-
-    def _solve(self) -> DampingFit:
+    def _solve(self, *, curves: bool) -> DampingFit:
         reg = self._regressors()
-        t_abs = np.concatenate(self._t)
-        x = reg.design()
         if self.method == "log-linear":
             scale = np.sqrt(np.diag(self._normal))
             scale[scale == 0] = 1.0
             normal_s = self._normal / np.outer(scale, scale)
             if np.linalg.cond(normal_s) > 1e12:  # too little data to see the modulation yet
                 p = _initial_decay(reg)
+                p[0] -= self._y0
             else:
                 p = np.linalg.solve(normal_s, self._rhs / scale) / scale
+            rss = max(self._yy - 2.0 * float(p @ self._rhs) + float(p @ self._normal @ p), 0.0)
+            p[0] += self._y0
             self._p = p
-            model = np.exp(x @ p)
-            r = np.log(reg.energy) - x @ p
-            dof = max(reg.energy.size - 4, 1)
-            c_hat = float(np.sum(model * r * r)) / dof  # 4 sigma^2
+            self._c_hat = rss / max(self._n - 4, 1)  # estimates 4 sigma^2
+            self._iterations += 1
+            self._converged = True
+        else:
+            if self._p is None:
+                self._p = _initial_decay(reg)
+            for _ in range(self.iterations_per_update):
+                dp, normal, chi2 = _gauss_newton_step(reg.xt, reg.energy, self._p, True)
+                self._p = self._p + dp
+                self._iterations += 1
+                self._converged = _gn_converged(dp, normal, chi2)
+            self._c_hat = chi2  # 4 sigma^2; with the step's normal matrix this gives the covariance
+            self._gn_cov = chi2 * _scaled_inverse(normal)
+        return self._finish(curves=curves)
+
+    def _finish(self, *, curves: bool) -> DampingFit:
+        reg = self._regressors()
+        if self.method == "log-linear":
             try:
-                cov = c_hat * np.linalg.inv(self._normal)
+                cov = self._c_hat * np.linalg.inv(self._normal)
             except np.linalg.LinAlgError:
                 cov = np.full((4, 4), np.inf)
-            self._iterations += 1
-            return _make_result(reg, t_abs, p, cov, math.sqrt(c_hat / 4.0), "sequential log-linear", self.model,
-                                self._iterations, True)
-        if self._p is None:
-            self._p = _initial_decay(reg)
-        converged = False
-        for _ in range(self.iterations_per_update):
-            dp, normal, _, _ = _gauss_newton_step(x, reg.energy, self._p, True)
-            self._p = self._p + dp
-            self._iterations += 1
-            converged = float(dp @ normal @ dp) <= 1e-10 * max(float(self._p @ normal @ self._p), 1e-300)
-        cov, noise = _gn_covariance(x, reg.energy, self._p, True)
-        return _make_result(reg, t_abs, self._p, cov, noise, "sequential gauss-newton", self.model,
-                            self._iterations, converged)
+            noise = math.sqrt(self._c_hat / 4.0)
+        elif curves:
+            cov, noise = _gn_covariance(reg.xt, reg.energy, self._p, True)
+        else:
+            cov, noise = self._gn_cov, math.sqrt(self._c_hat / 4.0)
+        return _make_result(reg, self._t[: self._n], self._p, cov, noise, "sequential " + self.method, self.model,
+                            self._iterations, self._converged, curves=curves)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -133,7 +133,7 @@ def _std_from_cov(cov: np.ndarray, i_gamma: int, i_bc: int, zg: np.ndarray) -> t
 def _cumulative_energy_info(t: np.ndarray, q: np.ndarray, noise_sigma: float, m: int, model: str) -> np.ndarray:
     """Cumulative Fisher information of (ln E0, gamma, b_c, b_s) from E, shape (n, 4, 4)."""
     reg = decay_regressors(t, q[:, 0], q[:, 1], q[:, 2], q[:, 3], model=model)
-    x = reg.design()
+    x = reg.x
     w = reg.energy / (4.0 * noise_sigma**2) * m
     return np.cumsum(w[:, None, None] * x[:, :, None] * x[:, None, :], axis=0)
 
