@@ -191,9 +191,10 @@ _CRC_TABLES: dict[int, tuple[np.ndarray, np.ndarray, int]] = {}
 
 
 def _crc_table(length: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Per-position contributions for messages of one (even) length: the CRC is affine over
-    GF(2), so crc(m) = crc(zeros) ^ XOR_j T[j, m[j]], T[j, v] = crc0(v at position j, zeros
-    elsewhere).  Positions are taken two bytes at a time (a 65536-entry row per byte pair)."""
+    """Per-position contributions for messages of one length: the CRC is affine over GF(2), so
+    crc(m) = crc(zeros) ^ XOR_j T[j, m[j]] with T[j, v] = crc0(v at position j, zeros elsewhere).
+    (Measured: as fast as a crc_hqx loop at 100 frames, 30 % faster at 2000; a two-byte table
+    was no faster and 3.7 MB.)"""
     if length not in _CRC_TABLES:
         table = np.empty((length, 256), np.uint16)
         for j in range(length):
@@ -201,18 +202,14 @@ def _crc_table(length: int) -> tuple[np.ndarray, np.ndarray, int]:
             for v in range(256):
                 msg[j] = v
                 table[j, v] = crc_hqx(bytes(msg), 0)
-        # pair table: word w = lo | hi << 8 (little-endian u16 view of bytes 2j, 2j+1)
-        lo, hi = np.arange(65536) & 0xFF, np.arange(65536) >> 8
-        pairs = table[0::2][:, lo] ^ table[1::2][:, hi]
-        _CRC_TABLES[length] = (pairs, np.arange(length // 2)[None, :], crc_hqx(bytes(length), CRC_INIT))
+        _CRC_TABLES[length] = (table, np.arange(length)[None, :], crc_hqx(bytes(length), CRC_INIT))
     return _CRC_TABLES[length]
 
 
 def crc16_rows(rows: np.ndarray) -> np.ndarray:
-    """CRC-16/CCITT-FALSE of every row of a (n, L) uint8 array at once (vectorised, L even)."""
-    pairs, positions, c0 = _crc_table(rows.shape[1])
-    words = np.ascontiguousarray(rows).view("<u2")
-    return np.bitwise_xor.reduce(pairs[positions, words], axis=1) ^ np.uint16(c0)
+    """CRC-16/CCITT-FALSE of every row of a (n, L) uint8 array at once (vectorised)."""
+    table, positions, c0 = _crc_table(rows.shape[1])
+    return np.bitwise_xor.reduce(table[positions, rows], axis=1) ^ np.uint16(c0)
 
 
 def encode_frame(ftype: int, seq: int, addr: int, payload: bytes = b"") -> bytes:
