@@ -38,7 +38,7 @@ class FpgaFirmware:
     def __init__(self, world) -> None:
         self.world = world
         self.lock = threading.RLock()
-        self.regs: dict[str, float] = {r.name: r.default for r in p.REGISTERS}
+        self.regs: dict[str, float] = {r.name: int(r.default) if r.kind == "u" else r.default for r in p.REGISTERS}
         self.regs["ID"] = p.FPGA_ID
         self.regs["VERSION"] = p.PROTOCOL_VERSION
         self.regs["SAMPLE_PERIOD_S"] = world.sample_period_s
