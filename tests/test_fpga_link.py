@@ -165,7 +165,7 @@ def test_link_drop_raises_within_timeout(bench):
         for _ in range(10):
             link.read_register("STATUS")
             time.sleep(0.05)
-    assert time.monotonic() - t0 < 3 * link.timeout_s + 1.0
+    assert time.monotonic() - t0 < 3 * link.timeout_s + 3.0  # generous: a loaded machine
     assert link.safe_state() is False  # cannot be confirmed
 
 
@@ -176,8 +176,7 @@ def test_stall_raises_within_timeout_and_recovers(bench):
     with pytest.raises(LinkLostError, match="no answer to read STATUS in 3 attempts"):
         link.read_register("STATUS")
     elapsed = time.monotonic() - t0
-    assert 3 * link.timeout_s - 0.05 <= elapsed < 3 * link.timeout_s + 1.0
-    link.start_stream  # noqa: B018 - the link object stays usable after a stall
+    assert 3 * link.timeout_s - 0.05 <= elapsed < 3 * link.timeout_s + 3.0  # generous: a loaded machine
     server.clear_faults()
     assert link.read_register("ID") == p.FPGA_ID
 
@@ -227,11 +226,11 @@ def test_a_client_that_stops_reading_cannot_hang_the_world():
     try:
         raw.sendall(p.encode_frame(p.WRITE, 1, p.BY_NAME["CTRL_SET"].addr, p.STREAM_EN.to_bytes(8, "little")))
         deadline = time.monotonic() + 5.0
-        while not server.firmware.regs["CTRL"] & p.STREAM_EN and time.monotonic() < deadline:
+        while not int(server.firmware.regs["CTRL"]) & p.STREAM_EN and time.monotonic() < deadline:
             time.sleep(0.01)
         t0 = time.monotonic()
         world.advance(300.0)  # 300 000 frames, 18 MB: far more than the socket buffers hold
-        assert time.monotonic() - t0 < 10.0
+        assert time.monotonic() - t0 < 30.0  # the encoding costs ~1 s; a hang would be forever
         assert server.frames_lost > 0
     finally:
         raw.close()
