@@ -19,7 +19,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .physics.averaged import Resonator
+from .physics.averaged import Resonator, use_single_thread_blas
 from .physics.params import ResonatorParams
 
 
@@ -57,6 +57,7 @@ class World:
     ) -> None:
         if not (math.isfinite(sample_period_s) and sample_period_s > 0):
             raise ValueError(f"sample_period_s={sample_period_s!r} must be > 0")
+        use_single_thread_blas()
         self.resonator = params if isinstance(params, Resonator) else Resonator(params, seed=seed)
         self.params = self.resonator.params
         self.seed = seed
