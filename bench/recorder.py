@@ -172,7 +172,8 @@ class RunData:
 
     def __init__(self, source: str | Path | h5py.File) -> None:
         self._own = not isinstance(source, h5py.File)
-        self.f = h5py.File(source, "r") if self._own else source
+        # no file lock: a run still being written can be read (the GUI, a report mid-run)
+        self.f = h5py.File(source, "r", locking=False) if self._own else source
         self.path = Path(self.f.filename)
         self.attrs: dict[str, Any] = {}
         for key, value in self.f.attrs.items():

@@ -64,6 +64,9 @@ class Result:
     limits: Limits | None = None
     dut: str | None = None
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "limits", Limits.of(self.limits))  # accept (low, high) too
+
     @property
     def outcome(self) -> str:
         return COMPLETE if self.limits is None else self.limits.evaluate(self.value)

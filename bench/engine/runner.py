@@ -167,10 +167,11 @@ class Runner:
             return self._run(proc)
         finally:
             self._in_run = False
+            self._abort_reason = None
+            self._running.set()
 
     def _run(self, proc: Procedure) -> RunRecord:
-        self._abort_reason = None
-        self._running.set()
+        # an abort requested before the run began (Ctrl-C while the station opened) still holds
         st = self.station
         clock: GuardedClock = st.clock
         run_id = new_run_id()

@@ -1,6 +1,6 @@
 """Spin the table at a rate, hold it there, and check the rate the table reports."""
 
-from bench.engine import Param, Procedure, step
+from bench.engine import Param, Procedure, Result, step
 
 
 class TableSpin(Procedure):
@@ -29,3 +29,11 @@ class TableSpin(Procedure):
         mean = sum(rates) / len(rates)
         tol = self.tolerance_dps
         ctx.measure("table_rate_dps", mean, "deg/s", limits=(self.rate_dps - tol, self.rate_dps + tol))
+
+    def analysis(self, data):
+        """Re-fit of a recorded run (`gyrobench analyze RUN`): mean of the table readings at rate."""
+        rate = data.table("table")["rate_dps"]
+        tol = self.tolerance_dps
+        at_rate = rate[abs(rate - self.rate_dps) < 0.1 * tol]  # settled readings only
+        limits = (self.rate_dps - tol, self.rate_dps + tol)
+        return [Result("table_rate_dps", float(at_rate.mean()), "deg/s", limits=limits)]

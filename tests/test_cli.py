@@ -1,0 +1,175 @@
+"""The gyrobench CLI as a user runs it (subprocesses in a temporary directory): the --json shape,
+exit codes, procedures from a file, list / runs / show / analyze / report, SIGINT and SIGTERM
+abort into a confirmed safe state, and a SIGKILLed run leaves a readable HDF5 file."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import pytest
+
+from bench.cli import main
+
+GYROBENCH = [sys.executable, "-m", "bench.cli"]
+JSON_KEYS = {
+    "run_id",
+    "procedure",
+    "outcome",
+    "measurements",
+    "truth",
+    "simulated_s",
+    "wall_s",
+    "safe_state",
+    "end_reason",
+    "raw_file",
+}
+MEAS_KEYS = {"value", "unit", "ci95", "limits", "outcome"}
+
+FAILING = '''
+from bench.engine import Param, Procedure, step
+
+
+class AlwaysHigh(Procedure):
+    """Measures the table's rate at rest against limits it cannot meet."""
+
+    offset_dps = Param(1.0, unit="deg/s", low=0.0, high=10.0)
+
+    @step
+    def measure_rest(self, ctx):
+        ctx.sleep(0.2)
+        rate = ctx.devices.table.status().rate_dps
+        ctx.measure("rest_rate_dps", rate, "deg/s", limits=(self.offset_dps, self.offset_dps + 1.0))
+'''
+
+
+def _run(args, cwd, timeout=120):
+    return subprocess.run(GYROBENCH + args, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+
+
+def test_run_json_shape_then_runs_show_analyze_report(tmp_path):
+    r = _run(
+        [
+            "run",
+            "table-spin",
+            "--station",
+            "sim-hrg",
+            "--set",
+            "hold_s=0.5",
+            "--set",
+            "rate_dps=120",
+            "--seed",
+            "4",
+            "--json",
+        ],
+        tmp_path,
+    )
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)  # stdout is exactly one JSON object
+    assert set(out) == JSON_KEYS
+    assert out["procedure"] == "table-spin" and out["outcome"] == "PASS" and out["safe_state"] is True
+    assert out["end_reason"] == "completed"
+    m = out["measurements"]["table_rate_dps"]
+    assert set(m) == MEAS_KEYS and m["unit"] == "deg/s" and m["limits"] == [119.5, 120.5] and m["outcome"] == "PASS"
+    assert out["truth"]["tau_s"] == 300.0 and out["simulated_s"] > 0.5 and out["wall_s"] > 0
+    raw = Path(out["raw_file"])
+    assert raw.is_file() and raw.parent == tmp_path / "runs"
+
+    runs = json.loads(_run(["runs", "--json"], tmp_path).stdout)
+    assert [x["run_id"] for x in runs] == [out["run_id"]]
+    show = json.loads(_run(["show", out["run_id"][:17], "--json"], tmp_path).stdout)
+    assert show["params"]["rate_dps"] == 120.0 and show["seed"] == 4 and show["outcome"] == "PASS"
+    ana = _run(["analyze", "last", "--json"], tmp_path)
+    assert ana.returncode == 0, ana.stderr
+    refit = json.loads(ana.stdout)["measurements"]["table_rate_dps"]
+    # the re-fit averages the recorded table readings at rate: the same rate within the noise
+    assert refit["value"] == pytest.approx(120.0, abs=0.01) and refit["outcome"] == "PASS"
+    rep = _run(["report", "last"], tmp_path)
+    html = Path(rep.stdout.strip()).read_text()
+    assert rep.returncode == 0 and "<svg" in html and "table_rate_dps" in html and "PASS" in html
+
+
+def test_procedure_from_a_file_that_fails_exits_nonzero(tmp_path):
+    path = tmp_path / "always_high.py"
+    path.write_text(FAILING)
+    r = _run(["run", str(path), "--json"], tmp_path)
+    out = json.loads(r.stdout)
+    assert r.returncode == 1 and out["outcome"] == "FAIL" and out["procedure"] == "always-high"
+    assert out["measurements"]["rest_rate_dps"]["outcome"] == "FAIL" and out["safe_state"] is True
+
+
+def test_bad_parameter_and_station_exit_2_naming_them(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "table-spin", "--set", "rate_dps=5000"]) == 2
+    err = capsys.readouterr().err
+    assert "rate_dps=5000.0" in err and "[-1000, 1000] deg/s" in err
+    assert main(["run", "table-spin", "--set", "spin=1"]) == 2
+    assert "spin" in capsys.readouterr().err
+    assert main(["run", "table-spin", "--station", "nowhere.toml"]) == 2
+    assert "nowhere.toml" in capsys.readouterr().err
+    assert main(["run", "table-spin", "--fault", "meteor@1"]) == 2
+    assert "meteor" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()  # nothing was started
+
+
+def test_list_json(capsys):
+    assert main(["list", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    spin = out["procedures"]["table-spin"]
+    assert spin["steps"] == ["spin_up", "hold"]
+    assert {"name": "rate_dps", "default": 100.0, "unit": "deg/s", "low": -1000.0, "high": 1000.0}.items() <= next(
+        p for p in spin["params"] if p["name"] == "rate_dps"
+    ).items()
+    assert {"sim-hrg", "sim-mems"} <= set(out["stations"]) and "link-drop" in out["faults"]
+
+
+def _start_long_run(tmp_path):
+    proc = subprocess.Popen(
+        GYROBENCH + ["run", "table-spin", "--set", "hold_s=600", "--json"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:  # wait until the hold is being recorded
+        files = list((tmp_path / "runs").glob("*.h5")) if (tmp_path / "runs").exists() else []
+        if files:
+            try:
+                with h5py.File(files[0], "r", locking=False) as f:  # the writer holds the lock
+                    if "streams/fpga" in f and f["streams/fpga"].shape[0] > 2000:
+                        return proc, files[0]
+            except OSError:
+                pass
+        time.sleep(0.2)
+    proc.kill()
+    raise AssertionError("the run did not start recording within 60 s")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_aborts_into_confirmed_safe_state(tmp_path, sig):
+    proc, _ = _start_long_run(tmp_path)
+    os.kill(proc.pid, sig)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1, out + err
+    res = json.loads(out)
+    assert res["outcome"] == "ABORTED" and res["end_reason"] == f"aborted: {sig.name}" and res["safe_state"] is True
+
+
+def test_sigkilled_run_leaves_a_readable_hdf5_file(tmp_path):
+    proc, path = _start_long_run(tmp_path)
+    time.sleep(1.0)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=30)
+    with h5py.File(path, "r") as f:
+        n = f["streams/fpga"].shape[0]
+        t = f["streams/fpga"][:, 1]
+        assert n > 2000 and json.loads(f.attrs["params"])["hold_s"] == 600.0
+        assert (t[1:] > t[:-1]).all()
+        assert "outcome" not in f.attrs  # the run never finished
