@@ -21,7 +21,7 @@ from bench.analysis.maslov_forced import (
     identify_forced,
     steady_states,
 )
-from bench.analysis.maslov_result import Identification, derived_quantities
+from bench.analysis.maslov_result import Identification, derived_ci95, derived_quantities
 from bench.analysis.maslov_terms import (
     MODELS,
     forced_param_names,
@@ -75,6 +75,7 @@ __all__ = [
     "ForcedIdentification",
     "ForcedResponse",
     "Identification",
+    "derived_ci95",
     "derived_quantities",
     "detuning_rad_s",
     "forced_param_names",

@@ -96,3 +96,29 @@ def check_finite_arrays(**arrays: np.ndarray) -> int:
         elif a.size != length:
             raise ValueError(f"{name} has {a.size} samples, expected {length} like the others")
     return int(length or 0)
+
+
+def derived_ci95(ident: Identification, *, natural_freq_hz: float | None = None,
+                 bryan_factor: float | None = None, level: float = 0.95) -> dict[str, tuple[float, float]]:
+    """Delta-method intervals of the derived quantities from the parameters' covariance (normal
+    quantile; central-difference gradients with a step of 1e-4 standard error)."""
+    names = list(ident.params)
+    z = np.array([ident.params[n] for n in names])
+    se = np.sqrt(np.maximum(np.diag(ident.covariance), 0.0))
+    base = derived_quantities(ident.params, natural_freq_hz=natural_freq_hz, bryan_factor=bryan_factor)
+    keys = list(base)
+    grad = np.zeros((len(keys), len(names)))
+    for j in range(len(names)):
+        step = 1e-4 * se[j] if se[j] > 0 else 1e-9 * max(abs(z[j]), 1.0)
+        vals = []
+        for sgn in (1.0, -1.0):
+            zz = z.copy()
+            zz[j] += sgn * step
+            d = derived_quantities(dict(zip(names, zz, strict=True)), natural_freq_hz=natural_freq_hz,
+                                   bryan_factor=bryan_factor)
+            vals.append(np.array([d[k] for k in keys]))
+        grad[:, j] = (vals[0] - vals[1]) / (2.0 * step)
+    var = np.einsum("kj,jl,kl->k", grad, ident.covariance, grad)
+    q = float(stats.norm.ppf(0.5 * (1.0 + level)))
+    return {k: (base[k] - q * math.sqrt(max(v, 0.0)), base[k] + q * math.sqrt(max(v, 0.0)))
+            for k, v in zip(keys, var, strict=True)}

@@ -1,0 +1,240 @@
+"""mems-sweep: forced-oscillation identification of a MEMS ring (Maslov et al. sections 3-4).
+
+Drive both channels through the front end, sweep the drive (= lock-in reference) frequency up
+across the resonance and back down (a nonlinear resonator shows its hysteresis there), and at each
+point wait for the steady state, then average the lock-in's slow variables over a window.  The
+wait comes from the time constant: settle_tau x tau_s for the resonator plus 5 lock-in time
+constants; the point is accepted when the two halves of the averaging window agree (no trend
+left), else it waits two more time constants (up to three times, then logs a warning).
+Identify the linear, cubic and quintic models, choose the simplest one that the next richer one
+does not beat by more than `improvement` in residual sigma, and report sigma of each, the chosen
+model's parameters with intervals and the derived quantities; plots: amplitude and phase
+against frequency (measured points, modelled curves) and the polar amplitude-phase plot of each
+channel (the paper's figures 2-3).
+
+Units: the lock-in reads pickoff_gain_v volts per model unit, so dividing by it gives the slow
+variables in model units and xi in the simulator's units (the paper normalised to the largest
+amplitude instead; that rescales xi and u only).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from bench.analysis.maslov import (
+    PAPER_NATURAL_FREQ_HZ,
+    derived_ci95,
+    identify_forced,
+)
+from bench.engine import Param, Procedure, Result, step
+
+SWEEP_COLUMNS = ("t_s", "freq_hz", "direction", "q1", "p1", "q2", "p2", "amplitude", "phase_deg",
+                 "amplitude_y", "phase_y_deg", "settled")
+MODEL_ORDER = {"linear": 1, "cubic": 3, "quintic": 5}
+DERIVED_UNITS = {
+    "Q": "",
+    "split_hz": "Hz",
+    "damping_anisotropy_per_s": "1/s",
+    "alpha_deg": "deg",
+    "beta_deg": "deg",
+    "freq_offset_hz": "Hz",
+    "zero_rate_dps": "deg/s",
+}
+
+
+def choose_model(sigmas: dict[str, float], improvement: float) -> str:
+    """The simplest model that the next richer one does not beat by more than `improvement`
+    (relative reduction of the residual sigma)."""
+    chosen = "linear"
+    for richer in ("cubic", "quintic"):
+        if sigmas[richer] < (1.0 - improvement) * sigmas[chosen]:
+            chosen = richer
+        else:
+            break
+    return chosen
+
+
+def sweep_analysis(
+    freq_hz: np.ndarray,
+    q: np.ndarray,
+    direction: np.ndarray,
+    *,
+    natural_freq_hz: float,
+    bryan_factor: float,
+    improvement: float,
+) -> tuple[list[Result], dict[str, dict[str, np.ndarray]], dict]:
+    """Identify the three models on the steady states; (results, plot curves, fits by model)."""
+    fits = {
+        m: identify_forced(freq_hz, *q.T, natural_freq_hz=natural_freq_hz, model=m, bryan_factor=bryan_factor)
+        for m in MODEL_ORDER
+    }
+    sigmas = {m: f.sigma for m, f in fits.items()}
+    chosen = choose_model(sigmas, improvement)
+    best = fits[chosen]
+    results = [Result(f"sigma_{m}", s) for m, s in sigmas.items()]
+    results.append(Result("chosen_model_order", float(MODEL_ORDER[chosen])))
+    for name, value in best.params.items():
+        results.append(Result(name, value, "1/s", ci95=best.ci95[name]))
+    dci = derived_ci95(best, natural_freq_hz=natural_freq_hz, bryan_factor=bryan_factor)
+    rad_ci = {"alpha_deg": "alpha_rad", "beta_deg": "beta_rad"}
+    for name, unit in DERIVED_UNITS.items():
+        lo_hi = dci[rad_ci[name]] if name in rad_ci else dci[name]
+        if name in rad_ci:
+            lo_hi = (math.degrees(lo_hi[0]), math.degrees(lo_hi[1]))
+        results.append(Result(name, best.derived[name], unit, ci95=lo_hi))
+    # hysteresis: largest amplitude difference between the up and down sweeps at one frequency
+    amp = np.hypot(q[:, 0], q[:, 1])
+    up, down = direction > 0, direction < 0
+    if up.any() and down.any():
+        common = np.intersect1d(np.round(freq_hz[up], 9), np.round(freq_hz[down], 9))
+        gaps = [abs(amp[up][np.round(freq_hz[up], 9) == f].mean() - amp[down][np.round(freq_hz[down], 9) == f].mean())
+                for f in common]
+        results.append(Result("hysteresis_max_amplitude", float(max(gaps)) if gaps else 0.0))
+
+    lo, hi = float(freq_hz.min()), float(freq_hz.max())
+    grid = np.linspace(lo, hi, 241)
+    curves: dict[str, dict[str, np.ndarray]] = {}
+    for m in ("linear", chosen):
+        r = fits[m].response(grid)
+        curves[f"sweep_model_{m}"] = {
+            "freq_hz": grid,
+            "amplitude": r.amp_x,
+            "phase_deg": np.degrees(r.phase_x_rad),
+            "amplitude_y": r.amp_y,
+            "phase_y_deg": np.degrees(r.phase_y_rad),
+        }
+        curves[f"polar_ch1_model_{m}"] = {"q1": r.q[:, 0], "p1": r.q[:, 1]}
+        curves[f"polar_ch2_model_{m}"] = {"q2": r.q[:, 2], "p2": r.q[:, 3]}
+    curves["sweep_model"] = curves[f"sweep_model_{chosen}"]  # the one the live plot overlays
+    order = np.argsort(freq_hz[up] if up.any() else freq_hz)
+    sel = q[up][order] if up.any() else q[order]
+    curves["polar_ch1_measured"] = {"q1": sel[:, 0], "p1": sel[:, 1]}
+    curves["polar_ch2_measured"] = {"q2": sel[:, 2], "p2": sel[:, 3]}
+    return results, curves, {"fits": fits, "chosen": chosen}
+
+
+class MemsSweep(Procedure):
+    """Forced sweep of a MEMS ring up and down the resonance; linear, cubic, quintic identification."""
+
+    name = "mems-sweep"
+    requires = ("frontend",)
+    start_hz = Param(PAPER_NATURAL_FREQ_HZ + 1.94 - 12.0, unit="Hz", low=1.0, high=200_000.0, doc="sweep start")
+    stop_hz = Param(PAPER_NATURAL_FREQ_HZ + 1.94 + 12.0, unit="Hz", low=1.0, high=200_000.0, doc="sweep end")
+    n_points = Param(61, low=5, high=2001, doc="frequencies per direction")
+    both_directions = Param(True, doc="sweep back down as well (exposes hysteresis)")
+    natural_freq_hz = Param(PAPER_NATURAL_FREQ_HZ, unit="Hz", low=1.0, high=200_000.0,
+                            doc="characteristic frequency w/2pi of the model (lam = 2 pi (f - this))")
+    drive1_v = Param(0.888, unit="V", low=0.0, high=10.0, doc="channel 1 drive amplitude")
+    drive1_phase_deg = Param(46.43, unit="deg", low=-360.0, high=360.0, doc="channel 1 drive phase")
+    drive2_v = Param(0.0308, unit="V", low=0.0, high=10.0, doc="channel 2 drive amplitude")
+    drive2_phase_deg = Param(113.15, unit="deg", low=-360.0, high=360.0, doc="channel 2 drive phase")
+    tau_s = Param(0.05, unit="s", low=1e-4, high=1000.0, doc="assumed amplitude time constant 2/gamma")
+    settle_tau = Param(8.0, low=1.0, high=100.0, doc="wait at each point, in time constants")
+    lockin_tc_s = Param(0.005, unit="s", low=0.0, high=10.0, doc="lock-in time constant")
+    window_s = Param(0.05, unit="s", low=1e-3, high=100.0, doc="averaging window at each point")
+    reads = Param(10, low=2, high=1000, doc="lock-in readings per window")
+    pickoff_gain_v = Param(1.0, unit="V", low=1e-9, high=1e6, doc="lock-in volts per model unit")
+    bryan_factor = Param(0.4, low=0.01, high=1.0, doc="K, for the zero-rate output")
+    improvement = Param(0.05, low=0.0, high=0.9, doc="sigma reduction that justifies the richer model")
+
+    def __init__(self, params=None) -> None:
+        super().__init__(params)
+        if self.stop_hz <= self.start_hz:
+            from bench.engine.params import ParamError
+
+            raise ParamError("stop_hz", self.stop_hz, f"> start_hz = {self.start_hz}")
+        self.rows: list[list[float]] = []
+
+    # --- steps ---------------------------------------------------------------------------------
+    @step("Set up the drive")
+    def set_up(self, ctx):
+        fe = ctx.devices.frontend
+        fe.lockin_tc_s = self.lockin_tc_s
+        fe.set_drive(1, amplitude_v=self.drive1_v, frequency_hz=self.start_hz, phase_deg=self.drive1_phase_deg)
+        fe.set_drive(2, amplitude_v=self.drive2_v, frequency_hz=self.start_hz, phase_deg=self.drive2_phase_deg)
+        fe.set_drive(1, output_on=True)
+        fe.set_drive(2, output_on=True)
+        ctx.log.info("drive on at %.4f Hz; settling %.3f s per point", self.start_hz, self.settle_time_s())
+        ctx.sleep(3.0 * self.settle_time_s())
+
+    @step("Sweep up")
+    def sweep_up(self, ctx):
+        self._sweep(ctx, self.frequencies(), +1.0)
+
+    @step("Sweep down")
+    def sweep_down(self, ctx):
+        if self.both_directions:
+            self._sweep(ctx, self.frequencies()[::-1], -1.0)
+
+    @step("Drive off")
+    def drive_off(self, ctx):
+        fe = ctx.devices.frontend
+        fe.set_drive(1, output_on=False)
+        fe.set_drive(2, output_on=False)
+
+    @step("Identify")
+    def identify(self, ctx):
+        rows = np.array(self.rows)
+        results, curves, _ = self._analyse(rows)
+        for res in results:
+            ctx.report(res)
+        for name, c in curves.items():
+            ctx.fit(name, **c)
+
+    # --- helpers -------------------------------------------------------------------------------
+    def frequencies(self) -> np.ndarray:
+        return np.linspace(self.start_hz, self.stop_hz, self.n_points)
+
+    def settle_time_s(self) -> float:
+        """The steady-state wait: settle_tau resonator time constants plus 5 lock-in ones."""
+        return self.settle_tau * self.tau_s + 5.0 * self.lockin_tc_s
+
+    def _window(self, ctx) -> np.ndarray:
+        fe = ctx.devices.frontend
+        dt = self.window_s / self.reads
+        out = []
+        for _ in range(self.reads):
+            ctx.sleep(dt)
+            out.append(fe.lockin_all())
+        return np.array(out) / self.pickoff_gain_v
+
+    def _sweep(self, ctx, freqs: np.ndarray, direction: float) -> None:
+        fe = ctx.devices.frontend
+        for j, f in enumerate(freqs):
+            fe.set_frequency_hz(float(f))
+            ctx.sleep(self.settle_time_s())
+            settled = False
+            for _attempt in range(4):
+                win = self._window(ctx)
+                half = len(win) // 2
+                drift = np.abs(win[half:].mean(axis=0) - win[:half].mean(axis=0))
+                scatter = win.std(axis=0, ddof=1) / math.sqrt(max(half, 1))
+                tol = 5.0 * scatter + 2e-3 * np.max(np.abs(win.mean(axis=0)))
+                if np.all(drift <= tol):
+                    settled = True
+                    break
+                ctx.sleep(2.0 * self.tau_s)
+            if not settled:
+                ctx.log.warning("%.4f Hz: not settled after 3 extra waits (drift %s)", f, np.array2string(drift))
+            q = win.mean(axis=0)
+            amp_x, amp_y = math.hypot(q[0], q[1]), math.hypot(q[2], q[3])
+            row = [ctx.clock.now(), float(f), direction, *q, amp_x, math.degrees(math.atan2(q[1], q[0])),
+                   amp_y, math.degrees(math.atan2(q[3], q[2])), float(settled)]
+            self.rows.append(row)
+            ctx.record("sweep", SWEEP_COLUMNS, np.array(row))
+            ctx.progress((j + 1) / len(freqs), f"{'up' if direction > 0 else 'down'} {f:.3f} Hz  A={amp_x:.4f}")
+
+    def _analyse(self, rows: np.ndarray):
+        return sweep_analysis(
+            rows[:, 1], rows[:, 3:7], rows[:, 2], natural_freq_hz=self.natural_freq_hz,
+            bryan_factor=self.bryan_factor, improvement=self.improvement,
+        )
+
+    def analysis(self, data) -> list[Result]:
+        """Re-fit a recorded run from its `sweep` stream."""
+        tab = data.table("sweep")
+        rows = np.column_stack([tab[c] for c in SWEEP_COLUMNS])
+        results, _, _ = self._analyse(rows)
+        return results

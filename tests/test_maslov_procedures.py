@@ -1,0 +1,100 @@
+"""The mems-sweep procedure end to end: engine, real SCPI front-end driver over loopback, the
+simulated MEMS ring (Maslov's identified model), identification against the simulator's truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bench.engine import Runner
+from bench.engine.params import ParamError
+from bench.recorder import open_run
+from bench.station import SimStation
+from procedures.mems_sweep import MemsSweep, choose_model
+
+# The built-in sim-mems also carries the FPGA link, whose simulated firmware sets the World's
+# reference frequency every block even with its PLL off, overriding the front end's drive
+# frequency (reported to the lead).  This station is sim-mems with the front end only.
+STATION_TOML = """
+[station]
+id = "sim-mems-fe"
+description = "simulated MEMS ring, front end only"
+
+[simulation]
+preset = "mems"
+seed = 0
+speed = 0.0
+
+[devices.frontend]
+driver = "scpi-frontend"
+max_amplitude_v = 5.0
+"""
+
+
+@pytest.fixture(scope="module")
+def sweep_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("mems")
+    path = tmp / "sim-mems-fe.toml"
+    path.write_text(STATION_TOML)
+    station = SimStation(path, seed=0).open()
+    try:
+        record = Runner(station, runs_dir=tmp / "runs").run(MemsSweep, {"n_points": 17})
+        yield record, station.truth()
+    finally:
+        station.close()
+
+
+def test_mems_sweep_identifies_the_simulated_ring(sweep_run):
+    """Truth: the sim's preset (the paper's cubic model).  Tolerances: each value inside its own
+    95 % interval widened 1.5x (the steady-state wait of 8 time constants leaves a residual
+    transient of e^-8 ~ 3e-4 of a step, below the noise) and the cubic model chosen."""
+    record, truth = sweep_run
+    assert record.outcome == "COMPLETE", record.traceback
+    m = {r.name: r for r in record.measurements}
+    assert m["chosen_model_order"].value == 3.0
+    assert m["sigma_linear"].value > 10 * m["sigma_cubic"].value
+    expected = {
+        "Q": truth["q_factor"],
+        "split_hz": truth["split_hz"],
+        "damping_anisotropy_per_s": truth["damping_anisotropy_per_s"],
+        "freq_offset_hz": truth["freq_offset_hz"],
+        "alpha_deg": truth["theta_w_deg"],
+        "beta_deg": truth["theta_tau_deg"] - 90.0,  # truth is in [0, 90); the fit's axis in (-45, 45]
+        "xi": 18.217,
+        "gamma": 43.029,
+        "u1": 50.0 * 0.888 * math.sin(math.radians(46.43)),  # drive_gain x amplitude x sin(phase)
+    }
+    for name, value in expected.items():
+        lo, hi = m[name].ci95
+        mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        assert abs(value - mid) <= 1.5 * half, (name, m[name].value, value, (lo, hi))
+    assert m["hysteresis_max_amplitude"].value < 0.01  # the paper's drive: no bistability
+
+
+def test_recorded_sweep_refits_to_the_same_answer(sweep_run):
+    """The analysis hook on the raw file gives the run's own measurements (same code, same data)."""
+    record, _ = sweep_run
+    data = open_run(record.raw_file)
+    tab = data.table("sweep")
+    assert len(tab["freq_hz"]) == 2 * 17 and set(np.unique(tab["direction"])) == {-1.0, 1.0}
+    assert np.all(tab["settled"] == 1.0)
+    refit = {r.name: r.value for r in MemsSweep(record.params).analysis(data)}
+    for r in record.measurements:
+        assert refit[r.name] == pytest.approx(r.value, rel=1e-9, abs=1e-12), r.name
+    fits = data.fits()
+    assert {"sweep_model", "polar_ch1_measured", "polar_ch1_model_cubic"} <= set(fits)
+
+
+def test_bad_sweep_range_is_rejected_before_anything_moves():
+    with pytest.raises(ParamError, match="stop_hz"):
+        MemsSweep({"start_hz": 13650.0, "stop_hz": 13640.0})
+    with pytest.raises(ParamError, match="n_points"):
+        MemsSweep({"n_points": 2})
+
+
+def test_model_choice_prefers_the_simplest_model_not_beaten_by_5_percent():
+    assert choose_model({"linear": 0.295, "cubic": 0.0926, "quintic": 0.0656}, 0.05) == "quintic"  # the paper
+    assert choose_model({"linear": 0.75, "cubic": 0.015, "quintic": 0.0149}, 0.05) == "cubic"
+    assert choose_model({"linear": 0.1, "cubic": 0.099, "quintic": 0.01}, 0.05) == "linear"
