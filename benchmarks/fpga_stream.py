@@ -81,6 +81,46 @@ def driver_ceiling(transport: str, n_frames: int = 400_000) -> dict[str, float]:
             "frames_per_cpu_s": s.frames / cpu, "cpu_per_wall": cpu / wall}
 
 
+def _world_process(conn, virtual_s: float, max_block_s: float) -> None:
+    """Child process: a lockstep world with the FPGA server, advanced on the parent's signal."""
+    world = World(preset("hrg"), seed=0, max_block_s=max_block_s)
+    server = serve_fpga(world)
+    conn.send(server.url)
+    conn.recv()  # go: the parent's stream is on
+    cpu0 = time.process_time()
+    world.advance(virtual_s)
+    conn.send(time.process_time() - cpu0)
+    conn.recv()
+    server.stop()
+
+
+def throughput_two_processes(virtual_s: float = 600.0, max_block_s: float = 0.1) -> dict[str, float]:
+    """The simulator in its own process (as `gyrobench sim` runs it), the driver in this one."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    parent, child = ctx.Pipe()
+    proc = ctx.Process(target=_world_process, args=(child, virtual_s, max_block_s), daemon=True)
+    proc.start()
+    link = FpgaLink(parent.recv(), timeout_s=5.0).connect()
+    count = [0]
+    link.subscribe(lambda b: count.__setitem__(0, count[0] + len(b)))
+    link.start_stream(1)
+    n = int(round(virtual_s / link.sample_period_s))
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    parent.send("go")
+    link.wait_for_sample(int(link.read_register("STREAM_START_INDEX")) + n, timeout_wall_s=120.0)
+    wall = time.perf_counter() - t0
+    cpu = time.process_time() - cpu0
+    child_cpu = parent.recv()
+    s = link.stats
+    link.close()
+    parent.send("stop")
+    proc.join(timeout=10.0)
+    return {"frames": s.frames, "dropped": s.dropped, "corrupt": s.corrupt, "frames_per_s": s.frames / wall,
+            "driver_cores": cpu / wall, "sim_cores": child_cpu / wall}
+
+
 class _WriteStamp:
     """Attached before the FPGA: its after_block runs just before the FPGA writes the block."""
 
@@ -149,6 +189,11 @@ def main() -> None:
         print(f"driver alone {transport:6s}: {r['frames_per_s']:9.0f} frames/s, frames {r['frames']}, "
               f"dropped {r['dropped']}, CPU {r['cpu_per_wall']:.2f} cores "
               f"({r['frames_per_cpu_s']:.0f} frames per CPU second, server writes included)")
+    for max_block_s in (0.1, 1.0):
+        r = throughput_two_processes(max_block_s=max_block_s)
+        print(f"two processes, {max_block_s * 1000:4.0f}-sample blocks: {r['frames_per_s']:9.0f} frames/s, "
+              f"frames {r['frames']}, dropped {r['dropped']}, corrupt {r['corrupt']}; CPU: driver process "
+              f"{r['driver_cores']:.2f} cores, simulator process {r['sim_cores']:.2f} cores")
     r = realtime(args.wall_s)
     print(f"real-time 1 kHz socket: write->subscriber latency median {r['latency_median_ms']:.3f} ms, "
           f"p99 {r['latency_p99_ms']:.3f} ms, max {r['latency_max_ms']:.3f} ms over {r['blocks']} blocks; "
