@@ -204,6 +204,49 @@ register_driver(
 )
 
 
+def _build_ascii_table(cfg: dict[str, Any], clock: Any) -> Any:
+    from drivers.rate_table import AsciiRateTable, TableLimits
+
+    limits = TableLimits(max_rate_dps=cfg["max_rate_dps"], max_accel_dps2=cfg["max_accel_dps2"])
+    table = AsciiRateTable(
+        cfg["url"],
+        limits=limits,
+        clock=clock,
+        baudrate=cfg["baudrate"],
+        timeout_s=cfg["timeout_s"],
+        watchdog_s=cfg["watchdog_s"],
+    )
+    table.connect()
+    return table
+
+
+def _serve_ascii_table(world: Any, cfg: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    from simulators.rate_table import serve_ascii_table
+
+    handle = serve_ascii_table(
+        world, max_rate_dps=cfg["max_rate_dps"], max_accel_dps2=cfg["max_accel_dps2"], watchdog_s=cfg["watchdog_s"]
+    )
+    return handle, {"url": handle.url}
+
+
+register_driver(
+    DriverSpec(
+        name="ascii-table",
+        role="table",
+        keys=_table_keys(
+            {
+                "url": Key(str, "", doc="serial port, pyserial URL or host:port"),
+                "baudrate": Key(int, 115200, 300, 4_000_000),
+            }
+        ),
+        build=_build_ascii_table,
+        serve=_serve_ascii_table,
+        health=_table_health,
+        doc="rate table, ASCII commands over a serial line or TCP",
+    )
+)
+
+
 def _build_frontend(cfg: dict[str, Any], clock: Any) -> Any:
     from drivers.frontend import FrontEndLimits, ScpiFrontEnd
 

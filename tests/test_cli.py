@@ -173,3 +173,39 @@ def test_sigkilled_run_leaves_a_readable_hdf5_file(tmp_path):
         assert n > 2000 and json.loads(f.attrs["params"])["hold_s"] == 600.0
         assert (t[1:] > t[:-1]).all()
         assert "outcome" not in f.attrs  # the run never finished
+
+
+def test_sim_serves_devices_that_real_drivers_reach(tmp_path):
+    proc = subprocess.Popen(
+        GYROBENCH + ["sim", "--duration-s", "20", "--speed", "2"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        info = json.loads(proc.stdout.readline())
+        dev = info["devices"]
+        assert info["station"] == "sim-hrg" and info["speed"] == 2.0
+        from bench.clock import RealClock
+        from drivers.fpga.link import FpgaLink
+        from drivers.rate_table import ModbusRateTable, TableLimits
+
+        table = ModbusRateTable(
+            dev["table"]["host"],
+            dev["table"]["port"],
+            clock=RealClock(),
+            limits=TableLimits(max_rate_dps=100.0, max_accel_dps2=100.0),
+        )
+        table.connect()
+        try:
+            assert not table.status().tripped
+        finally:
+            table.close()
+        with FpgaLink(dev["fpga"]["url"]) as link:
+            assert link.sample_period_s == pytest.approx(1e-3)
+        assert dev["frontend"]["resource"].startswith("TCPIP::127.0.0.1::")
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=30)
+    assert proc.returncode == 0

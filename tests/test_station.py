@@ -133,3 +133,18 @@ def test_abort_at_each_step_reaches_safe_state(sim_station, tmp_path, abort_at):
     assert rec.outcome == "ABORTED" and rec.end_reason == "aborted: operator" and rec.safe_state
     assert rec.safe_detail["order"] == ["fpga", "table", "frontend"]
     _at_rest_and_safe(sim_station)
+
+
+def test_same_procedure_on_an_ascii_table_only_station(tmp_path):
+    """A new table model is a registry entry: the same procedure runs on the ASCII controller."""
+    path = _write(
+        tmp_path,
+        '[station]\nid = "ascii"\n[simulation]\npreset = "mems"\n'
+        '[devices.table]\ndriver = "ascii-table"\nmax_rate_dps = 500.0\nmax_accel_dps2 = 300.0\n',
+    )
+    st = Station.load(path)
+    assert isinstance(st, SimStation)
+    with st:
+        rec = Runner(st, runs_dir=tmp_path / "runs").run(TableSpin, {"rate_dps": -80.0, "hold_s": 0.5})
+        assert rec.outcome == "PASS" and rec.safe_state and rec.safe_detail["order"] == ["table"]
+        assert abs(st.handles["table"].mechanics.rate_dps) < 0.05
