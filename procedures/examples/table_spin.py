@@ -23,7 +23,7 @@ class TableSpin(Procedure):
     def hold(self, ctx):
         rates = []
         for k in range(10):
-            ctx.sleep(self.hold_s / 10)
+            ctx.sleep(self.hold_s / 10)  # bench clock: virtual time on a simulated station
             rates.append(ctx.devices.table.status().rate_dps)
             ctx.progress((k + 1) / 10, f"{rates[-1]:.3f} deg/s")
         mean = sum(rates) / len(rates)
