@@ -235,3 +235,18 @@ def test_a_client_that_stops_reading_cannot_hang_the_world():
     finally:
         raw.close()
         server.stop()
+
+
+def test_pty_without_a_reader_cannot_hang_the_world():
+    """On a pty nobody reads: after one write timeout the server skips writes until the pty
+    drains, so the world runs on at full speed and counts the frames lost."""
+    world = World(preset("hrg"), seed=0)
+    server = serve_fpga(world, transport="pty", write_timeout_s=0.3)
+    try:
+        server.firmware.write(p.BY_NAME["CTRL_SET"], p.STREAM_EN)
+        t0 = time.monotonic()
+        world.advance(60.0)  # 3.6 MB of frames into a pty buffer of a few kB
+        assert time.monotonic() - t0 < 20.0  # one 0.3 s timeout, not one per block (180 s)
+        assert server.frames_lost > 50_000
+    finally:
+        server.stop()

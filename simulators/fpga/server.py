@@ -77,13 +77,20 @@ class _PtyPort(_Port):
         tty.setraw(self.master)
         self.path = os.ttyname(self.slave)
         self.closed = False
+        self.blocked = False  # a write timed out: nobody reads; skip writes until the pty drains
 
     def send(self, data: bytes, timeout_s: float) -> bool:
         view = memoryview(data)
         try:
+            if self.blocked:
+                _, ready, _ = select.select([], [self.master], [], 0)
+                if not ready:
+                    return False
+                self.blocked = False
             while view:
                 _, ready, _ = select.select([], [self.master], [], timeout_s)
                 if not ready:
+                    self.blocked = True
                     return False
                 n = os.write(self.master, view)
                 view = view[n:]
