@@ -329,19 +329,18 @@ def _weighted_ls(xt: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarr
     return p, inv, float(np.dot(w * r, r))
 
 
-def _fit_log_linear(reg: DecayRegressors, *, passes: int = 2) -> tuple[np.ndarray, np.ndarray, float]:
-    """Weighted closed-form LS on ln E: weights E (var(ln E) = 4 s^2/E), first from the measured E,
-    then from the fitted E so that the weights do not correlate with the noise."""
-    xt, y = reg.xt, reg.ln_e
+def _fit_log_linear(reg: DecayRegressors) -> tuple[np.ndarray, np.ndarray, float]:
+    """Weighted closed-form LS on ln E in two passes.  Pass 1 weights by the measured E
+    (var(ln E) = 4 s^2/E); pass 2 by the fitted E (weights independent of the noise) and removes
+    the noise floor of the log, E[ln E_meas] = ln E + 2 s^2/E, which matters late in a long decay."""
+    xt = reg.xt
     e_ref = float(np.max(reg.energy))
-    w = reg.energy / e_ref
-    p = inv = None
-    rss = 0.0
-    for i in range(max(1, passes)):
-        p, inv, rss = _weighted_ls(xt, y, w)
-        if i + 1 < passes:
-            w = np.exp(_lin(p, xt) - math.log(e_ref))
-    s2 = rss / max(y.size - len(PARAM_NAMES), 1)  # estimates 4 sigma^2 / e_ref
+    dof = max(reg.ln_e.size - len(PARAM_NAMES), 1)
+    p, _, rss = _weighted_ls(xt, reg.ln_e, reg.energy / e_ref)
+    sigma2 = rss / dof * e_ref / 4.0
+    model = np.exp(_lin(p, xt))
+    p, inv, rss = _weighted_ls(xt, reg.ln_e - 2.0 * sigma2 / model, model / e_ref)
+    s2 = rss / dof  # estimates 4 sigma^2 / e_ref
     return p, s2 * inv, math.sqrt(s2 * e_ref / 4.0)
 
 
@@ -394,13 +393,21 @@ def _fit_gauss_newton(
         raise DampingFitError(f"start={start!r} is not 'zero' or 'log-linear'")
     converged = False
     it = 0
-    for it in range(1, max_iter + 1):  # noqa: B007 - the count is reported
-        dp, normal, chi2 = _gauss_newton_step(reg.xt, reg.energy, p, weighted)
+    energy = reg.energy
+    floor_removed = False
+    while it < max_iter:
+        it += 1
+        dp, normal, chi2 = _gauss_newton_step(reg.xt, energy, p, weighted)
         p = p + dp
         if _gn_converged(dp, normal, chi2):
-            converged = True
-            break
-    cov, noise_sigma = _gn_covariance(reg.xt, reg.energy, p, weighted)
+            if floor_removed:
+                converged = True
+                break
+            # the measured E carries a noise floor 4 s^2: remove it and iterate once more
+            _, noise = _gn_covariance(reg.xt, reg.energy, p, weighted)
+            energy = reg.energy - 4.0 * noise * noise
+            floor_removed = True
+    cov, noise_sigma = _gn_covariance(reg.xt, energy, p, weighted)
     return p, cov, noise_sigma, it, converged
 
 
@@ -546,6 +553,8 @@ class SequentialDampingFit:
             xb = self._xt[:, sl]
             w = np.exp(_lin(self._p, xb)) if self._p is not None else energy  # predicted E: independent of this noise
             y = self._ln[sl] - self._y0
+            if self._p is not None:  # remove the noise floor of the log, 2 s^2 / E (see _fit_log_linear)
+                y = y - 0.5 * self._c_hat / w
             xw = xb * w
             self._normal += _gram(xw, xb)
             self._rhs += xw @ y

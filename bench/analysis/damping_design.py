@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.linalg import expm
 
-from .damping import MODELS, decay_regressors, fit_free_decay
+from .damping import MODELS, DampingFitError, decay_regressors, fit_free_decay
 from .slow_model import linear_matrix, state_from_elements
 
 TWO_PI = 2.0 * math.pi
@@ -70,7 +70,8 @@ class DecayScenario:
 
     def grid_step(self) -> tuple[float, int]:
         """(dt, m): a grid of m stream samples per step, at least 20 steps per fastest turn."""
-        fast = abs(4.0 * self.bryan_factor * math.radians(self.rate_dps)) + TWO_PI * self.split_hz + 4.0 / self.tau_s
+        spin = abs(4.0 * self.bryan_factor * math.radians(self.rate_dps))
+        fast = spin + 4.0 * TWO_PI * self.split_hz + 4.0 / self.tau_s
         m = max(1, int(math.floor(self.stream_hz * TWO_PI / (20.0 * fast))))
         return m / self.stream_hz, m
 
@@ -279,7 +280,11 @@ def _points_for_rate(sc: DecayScenario, lengths_s: tuple[float, ...], model: str
         sd_th, sd_d, _, sd_b = _std_from_cov(cov, 1, 2, zg)
         bias = 0.0
         for tq in variants:  # the split axis is unknown in advance: the worst of four
-            fit = fit_free_decay(tq[0][: k + 1], *tq[1][: k + 1].T, model=model)
+            try:
+                fit = fit_free_decay(tq[0][: k + 1], *tq[1][: k + 1].T, model=model)
+            except DampingFitError:  # the wave degenerates (a ~ k: no angle to follow): infeasible
+                bias = math.inf
+                break
             bias = max(bias, math.hypot(fit.b_c_per_s - zg[2], fit.b_s_per_s - zg[3]))
         crlb_rel, bias_rel = sd_b / d, bias / d
         out.append(DesignPoint(sc.rate_dps, float(length), crlb_rel, bias_rel, math.hypot(crlb_rel, bias_rel), sd_d,
@@ -310,7 +315,8 @@ def design_hrg_damping(
     For each rate and length: energy CRLB (std of the damping vector, relative to D) and the
     noise-free model bias of `model` ("patent": cos 4 theta, biased by split x quadrature at low
     rates; "exact": quadrature-aware).  The recommendation is the rate with the least total error
-    at the shortest length whose total error is within `length_tolerance` of the grid's best."""
+    at the shortest length whose total error is within `length_tolerance` of the grid's best,
+    above three times the highest rate where the wave degenerates (split with no quadrature loop)."""
     if model not in MODELS:
         raise ValueError(f"model={model!r} is not one of {MODELS}")
     if delta_inv_tau_per_s <= 0:
@@ -334,9 +340,15 @@ def design_hrg_damping(
     points: list[DesignPoint] = []
     for rate in sorted(set(rates_dps)):
         points += _points_for_rate(replace(base, rate_dps=rate), lengths_s, model)
-    best_total = min(p.total_rel for p in points)
-    length = min(p.duration_s for p in points if p.total_rel <= (1.0 + length_tolerance) * best_total)
-    rec = min((p for p in points if p.duration_s == length), key=lambda p: p.total_rel)
+    # a rate where the wave degenerates (infinite model error) bars every rate below three times it
+    bad = [p.rate_dps for p in points if not math.isfinite(p.total_rel)]
+    floor_dps = 3.0 * max(bad) if bad else 0.0
+    ok = [p for p in points if p.rate_dps > floor_dps and math.isfinite(p.total_rel)]
+    if not ok:
+        raise ValueError("no feasible table rate in rates_dps: the wave degenerates at every one of them")
+    best_total = min(p.total_rel for p in ok)
+    length = min(p.duration_s for p in ok if p.total_rel <= (1.0 + length_tolerance) * best_total)
+    rec = min((p for p in ok if p.duration_s == length), key=lambda p: p.total_rel)
     patent = _points_for_rate(replace(base, rate_dps=patent_rate_dps), (length,), model)[0]
     fc = four_channel_bound(replace(base, rate_dps=rec.rate_dps, duration_s=length))
     return DampingDesign(base, model, tuple(points), rec, patent, fc, lock_dps)
