@@ -1,0 +1,162 @@
+"""hrg-free-decay: the patent's decay recording identified with the slow-variable model of
+Maslov et al. (section 2): frequency split and its axis, damping anisotropy and its axis, tau,
+and the Bryan factor from the known table rate (nu = 4 K Omega).
+
+Steps: excite and hold the amplitude (FPGA AGC, PLL, quadrature loop); spin the table; wait for
+a stable rate; cut the drive and freeze the reference (PLL off, so the detuning stays constant
+through the record); record the FPGA stream; identify with `identify_free_decay` (Simpson
+regressors, least squares, sandwich intervals).  The record window goes to the `decay_window`
+stream, so `analysis(data)` re-fits a recorded run with the same code.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from bench.analysis.maslov import derived_ci95, identify_free_decay
+from bench.analysis.slow_model import orbit_elements
+from bench.engine import Param, Procedure, Result, step
+
+WINDOW = "decay_window"
+WINDOW_COLUMNS = ("t_start_s", "t_end_s", "ref_freq_hz", "rate_dps")
+_FPGA = {"t_s": 1, "cx": 2, "sx": 3, "cy": 4, "sy": 5}
+
+
+def decay_results(
+    t_s: np.ndarray, q: np.ndarray, *, rate_dps: float, ref_freq_hz: float, natural_freq_hz: float, model: str
+) -> tuple[list[Result], object]:
+    """Identify the decay; measurements under the simulator's truth names where they exist."""
+    fit = identify_free_decay(
+        t_s - t_s[0], *q.T, model=model, natural_freq_hz=natural_freq_hz, detuning_hz=ref_freq_hz - natural_freq_hz
+    )
+    d, p, ci = fit.derived, fit.params, fit.ci95
+    out = [Result(f"maslov_{n}", v, "1/s", ci95=ci[n]) for n, v in p.items()]
+    gamma_lo, gamma_hi = ci["gamma"]
+    out.append(Result("tau_s", 2.0 / p["gamma"], "s", ci95=(2.0 / gamma_hi, 2.0 / gamma_lo)))
+    out.append(Result("q_factor", d["Q"], "", ci95=(2 * math.pi * natural_freq_hz / gamma_hi,
+                                                    2 * math.pi * natural_freq_hz / gamma_lo)))
+    dci = derived_ci95(fit, natural_freq_hz=natural_freq_hz)
+    for name, key, unit in (("split_hz", "split_hz", "Hz"), ("delta_inv_tau_per_s", "delta_inv_tau_per_s", "1/s"),
+                            ("damping_anisotropy_per_s", "damping_anisotropy_per_s", "1/s"),
+                            ("freq_offset_hz", "freq_offset_hz", "Hz")):
+        out.append(Result(name, d[key], unit, ci95=dci[key]))
+    for name, key in (("theta_w_deg", "alpha_rad"), ("theta_tau_deg", "beta_rad")):
+        value = math.degrees(d[key])
+        shift = value % 90.0 - value  # report the axis in [0, 90) like the simulator's truth
+        lo, hi = (math.degrees(v) + shift for v in dci[key])
+        out.append(Result(name, value + shift, "deg", ci95=(lo, hi)))
+    if rate_dps:
+        omega = math.radians(rate_dps)
+        nu_lo, nu_hi = sorted(ci["nu"])
+        k_ci = tuple(sorted((nu_lo / (4 * omega), nu_hi / (4 * omega))))
+        out.append(Result("bryan_factor", p["nu"] / (4.0 * omega), "", ci95=k_ci))
+    out.append(Result("residual_sigma", fit.sigma, ""))
+    return out, fit
+
+
+class HrgFreeDecay(Procedure):
+    """HRG free decay on a rate table, identified with Maslov's slow-variable model."""
+
+    name = "hrg-free-decay"
+    requires = ("table", "fpga")
+
+    amplitude = Param(1.0, unit="", low=0.01, high=10.0, doc="amplitude held by the AGC before the cut")
+    amplitude_tolerance = Param(0.01, unit="", low=1e-4, high=0.5, doc="relative amplitude tolerance to go on")
+    amplitude_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to reach the amplitude")
+    rate_dps = Param(50.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate during the decay")
+    accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
+    rate_tolerance_dps = Param(0.05, unit="deg/s", low=1e-4, high=10.0, doc="rate-stability tolerance")
+    rate_hold_s = Param(2.0, unit="s", low=0.0, high=600.0, doc="time the rate must stay within tolerance")
+    rate_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to become stable at rate")
+    record_s = Param(300.0, unit="s", low=1.0, high=100000.0, doc="record duration")
+    stream_hz = Param(100.0, unit="Hz", low=0.1, high=1e6, doc="rate of the samples fitted (decimated stream)")
+    natural_freq_hz = Param(5500.0, unit="Hz", low=1.0, high=1e6, doc="nominal natural frequency w/2pi")
+    model = Param("linear", choices=("linear", "cubic", "quintic"), doc="slow-variable model")
+
+    @step("Excite and hold the amplitude")
+    def excite(self, ctx):
+        fpga = ctx.devices.fpga
+        self._latest = None
+        self._unsubscribe = fpga.subscribe(self._keep_latest)
+        fpga.set_whole_angle(False)
+        fpga.set_drift_compensation(False)
+        fpga.set_pll(True)
+        fpga.set_quadrature_loop(True)
+        fpga.set_agc(True, self.amplitude)
+        fpga.set_drive_enabled(True)
+        tol = self.amplitude_tolerance * self.amplitude
+        ok = ctx.wait_until(lambda: abs(self._amplitude_now(ctx) - self.amplitude) <= tol,
+                            timeout_s=self.amplitude_timeout_s, poll_s=0.5)
+        if not ok:
+            raise TimeoutError(f"amplitude {self._amplitude_now(ctx):.4g} not within {tol:.3g} of "
+                               f"{self.amplitude:g} after {self.amplitude_timeout_s:g} s")
+        self._unsubscribe()
+
+    @step("Spin the table")
+    def spin(self, ctx):
+        table = ctx.devices.table
+        table.enable()
+        table.set_rate(self.rate_dps, self.accel_dps2)
+        table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
+
+    @step("Cut the drive")
+    def cut_drive(self, ctx):
+        fpga = ctx.devices.fpga
+        fpga.set_drive_enabled(False)
+        fpga.set_pll(False)  # the reference stays where the PLL left it: constant detuning
+        ctx.sleep(0.1)  # the forces leave at the next loop block
+
+    @step("Record the decay")
+    def record(self, ctx):
+        fpga = ctx.devices.fpga
+        fpga.sync()
+        t0 = ctx.clock.now()
+        n = max(1, int(math.ceil(self.record_s / 10.0)))
+        for k in range(n):
+            ctx.sleep(self.record_s / n)
+            ctx.progress((k + 1) / n, f"free decay {(k + 1) * self.record_s / n:.0f} / {self.record_s:.0f} s")
+        fpga.sync()
+        ref = float(fpga.read_register("PLL_FREQ_HZ"))
+        ctx.record(WINDOW, WINDOW_COLUMNS, np.array([[t0, ctx.clock.now(), ref, self.rate_dps]]))
+
+    @step("Identify")
+    def identify(self, ctx):
+        results, fit, t, q = self._analyse(ctx.data())
+        for res in results:
+            ctx.report(res)
+        el = orbit_elements(q)
+        k = max(1, len(t) // 2000)
+        ctx.fit("hrg-free-decay elements", t_s=t[::k], energy=el["E"][::k],
+                theta_deg=np.degrees(np.unwrap(4 * el["theta_rad"]) / 4)[::k])
+        ctx.log.info("identified %s: sigma %.3g, noise %.3g per channel", fit.model, fit.sigma, fit.noise_sigma)
+
+    # --- helpers -------------------------------------------------------------------------------
+    def _amplitude_now(self, ctx) -> float:
+        ctx.devices.fpga.sync()
+        row = self._latest
+        return 0.0 if row is None else float(orbit_elements(row[2:6])["a"])
+
+    def _keep_latest(self, block: np.ndarray) -> None:
+        """Stream subscriber (reader thread): keep the newest row only."""
+        self._latest = block[-1].copy()
+
+    def _analyse(self, data):
+        win = data.array(WINDOW)[-1]
+        fpga = data.array("fpga")
+        t = fpga[:, _FPGA["t_s"]]
+        sel = (t >= win[0]) & (t <= win[1])
+        rows = fpga[sel]
+        period = float(np.median(np.diff(rows[:, 1])))
+        dec = max(1, int(round(1.0 / (self.stream_hz * period))))
+        rows = rows[::dec]
+        t_s = rows[:, _FPGA["t_s"]]
+        q = rows[:, 2:6]
+        results, fit = decay_results(t_s, q, rate_dps=float(win[3]), ref_freq_hz=float(win[2]),
+                                     natural_freq_hz=self.natural_freq_hz, model=self.model)
+        return results, fit, t_s, q
+
+    def analysis(self, data) -> list[Result]:
+        """Re-fit a recorded run from its `decay_window` and `fpga` streams."""
+        return self._analyse(data)[0]
