@@ -44,6 +44,9 @@ class Recorder:
         self._meas = self._text_dataset("measurements")
         for key, value in (attrs or {}).items():
             self._f.attrs[key] = value if isinstance(value, (str, int, float, bool)) else _json(value)
+        self._datasets: dict[str, h5py.Dataset] = {}
+        self._pending: dict[str, list[np.ndarray]] = {}
+        self._ncols: dict[str, int] = {}
         self._last_flush_sim: float | None = None
         self._last_flush_wall = time.monotonic()
         self._f.flush()
@@ -97,14 +100,15 @@ class Recorder:
             self._maybe_flush(event.t_sim_s)
 
     def append(self, stream: str, columns: tuple[str, ...], data: np.ndarray) -> None:
-        """Append rows to a stream; the first block fixes its columns."""
+        """Append rows to a stream; the first block fixes its columns.  Rows are buffered and
+        written in chunk-sized pieces (and at every flush): h5py's cost is per call, not per row."""
         arr = np.asarray(data, dtype=np.float64)
         if arr.ndim == 1:
             arr = arr.reshape(1, -1)
         with self._lock:
-            grp = self._f["streams"]
-            if stream not in grp:
-                ds = grp.create_dataset(
+            ds = self._datasets.get(stream)
+            if ds is None:
+                ds = self._f["streams"].create_dataset(
                     stream,
                     shape=(0, arr.shape[1]),
                     maxshape=(None, arr.shape[1]),
@@ -112,12 +116,26 @@ class Recorder:
                     chunks=(CHUNK_ROWS, arr.shape[1]),
                 )
                 ds.attrs["columns"] = _json(list(columns))
-            ds = grp[stream]
-            if arr.shape[1] != ds.shape[1]:
+                self._datasets[stream] = ds
+                self._pending[stream] = []
+                self._ncols[stream] = arr.shape[1]
+            if arr.shape[1] != self._ncols[stream]:
                 raise ValueError(f"stream {stream!r}: block has {arr.shape[1]} columns, the stream has {ds.shape[1]}")
-            n0 = ds.shape[0]
-            ds.resize(n0 + arr.shape[0], axis=0)
-            ds[n0:] = arr
+            pend = self._pending[stream]
+            pend.append(arr.copy())
+            if sum(len(a) for a in pend) >= CHUNK_ROWS:
+                self._write_pending(stream)
+
+    def _write_pending(self, stream: str) -> None:
+        pend = self._pending[stream]
+        if not pend:
+            return
+        rows = np.concatenate(pend) if len(pend) > 1 else pend[0]
+        pend.clear()
+        ds = self._datasets[stream]
+        n0 = ds.shape[0]
+        ds.resize(n0 + rows.shape[0], axis=0)
+        ds[n0:] = rows
 
     def _log_row(self, t_sim_s: float, level: str, message: str) -> None:
         self._append_text(self._log, _json({"t_sim_s": t_sim_s, "level": level, "msg": message}))
@@ -137,14 +155,17 @@ class Recorder:
             self._last_flush_wall = now
 
     def flush(self) -> None:
+        """Write the buffered rows and flush the file to disk."""
         with self._lock:
             if self._f is not None and self._f.id.valid:
+                for stream in self._pending:
+                    self._write_pending(stream)
                 self._f.flush()
 
     def data(self) -> RunData:
         """What is recorded so far, through the open file."""
         with self._lock:
-            self._f.flush()
+            self.flush()
             return RunData(self._f)
 
     def close(self, record: Any = None) -> None:
@@ -152,6 +173,8 @@ class Recorder:
         with self._lock:
             if self._f is None:
                 return
+            for stream in self._pending:
+                self._write_pending(stream)
             if record is not None:
                 a = self._f.attrs
                 a["outcome"] = record.outcome
