@@ -75,6 +75,8 @@ class Measurement(Event):
     high: float | None = None
     outcome: str = "COMPLETE"  # PASS | FAIL | MARGINAL | COMPLETE (no limits)
     dut: str | None = None
+    marginal_low: float | None = None  # the marginal band inside [low, high], when declared
+    marginal_high: float | None = None
 
 
 @dataclass(frozen=True)
