@@ -63,6 +63,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if args.speed is not None:
             overrides["speed"] = args.speed
         station = Station.load(args.station, **overrides)
+        missing = [r for r in proc_cls.requires if r not in station.config.devices]
+        if missing:
+            raise StationError(
+                f"procedure {proc_cls.name!r} needs device role(s) {missing}; station "
+                f"{station.id!r} has {sorted(station.config.devices)}"
+            )
         faults = [parse_fault(f) for f in args.fault]
         if faults and not isinstance(station, SimStation):
             raise StationError(f"--fault needs a simulated station; {args.station!r} is real")

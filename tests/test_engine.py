@@ -234,3 +234,23 @@ def test_pause_holds_virtual_time_and_resume_continues():
     rec = runner.run(ThreeSteps, {"wait_s": 1.0})
     assert resumed.is_set() and paused_at[0] == paused_at[1]
     assert rec.outcome == "PASS" and rec.wall_s >= 0.3
+
+
+def test_missing_device_role_is_refused_before_anything_moves():
+    class NeedsFrontEndAndLaser(ThreeSteps):
+        requires = ("frontend", "laser")
+
+    station = FakeStation()
+    with pytest.raises(ValueError, match=r"needs device role\(s\) \['laser'\]; station 'fake' has"):
+        Runner(station).run(NeedsFrontEndAndLaser)
+    assert station.calls == [] and not station.devices["table"].moved
+
+
+def test_abort_requested_before_the_run_starts_still_aborts():
+    station = FakeStation()
+    runner = Runner(station)
+    runner.abort("SIGINT")  # Ctrl-C while the station was opening
+    rec = runner.run(ThreeSteps)
+    assert rec.outcome == "ABORTED" and rec.end_reason == "aborted: SIGINT" and rec.safe_state
+    assert not station.devices["table"].moved
+    assert Runner.run(runner, ThreeSteps, {"wait_s": 0.0}).outcome == "PASS"  # the abort does not leak

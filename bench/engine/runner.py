@@ -160,6 +160,12 @@ class Runner:
     def run(self, procedure: type[Procedure] | Procedure, params: dict[str, Any] | None = None) -> RunRecord:
         """Run a procedure; ParamError (before anything moves) if a parameter is bad."""
         proc = procedure if isinstance(procedure, Procedure) else procedure(params)
+        missing = [r for r in proc.requires if r not in self.station.devices]
+        if missing:
+            raise ValueError(
+                f"procedure {proc.name!r} needs device role(s) {missing}; station {self.station.id!r} has "
+                f"{sorted(self.station.devices)}"
+            )
         if self._in_run:
             raise RuntimeError("this runner is already running a procedure")
         self._in_run = True
