@@ -250,3 +250,18 @@ def test_pty_without_a_reader_cannot_hang_the_world():
         assert server.frames_lost > 50_000
     finally:
         server.stop()
+
+
+def test_wait_without_a_stream_returns_at_once(bench):
+    _, clock, _, link = bench
+    blocks = _collect(link)
+    clock.sleep(0.5)
+    link.sync(timeout_wall_s=0.1)  # no stream: nothing to wait for
+    link.start_stream(1)
+    clock.sleep(0.5)
+    link.stop_stream()  # ordered after every frame sent before it
+    n = link.stats.frames
+    assert n == 500 and len(np.vstack(blocks)) == n
+    clock.sleep(0.5)
+    link.sync(timeout_wall_s=0.1)
+    assert link.stats.frames == n

@@ -75,6 +75,7 @@ class FpgaLink:
         self._last_index = -1
         self._stream_start_index = 0
         self._decimation = 1
+        self._streaming = False
         self.sample_period_s = float("nan")
 
     # --- connection ----------------------------------------------------------------------------
@@ -267,13 +268,16 @@ class FpgaLink:
             self._last_index = -1
             self._decimation = int(decimation)
         self._set_bits(p.STREAM_EN, True)
+        self._streaming = True
         start = int(self.read_register("STREAM_START_INDEX"))
         with self._cond:
             self._stream_start_index = start
             self._last_index = max(self._last_index, start)
 
     def stop_stream(self) -> None:
+        """Stop the stream; every frame sent before it has been delivered when this returns."""
         self._set_bits(p.STREAM_EN, False)
+        self._streaming = False
 
     def subscribe(self, callback: StreamCallback) -> Callable[[], None]:
         """callback(block) for every parsed block, shape (n, 10) in STREAM_COLUMNS order;
@@ -290,7 +294,10 @@ class FpgaLink:
 
     def wait_for_sample(self, index_or_time: int | float, timeout_wall_s: float = 5.0) -> None:
         """Block until every stream frame up to a sample index (int) or a time in seconds (float)
-        has been delivered (or counted dropped); LinkLostError if that takes over timeout_wall_s."""
+        has been delivered (or counted dropped); LinkLostError if that takes over timeout_wall_s.
+        Returns at once when this link has no stream running (nothing more will come)."""
+        if not self._streaming:
+            return
         if isinstance(index_or_time, (int, np.integer)):
             target = int(index_or_time)
         else:
