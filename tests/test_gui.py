@@ -74,7 +74,7 @@ def test_decay_run_fills_the_plots_and_results(window, qtbot):
     assert win.last_finished.outcome == "PASS" and win.last_finished.safe_state
     # every 1 kHz sample of the 5 s decay reached the ring buffer (5000 rows)
     assert win.plots.fpga.total_rows == 5000
-    f = win.plots.fpga.view()
+    f = win.plots.recent.view()
     assert f[-1, 0] == pytest.approx(5.0, abs=1e-9)
     # E decays as exp(-2 t / tau) (HRG tau from the preset): checks the derived column
     tau = win.backend.params.tau_s

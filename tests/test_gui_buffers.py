@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bench.gui.params import ParamSpec
-from bench.gui.ringbuffer import RingBuffer, decimate_minmax
+from bench.gui.ringbuffer import MinMaxHistory, RingBuffer
 
 
 def test_ring_buffer_keeps_the_newest_rows_in_order():
@@ -22,15 +22,27 @@ def test_ring_buffer_keeps_the_newest_rows_in_order():
         rb.append(np.zeros((1, 3)))
 
 
-def test_minmax_decimation_keeps_peaks_and_bounds_the_points():
+def test_minmax_history_keeps_peaks_and_bounds_the_points():
     t = np.arange(300_000) * 1e-3  # 300 s at 1 kHz, the worst case
     y = np.sin(2 * np.pi * 0.1 * t)
     y[123_457] = 5.0  # a single-sample spike must survive
-    xd, yd = decimate_minmax(t, y, 2000)
-    assert len(xd) <= 2001
-    assert yd.max() == 5.0 and yd.min() == pytest.approx(-1.0, abs=1e-4)
-    assert np.all(np.diff(xd) >= 0)  # still in time order
-    assert xd[-1] == t[-1]
+    y[200_001] = -7.0
+    h = MinMaxHistory(2, max_points=2000)
+    for i in range(0, len(t), 137):  # odd block sizes, as a link delivers them
+        h.append(t[i:i + 137], np.column_stack((y[i:i + 137], -y[i:i + 137])))
+    assert h.total_rows == 300_000
+    x, yd = h.curve(0)
+    assert len(x) <= 2000 + h.bucket_rows
+    assert yd.max() == 5.0 and yd.min() == -7.0
+    assert x[np.argmax(yd)] == t[123_457]  # at its own time
+    assert np.all(np.diff(x) >= 0) and x[-1] == t[-1]
+    assert h.curve(1)[1].max() == 7.0
+    short = MinMaxHistory(1, max_points=2000)
+    short.append(t[:500], y[:500, None])  # a short run is drawn at full resolution
+    assert np.array_equal(short.curve(0)[0], t[:500])
+    win = MinMaxHistory(1, max_points=100, history_s=10.0)
+    win.append(t[:30_000], y[:30_000, None])
+    assert win.curve(0)[0][0] >= t[30_000 - 1] - 10.0 - win.bucket_rows * 1e-3
 
 
 def test_param_spec_errors_name_the_value_and_the_limit():

@@ -3,7 +3,12 @@
 `EventBus.publish` calls subscribers in the engine's thread; a widget touched there crashes Qt
 sooner or later (bluesky#1222).  The bridge only queues the event and, when the queue was
 empty, emits a queued signal; the GUI thread then drains the whole queue at once.  However fast
-the engine runs, the event loop receives at most one wake-up per drain, so it cannot be flooded.
+the engine runs, the event loop receives at most one wake-up per drain, so it cannot be flooded;
+a drain hands over at most `slice_s` of work and re-posts itself for the rest, so timers and
+input keep running while a backlog is worked off.  When more than `max_pending` events wait, the
+publisher is held (at most `max_wait_s` per event) so a run at "max" speed goes at the pace the
+window can draw instead of queueing without bound; a hung window only slows the engine, never
+stops it (abort and the safe state still go through).
 """
 
 from __future__ import annotations
@@ -24,10 +29,15 @@ class EventBridge(QObject):
     events = Signal(list)
     _wake = Signal()
 
-    def __init__(self, bus: EventBus | None = None, parent: QObject | None = None) -> None:
+    def __init__(self, bus: EventBus | None = None, parent: QObject | None = None, *, slice_s: float = 0.02,
+                 max_pending: int = 200, max_wait_s: float = 0.25) -> None:
         super().__init__(parent)
         self._queue: deque[Event] = deque()
         self._lock = threading.Lock()
+        self._drained = threading.Condition(self._lock)
+        self.slice_s = slice_s
+        self.max_pending = max_pending
+        self.max_wait_s = max_wait_s
         self._pending = False
         self._unsubscribe: Callable[[], None] | None = None
         self._gate: Callable[[Event], None] | None = None
@@ -54,6 +64,8 @@ class EventBridge(QObject):
     def post(self, event: Event) -> None:
         """Any thread: queue the event and wake the GUI thread if it is not already woken."""
         with self._lock:
+            if len(self._queue) >= self.max_pending and threading.current_thread() is not threading.main_thread():
+                self._drained.wait_for(lambda: len(self._queue) < self.max_pending, self.max_wait_s)
             self._queue.append(event)
             wake = not self._pending
             self._pending = True
@@ -64,17 +76,29 @@ class EventBridge(QObject):
             gate(event)
 
     def drain(self) -> None:
-        """GUI thread: deliver what is queued now (tests call it to avoid waiting)."""
-        self._drain()
+        """GUI thread: deliver everything queued now (the screenshot mode calls it)."""
+        while True:
+            with self._lock:
+                if not self._queue:
+                    return
+            self._drain()
 
     def _drain(self) -> None:
-        with self._lock:
-            batch = list(self._queue)
-            self._queue.clear()
-            self._pending = False
-        if not batch:
-            return
-        now = time.time()
-        self.latency_s.append(now - batch[0].t_wall)
-        self.delivered += len(batch)
-        self.events.emit(batch)
+        t_end = time.perf_counter() + self.slice_s
+        while True:
+            with self._lock:
+                batch = [self._queue.popleft() for _ in range(min(len(self._queue), 200))]
+                self._drained.notify_all()
+                if not batch:
+                    self._pending = False
+                    return
+            self.latency_s.append(time.time() - batch[0].t_wall)
+            self.delivered += len(batch)
+            self.events.emit(batch)
+            if time.perf_counter() > t_end:
+                with self._lock:
+                    more = bool(self._queue)
+                    self._pending = more
+                if more:
+                    self._wake.emit()  # the rest after the event loop has had its turn
+                return

@@ -17,7 +17,7 @@ from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from bench.analysis.slow_model import orbit_elements
 
-from .ringbuffer import RingBuffer, decimate_minmax
+from .ringbuffer import MinMaxHistory, RingBuffer
 
 FPGA_COLS = ("t_s", "cx", "sx", "cy", "sy", "E", "theta_deg")
 TABLE_COLS = ("t_s", "rate_dps", "angle_deg")
@@ -35,15 +35,18 @@ def _columns(columns: tuple[str, ...], data: np.ndarray, wanted: tuple[str, ...]
 
 
 class LivePlots(QWidget):
-    """The plot area; feed it with `add_samples` and `set_fit`, it redraws itself."""
+    """The plot area; feed it with `add_samples` and `set_fit`, it redraws itself.  `fpga` and
+    `table` hold the whole run decimated (what is drawn), `recent` the last minute at full rate."""
 
     def __init__(self, parent: QWidget | None = None, *, history_s: float = 300.0, rate_hz: float = 1000.0,
-                 refresh_hz: float = 25.0, max_points: int = 2000) -> None:
+                 refresh_hz: float = 25.0, max_points: int = 2000,
+                 recent_s: float = 60.0) -> None:
         super().__init__(parent)
         pg.setConfigOptions(antialias=False, background="w", foreground="k")
-        capacity = int(history_s * rate_hz * 1.1)
-        self.fpga = RingBuffer(capacity, len(FPGA_COLS))
-        self.table = RingBuffer(capacity, len(TABLE_COLS))
+        # whole history, decimated as it arrives (drawn), and the last recent_s at full rate
+        self.fpga = MinMaxHistory(len(FPGA_COLS) - 1, max_points, history_s)
+        self.table = MinMaxHistory(len(TABLE_COLS) - 1, max_points, history_s)
+        self.recent = RingBuffer(int(recent_s * rate_hz), len(FPGA_COLS))
         self.sweep = RingBuffer(100_000, len(SWEEP_COLS))
         self.max_points = max_points
         self.fits: dict[str, dict[str, np.ndarray]] = {}
@@ -76,12 +79,11 @@ class LivePlots(QWidget):
         self.p_phase = self.view.addPlot(row=2, col=1, title="sweep phase (deg)")
         self.c_phase = self.p_phase.plot(pen=pg.mkPen("#ff7f0e"), symbol="o", symbolSize=5, symbolBrush="#ff7f0e")
         self.c_phase_fit = self.p_phase.plot(pen=pg.mkPen("#d62728", width=2))
+        # no grid: redrawing grid lines with the axes costs ~10 ms per plot per frame (raster)
         for p in (self.p_q, self.p_e, self.p_theta, self.p_rate):
             p.setLabel("bottom", "t", units="s")
-            p.showGrid(x=True, y=True, alpha=0.3)
         for p in (self.p_amp, self.p_phase):
             p.setLabel("bottom", "f", units="Hz")
-            p.showGrid(x=True, y=True, alpha=0.3)
 
         self.timer = QTimer(self)
         self.timer.setInterval(max(1, int(round(1000.0 / refresh_hz))))
@@ -92,6 +94,7 @@ class LivePlots(QWidget):
     def clear(self) -> None:
         self.fpga.clear()
         self.table.clear()
+        self.recent.clear()
         self.sweep.clear()
         self.fits.clear()
         self._theta_last_rad = None
@@ -112,13 +115,15 @@ class LivePlots(QWidget):
             # the angle means something when the quadrature is small against the amplitude
             defined = bool(np.median(np.abs(el["k"]) / np.maximum(el["a"], 1e-300)) < 0.3)
             theta_deg = self._unwrapped_theta_deg(el["theta_rad"], defined)
-            self.fpga.append(np.column_stack((q, el["E"], theta_deg)))
+            rows = np.column_stack((q, el["E"], theta_deg))
+            self.fpga.append(rows[:, 0], rows[:, 1:])
+            self.recent.append(rows)
             self._dirty = True
         rate = _columns(columns, data, ("t_s", "rate_dps"))
         if rate is not None:
             angle = _columns(columns, data, ("angle_deg",))
             angle = np.full((len(data), 1), np.nan) if angle is None else angle
-            self.table.append(np.column_stack((rate, angle)))
+            self.table.append(rate[:, 0], np.column_stack((rate[:, 1], angle[:, 0])))
             self._dirty = True
         sweep = _columns(columns, data, ("freq_hz", "amplitude"))
         if sweep is not None:
@@ -152,19 +157,13 @@ class LivePlots(QWidget):
             return
         t0 = time.perf_counter()
         self._dirty = False
-        f = self.fpga.view()
-        if len(f):
-            t = f[:, 0]
+        if len(self.fpga):
             for i, curve in enumerate(self.c_q):
-                curve.setData(*decimate_minmax(t, f[:, 1 + i], self.max_points))
-            e = f[:, 5]
-            ok = e > 0
-            curve_e = decimate_minmax(t[ok], e[ok], self.max_points)
-            self.c_e.setData(*curve_e)
-            self.c_theta.setData(*decimate_minmax(t, f[:, 6], self.max_points))
-        tb = self.table.view()
-        if len(tb):
-            self.c_rate.setData(*decimate_minmax(tb[:, 0], tb[:, 1], self.max_points))
+                curve.setData(*self.fpga.curve(i))
+            self.c_e.setData(*self.fpga.curve(4, positive_only=True))
+            self.c_theta.setData(*self.fpga.curve(5))
+        if len(self.table):
+            self.c_rate.setData(*self.table.curve(0))
         sw = self.sweep.view()
         if len(sw):
             order = np.argsort(sw[:, 0], kind="stable")

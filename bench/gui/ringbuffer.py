@@ -1,8 +1,6 @@
-"""Fixed-size ring buffers for live plots, and the decimation that keeps drawing cheap.
-
-The GUI keeps the last few minutes of each stream in memory (everything goes to disk through
-the recorder anyway) and draws at most a few thousand points per curve, whatever the stream
-rate: min/max decimation keeps the envelope of a fast signal visible.
+"""Buffers for live plots: a ring of the last rows at full rate, and a whole-run history kept
+min/max-decimated as it arrives, so drawing costs the same at second 1 and second 300 (the full
+stream goes to disk through the recorder anyway) and the envelope of a fast signal stays visible.
 """
 
 from __future__ import annotations
@@ -60,27 +58,119 @@ class RingBuffer:
         return np.concatenate((self._data[self._start:], self._data[: (self._start + self._size) % self.capacity]))
 
 
-def decimate_minmax(x: np.ndarray, y: np.ndarray, max_points: int) -> tuple[np.ndarray, np.ndarray]:
-    """At most ~max_points (x, y) pairs: each bucket keeps its min and max, in time order, so
-    peaks survive decimation (a stride would alias a 1 kHz ripple into a false slow wave)."""
-    n = len(x)
-    if n <= max_points or max_points < 4:
+class MinMaxHistory:
+    """A whole stream's history for drawing, at most ~max_points per column, kept incrementally.
+
+    Rows are reduced into buckets as they arrive (each bucket keeps, per column, its min and its
+    max with their times); when there are too many buckets, neighbours merge and the bucket size
+    doubles.  Drawing costs O(max_points) however long the run, and a one-sample spike stays
+    visible.  `history_s` drops buckets older than that (None keeps everything)."""
+
+    def __init__(self, n_cols: int, max_points: int = 2000, history_s: float | None = None) -> None:
+        if n_cols < 1 or max_points < 8:
+            raise ValueError(f"MinMaxHistory n_cols={n_cols} must be >= 1 and max_points={max_points} >= 8")
+        self.n_cols = int(n_cols)
+        self.max_buckets = int(max_points) // 2
+        self.history_s = history_s
+        self.clear()
+
+    def clear(self) -> None:
+        self.bucket_rows = 1
+        self.total_rows = 0
+        self._pend_t = np.empty(0)
+        self._pend_v = np.empty((0, self.n_cols))
+        self._t_min = np.empty((0, self.n_cols))
+        self._v_min = np.empty((0, self.n_cols))
+        self._t_max = np.empty((0, self.n_cols))
+        self._v_max = np.empty((0, self.n_cols))
+        self.t_last = float("nan")
+
+    def __len__(self) -> int:
+        return self.total_rows
+
+    def append(self, t: np.ndarray, values: np.ndarray) -> None:
+        """Rows at times t (n,) with values (n, n_cols), in time order."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        values = np.asarray(values, dtype=float).reshape(len(t), -1)
+        if values.shape[1] != self.n_cols:
+            raise ValueError(f"MinMaxHistory rows have {values.shape[1]} columns, expected {self.n_cols}")
+        if len(t) == 0:
+            return
+        self.total_rows += len(t)
+        self.t_last = float(t[-1])
+        pt = np.concatenate((self._pend_t, t))
+        pv = np.concatenate((self._pend_v, values))
+        b = self.bucket_rows
+        n_full = len(pt) // b
+        if b == 1:
+            tt = np.broadcast_to(pt[:, None], pv.shape)
+            self._push(tt, pv, tt, pv)
+            pt, pv = pt[:0], pv[:0]
+        elif n_full:
+            m = n_full * b
+            tb = np.broadcast_to(pt[:m].reshape(n_full, b, 1), (n_full, b, self.n_cols))
+            vb = pv[:m].reshape(n_full, b, self.n_cols)
+            i_min = np.argmin(vb, axis=1)[:, None, :]
+            i_max = np.argmax(vb, axis=1)[:, None, :]
+            self._push(np.take_along_axis(tb, i_min, 1)[:, 0], np.take_along_axis(vb, i_min, 1)[:, 0],
+                       np.take_along_axis(tb, i_max, 1)[:, 0], np.take_along_axis(vb, i_max, 1)[:, 0])
+            pt, pv = pt[m:], pv[m:]
+        self._pend_t, self._pend_v = pt, pv
+        self._trim()
+        while len(self._t_min) > self.max_buckets:
+            self._merge()
+
+    def _push(self, t_min, v_min, t_max, v_max) -> None:
+        self._t_min = np.concatenate((self._t_min, t_min))
+        self._v_min = np.concatenate((self._v_min, v_min))
+        self._t_max = np.concatenate((self._t_max, t_max))
+        self._v_max = np.concatenate((self._v_max, v_max))
+
+    def _trim(self) -> None:
+        if self.history_s is None or not len(self._t_min):
+            return
+        if max(self._t_min[0].max(), self._t_max[0].max()) >= self.t_last - self.history_s:
+            return  # the oldest bucket is still in the window
+        keep = np.maximum(self._t_min, self._t_max).max(axis=1) >= self.t_last - self.history_s
+        if not keep.all():
+            self._t_min, self._v_min = self._t_min[keep], self._v_min[keep]
+            self._t_max, self._v_max = self._t_max[keep], self._v_max[keep]
+
+    def _merge(self) -> None:
+        """Merge neighbouring buckets (an odd last one stays), doubling the bucket size."""
+        n = len(self._t_min) // 2 * 2
+        a, b = slice(0, n, 2), slice(1, n, 2)
+        take_a = self._v_min[a] <= self._v_min[b]
+        t_min = np.where(take_a, self._t_min[a], self._t_min[b])
+        v_min = np.where(take_a, self._v_min[a], self._v_min[b])
+        take_a = self._v_max[a] >= self._v_max[b]
+        t_max = np.where(take_a, self._t_max[a], self._t_max[b])
+        v_max = np.where(take_a, self._v_max[a], self._v_max[b])
+        rest = slice(n, None)
+        self._t_min = np.concatenate((t_min, self._t_min[rest]))
+        self._v_min = np.concatenate((v_min, self._v_min[rest]))
+        self._t_max = np.concatenate((t_max, self._t_max[rest]))
+        self._v_max = np.concatenate((v_max, self._v_max[rest]))
+        self.bucket_rows *= 2
+
+    def curve(self, col: int, positive_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y) to draw for one column, in time order."""
+        if self.bucket_rows == 1:
+            x = np.concatenate((self._t_min[:, col], self._pend_t))
+            y = np.concatenate((self._v_min[:, col], self._pend_v[:, col]))
+        else:
+            tmin, tmax = self._t_min[:, col], self._t_max[:, col]
+            vmin, vmax = self._v_min[:, col], self._v_max[:, col]
+            first_min = tmin <= tmax
+            x = np.empty(2 * len(tmin))
+            y = np.empty(2 * len(tmin))
+            x[0::2] = np.where(first_min, tmin, tmax)
+            x[1::2] = np.where(first_min, tmax, tmin)
+            y[0::2] = np.where(first_min, vmin, vmax)
+            y[1::2] = np.where(first_min, vmax, vmin)
+            x = np.concatenate((x, self._pend_t))
+            y = np.concatenate((y, self._pend_v[:, col]))
+        if positive_only:
+            ok = y > 0
+            x, y = x[ok], y[ok]
         return x, y
-    n_buckets = max_points // 2
-    size = n // n_buckets
-    m = size * n_buckets
-    yb = y[:m].reshape(n_buckets, size)
-    xb = x[:m].reshape(n_buckets, size)
-    i_min = np.argmin(yb, axis=1)
-    i_max = np.argmax(yb, axis=1)
-    lo = np.minimum(i_min, i_max)
-    hi = np.maximum(i_min, i_max)
-    rows = np.arange(n_buckets)
-    xd = np.empty(2 * n_buckets)
-    yd = np.empty(2 * n_buckets)
-    xd[0::2], xd[1::2] = xb[rows, lo], xb[rows, hi]
-    yd[0::2], yd[1::2] = yb[rows, lo], yb[rows, hi]
-    if m < n:  # keep the newest samples visible
-        xd = np.append(xd, x[-1])
-        yd = np.append(yd, y[-1])
-    return xd, yd
