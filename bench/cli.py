@@ -144,7 +144,12 @@ def _cmd_list(args: argparse.Namespace) -> int:
     for name, d in procs.items():
         print(f"  {name}: {d['title']}  (steps: {', '.join(d['steps'])})")
         for p in d["params"]:
-            rng = f"[{p['low']}, {p['high']}]" if p["choices"] is None else f"one of {p['choices']}"
+            if p["choices"] is not None:
+                rng = f"one of {p['choices']}"
+            elif p["low"] is None and p["high"] is None:
+                rng = ""
+            else:
+                rng = f"[{p['low']}, {p['high']}]"
             print(f"      {p['name']} = {p['default']!r} {p['unit']}  {rng}  {p['doc']}")
     print("stations:")
     for name, path in stations.items():
