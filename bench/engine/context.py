@@ -214,5 +214,7 @@ class RunContext:
             high=None if lim is None else lim.high,
             outcome=res.outcome,
             dut=res.dut,
+            marginal_low=None if lim is None else lim.marginal_low,
+            marginal_high=None if lim is None else lim.marginal_high,
         )
         return res
