@@ -87,11 +87,17 @@ def slow_rhs(
     return 0.5 * two_dq
 
 
+# Dg(q) zg = (sum_j zg_j B_j) q: the constant matrices B_j, built once from Dg of unit states.
+_BASIS = np.stack([regressor_linear(e) for e in np.eye(4)], axis=-1).transpose(1, 0, 2)  # (8, 4, 4)
+_DETUNING = np.stack([detuning_term(e) for e in np.eye(4)], axis=-1)  # J, (4, 4)
+
+
 def linear_matrix(zg: np.ndarray, lam: float = 0.0) -> np.ndarray:
     """A such that dq/dt = A q for the linear part (forcing excluded)."""
-    eye = np.eye(4)
-    cols = [regressor_linear(e) @ np.asarray(zg, dtype=float) - 2.0 * lam * detuning_term(e) for e in eye]
-    return 0.5 * np.stack(cols, axis=-1)
+    m = np.tensordot(np.asarray(zg, dtype=float), _BASIS, axes=1)
+    if lam:
+        m = m - 2.0 * lam * _DETUNING
+    return 0.5 * m
 
 
 # ----------------------------------------------------------------------------------------------

@@ -333,7 +333,9 @@ class TableMechanics:
         a0 = self.angle_deg
         angles = self._step(n, dt_s)
         t_rel = dt_s * np.arange(1, n + 1)
-        mean_rate = (angles[-1] - a0) / (n * dt_s)
+        # rounded to 1 ndeg/s so a table at rate gives the resonator the same rate every block
+        # (its exact step is cached on the inputs); the rounding goes into the deviation below
+        mean_rate = round((angles[-1] - a0) / (n * dt_s), 9)
         if self.noise_deg > 0:
             e = math.exp(-dt_s / self.noise_tau_s)
             w = self._rng_noise.standard_normal(n) * self.noise_deg * math.sqrt(1.0 - e * e)
