@@ -375,14 +375,15 @@ class FpgaLink:
         self._reader_cpu_s = time.thread_time() - cpu0
 
     def _dispatch(self, streams: list[np.ndarray], frames: list[p.Frame]) -> None:
+        # streams first: a reply is seen only after every frame that came before it was delivered
+        for arr in streams:
+            self._deliver(arr)
         if frames:
             with self._cond:
                 for f in frames:
                     if f.type in (p.ACK, p.NACK):
                         self._replies[f.seq] = f
                 self._cond.notify_all()
-        for arr in streams:
-            self._deliver(arr)
 
     def _deliver(self, arr: np.ndarray) -> None:
         seq = arr["seq"].astype(np.int64)
