@@ -68,10 +68,12 @@ def main() -> None:
         win.plots.refresh_cost_s.clear()
         costs0 = 0
         t0 = time.perf_counter()
+        cpu0 = time.process_time()
         probe.start()
         pump_until(lambda: time.perf_counter() - t0 >= seconds, seconds + 5)
         probe.stop()
         wall = time.perf_counter() - t0
+        cpu = (time.process_time() - cpu0) / wall
         costs = list(win.plots.refresh_cost_s)[costs0:]
         lat = [x * 1e3 for x in win.bridge.latency_s]
         print(f"{label}:")
@@ -81,6 +83,8 @@ def main() -> None:
               f"redraw cost median {_pct(costs, 50) * 1e3:.1f} ms, p99 {_pct(costs, 99) * 1e3:.1f} ms")
         print(f"  event loop: 10 ms timer late by median {_pct(lateness_ms, 50):.1f} ms, "
               f"p99 {_pct(lateness_ms, 99):.1f} ms, max {max(lateness_ms, default=float('nan')):.1f} ms")
+        print(f"  process CPU (GUI + simulated world): {cpu:.2f} cores; machine load average {os.getloadavg()[0]:.1f} "
+              f"on {os.cpu_count()} cores")
         print(f"  engine -> GUI delivery: median {_pct(lat, 50):.1f} ms, p99 {_pct(lat, 99):.1f} ms")
 
     win.procedure.setCurrentText("demo-decay")

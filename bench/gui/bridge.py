@@ -30,7 +30,7 @@ class EventBridge(QObject):
     _wake = Signal()
 
     def __init__(self, bus: EventBus | None = None, parent: QObject | None = None, *, slice_s: float = 0.02,
-                 max_pending: int = 200, max_wait_s: float = 0.25) -> None:
+                 max_pending: int = 50, max_wait_s: float = 0.25) -> None:
         super().__init__(parent)
         self._queue: deque[Event] = deque()
         self._lock = threading.Lock()

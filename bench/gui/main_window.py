@@ -171,20 +171,18 @@ class MainWindow(QMainWindow):
 
     # --- events ----------------------------------------------------------------------------
     def on_events(self, batch: list[ev.Event]) -> None:
-        """GUI thread: apply a batch of engine events to the widgets (consecutive sample blocks of
-        one stream are joined, so a fast engine costs one numpy pass per stream per batch)."""
-        blocks: list[ev.SampleBlock] = []
+        """GUI thread: apply a batch of engine events to the widgets.  Sample blocks are joined
+        per stream (one numpy pass per stream per batch however fast the engine runs); they are
+        flushed before a run starts or ends, where the plots' state changes."""
+        pending: dict[tuple[str, tuple[str, ...]], list[np.ndarray]] = {}
         for e in batch:
             self.t_sim_s = max(self.t_sim_s, e.t_sim_s)
             if isinstance(e, ev.SampleBlock):
-                if blocks and (blocks[-1].stream != e.stream or blocks[-1].columns != e.columns):
-                    self._add_blocks(blocks)
-                    blocks = []
-                blocks.append(e)
+                pending.setdefault((e.stream, tuple(e.columns)), []).append(np.asarray(e.data))
                 continue
-            if blocks:
-                self._add_blocks(blocks)
-                blocks = []
+            if isinstance(e, (ev.RunStarted, ev.RunFinished)) and pending:
+                self._add_blocks(pending)
+                pending = {}
             if isinstance(e, ev.FitUpdate):
                 self.plots.set_fit(e.name, e.curves)
             elif isinstance(e, ev.Progress):
@@ -204,13 +202,13 @@ class MainWindow(QMainWindow):
                 self._on_run_started(e)
             elif isinstance(e, ev.RunFinished):
                 self._on_run_finished(e)
-        if blocks:
-            self._add_blocks(blocks)
+        if pending:
+            self._add_blocks(pending)
         self.station.set_time(self.t_sim_s)
 
-    def _add_blocks(self, blocks: list[ev.SampleBlock]) -> None:
-        data = blocks[0].data if len(blocks) == 1 else np.concatenate([np.asarray(b.data) for b in blocks])
-        self.plots.add_samples(blocks[0].stream, blocks[0].columns, data)
+    def _add_blocks(self, pending: dict[tuple[str, tuple[str, ...]], list[np.ndarray]]) -> None:
+        for (stream, columns), arrays in pending.items():
+            self.plots.add_samples(stream, columns, arrays[0] if len(arrays) == 1 else np.concatenate(arrays))
 
     def _on_run_started(self, e: ev.RunStarted) -> None:
         self.plots.clear()

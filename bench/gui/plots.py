@@ -7,13 +7,14 @@ a QTimer at `refresh_hz`, decimated to `max_points` per curve, never per event.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QTimer
-from PySide6.QtWidgets import QVBoxLayout, QWidget
+from PySide6.QtWidgets import QGridLayout, QWidget
 
 from bench.analysis.slow_model import orbit_elements
 
@@ -39,7 +40,7 @@ class LivePlots(QWidget):
     `table` hold the whole run decimated (what is drawn), `recent` the last minute at full rate."""
 
     def __init__(self, parent: QWidget | None = None, *, history_s: float = 300.0, rate_hz: float = 1000.0,
-                 refresh_hz: float = 25.0, max_points: int = 2000,
+                 refresh_hz: float = 25.0, max_points: int = 1200,
                  recent_s: float = 60.0) -> None:
         super().__init__(parent)
         pg.setConfigOptions(antialias=False, background="w", foreground="k")
@@ -56,32 +57,42 @@ class LivePlots(QWidget):
         self._dirty = False
         self._theta_last_rad: float | None = None
 
-        self.view = pg.GraphicsLayoutWidget()
-        layout = QVBoxLayout(self)
-        layout.setContentsMargins(0, 0, 0, 0)
-        layout.addWidget(self.view)
+        # one view per plot: a frame repaints only the plots whose data changed
+        grid = QGridLayout(self)
+        grid.setContentsMargins(0, 0, 0, 0)
+        grid.setSpacing(2)
+        self.views: list[pg.PlotWidget] = []
 
-        self.p_q = self.view.addPlot(row=0, col=0, title="cx, sx, cy, sy")
+        def add_plot(row: int, col: int, title: str) -> pg.PlotItem:
+            w = pg.PlotWidget(title=title)
+            grid.addWidget(w, row, col)
+            self.views.append(w)
+            return w.getPlotItem()
+
+        self.p_q = add_plot(0, 0, "cx, sx, cy, sy")
         self.p_q.addLegend(offset=(5, 5))
         self.c_q = [self.p_q.plot(pen=pg.mkPen(c, width=1), name=n)
                     for c, n in zip(PEN_COLOURS, ("cx", "sx", "cy", "sy"), strict=True)]
-        self.p_e = self.view.addPlot(row=0, col=1, title="E (log) and fit")
+        self.p_e = add_plot(0, 1, "E (log) and fit")
         self.p_e.setLogMode(x=False, y=True)
         self.c_e = self.p_e.plot(pen=pg.mkPen("#1f77b4", width=1))
         self.c_fit = self.p_e.plot(pen=pg.mkPen("#d62728", width=2, style=pg.QtCore.Qt.PenStyle.DashLine))
-        self.p_theta = self.view.addPlot(row=1, col=0, title="wave angle theta (deg)")
+        self.p_theta = add_plot(1, 0, "wave angle theta (deg)")
         self.c_theta = self.p_theta.plot(pen=pg.mkPen("#9467bd", width=1))
-        self.p_rate = self.view.addPlot(row=1, col=1, title="table rate (deg/s)")
+        self.p_rate = add_plot(1, 1, "table rate (deg/s)")
         self.c_rate = self.p_rate.plot(pen=pg.mkPen("#8c564b", width=1))
-        self.p_amp = self.view.addPlot(row=2, col=0, title="sweep amplitude")
+        self.p_amp = add_plot(2, 0, "sweep amplitude")
         self.c_amp = self.p_amp.plot(pen=pg.mkPen("#1f77b4"), symbol="o", symbolSize=5, symbolBrush="#1f77b4")
         self.c_amp_fit = self.p_amp.plot(pen=pg.mkPen("#d62728", width=2))
-        self.p_phase = self.view.addPlot(row=2, col=1, title="sweep phase (deg)")
+        self.p_phase = add_plot(2, 1, "sweep phase (deg)")
         self.c_phase = self.p_phase.plot(pen=pg.mkPen("#ff7f0e"), symbol="o", symbolSize=5, symbolBrush="#ff7f0e")
         self.c_phase_fit = self.p_phase.plot(pen=pg.mkPen("#d62728", width=2))
         # no grid: redrawing grid lines with the axes costs ~10 ms per plot per frame (raster)
-        for p in (self.p_q, self.p_e, self.p_theta, self.p_rate):
+        self.time_plots = (self.p_q, self.p_e, self.p_theta, self.p_rate)
+        for p in self.time_plots:
             p.setLabel("bottom", "t", units="s")
+            p.enableAutoRange(x=False)
+        self._x_range: tuple[float, float] | None = None
         for p in (self.p_amp, self.p_phase):
             p.setLabel("bottom", "f", units="Hz")
 
@@ -98,6 +109,7 @@ class LivePlots(QWidget):
         self.sweep.clear()
         self.fits.clear()
         self._theta_last_rad = None
+        self._x_range = None
         for c in (*self.c_q, self.c_e, self.c_fit, self.c_theta, self.c_rate, self.c_amp, self.c_phase,
                   self.c_amp_fit, self.c_phase_fit):
             c.setData([], [])
@@ -157,6 +169,7 @@ class LivePlots(QWidget):
             return
         t0 = time.perf_counter()
         self._dirty = False
+        self._update_x_range()
         if len(self.fpga):
             for i, curve in enumerate(self.c_q):
                 curve.setData(*self.fpga.curve(i))
@@ -183,12 +196,30 @@ class LivePlots(QWidget):
         self.refresh_times.append(now)
         self.refresh_cost_s.append(now - t0)
 
+    def _update_x_range(self) -> None:
+        """The time axes move in round steps (not every frame): regenerating the ticks of four
+        axes each frame would cost more than drawing the curves."""
+        starts = [h.t_first for h in (self.fpga, self.table) if len(h)]
+        ends = [h.t_last for h in (self.fpga, self.table) if len(h)]
+        if not ends:
+            return
+        t0, t1 = min(starts), max(ends)
+        if self._x_range is not None and self._x_range[0] <= t0 and t1 <= self._x_range[1]:
+            return
+        span = max(t1 - t0, 1e-3)
+        step = 10.0 ** math.floor(math.log10(span))
+        hi = t0 + math.ceil(span / step + 1e-9) * step
+        self._x_range = (t0, hi)
+        for p in self.time_plots:
+            p.setXRange(t0, hi, padding=0.0)
+
     def shutdown(self) -> None:
         """Stop redrawing and release the scene explicitly: left to the garbage collector, the
         pyqtgraph scene can be torn down in the wrong order at interpreter exit."""
         self.timer.stop()
-        self.view.clear()
-        self.view.close()
+        for w in self.views:
+            w.getPlotItem().clear()
+            w.close()
 
     def refresh_rate_hz(self, window_s: float = 2.0) -> float:
         """Redraws per second over the last window_s of wall time."""

@@ -83,6 +83,7 @@ class MinMaxHistory:
         self._v_min = np.empty((0, self.n_cols))
         self._t_max = np.empty((0, self.n_cols))
         self._v_max = np.empty((0, self.n_cols))
+        self.t_first = float("nan")
         self.t_last = float("nan")
 
     def __len__(self) -> int:
@@ -96,6 +97,8 @@ class MinMaxHistory:
             raise ValueError(f"MinMaxHistory rows have {values.shape[1]} columns, expected {self.n_cols}")
         if len(t) == 0:
             return
+        if self.total_rows == 0:
+            self.t_first = float(t[0])
         self.total_rows += len(t)
         self.t_last = float(t[-1])
         pt = np.concatenate((self._pend_t, t))
@@ -135,6 +138,8 @@ class MinMaxHistory:
         if not keep.all():
             self._t_min, self._v_min = self._t_min[keep], self._v_min[keep]
             self._t_max, self._v_max = self._t_max[keep], self._v_max[keep]
+            if len(self._t_min):
+                self.t_first = float(np.minimum(self._t_min[0], self._t_max[0]).min())
 
     def _merge(self) -> None:
         """Merge neighbouring buckets (an odd last one stays), doubling the bucket size."""
