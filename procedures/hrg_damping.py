@@ -1,0 +1,305 @@
+"""HRG damping non-uniformity: the patent's free decay on a rate table, its fit, the compensation
+and its verification (issue 8; PHYSICS.md section 3).
+
+Steps: excite and hold the amplitude; spin the table; wait until the rate is stable; cut the
+drive; record the decay; compute E, theta and the quadrature; fit theta_tau, Delta(1/tau), tau;
+write the coefficients to the FPGA's drift-compensation registers and measure the drift against
+the wave angle with the compensation off and on (whole-angle mode turns the wave through every
+angle).  The decay and verification windows are recorded as the `damping_windows` stream, so
+`analysis(data)` re-fits a recorded run with the same code.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from typing import Any
+
+import numpy as np
+
+from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_free_decay
+from bench.analysis.slow_model import orbit_elements
+from bench.engine import Param, Procedure, Result, step
+
+WINDOWS = "damping_windows"
+WINDOW_COLUMNS = ("kind", "t_start_s", "t_end_s")
+REF = "damping_reference"  # the reference frequency held during the decay, for Q = pi f0 tau
+DECAY, VERIFY_OFF, VERIFY_ON = 0.0, 1.0, 2.0
+_COLS = {"index": 0, "t_s": 1, "cx": 2, "sx": 3, "cy": 4, "sy": 5}
+_MAX_CURVE_POINTS = 2000
+
+
+class _StreamTap:
+    """Keeps the FPGA stream rows (t_s, cx, sx, cy, sy) while `on` (runs on the link's reader
+    thread: appends only)."""
+
+    def __init__(self) -> None:
+        self.on = False
+        self.latest: np.ndarray | None = None
+        self._rows: list[np.ndarray] = []
+        self._lock = threading.Lock()
+
+    def __call__(self, block: np.ndarray) -> None:
+        self.latest = block[-1]
+        if self.on:
+            with self._lock:
+                self._rows.append(block[:, 1:6].copy())
+
+    def take(self, t_start_s: float, t_end_s: float) -> np.ndarray:
+        with self._lock:
+            rows = np.vstack(self._rows) if self._rows else np.empty((0, 5))
+            self._rows.clear()
+        return rows[(rows[:, 0] > t_start_s) & (rows[:, 0] <= t_end_s)]
+
+
+def _thin(*arrays: np.ndarray) -> list[np.ndarray]:
+    """Every k-th point so that plots get at most _MAX_CURVE_POINTS."""
+    k = max(1, int(math.ceil(len(arrays[0]) / _MAX_CURVE_POINTS)))
+    return [np.asarray(a)[::k] for a in arrays]
+
+
+def block_drift(t_s: np.ndarray, theta_rad: np.ndarray, block_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Wave angle rate by least-squares slopes over blocks of block_s: (theta mid-block, rate)."""
+    theta = np.unwrap(4.0 * theta_rad) / 4.0
+    edges = np.arange(t_s[0], t_s[-1] + 1e-12, block_s)
+    mids, rates = [], []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        sel = (t_s >= a) & (t_s < b)
+        if sel.sum() < 3:
+            continue
+        slope, icpt = np.polyfit(t_s[sel] - a, theta[sel], 1)
+        mids.append(icpt + slope * 0.5 * (b - a))
+        rates.append(slope)
+    return np.asarray(mids), np.asarray(rates)
+
+
+class HrgDamping(Procedure):
+    """HRG damping non-uniformity from a free decay on a rate table (the patent), with compensation."""
+
+    name = "hrg-damping"
+    requires = ("table", "frontend", "fpga")
+
+    amplitude = Param(1.0, unit="", low=0.01, high=10.0, doc="amplitude setpoint held by the AGC before the cut")
+    amplitude_tolerance = Param(0.01, unit="", low=1e-4, high=0.5, doc="relative amplitude tolerance to go on")
+    amplitude_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to reach the amplitude")
+    rate_dps = Param(500.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate during the decay (patent: 500)")
+    accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
+    rate_tolerance_dps = Param(0.05, unit="deg/s", low=1e-4, high=10.0, doc="rate-stability tolerance")
+    rate_hold_s = Param(2.0, unit="s", low=0.0, high=600.0, doc="time the rate must stay within tolerance")
+    rate_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to become stable at rate")
+    record_s = Param(900.0, unit="s", low=1.0, high=100000.0, doc="record duration (about 3 tau)")
+    stream_hz = Param(1000.0, unit="Hz", low=0.1, high=1e6, doc="rate of the samples fitted (stream decimation)")
+    fit_method = Param("log-linear", choices=METHODS, doc="estimator (bench.analysis.damping)")
+    fit_model = Param("exact", choices=MODELS, doc="energy model: quadrature-aware or the patent's")
+    compensate = Param(True, doc="write the coefficients to the FPGA and verify the drift off and on")
+    verify_rate_dps = Param(2.0, unit="deg/s", low=0.01, high=100.0, doc="whole-angle precession while verifying")
+    verify_s = Param(90.0, unit="s", low=1.0, high=100000.0, doc="drift record per verification (off, on)")
+    verify_settle_s = Param(5.0, unit="s", low=0.0, high=600.0, doc="settling before each verification record")
+    drift_block_s = Param(1.0, unit="s", low=0.01, high=100.0, doc="block over which the drift rate is measured")
+    bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: refers the wave's drift to the gyro output")
+
+    def __init__(self, params: dict[str, Any] | None = None) -> None:
+        super().__init__(params)
+        self._tap = _StreamTap()
+        self._unsubscribe = None
+        self._decay: np.ndarray | None = None
+        self._fit = None
+
+    # --- helpers -----------------------------------------------------------------------------
+    def _sample_period_s(self, ctx) -> float:
+        return float(ctx.devices.fpga.read_register("SAMPLE_PERIOD_S"))
+
+    def _decimate(self, rows: np.ndarray, period_s: float) -> np.ndarray:
+        dec = max(1, int(round(1.0 / (self.stream_hz * period_s))))
+        idx = np.rint(rows[:, 0] / period_s).astype(np.int64)
+        return rows[idx % dec == 0]
+
+    def _amplitude_now(self, ctx) -> float:
+        ctx.devices.fpga.sync()
+        row = self._tap.latest
+        if row is None:
+            return 0.0
+        return float(orbit_elements(row[2:6])["a"])
+
+    def _hold_amplitude(self, ctx) -> None:
+        tol = self.amplitude_tolerance * self.amplitude
+        ok = ctx.wait_until(lambda: abs(self._amplitude_now(ctx) - self.amplitude) <= tol,
+                            timeout_s=self.amplitude_timeout_s, poll_s=0.5)
+        if not ok:
+            raise TimeoutError(
+                f"amplitude {self._amplitude_now(ctx):.4g} not within {tol:.3g} of the setpoint {self.amplitude:g} "
+                f"after {self.amplitude_timeout_s:g} s"
+            )
+
+    def _record(self, ctx, kind: float, duration_s: float, label: str) -> np.ndarray:
+        fpga = ctx.devices.fpga
+        fpga.sync()
+        t0 = ctx.clock.now()
+        self._tap.take(-math.inf, -math.inf)  # drop anything older
+        self._tap.on = True
+        n = max(1, int(math.ceil(duration_s / 10.0)))
+        for k in range(n):
+            ctx.sleep(duration_s / n)
+            ctx.progress((k + 1) / n, f"{label}: {(k + 1) * duration_s / n:.0f} / {duration_s:.0f} s")
+        fpga.sync()
+        self._tap.on = False
+        t1 = ctx.clock.now()
+        ctx.record(WINDOWS, WINDOW_COLUMNS, np.array([[kind, t0, t1]]))
+        return self._tap.take(t0, t1)
+
+    # --- steps -------------------------------------------------------------------------------
+    @step("Excite and hold the amplitude")
+    def excite(self, ctx):
+        fpga = ctx.devices.fpga
+        self._unsubscribe = fpga.subscribe(self._tap)
+        fpga.set_whole_angle(False)
+        fpga.set_drift_compensation(False)
+        fpga.set_pll(True)
+        fpga.set_quadrature_loop(True)
+        fpga.set_agc(True, self.amplitude)
+        fpga.set_drive_enabled(True)
+        self._hold_amplitude(ctx)
+        ctx.log.info(f"amplitude {self._amplitude_now(ctx):.4f} held (setpoint {self.amplitude:g})")
+
+    @step("Spin the table")
+    def spin(self, ctx):
+        table = ctx.devices.table
+        table.enable()
+        table.set_rate(self.rate_dps, self.accel_dps2)
+
+    @step("Wait for a stable rate")
+    def wait_stable(self, ctx):
+        st = ctx.devices.table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
+        ctx.log.info(f"table stable at {st.rate_dps:.4f} deg/s")
+
+    @step("Cut the drive")
+    def cut_drive(self, ctx):
+        fpga = ctx.devices.fpga
+        fpga.set_drive_enabled(False)
+        fpga.set_pll(False)  # hold the reference: a PLL cannot follow a decaying wave, and E, theta ignore chi
+        for ch in (1, 2):
+            ctx.devices.frontend.set_drive(ch, output_on=False)
+        ctx.sleep(0.1)  # the forces leave at the next loop block
+
+    @step("Record cx, sx, cy, sy")
+    def record(self, ctx):
+        rows = self._record(ctx, DECAY, self.record_s, "free decay")
+        self._decay = self._decimate(rows, self._sample_period_s(ctx))
+        ctx.log.info(f"recorded {len(self._decay)} samples over {self.record_s:g} s")
+
+    @step("Compute E, theta and the quadrature")
+    def elements(self, ctx):
+        d = self._decay
+        if d is None or len(d) < 8:
+            raise RuntimeError(f"the decay record holds {0 if d is None else len(d)} samples; at least 8 are needed")
+        el = orbit_elements(d[:, 1:5])
+        t, e, th, k = _thin(d[:, 0], el["E"], np.unwrap(4 * el["theta_rad"]) / 4, el["k"] / np.maximum(el["a"], 1e-300))
+        ctx.fit("hrg-damping elements", t_s=t, energy=e, theta_deg=np.degrees(th), quadrature_rel=k)
+        ctx.measure("quadrature_rel_max", float(np.max(np.abs(el["k"] / np.maximum(el["a"], 1e-300)))), "")
+
+    @step("Fit the free-decay model")
+    def fit(self, ctx):
+        d = self._decay
+        fit = fit_free_decay(d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4], method=self.fit_method, model=self.fit_model)
+        self._fit = fit
+        t, e, ef, r = _thin(fit.t_s, fit.energy, fit.energy_fit, fit.residuals_ln_e)
+        ctx.fit("hrg-damping energy", t_s=t, energy=e, energy_fit=ef, residual_ln_e=r)
+        f0_hz = self._f0_hz(ctx)
+        ctx.record(REF, ("t_s", "f0_hz"), np.array([[ctx.clock.now(), f0_hz]]))
+        for res in self._decay_results(fit, f0_hz):
+            ctx.report(res)
+        ctx.log.info(fit.summary())
+
+    @step("Compensate and verify")
+    def compensate_step(self, ctx):
+        try:
+            self._compensate(ctx)
+        finally:
+            if self._unsubscribe is not None:
+                self._unsubscribe()
+                self._unsubscribe = None
+
+    def _compensate(self, ctx):
+        if not self.compensate:
+            ctx.log.info("compensation not requested")
+            return
+        fit = self._fit
+        fpga, table = ctx.devices.fpga, ctx.devices.table
+        table.stop(self.accel_dps2)
+        table.wait_at_rest(timeout_s=self.rate_timeout_s + abs(self.rate_dps) / self.accel_dps2)
+        fpga.set_drift_compensation(False, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
+        fpga.set_whole_angle(True, self.verify_rate_dps)
+        fpga.set_agc(True, self.amplitude)
+        fpga.set_drive_enabled(True)
+        self._hold_amplitude(ctx)
+        ctx.sleep(self.verify_settle_s)
+        off = self._record(ctx, VERIFY_OFF, self.verify_s, "drift, compensation off")
+        fpga.set_drift_compensation(True, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
+        ctx.sleep(self.verify_settle_s)
+        on = self._record(ctx, VERIFY_ON, self.verify_s, "drift, compensation on")
+        fpga.set_drift_compensation(False, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
+        fpga.set_drive_enabled(False)
+        results, curves = self._verify_results(off, on)
+        for name, (th, rate) in curves.items():
+            ctx.fit(f"hrg-damping drift {name}", theta_deg=np.degrees(th), drift_dph=rate)
+        for res in results:
+            ctx.report(res)
+
+    # --- results, shared by the run and by `analysis` -----------------------------------------
+    def _f0_hz(self, ctx) -> float:
+        return float(ctx.devices.fpga.read_register("PLL_FREQ_HZ"))
+
+    def _decay_results(self, fit, f0_hz: float | None) -> list[Result]:
+        ci = fit.ci95
+        out = [
+            Result("theta_tau_deg", fit.theta_tau_deg, "deg", ci95=ci["theta_tau_deg"]),
+            Result("delta_inv_tau_per_s", fit.delta_inv_tau_per_s, "1/s", ci95=ci["delta_inv_tau_per_s"]),
+            Result("tau_s", fit.tau_s, "s", ci95=ci["tau_s"]),
+        ]
+        if f0_hz:
+            out.append(Result("q_factor", fit.q_factor(f0_hz), "", ci95=fit.q_factor_ci95(f0_hz)))
+        lo, hi = ci["delta_inv_tau_per_s"]
+        k = self.bryan_factor
+        out.append(Result("drift_predicted_dph", fit.drift_amplitude_dph(k), "deg/h",
+                          ci95=(math.degrees(lo / 4 / k) * 3600, math.degrees(hi / 4 / k) * 3600)))
+        return out
+
+    def _verify_results(self, off: np.ndarray, on: np.ndarray) -> tuple[list[Result], dict]:
+        k = self.bryan_factor
+        results, curves, amps = [], {}, {}
+        for name, rows in (("before", off), ("after", on)):
+            th = orbit_elements(rows[:, 1:5])["theta_rad"]
+            mids, rate = block_drift(rows[:, 0], th, self.drift_block_s)
+            drift = rate - math.radians(self.verify_rate_dps)
+            fit = fit_angle_drift(mids, drift)
+            to_dph = math.degrees(1.0 / k) * 3600
+            amps[name] = fit.amplitude_rad_s * to_dph
+            lo, hi = fit.amplitude_ci95
+            results.append(Result(f"drift_{name}_dph", amps[name], "deg/h", ci95=(lo * to_dph, hi * to_dph)))
+            curves[name] = (mids, drift * to_dph)
+        ratio = amps["before"] / amps["after"] if amps["after"] > 0 else math.inf
+        results.append(Result("drift_reduction_ratio", ratio, ""))
+        return results, curves
+
+    def analysis(self, data) -> list[Result]:
+        """Re-fit a recorded run: the decay and verification windows of `damping_windows`."""
+        win = data.array(WINDOWS)
+        fpga = data.array("fpga")
+        rows = fpga[:, [_COLS["t_s"], _COLS["cx"], _COLS["sx"], _COLS["cy"], _COLS["sy"]]]
+        period = float(np.median(np.diff(fpga[:, 1]) / np.maximum(np.diff(fpga[:, 0]), 1)))
+
+        def window(kind: float) -> np.ndarray | None:
+            sel = win[win[:, 0] == kind]
+            if not len(sel):
+                return None
+            t0, t1 = sel[-1, 1], sel[-1, 2]
+            return rows[(rows[:, 0] > t0) & (rows[:, 0] <= t1)]  # as the live tap: after t0, up to t1
+
+        decay = self._decimate(window(DECAY), period)
+        fit = fit_free_decay(*decay.T, method=self.fit_method, model=self.fit_model)
+        f0_hz = float(data.array(REF)[-1, 1]) if REF in data else None
+        out = self._decay_results(fit, f0_hz)
+        off, on = window(VERIFY_OFF), window(VERIFY_ON)
+        if off is not None and on is not None:
+            out += self._verify_results(off, on)[0]
+        return out
