@@ -54,14 +54,15 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
     backend = window.backend
     window.bridge.set_gate(gate)
     window.show()
-    if params:
-        for k, v in params.items():
-            window.form.set_value(k, v)
     idx = window.procedure.findText(procedure)
     if idx < 0:
         names = [window.procedure.itemText(i) for i in range(window.procedure.count())]
         raise ValueError(f"procedure {procedure!r} is not one of {names}")
     window.procedure.setCurrentIndex(idx)
+    for k, v in (params or {}).items():
+        if k not in window.form.fields:
+            raise ValueError(f"{procedure} has no parameter {k!r}; it has {', '.join(window.form.fields)}")
+        window.form.set_value(k, v)
     if not window.form.is_valid():
         raise ValueError(f"invalid parameters for {procedure}: {window.form.errors}")
     window.start()
@@ -79,6 +80,7 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
         path.parent.mkdir(parents=True, exist_ok=True)
         if not window.grab().save(str(path), "PNG"):
             raise OSError(f"could not write the screenshot {path}")
+        window.screenshot_t_s = window.t_sim_s
     finally:
         window.bridge.set_gate(None)
         if window.run_active:
@@ -93,7 +95,7 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
 
 def run_gui(station: str | None = None, *, run: str | None = None, screenshot: str | None = None,
             at_s: float | None = None, seed: int = 0, speed: float | None = None,
-            open_run: str | None = None) -> int:
+            open_run: str | None = None, params: dict[str, str] | None = None) -> int:
     """Open the window (blocking until it closes), or with `screenshot`, run headless and exit."""
     app = _app()
     from .main_window import MainWindow
@@ -115,9 +117,9 @@ def run_gui(station: str | None = None, *, run: str | None = None, screenshot: s
                 window.plots.refresh(force=True)
                 window.grab().save(str(screenshot), "PNG")
             else:
-                out = take_screenshot(window, run, screenshot, at_s=at_s)
+                out = take_screenshot(window, run, screenshot, at_s=at_s, params=params)
                 fin = window.last_finished
-                print(f"screenshot {out} at t = {window.t_sim_s:.1f} s"
+                print(f"screenshot {out} at t = {window.screenshot_t_s:.1f} s"
                       + (f"; run {fin.outcome}, safe state {'confirmed' if fin.safe_state else 'NOT confirmed'}"
                          if fin else ""))
         else:
@@ -125,6 +127,9 @@ def run_gui(station: str | None = None, *, run: str | None = None, screenshot: s
                 idx = window.procedure.findText(run)
                 if idx >= 0:
                     window.procedure.setCurrentIndex(idx)
+                for k, v in (params or {}).items():
+                    if k in window.form.fields:
+                        window.form.set_value(k, v)
             window.show()
             code = int(app.exec())
     finally:

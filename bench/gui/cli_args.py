@@ -15,6 +15,8 @@ def add_gui_subcommand(sub) -> argparse.ArgumentParser:
                    help="simulated second at which the screenshot is taken (default: end of the run)")
     p.add_argument("--speed", default=None, help="simulated clock speed: 1, 10, 100 or max")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="a procedure parameter (repeatable)")
     p.add_argument("--open", dest="open_run", default=None, metavar="RUN.h5", help="replay a recorded run")
     p.set_defaults(func=cmd_gui)
     return p
@@ -24,5 +26,11 @@ def cmd_gui(args: argparse.Namespace) -> int:
     from .app import parse_speed, run_gui
 
     speed = None if args.speed is None else parse_speed(args.speed)
+    params: dict[str, str] = {}
+    for item in args.set:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise SystemExit(f"gyrobench gui: --set {item!r}: expected NAME=VALUE")
+        params[name.strip()] = value.strip()
     return run_gui(args.station, run=args.run, screenshot=args.screenshot, at_s=args.at_s, seed=args.seed,
-                   speed=speed, open_run=args.open_run)
+                   speed=speed, open_run=args.open_run, params=params)

@@ -18,6 +18,7 @@ from PySide6.QtWidgets import (
     QMainWindow,
     QMessageBox,
     QPushButton,
+    QScrollArea,
     QSplitter,
     QTabWidget,
     QVBoxLayout,
@@ -51,6 +52,7 @@ class MainWindow(QMainWindow):
         self.paused = False
         self.last_finished: ev.RunFinished | None = None
         self.t_sim_s = 0.0
+        self.screenshot_t_s: float | None = None
 
         self.station = StationPanel(backend.station_name, backend.simulated)
         self.station.speed_changed.connect(self._on_speed)
@@ -76,13 +78,18 @@ class MainWindow(QMainWindow):
         proc_box = QGroupBox("Procedure")
         proc_lay = QVBoxLayout(proc_box)
         proc_lay.addWidget(self.procedure)
-        proc_lay.addWidget(self.form)
+        form_scroll = QScrollArea()
+        form_scroll.setWidget(self.form)
+        form_scroll.setWidgetResizable(True)
+        form_scroll.setFrameShape(QScrollArea.Shape.NoFrame)
+        form_scroll.setMinimumHeight(140)
+        proc_lay.addWidget(form_scroll, 1)
         buttons = QHBoxLayout()
         for b in (self.start_button, self.pause_button, self.abort_button):
             buttons.addWidget(b)
         proc_lay.addLayout(buttons)
         proc_lay.addWidget(self.safe_label)
-        left_lay.addWidget(proc_box)
+        left_lay.addWidget(proc_box, 2)
         step_box = QGroupBox("Steps")
         QVBoxLayout(step_box).addWidget(self.steps)
         left_lay.addWidget(step_box, 1)

@@ -23,6 +23,7 @@ from .ringbuffer import MinMaxHistory, RingBuffer
 FPGA_COLS = ("t_s", "cx", "sx", "cy", "sy", "E", "theta_deg")
 TABLE_COLS = ("t_s", "rate_dps", "angle_deg")
 SWEEP_COLS = ("freq_hz", "amplitude", "phase_deg")
+E_FIT_KEYS = ("E_fit", "energy_fit", "E")  # model E(t) keys of a FitUpdate (not the measured "energy")
 PEN_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 
 
@@ -87,6 +88,8 @@ class LivePlots(QWidget):
         self.p_phase = add_plot(2, 1, "sweep phase (deg)")
         self.c_phase = self.p_phase.plot(pen=pg.mkPen("#ff7f0e"), symbol="o", symbolSize=5, symbolBrush="#ff7f0e")
         self.c_phase_fit = self.p_phase.plot(pen=pg.mkPen("#d62728", width=2))
+        self.sweep_views = self.views[4:6]
+        self._show_sweep(False)
         # no grid: redrawing grid lines with the axes costs ~10 ms per plot per frame (raster)
         self.time_plots = (self.p_q, self.p_e, self.p_theta, self.p_rate)
         for p in self.time_plots:
@@ -110,6 +113,7 @@ class LivePlots(QWidget):
         self.fits.clear()
         self._theta_last_rad = None
         self._x_range = None
+        self._show_sweep(False)
         for c in (*self.c_q, self.c_e, self.c_fit, self.c_theta, self.c_rate, self.c_amp, self.c_phase,
                   self.c_amp_fit, self.c_phase_fit):
             c.setData([], [])
@@ -143,6 +147,8 @@ class LivePlots(QWidget):
             phase = np.full((len(data), 1), np.nan) if phase is None else phase
             self.sweep.append(np.column_stack((sweep, phase)))
             self._dirty = True
+            if not self.sweep_shown:
+                self._show_sweep(True)
 
     def _unwrapped_theta_deg(self, theta_rad: np.ndarray, wave_defined: bool) -> np.ndarray:
         """theta continues across its (-45, 45] deg wrap while a standing wave is there (a
@@ -157,8 +163,24 @@ class LivePlots(QWidget):
         self._theta_last_rad = float(joined[-1])
         return np.degrees(joined[1:])
 
+    def _pick_fit(self, x_key: str, y_keys: tuple[str, ...], prefer: str = "") -> tuple[np.ndarray, np.ndarray] | None:
+        """(x, y) of the fit to overlay: the one named `prefer` if any, else the latest with x_key
+        and one of y_keys (in that order of preference)."""
+        names = list(self.fits)
+        if prefer in self.fits:
+            names.append(prefer)
+        found = None
+        for name in names:
+            curves = self.fits[name]
+            for key in y_keys:
+                if x_key in curves and key in curves and len(curves[key]) == len(curves[x_key]):
+                    found = (curves[x_key], curves[key])
+                    break
+        return found
+
     def set_fit(self, name: str, curves: dict[str, np.ndarray]) -> None:
-        """A FitUpdate: an E(t) curve ({t_s, E}) or a sweep model ({freq_hz, amplitude[, phase_deg]})."""
+        """A FitUpdate: an E(t) model ({t_s, E_fit | energy_fit | E}) or a sweep model
+        ({freq_hz, amplitude[, phase_deg]}; the one named "sweep_model" wins)."""
         self.fits[name] = {k: np.asarray(v, dtype=float) for k, v in curves.items()}
         self._dirty = True
 
@@ -183,18 +205,27 @@ class LivePlots(QWidget):
             self.c_amp.setData(sw[order, 0], sw[order, 1])
             if np.isfinite(sw[:, 2]).any():
                 self.c_phase.setData(sw[order, 0], sw[order, 2])
-        for curves in self.fits.values():
-            if "t_s" in curves and "E" in curves:
-                ok = curves["E"] > 0
-                self.c_fit.setData(curves["t_s"][ok], curves["E"][ok])
-            if "freq_hz" in curves and "amplitude" in curves:
-                self.c_amp_fit.setData(curves["freq_hz"], curves["amplitude"])
-                if "phase_deg" in curves:
-                    self.c_phase_fit.setData(curves["freq_hz"], curves["phase_deg"])
+        e_fit = self._pick_fit("t_s", E_FIT_KEYS)
+        if e_fit is not None:
+            x, y = e_fit
+            ok = y > 0
+            self.c_fit.setData(x[ok], y[ok])
+        amp_fit = self._pick_fit("freq_hz", ("amplitude",), prefer="sweep_model")
+        if amp_fit is not None:
+            self.c_amp_fit.setData(*amp_fit)
+        phase_fit = self._pick_fit("freq_hz", ("phase_deg",), prefer="sweep_model")
+        if phase_fit is not None:
+            self.c_phase_fit.setData(*phase_fit)
         self.refresh_count += 1
         now = time.perf_counter()
         self.refresh_times.append(now)
         self.refresh_cost_s.append(now - t0)
+
+    def _show_sweep(self, shown: bool) -> None:
+        """The sweep row takes room only once a sweep sends points."""
+        self.sweep_shown = shown
+        for w in self.sweep_views:
+            w.setVisible(shown)
 
     def _update_x_range(self) -> None:
         """The time axes move in round steps (not every frame): regenerating the ticks of four
@@ -207,8 +238,8 @@ class LivePlots(QWidget):
         if self._x_range is not None and self._x_range[0] <= t0 and t1 <= self._x_range[1]:
             return
         span = max(t1 - t0, 1e-3)
-        step = 10.0 ** math.floor(math.log10(span))
-        hi = t0 + math.ceil(span / step + 1e-9) * step
+        step = 0.5 * 10.0 ** math.floor(math.log10(span))
+        hi = t0 + max(1, math.ceil(span / step)) * step
         self._x_range = (t0, hi)
         for p in self.time_plots:
             p.setXRange(t0, hi, padding=0.0)
