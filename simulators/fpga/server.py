@@ -75,6 +75,8 @@ class _PtyPort(_Port):
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)
         tty.setraw(self.master)
+        # non-blocking: a blocking write to a pty waits for room for ALL its bytes, past select
+        os.set_blocking(self.master, False)
         self.path = os.ttyname(self.slave)
         self.closed = False
         self.blocked = False  # a write timed out: nobody reads; skip writes until the pty drains
@@ -92,7 +94,10 @@ class _PtyPort(_Port):
                 if not ready:
                     self.blocked = True
                     return False
-                n = os.write(self.master, view)
+                try:
+                    n = os.write(self.master, view)
+                except BlockingIOError:
+                    continue
                 view = view[n:]
             return True
         except (OSError, ValueError):
@@ -104,6 +109,8 @@ class _PtyPort(_Port):
             if not ready:
                 return b""
             return os.read(self.master, 65536) or None
+        except BlockingIOError:
+            return b""
         except (OSError, ValueError):
             return None
 
