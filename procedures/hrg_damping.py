@@ -193,8 +193,9 @@ class HrgDamping(Procedure):
         if d is None or len(d) < 8:
             raise RuntimeError(f"the decay record holds {0 if d is None else len(d)} samples; at least 8 are needed")
         el = orbit_elements(d[:, 1:5])
-        t, e, th, k = _thin(d[:, 0], el["E"], np.unwrap(4 * el["theta_rad"]) / 4, el["k"] / np.maximum(el["a"], 1e-300))
-        ctx.fit("hrg-damping elements", t_s=t, energy=e, theta_deg=np.degrees(th), quadrature_rel=k)
+        t, th, k = _thin(d[:, 0], np.unwrap(4 * el["theta_rad"]) / 4, el["k"] / np.maximum(el["a"], 1e-300))
+        ctx.fit("hrg-damping theta", t_s=t, theta_deg=np.degrees(th))
+        ctx.fit("hrg-damping quadrature", t_s=t, quadrature_rel=k)
         ctx.measure("quadrature_rel_max", float(np.max(np.abs(el["k"] / np.maximum(el["a"], 1e-300)))), "")
 
     @step("Fit the free-decay model")
@@ -203,7 +204,8 @@ class HrgDamping(Procedure):
         fit = fit_free_decay(d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4], method=self.fit_method, model=self.fit_model)
         self._fit = fit
         t, e, ef, r = _thin(fit.t_s, fit.energy, fit.energy_fit, fit.residuals_ln_e)
-        ctx.fit("hrg-damping energy", t_s=t, energy=e, energy_fit=ef, residual_ln_e=r)
+        ctx.fit("hrg-damping energy", t_s=t, energy=e, energy_fit=ef)
+        ctx.fit("hrg-damping residuals", t_s=t, residual_ln_e=r)
         f0_hz = self._f0_hz(ctx)
         ctx.record(REF, ("t_s", "f0_hz"), np.array([[ctx.clock.now(), f0_hz]]))
         for res in self._decay_results(fit, f0_hz):

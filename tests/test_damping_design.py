@@ -60,6 +60,18 @@ def test_design_recommends_a_slower_table_and_prints_it():
     assert d.four_channel_recommended.std_delta_inv_tau_per_s < d.recommended.std_delta_inv_tau_per_s
 
 
+def test_patent_model_is_pushed_to_faster_rates_by_its_bias():
+    """With a 0.05 rad/s split and 0.02 quadrature the cos 4 theta model's bias grows as the rate
+    falls, so its best rate is faster than the quadrature-aware model's, and its error larger."""
+    kw = dict(tau_s=300.0, delta_inv_tau_per_s=2e-4, noise_sigma=1e-4, stream_hz=200.0,
+              split_hz=0.05 / (2 * math.pi), quadrature=0.02, theta_tau_deg=20.0,
+              rates_dps=(2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 500.0), lengths_tau=(1.0,))
+    patent = design_hrg_damping(model="patent", **kw)
+    exact = design_hrg_damping(model="exact", **kw)
+    assert patent.recommended.rate_dps > exact.recommended.rate_dps
+    assert patent.recommended.total_rel > exact.recommended.total_rel
+
+
 def test_design_rejects_bad_input():
     with pytest.raises(ValueError, match="delta_inv_tau_per_s=0"):
         design_hrg_damping(tau_s=300.0, delta_inv_tau_per_s=0.0, noise_sigma=1e-4)

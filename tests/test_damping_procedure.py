@@ -91,8 +91,8 @@ def test_compensation_reduces_the_angle_drift(run):
 def test_fit_curves_are_published(run):
     _, events, _ = run
     fits = {e.name: e.curves for e in events if type(e).__name__ == "FitUpdate"}
-    assert {"hrg-damping energy", "hrg-damping elements", "hrg-damping drift before",
-            "hrg-damping drift after"} <= set(fits)
+    assert {"hrg-damping energy", "hrg-damping residuals", "hrg-damping theta", "hrg-damping quadrature",
+            "hrg-damping drift before", "hrg-damping drift after"} <= set(fits)
     assert len(fits["hrg-damping energy"]["energy_fit"]) <= 2000
 
 

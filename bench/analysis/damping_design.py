@@ -304,7 +304,7 @@ def design_hrg_damping(
     amplitude: float = 1.0,
     theta_tau_deg: float = 0.0,
     theta_w_deg: float = 0.0,
-    model: str = "patent",
+    model: str = "exact",
     rates_dps: tuple[float, ...] | None = None,
     lengths_tau: tuple[float, ...] = (1.0, 2.0, 3.0, 4.0),
     patent_rate_dps: float = 500.0,
@@ -313,8 +313,9 @@ def design_hrg_damping(
     """Table rate and record length minimising the predicted error of (b_c, b_s) for a fit model.
 
     For each rate and length: energy CRLB (std of the damping vector, relative to D) and the
-    noise-free model bias of `model` ("patent": cos 4 theta, biased by split x quadrature at low
-    rates; "exact": quadrature-aware).  The recommendation is the rate with the least total error
+    noise-free model bias of `model` ("exact": quadrature-aware, the procedure's default fit;
+    "patent": cos 4 theta, biased by split x quadrature at low rates, so its optimum is faster).
+    The recommendation is the rate with the least total error
     at the shortest length whose total error is within `length_tolerance` of the grid's best,
     above three times the highest rate where the wave degenerates (split with no quadrature loop)."""
     if model not in MODELS:
