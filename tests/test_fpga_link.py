@@ -265,3 +265,21 @@ def test_wait_without_a_stream_returns_at_once(bench):
     clock.sleep(0.5)
     link.sync(timeout_wall_s=0.1)
     assert link.stats.frames == n
+
+
+def test_reconnect_after_a_link_drop():
+    world = World(preset("hrg"), seed=0)
+    server = serve_fpga(world)
+    link = FpgaLink(server.url, timeout_s=0.5).connect()
+    try:
+        server.inject("link-drop")
+        with pytest.raises(LinkLostError):
+            for _ in range(20):
+                link.read_register("ID")
+                time.sleep(0.05)
+        assert not link.connected
+        link.connect()
+        assert link.connected and link.read_register("ID") == p.FPGA_ID
+    finally:
+        link.close()
+        server.stop()

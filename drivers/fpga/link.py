@@ -80,9 +80,12 @@ class FpgaLink:
 
     # --- connection ----------------------------------------------------------------------------
     def connect(self) -> FpgaLink:
-        """Open the port, start the reader and check the device's identity."""
+        """Open the port, start the reader and check the device's identity (after a lost link,
+        reopen it)."""
         if self._ser is not None:
-            return self
+            if self._link_error is None:
+                return self
+            self.close()
         try:
             self._ser = serial.serial_for_url(self.url, timeout=0, write_timeout=self.timeout_s)
         except (serial.SerialException, OSError, ValueError) as exc:
