@@ -130,8 +130,12 @@ class FpgaFirmware:
             if self.regs["FM_AMPLITUDE_HZ"] and self.regs["FM_RATE_HZ"]:
                 t_mid = t_s + 0.5 * n * dt_s
                 fm = self.regs["FM_AMPLITUDE_HZ"] * math.sin(2 * math.pi * self.regs["FM_RATE_HZ"] * t_mid)
-            world.ref_freq_hz = self.regs["PLL_FREQ_HZ"] + fm
-            self._out[1] = world.ref_freq_hz - self.regs["REF_FREQ_HZ"]
+            # the FPGA's NCO is the world's reference only while it drives, tracks or modulates;
+            # idle, it leaves the reference to whoever drives (the front end in a MEMS sweep)
+            fm_on = bool(self.regs["FM_AMPLITUDE_HZ"] and self.regs["FM_RATE_HZ"])
+            if ctrl & (p.DRIVE_EN | p.PLL_EN) or fm_on:
+                world.ref_freq_hz = self.regs["PLL_FREQ_HZ"] + fm
+            self._out[1] = self.regs["PLL_FREQ_HZ"] + fm - self.regs["REF_FREQ_HZ"]
             if ctrl & p.DRIVE_EN:
                 world.set_force("fpga", self._u)
             elif self._u is not None:
