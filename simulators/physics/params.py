@@ -134,9 +134,28 @@ class ResonatorParams:
         )
 
     def truth(self) -> dict[str, float]:
-        """Ground truth under the names the procedures' measurements use."""
+        """Ground truth under the names the procedures' measurements use: the physical names of
+        the HRG procedures, and the model coefficients, Q and axes (Maslov's alpha = stiffness
+        axis, beta = damping axis, both atan2/4 in (-45, 45] deg) of the identification."""
         th = ((self.theta_tau_deg % 90.0) + 90.0) % 90.0
-        return {
+        c = self.coefficients()
+        model = {
+            "gamma": c.gamma,
+            "b_c": c.b_c,
+            "b_s": c.b_s,
+            "c_m": c.c_m,
+            "n": c.n,
+            "h_c": c.h_c,
+            "h_s": c.h_s,
+            "xi": c.xi,
+            "kappa": c.kappa,
+            "Q": c.w0_rad_s / c.gamma,
+            "split_rad_s": TWO_PI * self.split_hz,
+            "alpha_deg": math.degrees(0.25 * math.atan2(c.h_s, c.h_c)),
+            "beta_deg": math.degrees(0.25 * math.atan2(c.b_s, c.b_c)),
+            "zero_rate_dps": math.degrees(c.nu_offset / (4.0 * c.bryan_factor)),
+        }
+        return model | {
             "tau_s": self.tau_s,
             "q_factor": self.q_factor,
             "theta_tau_deg": th,
