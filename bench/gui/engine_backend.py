@@ -108,13 +108,17 @@ class EngineBackend:
 
     # --- station panel ---------------------------------------------------------------------
     def _watch(self, event: ev.Event) -> None:
-        """Engine thread: keep the table's last row; publish a StationStatus now and then."""
+        """Engine thread: keep the table's last row; publish a StationStatus at each step
+        boundary and every STATUS_EVERY_WALL_S in between."""
         if isinstance(event, ev.SampleBlock) and event.stream == "table" and len(event.data):
             cols = event.columns
             if "rate_dps" in cols and "angle_deg" in cols:
                 row = np.asarray(event.data)[-1]
                 self._table_row = (float(row[cols.index("rate_dps")]), float(row[cols.index("angle_deg")]))
-        if not isinstance(event, ev.StationStatus) and time.monotonic() - self._last_status_wall > STATUS_EVERY_WALL_S:
+        if isinstance(event, ev.StationStatus):
+            return
+        at_step = isinstance(event, (ev.RunStarted, ev.StepStarted, ev.StepFinished))
+        if at_step or time.monotonic() - self._last_status_wall > STATUS_EVERY_WALL_S:
             self.publish_status(event.run_id)
 
     def publish_status(self, run_id: str = "") -> None:

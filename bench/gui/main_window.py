@@ -103,7 +103,7 @@ class MainWindow(QMainWindow):
         right = QSplitter(Qt.Orientation.Vertical)
         right.addWidget(self.plots)
         right.addWidget(tabs)
-        right.setStretchFactor(0, 4)
+        right.setStretchFactor(0, 3)
         right.setStretchFactor(1, 1)
         central = QSplitter(Qt.Orientation.Horizontal)
         central.addWidget(left)

@@ -40,12 +40,13 @@ class LivePlots(QWidget):
     """The plot area; feed it with `add_samples` and `set_fit`, it redraws itself.  `fpga` and
     `table` hold the whole run decimated (what is drawn), `recent` the last minute at full rate."""
 
-    def __init__(self, parent: QWidget | None = None, *, history_s: float = 300.0, rate_hz: float = 1000.0,
+    def __init__(self, parent: QWidget | None = None, *, history_s: float | None = None, rate_hz: float = 1000.0,
                  refresh_hz: float = 25.0, max_points: int = 1200,
                  recent_s: float = 60.0) -> None:
         super().__init__(parent)
         pg.setConfigOptions(antialias=False, background="w", foreground="k")
-        # whole history, decimated as it arrives (drawn), and the last recent_s at full rate
+        # the whole run (or its last history_s), decimated as it arrives (drawn), and the last
+        # recent_s at full rate
         self.fpga = MinMaxHistory(len(FPGA_COLS) - 1, max_points, history_s)
         self.table = MinMaxHistory(len(TABLE_COLS) - 1, max_points, history_s)
         self.recent = RingBuffer(int(recent_s * rate_hz), len(FPGA_COLS))
@@ -98,6 +99,8 @@ class LivePlots(QWidget):
         self._x_range: tuple[float, float] | None = None
         for p in (self.p_amp, self.p_phase):
             p.setLabel("bottom", "f", units="Hz")
+        for w in self.views:  # a fixed width: no relayout when the tick labels change
+            w.getPlotItem().getAxis("left").setWidth(62)
 
         self.timer = QTimer(self)
         self.timer.setInterval(max(1, int(round(1000.0 / refresh_hz))))
