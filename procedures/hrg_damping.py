@@ -183,9 +183,19 @@ class HrgDamping(Procedure):
 
     @step("Record cx, sx, cy, sy")
     def record(self, ctx):
-        rows = self._record(ctx, DECAY, self.record_s, "free decay")
-        self._decay = self._decimate(rows, self._sample_period_s(ctx))
-        ctx.log.info(f"recorded {len(self._decay)} samples over {self.record_s:g} s")
+        fpga = ctx.devices.fpga
+        period = self._sample_period_s(ctx)
+        dec = max(1, int(round(1.0 / (self.stream_hz * period))))
+        old = int(fpga.read_register("STREAM_DECIMATION"))
+        if dec != old:  # the FPGA streams at the requested rate (every dec-th sample) for the decay
+            fpga.start_stream(dec)
+        try:
+            rows = self._record(ctx, DECAY, self.record_s, "free decay")
+        finally:
+            if dec != old:
+                fpga.start_stream(old)
+        self._decay = self._decimate(rows, period)
+        ctx.log.info(f"recorded {len(self._decay)} samples over {self.record_s:g} s at {1 / (dec * period):g} Hz")
 
     @step("Compute E, theta and the quadrature")
     def elements(self, ctx):

@@ -1,8 +1,8 @@
 """The `hrg-damping` procedure end to end on the simulated `sim-hrg` station (real drivers over
 loopback, lockstep clock), checked against the simulator's truth.
 
-Kept short for CI: a 60 s decay at 20 deg/s (the design's regime: the energy bound there is far
-tighter than at the patent's 500 deg/s) and 45 s drift records at a 4 deg/s precession (two turns
+Kept short for CI: a 60 s decay at 20 deg/s streamed at 200 Hz (the design's regime: the energy
+bound there is far tighter than at the patent's 500 deg/s) and 45 s drift records at a 4 deg/s precession (two turns
 of the 4-theta harmonic each).  Tolerances come from the fit's own 95 % intervals (validated by
 Monte Carlo in test_damping.py): the truth must lie within 2x the half-width (about 4 sigma)."""
 
@@ -18,6 +18,7 @@ from procedures.hrg_damping import HrgDamping
 PARAMS = {
     "rate_dps": 20.0,
     "record_s": 60.0,
+    "stream_hz": 200.0,  # the FPGA streams every 5th sample during the decay
     "verify_rate_dps": 4.0,
     "verify_s": 45.0,
     "verify_settle_s": 2.0,
@@ -64,6 +65,18 @@ def test_runs_to_completion_with_safe_state(run):
     assert record.safe_state
     started = [e.name for e in events if type(e).__name__ == "StepStarted"]
     assert started == [s for s, _ in HrgDamping.step_specs()]
+
+
+def test_decay_streamed_at_the_requested_rate(run):
+    """stream_hz = 200: the decay window of the raw file holds 200 samples a second."""
+    from bench.recorder import RunData
+
+    record, _, _ = run
+    with RunData(record.raw_file) as data:
+        kind, t0, t1 = data.array("damping_windows")[0]
+        t = data.table("fpga")["t_s"]
+        n = int(((t > t0) & (t <= t1)).sum())
+    assert kind == 0.0 and n == pytest.approx(200 * (t1 - t0), abs=2)
 
 
 def test_measurements_match_the_simulator_truth(run):
