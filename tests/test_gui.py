@@ -104,10 +104,16 @@ def test_start_pause_and_abort_from_the_window(window, qtbot):
     _start(qtbot, win, "demo-decay", duration_s=3600.0)
     qtbot.waitUntil(lambda: win.run_active and win.plots.fpga.total_rows > 0, timeout=WAIT_MS)
     assert not win.start_button.isEnabled() and win.abort_button.isEnabled()
+    qtbot.waitUntil(lambda: win.steps.progress.value() > 0, timeout=WAIT_MS)
     qtbot.mouseClick(win.pause_button, Qt.MouseButton.LeftButton)
     assert win.pause_button.text() == "Resume"
+    qtbot.wait(300)  # at most one step of the procedure after the pause
+    held = win.steps.progress.value()
+    qtbot.wait(700)  # 7 simulated seconds at 10x: 7 progress events if it were running
+    assert win.steps.progress.value() == held
     qtbot.mouseClick(win.pause_button, Qt.MouseButton.LeftButton)
     assert win.pause_button.text() == "Pause"
+    qtbot.waitUntil(lambda: win.steps.progress.value() > held, timeout=WAIT_MS)
     qtbot.mouseClick(win.abort_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: win.last_finished is not None, timeout=WAIT_MS)
     assert win.last_finished.outcome == "ABORTED"
@@ -225,5 +231,36 @@ def test_window_on_the_engine_station_runs_and_reports(qtbot, tmp_path, monkeypa
         assert win.results.report_button.isEnabled()
         html = win.render_report()
         assert html is not None and "table_rate_dps" in open(html).read()
+    finally:
+        backend.close()
+
+
+def test_mems_sweep_on_the_engine_fills_amplitude_and_phase_with_the_fit(qtbot, tmp_path, monkeypatch):
+    """The MEMS forced sweep on sim-mems: amplitude and phase fill in point by point (the sweep
+    row appears with the first point) and the procedure's model is drawn over them."""
+    monkeypatch.chdir(tmp_path)
+    from bench.gui.engine_backend import EngineBackend
+
+    backend = EngineBackend("sim-mems", seed=0)
+    win = MainWindow(backend)
+    qtbot.addWidget(win)
+    counts: list[int] = []
+    win.bridge.events.connect(lambda _b: counts.append(len(win.plots.sweep)))
+    try:
+        assert not win.plots.sweep_shown
+        win.procedure.setCurrentText("mems-sweep")
+        assert win.form.fields["both_directions"].isChecked()
+        win.form.set_value("both_directions", False)
+        _start(qtbot, win, "mems-sweep", n_points=9)
+        qtbot.waitUntil(lambda: win.last_finished is not None, timeout=120_000)
+        assert win.last_finished.safe_state, win.last_finished.end_reason
+        assert len(win.plots.sweep) == 9 and win.plots.sweep_shown
+        assert len(set(counts)) > 2  # points arrived over several batches, not all at the end
+        x, y = win.plots.c_amp.getData()
+        assert np.all(np.diff(x) > 0) and np.all(y > 0)
+        xf, yf = win.plots.c_amp_fit.getData()
+        assert xf is not None and len(xf) > 9  # the model curve over the points
+        xp, _ = win.plots.c_phase.getData()
+        assert len(xp) == 9
     finally:
         backend.close()
