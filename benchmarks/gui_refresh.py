@@ -27,6 +27,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--prefill-s", type=float, default=280.0)
     ap.add_argument("--measure-s", type=float, default=10.0)
+    ap.add_argument("--station", default="sim-world",
+                    help="sim-world (in-process HRG source) or sim-hrg (engine, simulators on loopback, hrg-damping)")
     args = ap.parse_args()
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6.QtCore import QTimer
@@ -36,7 +38,17 @@ def main() -> None:
     from bench.gui.sim_backend import SimWorldBackend
 
     app = QApplication.instance() or QApplication([])
-    backend = SimWorldBackend(seed=0, speed=math.inf)
+    if args.station == "sim-world":
+        backend = SimWorldBackend(seed=0, speed=math.inf)
+        procedure, params = "demo-decay", {"duration_s": "3600"}
+    else:
+        import tempfile
+
+        from bench.gui.engine_backend import EngineBackend
+
+        os.chdir(tempfile.mkdtemp(prefix="gui_refresh_"))  # the run's raw file and results index
+        backend = EngineBackend(args.station, seed=0)
+        procedure, params = "hrg-damping", {"record_s": "3600", "compensate": "false"}
     win = MainWindow(backend)
     win.show()
 
@@ -87,11 +99,13 @@ def main() -> None:
               f"on {os.cpu_count()} cores")
         print(f"  engine -> GUI delivery: median {_pct(lat, 50):.1f} ms, p99 {_pct(lat, 99):.1f} ms")
 
-    win.procedure.setCurrentText("demo-decay")
-    win.form.set_value("duration_s", "3600")
+    win.procedure.setCurrentText(procedure)
+    for k, v in params.items():
+        win.form.set_value(k, v)
     t0 = time.perf_counter()
     win.start()
     pump_until(lambda: win.t_sim_s >= args.prefill_s, 600)
+    print(f"station {args.station}, procedure {procedure}")
     print(f"prefill: {win.t_sim_s:.0f} s of 1 kHz simulated in {time.perf_counter() - t0:.1f} s wall (max speed)")
     measure(f"max speed with {args.prefill_s:.0f} s of history", 3.0)
     backend.set_speed(1.0)
