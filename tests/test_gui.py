@@ -216,6 +216,10 @@ def test_window_on_the_engine_station_runs_and_reports(qtbot, tmp_path, monkeypa
     win = MainWindow(backend)
     qtbot.addWidget(win)
     try:
+        win.station.speed.setCurrentText("100x")  # the station's SimClock follows the control
+        assert backend.station.clock.speed == 100.0
+        win.station.speed.setCurrentText("max")
+        assert math.isinf(backend.station.clock.speed)
         win.procedure.setCurrentText("table-spin")
         spec = {s.name: s for s in win.form.specs}["rate_dps"]
         assert (spec.unit, spec.low, spec.high) == ("deg/s", -1000.0, 1000.0)

@@ -145,6 +145,7 @@ def replay_events(path: str | Path) -> list[ev.Event]:
                                   value=float(row.get("value", float("nan"))), unit=str(row.get("unit", "")),
                                   low=row.get("low"), high=row.get("high"),
                                   outcome=str(row.get("outcome", "COMPLETE")), dut=row.get("dut")))
+    out.append(ev.StepFinished(run_id, t_end, name="replay", index=0))
     out.append(ev.RunFinished(run_id, t_end, outcome=_text(attrs.get("outcome", "COMPLETE")),
                               end_reason=f"replay of {path.name}", safe_state=bool(attrs.get("safe_state", False)),
                               raw_file=str(path)))
