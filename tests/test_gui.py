@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -163,6 +164,29 @@ def test_bridge_delivers_in_the_gui_thread(qtbot):
     assert all(th is bridge.thread() for th in threads)
     assert len(threads) < 2000  # batched: the event loop was not woken per event
     assert not bus.errors
+
+
+def test_bridge_holds_the_publisher_only_when_asked(qtbot):
+    """Backpressure (lockstep only): beyond max_pending queued events each publish waits up to
+    max_wait_s for the GUI; with max_wait_s = 0 (real time, real bench) it never waits."""
+    bus = ev.EventBus()
+    bridge = EventBridge(bus, max_pending=10)
+
+    def publish_all() -> float:
+        t = threading.Thread(target=lambda: [bus.publish(ev.Log("r", float(i))) for i in range(40)])
+        t0 = time.perf_counter()
+        t.start()
+        t.join(30)  # the GUI thread does not drain meanwhile
+        return time.perf_counter() - t0
+
+    assert publish_all() < 0.5  # nothing held
+    bridge.drain()
+    bridge.max_wait_s = 0.02
+    assert publish_all() >= 30 * 0.02 * 0.9  # events 11..40 each waited max_wait_s
+    got: list = []
+    bridge.events.connect(got.extend)
+    bridge.drain()
+    assert len(got) == 40
 
 
 def test_replay_of_a_recorded_run(qtbot, tmp_path):

@@ -5,10 +5,13 @@ sooner or later (bluesky#1222).  The bridge only queues the event and, when the 
 empty, emits a queued signal; the GUI thread then drains the whole queue at once.  However fast
 the engine runs, the event loop receives at most one wake-up per drain, so it cannot be flooded;
 a drain hands over at most `slice_s` of work and re-posts itself for the rest, so timers and
-input keep running while a backlog is worked off.  When more than `max_pending` events wait, the
-publisher is held (at most `max_wait_s` per event) so a run at "max" speed goes at the pace the
-window can draw instead of queueing without bound; a hung window only slows the engine, never
-stops it (abort and the safe state still go through).
+input keep running while a backlog is worked off.
+
+Backpressure is opt-in (`max_wait_s` > 0), for a simulated station in lockstep only: when more
+than `max_pending` events wait, the publisher is held (at most `max_wait_s` per event) so a run
+at "max" speed goes at the pace the window can draw instead of queueing without bound.  Never on
+real time or a real bench: there a held link reader would lose frames, so the queue just grows
+until the window catches up.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ class EventBridge(QObject):
     _wake = Signal()
 
     def __init__(self, bus: EventBus | None = None, parent: QObject | None = None, *, slice_s: float = 0.02,
-                 max_pending: int = 50, max_wait_s: float = 0.25) -> None:
+                 max_pending: int = 50, max_wait_s: float = 0.0) -> None:
         super().__init__(parent)
         self._queue: deque[Event] = deque()
         self._lock = threading.Lock()
@@ -64,7 +67,8 @@ class EventBridge(QObject):
     def post(self, event: Event) -> None:
         """Any thread: queue the event and wake the GUI thread if it is not already woken."""
         with self._lock:
-            if len(self._queue) >= self.max_pending and threading.current_thread() is not threading.main_thread():
+            if (self.max_wait_s > 0 and len(self._queue) >= self.max_pending
+                    and threading.current_thread() is not threading.main_thread()):
                 self._drained.wait_for(lambda: len(self._queue) < self.max_pending, self.max_wait_s)
             self._queue.append(event)
             wake = not self._pending

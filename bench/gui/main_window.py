@@ -3,6 +3,7 @@ live plots, log and results, all fed by the engine's events through the bridge."
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -34,6 +35,7 @@ from .param_form import ParameterForm
 from .plots import LivePlots
 
 GIL_SWITCH_S = 0.0005
+LOCKSTEP_WAIT_S = 0.25  # longest the bridge holds a lockstep engine per event
 
 
 class MainWindow(QMainWindow):
@@ -125,6 +127,7 @@ class MainWindow(QMainWindow):
 
         self.bridge = EventBridge(backend.bus, self)
         self.bridge.events.connect(self.on_events)
+        self._set_backpressure(float(self.station.speed.currentData()))
         self._on_procedure(self.procedure.currentText())
 
     # --- controls --------------------------------------------------------------------------
@@ -143,6 +146,12 @@ class MainWindow(QMainWindow):
     def _on_speed(self, speed: float) -> None:
         if self.backend.simulated:
             self.backend.set_speed(speed)
+        self._set_backpressure(speed)
+
+    def _set_backpressure(self, speed: float) -> None:
+        """Hold the engine for the window only in lockstep on a simulated station (nothing is
+        lost there: the world waits); in real time or on a real bench, never."""
+        self.bridge.max_wait_s = LOCKSTEP_WAIT_S if self.backend.simulated and math.isinf(speed) else 0.0
 
     def start(self) -> None:
         """Start the selected procedure with the form's values (refused while one is invalid)."""
