@@ -15,31 +15,11 @@ from bench.station import SimStation
 from procedures.hrg_free_decay import HrgFreeDecay
 from procedures.mems_sweep import MemsSweep, choose_model
 
-# The built-in sim-mems also carries the FPGA link, whose simulated firmware sets the World's
-# reference frequency every block even with its PLL off, overriding the front end's drive
-# frequency (reported to the lead).  This station is sim-mems with the front end only.
-STATION_TOML = """
-[station]
-id = "sim-mems-fe"
-description = "simulated MEMS ring, front end only"
-
-[simulation]
-preset = "mems"
-seed = 0
-speed = 0.0
-
-[devices.frontend]
-driver = "scpi-frontend"
-max_amplitude_v = 5.0
-"""
-
 
 @pytest.fixture(scope="module")
 def sweep_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("mems")
-    path = tmp / "sim-mems-fe.toml"
-    path.write_text(STATION_TOML)
-    station = SimStation(path, seed=0).open()
+    station = SimStation("sim-mems", seed=0).open()  # the built-in station: front end, table and FPGA
     try:
         record = Runner(station, runs_dir=tmp / "runs").run(MemsSweep, {"n_points": 17})
         yield record, station.truth()
@@ -61,8 +41,8 @@ def test_mems_sweep_identifies_the_simulated_ring(sweep_run):
         "split_hz": truth["split_hz"],
         "damping_anisotropy_per_s": truth["damping_anisotropy_per_s"],
         "freq_offset_hz": truth["freq_offset_hz"],
-        "alpha_deg": truth["theta_w_deg"],
-        "beta_deg": truth["theta_tau_deg"] - 90.0,  # truth is in [0, 90); the fit's axis in (-45, 45]
+        "alpha_deg": truth["alpha_deg"],
+        "beta_deg": truth["beta_deg"],
         "xi": 18.217,
         "gamma": 43.029,
         "u1": 50.0 * 0.888 * math.sin(math.radians(46.43)),  # drive_gain x amplitude x sin(phase)

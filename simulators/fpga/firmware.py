@@ -109,6 +109,7 @@ class FpgaFirmware:
         self._agc_int = 0.0
         self._quad_int = 0.0
         self._pll_int_hz = float(self.regs["PLL_FREQ_HZ"])
+        self._owns_ref = False  # the world's reference follows this NCO only while active
         self._phase_err = 0.0
         self._a = 0.0
         self._elements = (0.0, 0.0, 0.0, 0.0)  # a, k, theta, chi
@@ -132,9 +133,11 @@ class FpgaFirmware:
                 fm = self.regs["FM_AMPLITUDE_HZ"] * math.sin(2 * math.pi * self.regs["FM_RATE_HZ"] * t_mid)
             # the FPGA's NCO is the world's reference only while it drives, tracks or modulates;
             # idle, it leaves the reference to whoever drives (the front end in a MEMS sweep)
-            fm_on = bool(self.regs["FM_AMPLITUDE_HZ"] and self.regs["FM_RATE_HZ"])
-            if ctrl & (p.DRIVE_EN | p.PLL_EN) or fm_on:
+            # (one more block after going idle, so the reference ends at the NCO's final value)
+            active = bool(ctrl & (p.DRIVE_EN | p.PLL_EN) or (self.regs["FM_AMPLITUDE_HZ"] and self.regs["FM_RATE_HZ"]))
+            if active or self._owns_ref:
                 world.ref_freq_hz = self.regs["PLL_FREQ_HZ"] + fm
+            self._owns_ref = active
             self._out[1] = self.regs["PLL_FREQ_HZ"] + fm - self.regs["REF_FREQ_HZ"]
             if ctrl & p.DRIVE_EN:
                 world.set_force("fpga", self._u)
