@@ -123,6 +123,36 @@ def test_decimation_and_wait_for_time(bench):
     assert len(idx) == 40
 
 
+def test_decimated_frames_carry_the_boxcar_mean_of_their_window(bench):
+    """Truth: the world's measured samples; each decimated frame is the mean of the 25 samples
+    ending at its index (float32 on the wire, hence the tolerance), across block boundaries."""
+    world, clock, _, link = bench
+    measured: dict[int, np.ndarray] = {}
+
+    class Tap:
+        def before_block(self, *a):
+            pass
+
+        def after_block(self, w, block):
+            measured.update(zip(block.index.tolist(), block.q_meas, strict=True))
+
+    world.attach(Tap())
+    blocks = _collect(link)
+    link.start_stream(25)
+    clock.sleep(0.333)  # blocks that end mid-window carry their partial sums
+    clock.sleep(0.667)
+    link.wait_for_sample(clock.now(), timeout_wall_s=10.0)
+    rows = np.vstack(blocks)
+    checked = 0
+    for row in rows:
+        i = int(row[0])
+        window = [measured[j] for j in range(i - 24, i + 1) if j in measured]
+        if len(window) == 25:
+            np.testing.assert_allclose(row[2:6], np.mean(window, axis=0), rtol=1e-5, atol=1e-7)
+            checked += 1
+    assert checked >= 38
+
+
 def test_dropped_and_corrupted_frames_are_counted_never_wrong(bench):
     """Faults at 2 % drop and 5 % corruption per frame: every delivered sample equals what the
     world measured, and every missing frame is counted (dropped = frames sent - delivered)."""

@@ -47,6 +47,7 @@ class FpgaFirmware:
         self.regs["SAMPLE_INDEX"] = world.sample_index
         self.sink: StreamSink | None = None
         self._stream_seq = 0
+        self._dec_sum, self._dec_n = np.zeros(4), 0  # boxcar decimator's carry between blocks
         self._reset_loops()
 
     # --- registers (called by the server's command thread) ----------------------------------------
@@ -69,6 +70,8 @@ class FpgaFirmware:
                 self._set_ctrl(int(value))
                 return value
             self.regs[reg.name] = int(value) if reg.kind == "u" else float(value)
+            if reg.name == "STREAM_DECIMATION":
+                self._dec_sum, self._dec_n = np.zeros(4), 0
             if reg.name == "REF_FREQ_HZ" and not int(self.regs["CTRL"]) & p.PLL_EN:
                 self.regs["PLL_FREQ_HZ"] = float(value)
             return self.regs[reg.name]
@@ -79,6 +82,7 @@ class FpgaFirmware:
         rising = new & ~old
         if rising & p.STREAM_EN:
             self._stream_seq = 0
+            self._dec_sum, self._dec_n = np.zeros(4), 0
             self.regs["FRAMES_SENT"] = 0
             self.regs["STREAM_START_INDEX"] = self.regs["SAMPLE_INDEX"]
         if rising & p.PLL_EN:
@@ -204,15 +208,35 @@ class FpgaFirmware:
 
     # --- stream ---------------------------------------------------------------------------------
     def _emit(self, block) -> None:
+        """Stream the block, decimated by a boxcar (CIC-1) filter as the real firmware does: each
+        frame carries the mean of the `dec` samples ending at its index, so decimating keeps the
+        information (noise falls by sqrt(dec)) instead of throwing samples away."""
         dec = int(self.regs["STREAM_DECIMATION"])
         index = block.index
-        sel = index % dec == 0 if dec > 1 else slice(None)
+        if dec > 1:
+            q = block.q_meas
+            pos = np.flatnonzero(index % dec == 0)
+            csum = np.cumsum(q, axis=0) + self._dec_sum
+            count = np.arange(1, len(index) + 1) + self._dec_n
+            if len(pos):
+                prev_sum = np.vstack([np.zeros((1, 4)), csum[pos[:-1]]])
+                prev_n = np.concatenate([[0], count[pos[:-1]]])
+                means = (csum[pos] - prev_sum) / (count[pos] - prev_n)[:, None]
+                self._dec_sum = csum[-1] - csum[pos[-1]]
+                self._dec_n = int(count[-1] - count[pos[-1]])
+            else:
+                means = np.empty((0, 4))
+                self._dec_sum, self._dec_n = csum[-1], int(count[-1])
+            sel = pos
+        else:
+            sel = slice(None)
+            means = block.q_meas
         idx = index[sel]
         n = len(idx)
         if n == 0:
             return
         ch = np.empty((n, 8))
-        ch[:, :4] = block.q_meas[sel]
+        ch[:, :4] = means
         ch[:, 4:] = self._out
         data = p.encode_stream(self._stream_seq, idx, block.t_s[sel], ch)
         self._stream_seq = (self._stream_seq + n) % p.SEQ_MOD
