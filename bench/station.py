@@ -310,6 +310,11 @@ class _FpgaHealth:
     def __call__(self, link: Any) -> None:
         if not link.connected:
             raise LinkLostError(f"FPGA link {link.url} lost")
+        if getattr(link.clock, "lockstep", False):
+            # lockstep: the world waits while the stream catches up to the bench clock, so a
+            # link that died is found at this check's simulated time, not whenever the reader
+            # thread happens to notice (a real bench's FPGA clock is not the bench's: skipped)
+            link.sync(timeout_wall_s=max(1.0, 2.0 * getattr(link, "timeout_s", 1.0)))
         s = link.stats
         base = getattr(link, "_gyrobench_stats0", None)
         if base is None:

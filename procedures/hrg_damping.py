@@ -88,7 +88,7 @@ class HrgDamping(Procedure):
     rate_hold_s = Param(2.0, unit="s", low=0.0, high=600.0, doc="time the rate must stay within tolerance")
     rate_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to become stable at rate")
     record_s = Param(900.0, unit="s", low=1.0, high=100000.0, doc="record duration (about 3 tau)")
-    stream_hz = Param(1000.0, unit="Hz", low=0.1, high=1e6, doc="rate of the samples fitted (stream decimation)")
+    stream_hz = Param(100.0, unit="Hz", low=0.1, high=1e6, doc="rate of the samples fitted (boxcar-decimated stream)")
     fit_method = Param("log-linear", choices=METHODS, doc="estimator (bench.analysis.damping)")
     fit_model = Param("exact", choices=MODELS, doc="energy model: quadrature-aware or the patent's")
     compensate = Param(True, doc="write the coefficients to the FPGA and verify the drift off and on")

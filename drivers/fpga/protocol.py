@@ -99,7 +99,7 @@ REGISTERS: tuple[Register, ...] = (
     Register("STREAM_DECIMATION", 0x08, "u", "rw", 1, 100000, default=1,
              doc="stream every Nth sample (sample index divisible by N)"),
     Register("STREAM_START_INDEX", 0x09, "u", "ro", doc="SAMPLE_INDEX when the stream was enabled"),
-    Register("LOOP_PERIOD_S", 0x0A, "f", "rw", 1e-4, 1.0, "s", 0.01, "loop update period (max block)"),
+    Register("LOOP_PERIOD_S", 0x0A, "f", "rw", 1e-4, 1.0, "s", 0.05, "loop update period (max block)"),
     Register("FORCE_LIMIT", 0x0B, "f", "rw", 0.0, 100.0, "1/s", 1.0, "clamp on each loop force"),
     Register("DRIVE_FORCE", 0x0C, "f", "rw", -100.0, 100.0, "1/s", 0.0, "open-loop amplitude force, AGC off"),
     Register("AGC_SETPOINT", 0x10, "f", "rw", 0.0, 100.0, "", 1.0, "amplitude setpoint a"),
