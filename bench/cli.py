@@ -107,11 +107,31 @@ def _cmd_run(args: argparse.Namespace) -> int:
         station.close()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    js = rec.as_json()
+    report = None
+    if args.report and js.get("raw_file"):  # beside the raw file, same name with .html
+        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if store else None)
     if args.json:
-        print(json.dumps(rec.as_json()))
+        print(json.dumps(js))
     else:
-        _print_record(rec.as_json())
+        _print_record(js)
+        if report is not None:
+            print(f"  report {report}")
     return EXIT_BAD_OUTCOME if rec.outcome in BAD_OUTCOMES else EXIT_OK
+
+
+def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None = None) -> Any:
+    """Render the HTML report of a recorded run beside its raw file (or to output); its path."""
+    from pathlib import Path
+
+    from bench.recorder import open_run
+    from bench.report import render_report
+
+    with open_run(raw_file) as data:
+        html = render_report(data, row)
+        out = Path(output or data.path.with_suffix(".html"))
+    out.write_text(html)
+    return out
 
 
 def _print_record(js: dict[str, Any]) -> None:
@@ -259,9 +279,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from pathlib import Path
 
-    from bench.report import render_report
 
     try:
         data, store, run_id = _open_recorded(args.run, args.results)
@@ -270,10 +288,35 @@ def _cmd_report(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     with data:
         row = store.get_run(run_id) if store is not None else None
-        html = render_report(data, row)
-    out = Path(args.output or data.path.with_suffix(".html"))
-    out.write_text(html)
-    print(out)
+        raw_file = str(data.path)
+    print(_write_report(raw_file, row, args.output))
+    return EXIT_OK
+
+
+def _cmd_design(args: argparse.Namespace) -> int:
+    from bench.analysis.damping_design import design_hrg_damping
+    from simulators.physics.params import ParameterError, preset
+
+    try:
+        p = preset(args.preset)
+        design = design_hrg_damping(
+            tau_s=args.tau_s if args.tau_s is not None else p.tau_s,
+            delta_inv_tau_per_s=(
+                args.delta_inv_tau_per_s if args.delta_inv_tau_per_s is not None else p.delta_inv_tau_per_s
+            ),
+            noise_sigma=args.noise_sigma if args.noise_sigma is not None else p.noise_sigma,
+            stream_hz=args.stream_hz,
+            bryan_factor=args.bryan_factor if args.bryan_factor is not None else p.bryan_factor,
+            split_hz=args.split_hz if args.split_hz is not None else p.split_hz,
+            quadrature=args.quadrature,
+            theta_tau_deg=p.theta_tau_deg,
+            theta_w_deg=p.theta_w_deg,
+            model=args.model,
+        )
+    except (ParameterError, ValueError) as exc:
+        _err(str(exc))
+        return EXIT_USAGE
+    print(design.summary())
     return EXIT_OK
 
 
@@ -333,7 +376,21 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--runs-dir", default=None, help="directory of the raw HDF5 files (default: station's)")
     run.add_argument("--operator", default="")
     run.add_argument("--dut", action="append", default=[], metavar="SERIAL", help="serial of a gyro under test")
+    run.add_argument("--report", action="store_true", help="also write the run's HTML report and print its path")
     run.set_defaults(func=_cmd_run)
+
+    design = sub.add_parser("design", help="experiment design: table rate and record length for a procedure")
+    design.add_argument("procedure", choices=["hrg-damping"])
+    design.add_argument("--preset", default="hrg", help="resonator preset giving the defaults below")
+    design.add_argument("--tau-s", type=float, default=None)
+    design.add_argument("--delta-inv-tau-per-s", type=float, default=None)
+    design.add_argument("--noise-sigma", type=float, default=None, help="white noise per channel per streamed sample")
+    design.add_argument("--stream-hz", type=float, default=1000.0)
+    design.add_argument("--bryan-factor", type=float, default=None)
+    design.add_argument("--split-hz", type=float, default=None)
+    design.add_argument("--quadrature", type=float, default=0.0, help="quadrature k left at the cut (amplitude 1)")
+    design.add_argument("--model", choices=["exact", "patent"], default="exact", help="energy model of the fit")
+    design.set_defaults(func=_cmd_design)
 
     lst = sub.add_parser("list", help="procedures (with parameters), stations, drivers, fault kinds")
     lst.add_argument("--json", action="store_true")

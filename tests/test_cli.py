@@ -118,6 +118,28 @@ def test_bad_parameter_and_station_exit_2_naming_them(tmp_path, capsys, monkeypa
     assert not (tmp_path / "runs").exists()  # nothing was started
 
 
+def test_run_with_report_prints_truth_and_the_report_path(tmp_path):
+    r = _run(["run", "table-spin", "--set", "hold_s=0.5", "--report"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    report = Path(r.stdout.strip().splitlines()[-1].split("report ", 1)[1])
+    assert report.is_file() and report.suffix == ".html" and "table_rate_dps" in report.read_text()
+    assert "safe state confirmed" in r.stdout
+
+
+def test_design_recommends_a_slower_table_than_the_patent(capsys):
+    """PHYSICS.md section 3: the scatter of D falls in proportion to the rate, so for the HRG
+    preset the recommended rate is far below 500 deg/s and the predicted gain is large."""
+    assert main(["design", "hrg-damping", "--stream-hz", "100"]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.strip().startswith("recommended: table rate"))
+    rate_dps = float(line.split("table rate ")[1].split(" deg/s")[0])
+    assert 0.1 < rate_dps < 50.0
+    gain = float(out.split("recommended is ")[1].split("x better")[0])
+    assert gain > 10.0
+    assert main(["design", "hrg-damping", "--tau-s", "-3"]) == 2
+    assert "tau" in capsys.readouterr().err
+
+
 def test_list_json(capsys):
     assert main(["list", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
