@@ -154,6 +154,8 @@ class ResonatorParams:
             "alpha_deg": math.degrees(0.25 * math.atan2(c.h_s, c.h_c)),
             "beta_deg": math.degrees(0.25 * math.atan2(c.b_s, c.b_c)),
             "zero_rate_dps": math.degrees(c.nu_offset / (4.0 * c.bryan_factor)),
+            # the damping drift (D/4) sin 4(theta - th_tau) referred to the gyro output (/K)
+            "drift_predicted_dph": rad_s_to_dph(self.delta_inv_tau_per_s / 4.0 / self.bryan_factor),
         }
         return model | {
             "tau_s": self.tau_s,
