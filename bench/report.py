@@ -10,6 +10,8 @@ from typing import Any
 import numpy as np
 
 MAX_POINTS = 1500
+#: what a fit's curves are plotted against, in order of preference
+_X_NAMES = ("t_s", "freq_hz", "drive_freq_hz", "theta_deg", "theta_rad")
 _COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2")
 
 
@@ -19,14 +21,32 @@ def _decimate(x: np.ndarray, ys: list[np.ndarray]) -> tuple[np.ndarray, list[np.
 
 
 def svg_plot(
-    x: np.ndarray, series: dict[str, np.ndarray], *, title: str, xlabel: str, width: int = 760, height: int = 260
+    x: np.ndarray,
+    series: dict[str, np.ndarray],
+    *,
+    title: str,
+    xlabel: str,
+    width: int = 760,
+    height: int = 260,
+    logy: bool | None = None,
+    markers: bool | None = None,
 ) -> str:
-    """Line plot of several series over x as an SVG string."""
+    """Plot of several series over x as an SVG string.  logy=None picks a log axis for positive
+    data spanning more than two decades; markers=None draws points where x is not monotonic
+    (e.g. drift against wave angle) and lines otherwise."""
     x = np.asarray(x, dtype=float)
     names = list(series)
     if x.size < 2 or not names:
         return f"<p><em>{html.escape(title)}: no data</em></p>"
     xd, ys = _decimate(x, [np.asarray(series[n], dtype=float) for n in names])
+    if markers is None:
+        dx = np.diff(xd[np.isfinite(xd)])
+        markers = not (np.all(dx >= 0) or np.all(dx <= 0))
+    allv = np.concatenate([y[np.isfinite(y)] for y in ys]) if ys else np.array([])
+    if logy is None:
+        logy = bool(allv.size and allv.min() > 0 and allv.max() / allv.min() > 100.0)
+    if logy:
+        ys = [np.where(y > 0, np.log10(np.where(y > 0, y, 1.0)), np.nan) for y in ys]
     finite = np.concatenate([y[np.isfinite(y)] for y in ys]) if ys else np.array([0.0])
     y0, y1 = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
     if y1 - y0 < 1e-300:
@@ -51,14 +71,22 @@ def svg_plot(
     for frac in (0.0, 0.5, 1.0):
         yv = y0 + frac * (y1 - y0)
         xv = x0 + frac * (x1 - x0)
-        out.append(f'<text x="{ml - 4}" y="{sy(yv) + 4:.1f}" text-anchor="end">{yv:.4g}</text>')
+        label = f"{10.0 ** yv:.3g}" if logy else f"{yv:.4g}"
+        out.append(f'<text x="{ml - 4}" y="{sy(yv) + 4:.1f}" text-anchor="end">{label}</text>')
         out.append(f'<text x="{sx(xv):.1f}" y="{height - 18}" text-anchor="middle">{xv:.4g}</text>')
-    out.append(f'<text x="{ml + pw / 2}" y="{height - 4}" text-anchor="middle">{html.escape(xlabel)}</text>')
+    axis = f"{xlabel}   (log y)" if logy else xlabel
+    out.append(f'<text x="{ml + pw / 2}" y="{height - 4}" text-anchor="middle">{html.escape(axis)}</text>')
     for i, (name, y) in enumerate(zip(names, ys, strict=True)):
         ok = np.isfinite(y) & np.isfinite(xd)
         pts = " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(sx(xd[ok]), sy(y[ok]), strict=True))
         color = _COLORS[i % len(_COLORS)]
-        out.append(f'<polyline fill="none" stroke="{color}" stroke-width="1" points="{pts}"/>')
+        if markers:
+            out.extend(
+                f'<circle cx="{a:.1f}" cy="{b:.1f}" r="1.6" fill="{color}"/>'
+                for a, b in zip(sx(xd[ok]), sy(y[ok]), strict=True)
+            )
+        else:
+            out.append(f'<polyline fill="none" stroke="{color}" stroke-width="1" points="{pts}"/>')
         out.append(f'<text x="{ml + 8 + 90 * i}" y="{mt + 14}" fill="{color}">{html.escape(name)}</text>')
     out.append("</svg>")
     return "\n".join(out)
@@ -129,21 +157,30 @@ def render_report(data: Any, run_row: dict[str, Any] | None = None) -> str:
     parts.append(
         "<h2>Measurements</h2>" + _table(rows, ["name", "value", "unit", "ci95", "limits", "outcome", "truth"])
     )
+    fits = data.fits()
+    if fits:
+        parts.append("<h2>Fits</h2>")
+    for name, curves in fits.items():
+        xk = next((k for k in _X_NAMES if k in curves), next(iter(curves), None))
+        if xk is None:
+            continue
+        ys = {k: v for k, v in curves.items() if k != xk and np.shape(v) == np.shape(curves[xk])}
+        parts.append(svg_plot(curves[xk], ys, title=f"fit: {name}", xlabel=xk))
     parts.append("<h2>Raw data</h2>")
     for stream in data.streams():
         tab = data.table(stream)
         cols = [c for c in tab if c not in ("t_s", "index")]
         x = tab.get("t_s", np.arange(len(next(iter(tab.values())))) if tab else np.array([]))
+        if len(x) < 10:  # bookkeeping streams (windows, settings): a table says more than a plot
+            rows = [[f"{float(tab[c][i]):.6g}" for c in tab] for i in range(len(x))]
+            parts.append(f"<h3>{html.escape(stream)}</h3>" + _table(rows, list(tab)))
+            continue
         parts.append(svg_plot(x, {c: tab[c] for c in cols[:6]}, title=f"{stream} ({len(x)} rows)", xlabel="t (s)"))
         if stream == "fpga" and all(c in tab for c in ("cx", "sx", "cy", "sy")):
             e = tab["cx"] ** 2 + tab["sx"] ** 2 + tab["cy"] ** 2 + tab["sy"] ** 2
-            parts.append(svg_plot(x, {"E = cx²+sx²+cy²+sy²": e}, title="fpga: energy E", xlabel="t (s)"))
-    for name, curves in data.fits().items():
-        xk = "t_s" if "t_s" in curves else next(iter(curves), None)
-        if xk is None:
-            continue
-        ys = {k: v for k, v in curves.items() if k != xk and np.shape(v) == np.shape(curves[xk])}
-        parts.append(svg_plot(curves[xk], ys, title=f"fit: {name}", xlabel=xk))
+            parts.append(
+                svg_plot(x, {"E = cx²+sx²+cy²+sy²": e}, title="fpga: energy E", xlabel="t (s)", logy=True)
+            )
     log = data.log()
     if log:
         parts.append(
