@@ -28,7 +28,7 @@ from bench.analysis.maslov_result import (
     intervals,
     t_quantile,
 )
-from bench.analysis.maslov_terms import check_model, free_param_names, nonlinear_columns, nonlinear_jacobian
+from bench.analysis.maslov_terms import check_model, free_param_names, nonlinear_columns
 from bench.analysis.slow_model import linear_matrix
 
 # Dg(q)[a, c] = _DG_SIGN[a, c] * q[_DG_INDEX[a, c]] (slow_model.regressor_linear, by table lookup)
@@ -111,77 +111,168 @@ def _linear_fit(q: np.ndarray, dt_s: float) -> dict[str, np.ndarray | float]:
 
 
 _CHUNK = 8192  # samples per chunk: keeps the (chunk, 4, k) temporaries in cache
+_RLS_CHUNK = 4096  # 4x4 blocks per chunk of the recursive form (its update equals their 4x4 updates in turn)
+
+# the Jacobian of the nonlinear columns is  sum_c z_c dN_c/dq = alpha DS1 + beta DS2 + s1 u^T + s2 w^T
+# with s1 = DS1 q, s2 = DS2 q (maslov_terms); these are DS1^T, DS2^T for the transposed Jacobian
+_DS1_T = np.array([[0, 1, 0, 0], [-1, 0, 0, 0], [0, 0, 0, 1], [0, 0, -1, 0]], dtype=float)
+_DS2_T = np.array([[0, 0, 1, 0], [0, 0, 0, 1], [-1, 0, 0, 0], [0, -1, 0, 0]], dtype=float)
 
 
-def _blocks(q: np.ndarray, dt_s: float, model: str, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
-    """Simpson regressors and differences of the blocks with middle sample lo..hi-1 (1 <= lo)."""
-    return simpson_regressors(q[lo - 1 : hi + 1], dt_s, model)
+def _jacobian_t(q: np.ndarray, a: np.ndarray, model: str, z_nl: np.ndarray) -> np.ndarray:
+    """J_j^T of dq/dt = A q + N(q) z_nl / 2 at the samples q (n, 4), shape (n, 4, 4), from the
+    closed form of maslov_terms.nonlinear_jacobian (columns of q, no (n, 4, 4, m) temporaries)."""
+    jt = np.empty((q.shape[0], 4, 4))
+    jt[:] = a.T
+    if model == "linear":
+        return jt
+    q1, p1, q2, p2 = (np.ascontiguousarray(q[:, i]) for i in range(4))
+    energy = q1 * q1 + p1 * p1 + q2 * q2 + p2 * p2
+    xp = p2 * q1 - p1 * q2
+    xi = z_nl[0]
+    alpha, beta = 0.75 * xi * energy, 0.5 * xi * xp
+    cu, cw = np.full_like(energy, 1.5 * xi), np.full_like(energy, 0.5 * xi)  # u = cu q + du dxp, w = cw dxp + dw q
+    du = dw = None
+    if model == "quintic":
+        kappa = z_nl[1]
+        alpha = alpha + kappa * (0.625 * energy * energy - 0.5 * xp * xp)
+        beta = beta + 0.5 * kappa * xp * energy
+        cu = cu + 2.5 * kappa * energy
+        cw = cw + 0.5 * kappa * energy
+        du, dw = -kappa * xp, kappa * xp
+    dxp = np.stack([p2, -q2, -p1, q1], axis=-1)
+    u = cu[:, None] * q
+    w = cw[:, None] * dxp
+    if du is not None:
+        u += du[:, None] * dxp
+        w += dw[:, None] * q
+    s1 = np.stack([-p1, q1, -p2, q2], axis=-1)
+    s2 = np.stack([-q2, -p2, q1, p1], axis=-1)
+    jt += 0.5 * (alpha[:, None, None] * _DS1_T + beta[:, None, None] * _DS2_T)
+    jt += 0.5 * (u[:, :, None] * s1[:, None, :] + w[:, :, None] * s2[:, None, :])
+    return jt
 
 
-def _neighbour_blocks(q: np.ndarray, dt_s: float, model: str, s: int, e: int, k: int):
-    """(X_{j-1}, X_j, X_{j+1}) for samples j = s..e-1, zero for blocks outside 1..N-1."""
-    n_samples = q.shape[0]
-    lo, hi = max(s - 1, 1), min(e + 1, n_samples - 1)
-    xs = np.zeros((e - s + 2, 4, k))  # xs[m] holds block s - 1 + m
-    xb, _ = _blocks(q, dt_s, model, lo, hi)
-    xs[lo - (s - 1) : hi - (s - 1)] = xb
-    return xs[:-2], xs[1:-1], xs[2:]
+def _error_map_norm_samples(tr: np.ndarray, n2: np.ndarray, h3: float) -> float:
+    """tr(L L^T) for per-sample Jacobians from their traces tr and squared Frobenius norms n2
+    (N+1 samples): |I -/+ h3 J|^2 = 4 -/+ 2 h3 tr J + h3^2 |J|^2 (no (N, 4, 4) temporaries)."""
+    after = 4.0 * (tr.size - 2) - 2.0 * h3 * tr[2:].sum() + h3 * h3 * n2[2:].sum()
+    before = 4.0 * (tr.size - 2) + 2.0 * h3 * tr[:-2].sum() + h3 * h3 * n2[:-2].sum()
+    return float(after + 16.0 * h3 * h3 * n2[1:-1].sum() + before)
+
+
+def _simpson_parts(q: np.ndarray, dt_s: float, model: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(qs, ns, y): Simpson states (N-1, 4), Simpson-integrated nonlinear columns (N-1, 4, m) and
+    differences; the regressor of block i is (Dg(qs_i) | ns_i)."""
+    nl = nonlinear_columns(q, model)
+    ns = (dt_s / 6.0) * (nl[:-2] + 4.0 * nl[1:-1] + nl[2:])
+    return simpson_states(q, dt_s), ns, q[2:] - q[:-2]
+
+
+def _moments(qs: np.ndarray, ns: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(X^T X, X^T y) of the blocks (Dg(qs_i) | ns_i) from 4x4 / 4x4m moments (X never formed)."""
+    m = ns.shape[-1]
+    ns2 = ns.reshape(4 * ns.shape[0], m)
+    ns_rows = ns.reshape(ns.shape[0], 4 * m)  # (n, 4 m), [a * m + c]
+    gg = np.einsum("mn,mak,nal->kl", qs.T @ qs, _DG_BASIS, _DG_BASIS)
+    gn = np.einsum("mac,mak->kc", (qs.T @ ns_rows).reshape(4, 4, m), _DG_BASIS)
+    xtx = np.block([[gg, gn], [gn.T, ns2.T @ ns2]])
+    xty = np.concatenate([np.einsum("ma,mak->k", qs.T @ y, _DG_BASIS), ns2.T @ y.reshape(-1)])
+    return xtx, xty
+
+
+def _sandwich(q: np.ndarray, dt_s: float, model: str, z: np.ndarray, qs: np.ndarray, ns: np.ndarray,
+              y: np.ndarray) -> dict:
+    """Residuals, meat sum_j F_j^T F_j and tr(L L^T) of the module docstring at parameters z."""
+    n_samples, m = q.shape[0], ns.shape[-1]
+    k = 8 + m
+    a = linear_matrix(z[:8])
+    h3 = dt_s / 3.0
+    resid = y - qs @ (2.0 * a).T - (ns.reshape(4 * ns.shape[0], m) @ z[8:]).reshape(-1, 4)
+    qp = np.concatenate([np.zeros((2, 4)), qs, np.zeros((2, 4))])  # qp[j + 1]: block with middle sample j
+    npd = np.concatenate([np.zeros((2, 4, m)), ns, np.zeros((2, 4, m))])
+    qd, qsum = qp[:-2] - qp[2:], qp[:-2] + 4.0 * qp[1:-1] + qp[2:]
+    nd, nsum = npd[:-2] - npd[2:], npd[:-2] + 4.0 * npd[1:-1] + npd[2:]
+    meat = np.zeros((k, k))
+    tr, n2 = np.empty(n_samples), np.empty(n_samples)
+    for s in range(0, n_samples, _CHUNK):
+        e = min(s + _CHUNK, n_samples)
+        x_diff = np.concatenate([dg_fast(qd[s:e]), nd[s:e]], axis=-1)
+        x_sum = np.concatenate([dg_fast(qsum[s:e]), nsum[s:e]], axis=-1)
+        jt = _jacobian_t(q[s:e], a, model, z[8:])
+        f = x_diff - h3 * np.matmul(jt, x_sum)  # F_j = (X_{j-1} - X_{j+1}) - h3 J_j^T (X_{j-1} + 4 X_j + X_{j+1})
+        f2 = f.reshape(-1, k)
+        meat += f2.T @ f2
+        tr[s:e] = np.einsum("jaa->j", jt)
+        n2[s:e] = np.einsum("jab,jab->j", jt, jt)
+    lnorm = _error_map_norm(a, h3, qs.shape[0]) if model == "linear" else _error_map_norm_samples(tr, n2, h3)
+    return {"resid": resid, "meat": meat, "lnorm": lnorm}
 
 
 def _general_fit(q: np.ndarray, dt_s: float, model: str, recursive: bool, n_init: int | None) -> dict:
-    """Fit from the Simpson regressors in chunks (nonlinear models) or materialised (recursive form)."""
-    n_samples = q.shape[0]
-    n_blocks = n_samples - 2
-    k = 8 + len(nonlinear_columns(q[:1], model)[0, 0])
+    """Batch fit from regressor moments, or the recursive form over the Simpson blocks; then the sandwich."""
+    qs, ns, y = _simpson_parts(q, dt_s, model)
+    n_blocks = qs.shape[0]
+    k = 8 + ns.shape[-1]
     if recursive:
-        x, y = simpson_regressors(q, dt_s, model)
         m = n_init if n_init is not None else max(4 * k, n_blocks // 50)
         if not k <= m <= n_blocks:
             raise ValueError(f"n_init_blocks={m} must be between {k} and the {n_blocks} blocks")
-        z, c = recursive_lsq(x, y, int(m))
+        z, c = _recursive_from_parts(qs, ns, y, int(m))
     else:
-        xtx, xty = np.zeros((k, k)), np.zeros(k)
-        for lo in range(1, n_samples - 1, _CHUNK):
-            x, y = _blocks(q, dt_s, model, lo, min(lo + _CHUNK, n_samples - 1))
-            x2 = x.reshape(-1, k)
-            xtx += x2.T @ x2
-            xty += x2.T @ y.reshape(-1)
+        xtx, xty = _moments(qs, ns, y)
         c = np.linalg.inv(xtx)
         z = np.linalg.solve(xtx, xty)
-    a = linear_matrix(z[:8])
-    h3 = dt_s / 3.0
-    resid = np.empty((n_blocks, 4))
-    meat = np.zeros((k, k))
-    jacs = []
-    for s in range(0, n_samples, _CHUNK):
-        e = min(s + _CHUNK, n_samples)
-        x_prev, x_here, x_next = _neighbour_blocks(q, dt_s, model, s, e, k)
-        lo, hi = max(s, 1), min(e, n_samples - 1)
-        if hi > lo:
-            yb = q[lo + 1 : hi + 1] - q[lo - 1 : hi - 1]
-            resid[lo - 1 : hi - 1] = yb - x_here[lo - s : hi - s] @ z
-        jac = a if model == "linear" else a + 0.5 * nonlinear_jacobian(q[s:e], model, z[8:])
-        jacs.append(jac)
-        simp = x_prev + 4.0 * x_here + x_next
-        f = x_prev - x_next
-        for b in range(4):  # f -= h3 J^T simp, per sample (a loop over 4 beats batched 4x4 matmul)
-            jb = jac[b] if jac.ndim == 2 else jac[:, b]
-            f -= h3 * jb[..., :, None] * simp[:, b, None, :]
-        f2 = f.reshape(-1, k)
-        meat += f2.T @ f2
-    jac_all = a if model == "linear" else np.concatenate(jacs)
-    return {"z": z, "c": c, "resid": resid, "meat": meat, "lnorm": _error_map_norm(jac_all, h3, n_blocks)}
+    return {"z": z, "c": c, **_sandwich(q, dt_s, model, z, qs, ns, y)}
 
 
-def recursive_lsq(x: np.ndarray, y: np.ndarray, n_init_blocks: int) -> tuple[np.ndarray, np.ndarray]:
+def _rls_chunk(z: np.ndarray, p: np.ndarray, h: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One step of eq. 2.12 for a block D of any height from h = D^T D and g = D^T (y - D z) (the
+    residual formed per equation first: D^T y - h z would cancel).  With P = L L^T the push-through
+    identity gives S = P D^T (I + D P D^T)^-1 = L M^-1 L^T D^T, M = I + L^T h L (small, symmetric,
+    eigenvalues 1 .. 1 + new/old information), so z += L M^-1 L^T g and P -= S D P = L M^-1 L^T.
+    Applied to a stack of 4x4 blocks it gives what their 4x4 updates in turn give (each update is
+    the exact posterior of the equations so far), without any 4B x 4B inverse."""
+    chol = np.linalg.cholesky(0.5 * (p + p.T))
+    m = np.eye(p.shape[0]) + chol.T @ h @ chol
+    sol = np.linalg.solve(m, np.hstack([chol.T, (chol.T @ g)[:, None]]))
+    return z + chol @ sol[:, -1], chol @ sol[:, :-1]
+
+
+def _recursive_from_parts(qs: np.ndarray, ns: np.ndarray, y: np.ndarray, n_init_blocks: int,
+                          chunk_blocks: int = _RLS_CHUNK) -> tuple[np.ndarray, np.ndarray]:
+    """recursive_lsq on the blocks (Dg(qs_i) | ns_i) with the chunk moments from 4x4 moments."""
+    xtx, xty = _moments(qs[:n_init_blocks], ns[:n_init_blocks], y[:n_init_blocks])
+    p = np.linalg.inv(xtx)
+    z = p @ xty
+    for lo in range(n_init_blocks, qs.shape[0], chunk_blocks):
+        hi = lo + chunk_blocks
+        qs_c, ns_c = qs[lo:hi], ns[lo:hi]
+        resid = y[lo:hi] - qs_c @ (2.0 * linear_matrix(z[:8])).T
+        resid -= (ns_c.reshape(4 * qs_c.shape[0], -1) @ z[8:]).reshape(-1, 4)
+        z, p = _rls_chunk(z, p, *_moments(qs_c, ns_c, resid))
+    return z, 0.5 * (p + p.T)
+
+
+def recursive_lsq(x: np.ndarray, y: np.ndarray, n_init_blocks: int, *,
+                  chunk_blocks: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """The paper's recursive least squares (eq. 2.12) with 4x4 blocks: batch start on the first
     n_init_blocks blocks, then for each block with regressor D (4 x k) and r = D^T:
         S = P r (I + r^T P r)^-1,  z += S (y - D z),  P -= S r^T P.
+    chunk_blocks > 1 applies the updates of that many 4x4 blocks at once (`_rls_chunk`: equal to
+    applying them in turn, vectorised); chunk_blocks = 1 is the literal 4x4 loop.
     Returns (z, P); P = (X^T X)^-1 of all blocks."""
+    if int(chunk_blocks) < 1:
+        raise ValueError(f"chunk_blocks={chunk_blocks!r} must be at least 1")
     n_blocks, _, k = x.shape
     x0 = x[:n_init_blocks].reshape(-1, k)
     p = np.linalg.inv(x0.T @ x0)
     z = p @ (x0.T @ y[:n_init_blocks].reshape(-1))
+    if chunk_blocks > 1:
+        for lo in range(n_init_blocks, n_blocks, int(chunk_blocks)):
+            d = x[lo : lo + int(chunk_blocks)].reshape(-1, k)
+            z, p = _rls_chunk(z, p, d.T @ d, d.T @ (y[lo : lo + int(chunk_blocks)].reshape(-1) - d @ z))
+        return z, 0.5 * (p + p.T)
     eye = np.eye(4)
     for i in range(n_init_blocks, n_blocks):
         d = x[i]
