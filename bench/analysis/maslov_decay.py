@@ -117,15 +117,15 @@ _RLS_CHUNK = 4096  # 4x4 blocks per chunk of the recursive form (its update equa
 # with s1 = DS1 q, s2 = DS2 q (maslov_terms); these are DS1^T, DS2^T for the transposed Jacobian
 _DS1_T = np.array([[0, 1, 0, 0], [-1, 0, 0, 0], [0, 0, 0, 1], [0, 0, -1, 0]], dtype=float)
 _DS2_T = np.array([[0, 0, 1, 0], [0, 0, 0, 1], [-1, 0, 0, 0], [0, -1, 0, 0]], dtype=float)
+_DS1_T_ENTRIES = [((i, r), _DS1_T[i, r]) for i, r in zip(*np.nonzero(_DS1_T), strict=True)]
+_DS2_T_ENTRIES = [((i, r), _DS2_T[i, r]) for i, r in zip(*np.nonzero(_DS2_T), strict=True)]
 
 
 def _jacobian_t(q: np.ndarray, a: np.ndarray, model: str, z_nl: np.ndarray) -> np.ndarray:
     """J_j^T of dq/dt = A q + N(q) z_nl / 2 at the samples q (n, 4), shape (n, 4, 4), from the
     closed form of maslov_terms.nonlinear_jacobian (columns of q, no (n, 4, 4, m) temporaries)."""
-    jt = np.empty((q.shape[0], 4, 4))
-    jt[:] = a.T
     if model == "linear":
-        return jt
+        return np.broadcast_to(a.T, (q.shape[0], 4, 4))
     q1, p1, q2, p2 = (np.ascontiguousarray(q[:, i]) for i in range(4))
     energy = q1 * q1 + p1 * p1 + q2 * q2 + p2 * p2
     xp = p2 * q1 - p1 * q2
@@ -146,10 +146,15 @@ def _jacobian_t(q: np.ndarray, a: np.ndarray, model: str, z_nl: np.ndarray) -> n
     if du is not None:
         u += du[:, None] * dxp
         w += dw[:, None] * q
-    s1 = np.stack([-p1, q1, -p2, q2], axis=-1)
-    s2 = np.stack([-q2, -p2, q1, p1], axis=-1)
-    jt += 0.5 * (alpha[:, None, None] * _DS1_T + beta[:, None, None] * _DS2_T)
-    jt += 0.5 * (u[:, :, None] * s1[:, None, :] + w[:, :, None] * s2[:, None, :])
+    s12 = np.stack([np.stack([-p1, q1, -p2, q2], axis=-1), np.stack([-q2, -p2, q1, p1], axis=-1)], axis=1)
+    jt = np.matmul(np.stack([u, w], axis=-1), s12)  # u s1^T + w s2^T, (n, 4, 2) @ (n, 2, 4)
+    jt *= 0.5
+    jt += a.T
+    half_a, half_b = 0.5 * alpha, 0.5 * beta
+    for (i, r), sgn in _DS1_T_ENTRIES:
+        jt[:, i, r] += sgn * half_a
+    for (i, r), sgn in _DS2_T_ENTRIES:
+        jt[:, i, r] += sgn * half_b
     return jt
 
 
@@ -162,11 +167,17 @@ def _error_map_norm_samples(tr: np.ndarray, n2: np.ndarray, h3: float) -> float:
 
 
 def _simpson_parts(q: np.ndarray, dt_s: float, model: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(qs, ns, y): Simpson states (N-1, 4), Simpson-integrated nonlinear columns (N-1, 4, m) and
-    differences; the regressor of block i is (Dg(qs_i) | ns_i)."""
+    """(qp, np, y): Simpson states (N-1, 4) and Simpson-integrated nonlinear columns (N-1, 4, m),
+    each with two zero blocks either side (qp[j + 1]: block with middle sample j), and the
+    differences y; the regressor of block i is (Dg(qs_i) | ns_i), qs = qp[2:-2], ns = np[2:-2]."""
     nl = nonlinear_columns(q, model)
-    ns = (dt_s / 6.0) * (nl[:-2] + 4.0 * nl[1:-1] + nl[2:])
-    return simpson_states(q, dt_s), ns, q[2:] - q[:-2]
+    n_blocks = q.shape[0] - 2
+    qp = np.zeros((n_blocks + 4, 4))  # two zero blocks either side, for the sandwich's neighbours
+    np_ = np.zeros((n_blocks + 4, 4, nl.shape[-1]))
+    qp[2:-2] = simpson_states(q, dt_s)
+    np_[2:-2] = nl[:-2] + 4.0 * nl[1:-1] + nl[2:]
+    np_[2:-2] *= dt_s / 6.0
+    return qp, np_, q[2:] - q[:-2]
 
 
 def _moments(qs: np.ndarray, ns: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -181,24 +192,47 @@ def _moments(qs: np.ndarray, ns: np.ndarray, y: np.ndarray) -> tuple[np.ndarray,
     return xtx, xty
 
 
-def _sandwich(q: np.ndarray, dt_s: float, model: str, z: np.ndarray, qs: np.ndarray, ns: np.ndarray,
+def _window_maps(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Constant maps from the windows (qs_{j-1}, qs_j, qs_{j+1}) (12) and (ns_{j-1}, ns_j, ns_{j+1})
+    (12 m) of sample j to (X_{j-1} - X_{j+1} | X_{j-1} + 4 X_j + X_{j+1}) flattened, 2 x (4, 8 + m)."""
+    k = 8 + m
+    mq = np.zeros((3, 4, 2, 4, k))
+    mn = np.zeros((3, 4, m, 2, 4, k))
+    for w, (wd, ws) in enumerate(((1.0, 1.0), (0.0, 4.0), (-1.0, 1.0))):
+        mq[w, :, 0, :, :8], mq[w, :, 1, :, :8] = wd * _DG_BASIS, ws * _DG_BASIS
+        for a in range(4):
+            for c in range(m):
+                mn[w, a, c, 0, a, 8 + c], mn[w, a, c, 1, a, 8 + c] = wd, ws
+    return mq.reshape(12, 8 * k), mn.reshape(12 * m, 8 * k)
+
+
+def _windows(rows: np.ndarray, s: int, e: int) -> np.ndarray:
+    """(rows[s], rows[s + 1], rows[s + 2]) flattened for each of s..e-1: a strided view, no copy."""
+    flat = rows.reshape(rows.shape[0], -1)
+    width = flat.shape[1]
+    return np.lib.stride_tricks.as_strided(flat[s:], shape=(e - s, 3 * width), strides=flat.strides, writeable=False)
+
+
+def _sandwich(q: np.ndarray, dt_s: float, model: str, z: np.ndarray, qp: np.ndarray, npd: np.ndarray,
               y: np.ndarray) -> dict:
-    """Residuals, meat sum_j F_j^T F_j and tr(L L^T) of the module docstring at parameters z."""
+    """Residuals, meat sum_j F_j^T F_j and tr(L L^T) of the module docstring at parameters z
+    (qp, npd: the padded Simpson parts of _simpson_parts)."""
+    qs, ns = qp[2:-2], npd[2:-2]
     n_samples, m = q.shape[0], ns.shape[-1]
     k = 8 + m
     a = linear_matrix(z[:8])
     h3 = dt_s / 3.0
     resid = y - qs @ (2.0 * a).T - (ns.reshape(4 * ns.shape[0], m) @ z[8:]).reshape(-1, 4)
-    qp = np.concatenate([np.zeros((2, 4)), qs, np.zeros((2, 4))])  # qp[j + 1]: block with middle sample j
-    npd = np.concatenate([np.zeros((2, 4, m)), ns, np.zeros((2, 4, m))])
-    qd, qsum = qp[:-2] - qp[2:], qp[:-2] + 4.0 * qp[1:-1] + qp[2:]
-    nd, nsum = npd[:-2] - npd[2:], npd[:-2] + 4.0 * npd[1:-1] + npd[2:]
     meat = np.zeros((k, k))
     tr, n2 = np.empty(n_samples), np.empty(n_samples)
+    map_q, map_n = _window_maps(m)
     for s in range(0, n_samples, _CHUNK):
         e = min(s + _CHUNK, n_samples)
-        x_diff = np.concatenate([dg_fast(qd[s:e]), nd[s:e]], axis=-1)
-        x_sum = np.concatenate([dg_fast(qsum[s:e]), nsum[s:e]], axis=-1)
+        both = _windows(qp, s, e) @ map_q
+        if m:
+            both += _windows(npd, s, e) @ map_n
+        both = both.reshape(e - s, 2, 4, k)
+        x_diff, x_sum = both[:, 0], both[:, 1]
         jt = _jacobian_t(q[s:e], a, model, z[8:])
         f = x_diff - h3 * np.matmul(jt, x_sum)  # F_j = (X_{j-1} - X_{j+1}) - h3 J_j^T (X_{j-1} + 4 X_j + X_{j+1})
         f2 = f.reshape(-1, k)
@@ -211,7 +245,8 @@ def _sandwich(q: np.ndarray, dt_s: float, model: str, z: np.ndarray, qs: np.ndar
 
 def _general_fit(q: np.ndarray, dt_s: float, model: str, recursive: bool, n_init: int | None) -> dict:
     """Batch fit from regressor moments, or the recursive form over the Simpson blocks; then the sandwich."""
-    qs, ns, y = _simpson_parts(q, dt_s, model)
+    qp, npd, y = _simpson_parts(q, dt_s, model)
+    qs, ns = qp[2:-2], npd[2:-2]
     n_blocks = qs.shape[0]
     k = 8 + ns.shape[-1]
     if recursive:
@@ -223,7 +258,7 @@ def _general_fit(q: np.ndarray, dt_s: float, model: str, recursive: bool, n_init
         xtx, xty = _moments(qs, ns, y)
         c = np.linalg.inv(xtx)
         z = np.linalg.solve(xtx, xty)
-    return {"z": z, "c": c, **_sandwich(q, dt_s, model, z, qs, ns, y)}
+    return {"z": z, "c": c, **_sandwich(q, dt_s, model, z, qp, npd, y)}
 
 
 def _rls_chunk(z: np.ndarray, p: np.ndarray, h: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
