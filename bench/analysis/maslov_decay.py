@@ -1,7 +1,11 @@
 """Free-decay identification (Maslov et al. section 2): integrate 2 dq/dt = D(q) z over
 [t_{i-1}, t_{i+1}] with Simpson's rule, y_i = q_{i+1} - q_{i-1} = (h/6)(D_{i-1} + 4 D_i + D_{i+1}) z
 (the 1/2 of eq. 2.7 kept, eq. 2.8 drops it), stack the N-1 blocks, least squares; or the paper's
-recursive least squares with 4x4 blocks (eq. 2.12), which gives the same answer.
+recursive least squares with 4x4 blocks (eq. 2.12), which gives the same answer.  The recursion
+runs over chunks of _RLS_CHUNK 4x4 blocks: one push-through update per chunk (square-root form)
+equals that chunk's 4x4 updates applied in turn, so (z, P) after each chunk is the paper's state
+after its last block; the states inside a chunk are not formed.  recursive_lsq(chunk_blocks=1) is
+the literal one-block loop (tests compare the two).
 
 Intervals.  The textbook interval (eq. 2.11) treats the 4(N-1) equation errors as independent,
 but y_i and y_{i+2} share a sample, and the same noise enters the regressors: with white noise
