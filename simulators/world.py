@@ -36,6 +36,16 @@ class SampleBlock:
     angle_deg: np.ndarray  # (n,) case angle
 
 
+def _gradient(f: np.ndarray, dx: float) -> np.ndarray:
+    """np.gradient(f, dx) of a 1-D array of >= 2 samples, same arithmetic (central differences,
+    one-sided at the ends) without its generic-axis overhead."""
+    out = np.empty_like(f)
+    out[1:-1] = (f[2:] - f[:-2]) / (2.0 * dx)
+    out[0] = (f[1] - f[0]) / dx
+    out[-1] = (f[-1] - f[-2]) / dx
+    return out
+
+
 class WorldDevice(Protocol):
     """What a simulated device implements to take part in the world's advance."""
 
@@ -75,6 +85,7 @@ class World:
         self._forces: dict[str, np.ndarray] = {}
         self.last_block: SampleBlock | None = None
         self._listeners: list[Any] = []
+        self._steps_cache: dict[int, np.ndarray] = {}
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -140,6 +151,15 @@ class World:
                     limit = min(limit, max(1, int(m)))
         return limit
 
+    def _steps(self, n: int) -> np.ndarray:
+        """1..n as int64 (cached: every block needs it)."""
+        steps = self._steps_cache.get(n)
+        if steps is None:
+            steps = np.arange(1, n + 1, dtype=np.int64)
+            if len(self._steps_cache) < 64:
+                self._steps_cache[n] = steps
+        return steps
+
     def _run_block(self, n: int) -> None:
         dt = self.sample_period_s
         t0 = self.t_s
@@ -155,7 +175,7 @@ class World:
             ref_freq_hz=self.ref_freq_hz,
             ripple_angle_rad=self.ripple_angle_rad,
         )
-        index = self.sample_index + np.arange(1, n + 1, dtype=np.int64)
+        index = self._steps(n) + self.sample_index
         t = index * dt
         angle0 = self.case_angle_deg
         angle = angle0 + rate * (t - t0)
@@ -163,7 +183,8 @@ class World:
         if self.ripple_angle_rad is not None:
             ripple_deg = np.degrees(self.ripple_angle_rad)
             angle = angle + ripple_deg
-            rate_arr = rate_arr + np.gradient(ripple_deg, dt) if n > 1 else rate_arr
+            if n > 1:
+                rate_arr = rate_arr + _gradient(ripple_deg, dt)
         block = SampleBlock(
             index=index,
             t_s=t,

@@ -239,19 +239,42 @@ STREAM_FRAME_SIZE = STREAM_DTYPE.itemsize  # 60
 assert STREAM_FRAME_SIZE == HEADER_SIZE + STREAM_PAYLOAD + CRC_SIZE
 
 
+_STREAM_TEMPLATE = np.zeros(0, STREAM_DTYPE)
+
+
+def _stream_template(n: int) -> np.ndarray:
+    """n frames with the constant fields (sync, type, length) filled in; copy before use."""
+    global _STREAM_TEMPLATE
+    if len(_STREAM_TEMPLATE) < n:
+        tpl = np.zeros(max(n, 2 * len(_STREAM_TEMPLATE), 64), STREAM_DTYPE)
+        tpl["sync"] = SYNC_U16
+        tpl["type"] = STREAM
+        tpl["len"] = STREAM_PAYLOAD
+        _STREAM_TEMPLATE = tpl
+    return _STREAM_TEMPLATE[:n]
+
+
+_SMALL_CRC_FRAMES = 32  # below this, crc_hqx per frame beats the vectorised table (measured 3x at 10)
+
+
 def encode_stream(seq0: int, index: np.ndarray, t_s: np.ndarray, channels: np.ndarray) -> bytes:
     """Encode n stream frames at once (vectorised; CRC per frame): channels is (n, 8)."""
     n = len(index)
-    arr = np.zeros(n, STREAM_DTYPE)
-    arr["sync"] = SYNC_U16
-    arr["type"] = STREAM
-    arr["len"] = STREAM_PAYLOAD
-    arr["seq"] = (seq0 + np.arange(n, dtype=np.int64)) % SEQ_MOD
+    arr = _stream_template(n).copy()
+    seq = np.arange(seq0, seq0 + n, dtype=np.int64)
+    if seq0 + n > SEQ_MOD:
+        seq %= SEQ_MOD
+    arr["seq"] = seq
     arr["index"] = index
     arr["t_s"] = t_s
     arr["ch"] = channels
-    rows = arr.view(np.uint8).reshape(n, STREAM_FRAME_SIZE)
-    arr["crc"] = crc16_rows(rows[:, 2:-2])
+    if n < _SMALL_CRC_FRAMES:
+        raw = memoryview(arr.view(np.uint8))
+        size = STREAM_FRAME_SIZE
+        arr["crc"] = [crc_hqx(raw[i * size + 2 : (i + 1) * size - 2], CRC_INIT) for i in range(n)]
+    else:
+        rows = arr.view(np.uint8).reshape(n, STREAM_FRAME_SIZE)
+        arr["crc"] = crc16_rows(rows[:, 2:-2])
     return arr.tobytes()
 
 

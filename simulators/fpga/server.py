@@ -40,10 +40,13 @@ class _SocketPort(_Port):
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         conn.setblocking(True)
         self.closed = False
+        self._timeout_s: float | None = None
 
     def send(self, data: bytes, timeout_s: float) -> bool:
         try:
-            self.conn.settimeout(timeout_s)
+            if timeout_s != self._timeout_s:  # settimeout costs a call per block: set it on change
+                self.conn.settimeout(timeout_s)
+                self._timeout_s = timeout_s
             self.conn.sendall(data)
             return True
         except OSError:

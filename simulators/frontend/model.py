@@ -17,7 +17,6 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import lfilter
 
 from drivers.frontend import commands as cmd
 
@@ -80,6 +79,9 @@ class FrontEndModel:
         self.errors: deque[tuple[int, str]] = deque()
         self.esr = 0
         self.lockin = np.zeros(4)  # filtered (cx, sx, cy, sy), model units
+        self._lockin_weights_key: tuple[int, float] | None = None
+        self._lockin_weights = np.empty(0)
+        self._lockin_carry = 1.0
         self.reset()
 
     def reset(self) -> None:
@@ -124,9 +126,16 @@ class FrontEndModel:
         if self.lockin_tc_s <= 0.0:
             self.lockin = q[-1].copy()
         else:
+            # the first-order low-pass y_k = a q_k + (1 - a) y_(k-1) over the block, of which only
+            # the last output is kept: y_(n-1) = (1 - a)^n y_(-1) + sum_k a (1 - a)^(n-1-k) q_k
             a = 1.0 - math.exp(-world.sample_period_s / self.lockin_tc_s)
-            out, _ = lfilter([a], [1.0, a - 1.0], q, axis=0, zi=((1.0 - a) * self.lockin)[None, :])
-            self.lockin = out[-1].copy()
+            n = len(q)
+            key = (n, a)
+            if self._lockin_weights_key != key:
+                self._lockin_weights = a * (1.0 - a) ** np.arange(n - 1, -1, -1, dtype=float)
+                self._lockin_carry = (1.0 - a) ** n
+                self._lockin_weights_key = key
+            self.lockin = self._lockin_carry * self.lockin + self._lockin_weights @ q
         cap = self.capture
         if cap is not None:
             cap.t_s.append(block.t_s)

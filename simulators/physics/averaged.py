@@ -20,6 +20,7 @@ from bench.analysis.slow_model import k_cubic, k_quintic, linear_matrix
 from .params import TWO_PI, ResonatorParams
 
 _blas_limiter: object | None = None
+_POWERS_CHUNK = 4096  # samples per cached run of matrix powers (4096 x 4 x 8 doubles = 1 MB)
 
 
 def use_single_thread_blas() -> None:
@@ -36,7 +37,12 @@ def rotate_wave(q: np.ndarray, psi_rad: np.ndarray | float) -> np.ndarray:
     """Rotate the electrical angle of states q (..., 4) by psi (the wave turns by psi/2)."""
     c, s = np.cos(psi_rad), np.sin(psi_rad)
     q1, p1, q2, p2 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack([q1 * c - q2 * s, p1 * c - p2 * s, q1 * s + q2 * c, p1 * s + p2 * c], axis=-1)
+    out = np.empty(np.broadcast_shapes(q1.shape, np.shape(c)) + (4,))
+    out[..., 0] = q1 * c - q2 * s
+    out[..., 1] = p1 * c - p2 * s
+    out[..., 2] = q1 * s + q2 * c
+    out[..., 3] = p1 * s + p2 * c
+    return out
 
 
 def _matrix_powers(phi: np.ndarray, n: int) -> np.ndarray:
@@ -58,6 +64,7 @@ class Resonator:
     """The resonator's slow state and its integration.  Not thread-safe: the World locks it."""
 
     def __init__(self, params: ResonatorParams, *, seed: int = 0, state: np.ndarray | None = None) -> None:
+        use_single_thread_blas()  # also makes the arrays independent of BLAS's thread split
         self.params = params
         self.coeffs = params.coefficients()
         self.rng = np.random.default_rng(seed)
@@ -116,18 +123,31 @@ class Resonator:
         return rotate_wave(traj, psi)
 
     def _linear_block(self, n: int, dt: float, zg: np.ndarray, u: np.ndarray, lam: float) -> np.ndarray:
-        key = (dt, zg.tobytes(), u.tobytes(), lam)
+        """Exact steps of dq/dt = A q + u/2 with the force as state: exp of [[A, I/2], [0, 0]] dt
+        is [[Phi, Gamma], [0, I]], so x_k = (q_k, u) = M^k x_0 and the cached powers of M serve
+        any force (a loop that changes its force every block costs no matrix exponential)."""
+        key = (dt, zg.tobytes(), lam)
         if key != self._cache_key:
-            aug = np.zeros((5, 5))
+            aug = np.zeros((8, 8))
             aug[:4, :4] = linear_matrix(zg, lam)
-            aug[:4, 4] = 0.5 * u
+            aug[:4, 4:] = 0.5 * np.eye(4)
             self._cache_phi = expm(aug * dt)
             self._cache_key = key
             self._cache_powers = None
-        if self._cache_powers is None or len(self._cache_powers) < n:
-            self._cache_powers = _matrix_powers(self._cache_phi, max(n, 1))
-        x0 = np.append(self._q, 1.0)
-        return (self._cache_powers[:n] @ x0)[:, :4]
+        m = min(n, _POWERS_CHUNK)
+        if self._cache_powers is None or len(self._cache_powers) < m:
+            # rows of M^k that give q_k (the force rows of M^k are the identity), contiguous
+            self._cache_powers = np.ascontiguousarray(_matrix_powers(self._cache_phi, m)[:, :4, :])
+        powers = self._cache_powers
+        out = np.empty((n, 4))
+        x = np.empty(8)
+        x[:4] = self._q
+        x[4:] = u
+        for start in range(0, n, _POWERS_CHUNK):  # long blocks in chunks: bounded memory
+            k = min(_POWERS_CHUNK, n - start)
+            out[start : start + k] = (powers[:k].reshape(4 * k, 8) @ x).reshape(k, 4)
+            x[:4] = out[start + k - 1]
+        return out
 
     def _nonlinear_block(self, n: int, dt: float, zg: np.ndarray, u: np.ndarray, lam: float) -> np.ndarray:
         a = linear_matrix(zg, lam)

@@ -82,6 +82,8 @@ class TableMechanics:
         self.angle_deg = 0.0  # actual multi-turn angle, without ripple and noise
         self.ref_angle_deg = 0.0  # profile angle (position mode)
         self._noise_state = 0.0  # OU angle jitter, deg
+        self._ar1_cache: dict[tuple[int, float], tuple[np.ndarray, np.ndarray]] = {}
+        self._steps_cache: dict[int, np.ndarray] = {}
         self.t_s = 0.0
         # commands
         self.mode = mp.MODE_STOP
@@ -294,7 +296,7 @@ class TableMechanics:
     def _step(self, n: int, dt_s: float) -> np.ndarray:
         """Advance n samples; return the smooth angle at each sample end (n,)."""
         if self.settled():
-            angles = self.angle_deg + self.rate_dps * dt_s * np.arange(1, n + 1)
+            angles = self.angle_deg + self.rate_dps * dt_s * self._steps(n)
             self.angle_deg = float(angles[-1])
             self.ref_angle_deg += self.ref_dps * dt_s * n
             return angles
@@ -326,20 +328,48 @@ class TableMechanics:
         self.check_watchdog()
         return None if self.settled() else self.accel_block_samples
 
+    def _ar1(self, w: np.ndarray, e: float, y_prev: float, dt_s: float) -> np.ndarray:
+        """y_k = e y_(k-1) + w_k from y_(-1) = y_prev / e, i.e. lfilter([1], [1, -e], w, zi=[y_prev]):
+        closed form y_k = e^k (y_prev + sum_(j<=k) e^-j w_j), vectorised; scipy's lfilter when the
+        block is long against the jitter time (e^-n would lose range)."""
+        n = len(w)
+        decay = (n - 1) * dt_s / self.noise_tau_s
+        if decay > 30.0:
+            jitter, _ = lfilter([1.0], [1.0, -e], w, zi=[y_prev])
+            return jitter
+        key = (n, e)
+        powers = self._ar1_cache.get(key)
+        if powers is None:
+            k = np.arange(n)
+            powers = (e**k, e ** (-k.astype(float)))
+            self._ar1_cache = {key: powers} if len(self._ar1_cache) > 16 else {**self._ar1_cache, key: powers}
+        grow, shrink = powers
+        acc = np.cumsum(w * shrink)
+        acc += y_prev
+        return acc * grow
+
+    def _steps(self, n: int) -> np.ndarray:
+        """1.0 .. n, cached per block size (never written to)."""
+        steps = self._steps_cache.get(n)
+        if steps is None:
+            steps = np.arange(1, n + 1, dtype=float)
+            self._steps_cache = {n: steps} if len(self._steps_cache) > 16 else {**self._steps_cache, n: steps}
+        return steps
+
     def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
         """Move the table over the block; hand the world its mean rate and the in-block angle
         deviation (profile curvature, ripple, jitter) as `ripple_angle_rad`."""
         self.check_watchdog()
         a0 = self.angle_deg
         angles = self._step(n, dt_s)
-        t_rel = dt_s * np.arange(1, n + 1)
+        t_rel = dt_s * self._steps(n)
         # rounded to 1 ndeg/s so a table at rate gives the resonator the same rate every block
         # (its exact step is cached on the inputs); the rounding goes into the deviation below
         mean_rate = round((angles[-1] - a0) / (n * dt_s), 9)
         if self.noise_deg > 0:
             e = math.exp(-dt_s / self.noise_tau_s)
             w = self._rng_noise.standard_normal(n) * self.noise_deg * math.sqrt(1.0 - e * e)
-            jitter, zf = lfilter([1.0], [1.0, -e], w, zi=[e * self._noise_state])
+            jitter = self._ar1(w, e, e * self._noise_state, dt_s)
             self._noise_state = float(jitter[-1])
         else:
             jitter = 0.0
