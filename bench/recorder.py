@@ -47,6 +47,7 @@ class Recorder:
         self._datasets: dict[str, h5py.Dataset] = {}
         self._pending: dict[str, list[np.ndarray]] = {}
         self._ncols: dict[str, int] = {}
+        self._pending_rows: dict[str, int] = {}
         self._last_flush_sim: float | None = None
         self._last_flush_wall = time.monotonic()
         self._f.flush()
@@ -123,19 +124,26 @@ class Recorder:
                 raise ValueError(f"stream {stream!r}: block has {arr.shape[1]} columns, the stream has {ds.shape[1]}")
             pend = self._pending[stream]
             pend.append(arr.copy())
-            if sum(len(a) for a in pend) >= CHUNK_ROWS:
+            self._pending_rows[stream] = self._pending_rows.get(stream, 0) + len(arr)
+            if self._pending_rows[stream] >= CHUNK_ROWS:
                 self._write_pending(stream)
 
     def _write_pending(self, stream: str) -> None:
         pend = self._pending[stream]
         if not pend:
             return
-        rows = np.concatenate(pend) if len(pend) > 1 else pend[0]
+        rows = np.ascontiguousarray(np.concatenate(pend) if len(pend) > 1 else pend[0], dtype=np.float64)
         pend.clear()
-        ds = self._datasets[stream]
-        n0 = ds.shape[0]
-        ds.resize(n0 + rows.shape[0], axis=0)
-        ds[n0:] = rows
+        self._pending_rows[stream] = 0
+        # h5py's low-level calls: the high-level resize and slice assignment cost ~0.5 ms a call
+        # in selection building, and a fast lockstep run writes each stream every simulated second
+        dsid = self._datasets[stream].id
+        n0, ncols = dsid.shape
+        n = rows.shape[0]
+        dsid.set_extent((n0 + n, ncols))
+        fspace = dsid.get_space()
+        fspace.select_hyperslab((n0, 0), (n, ncols))
+        dsid.write(h5py.h5s.create_simple((n, ncols)), fspace, rows)
 
     def _log_row(self, t_sim_s: float, level: str, message: str) -> None:
         self._append_text(self._log, _json({"t_sim_s": t_sim_s, "level": level, "msg": message}))
