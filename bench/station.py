@@ -516,10 +516,12 @@ class Station:
 
     def check_links(self) -> None:
         """Called at every engine checkpoint: at most every 0.35 s (bench clock) or 0.5 s (wall)
-        ask each device for a sign of life; a lost link or a trip raises."""
+        ask each device for a sign of life; a lost link or a trip raises.  In lockstep only the
+        bench clock counts, so a seeded run makes the same device reads and the same arrays."""
         now_sim, now_wall = self.clock.now(), time.monotonic()
         last_sim, last_wall = self._last_health
-        if now_sim - last_sim < self.HEALTH_EVERY_SIM_S and now_wall - last_wall < self.HEALTH_EVERY_WALL_S:
+        wall_due = now_wall - last_wall >= self.HEALTH_EVERY_WALL_S and not getattr(self.clock, "lockstep", False)
+        if now_sim - last_sim < self.HEALTH_EVERY_SIM_S and not wall_due:
             return
         self._last_health = (now_sim, now_wall)
         for role in ordered_roles(self.devices):
