@@ -297,7 +297,7 @@ class FpgaLink:
 
     def wait_for_sample(self, index_or_time: int | float, timeout_wall_s: float = 5.0) -> None:
         """Block until every stream frame up to a sample index (int) or a time in seconds (float)
-        has been delivered (or counted dropped); LinkLostError if that takes over timeout_wall_s.
+        has been delivered to every subscriber (or counted dropped); LinkLostError if that takes over timeout_wall_s.
         Returns at once when this link has no stream running (nothing more will come)."""
         if not self._streaming:
             return
@@ -402,12 +402,15 @@ class FpgaLink:
             self._expected_seq = (int(seq[-1]) + 1) % p.SEQ_MOD
             self._frames += len(arr)
             block = p.stream_rows(arr)
-            self._last_index = max(self._last_index, int(arr["index"][-1]))
             subscribers = list(self._subscribers)
-            self._cond.notify_all()
         for cb in subscribers:
             try:
                 cb(block)
             except Exception:  # a subscriber's bug must not stop the reader (and every command)
                 self._callback_errors += 1
                 log.exception("FPGA stream subscriber %r failed", cb)
+        # only now is the block "delivered": a wait_for_sample/sync that returns guarantees that
+        # every subscriber (recorder, a procedure's tap) has seen it
+        with self._cond:
+            self._last_index = max(self._last_index, int(arr["index"][-1]))
+            self._cond.notify_all()
