@@ -403,12 +403,20 @@ class ScpiFrontEnd:
     # --- safety -------------------------------------------------------------------------------
     def safe_state(self) -> bool:
         """Outputs off, amplitudes zero on every channel; True only when read back as such."""
+        failures: list[str] = []
+        # every channel's output, then every amplitude, each on its own: one refusal must not
+        # leave the other channel driving
+        for action in ("output_on", "amplitude_v"):
+            for n, c in self.channels.items():
+                try:
+                    setattr(c, action, False if action == "output_on" else 0.0)
+                except Exception as exc:  # noqa: BLE001 - a safe-state attempt reports, it does not raise
+                    failures.append(f"ch{n} {action}: {exc}")
         try:
-            for c in self.channels.values():
-                c.output_on = False
-            for c in self.channels.values():
-                c.amplitude_v = 0.0
-            return all((not c.output_on) and c.amplitude_v == 0.0 for c in self.channels.values())
-        except Exception as exc:  # noqa: BLE001 - a safe-state attempt reports, it does not raise
-            log.warning("front end %s: safe state not confirmed: %s", self.resource_name, exc)
-            return False
+            confirmed = all((not c.output_on) and c.amplitude_v == 0.0 for c in self.channels.values())
+        except Exception as exc:  # noqa: BLE001
+            failures.append(f"read-back: {exc}")
+            confirmed = False
+        if failures:
+            log.warning("front end %s: safe state trouble: %s", self.resource_name, "; ".join(failures))
+        return confirmed and not failures

@@ -215,9 +215,12 @@ class RateTable(ABC):
             st = self.status()
             if timeout_s is None:  # the time a full-limit ramp-down needs, doubled, plus margin
                 timeout_s = 2.0 * abs(st.rate_dps) / self.limits.max_accel_dps2 + 5.0
-            self.stop()
+            try:
+                self.stop()
+            except DeviceError:  # refused (e-stopped, faulted): the table brakes by itself
+                pass
             if self.wait_at_rest(timeout_s) is None:
-                return False
+                return False  # still turning: left enabled and commanded to stop, under control
             self.disable()
             st = self.status()
             return (not st.enabled) and abs(st.rate_dps) <= REST_RATE_DPS
