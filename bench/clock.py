@@ -77,6 +77,7 @@ class SimClock(_PollingWait):
         self._speed = math.inf
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._thread_error: BaseException | None = None
         world.add_listener(self._on_world_advanced)
         self.set_speed(speed)
 
@@ -115,6 +116,7 @@ class SimClock(_PollingWait):
 
     def sleep(self, dt_s: float) -> None:
         dt_s = _check_dt(dt_s)
+        self._raise_thread_error()
         target = self.world.t_s + dt_s
         if self.lockstep:
             self.world.advance(dt_s)
@@ -125,8 +127,16 @@ class SimClock(_PollingWait):
                 if self.lockstep:  # speed switched to lockstep while waiting
                     break
                 self._cond.wait(timeout=0.05)
+        self._raise_thread_error()
         if self.lockstep and self.world.t_s < target:
             self.world.advance(max(0.0, target - self.world.t_s))
+
+    def _raise_thread_error(self) -> None:
+        """Report, once, that the real-time thread died; the clock is lockstep from then on, so
+        the waits of the safe state that follows still advance the world (in the caller)."""
+        err, self._thread_error = self._thread_error, None
+        if err is not None:
+            raise RuntimeError(f"the simulated world stopped advancing in real time: {err!r}") from err
 
     # --- real-time thread --------------------------------------------------------------------
     def _on_world_advanced(self, _world) -> None:
@@ -134,6 +144,17 @@ class SimClock(_PollingWait):
             self._cond.notify_all()
 
     def _run_realtime(self) -> None:
+        try:
+            self._advance_in_real_time()
+        except BaseException as exc:  # noqa: BLE001 - a dead thread must not leave waits hanging
+            with self._cond:
+                self._thread_error = exc
+                self._speed = math.inf
+                self._cond.notify_all()
+        finally:
+            self._thread = None
+
+    def _advance_in_real_time(self) -> None:
         last = time.monotonic()
         owed_s = 0.0
         while not self._stop.is_set():

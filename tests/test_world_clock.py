@@ -108,3 +108,35 @@ def test_clock_rejects_bad_waits():
         clock.set_speed(0)
     with pytest.raises(ValueError, match="nan"):
         RealClock().sleep(float("nan"))
+
+
+def test_a_dead_real_time_thread_raises_in_the_waiter_then_runs_lockstep():
+    """A device that fails inside the world's advance in real-time mode: the wait raises (it does
+    not hang), and the clock goes on in lockstep so a safe state can still wait."""
+
+    class Breaks:
+        def __init__(self) -> None:
+            self.armed = True
+
+        def before_block(self, world, t_s, n, dt_s):
+            if self.armed and t_s > 0.5:
+                self.armed = False
+                raise ValueError("device bug")
+
+        def after_block(self, world, block):
+            pass
+
+    world = World(preset("hrg"), seed=0)
+    world.attach(Breaks())
+    clock = SimClock(world, speed=20.0)
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(RuntimeError, match="device bug"):
+            clock.sleep(5.0)
+        assert time.monotonic() - t0 < 5.0
+        assert clock.lockstep
+        t1 = clock.now()
+        clock.sleep(1.0)
+        assert clock.now() == pytest.approx(t1 + 1.0, abs=1e-9)
+    finally:
+        clock.close()
