@@ -34,7 +34,7 @@ import numpy as np
 
 from bench.engine.context import GuardedClock
 from bench.engine.safety import SafeStateReport, ordered_roles
-from drivers.errors import LinkLostError, SafetyTripError
+from drivers.errors import DeviceError, LinkLostError, SafetyTripError
 
 BUILTIN_DIR = Path(__file__).resolve().parent / "stations"
 ROLES = ("table", "frontend", "fpga")
@@ -317,12 +317,16 @@ class _FpgaHealth:
             link.sync(timeout_wall_s=max(1.0, 2.0 * getattr(link, "timeout_s", 1.0)))
         s = link.stats
         base = getattr(link, "_gyrobench_stats0", None)
-        if base is None:
-            link._gyrobench_stats0 = (s.dropped, s.corrupt)
+        if base is None:  # no run stream started: nothing to compare against yet
             return
         if s.dropped > base[0] or s.corrupt > base[1]:
             raise LinkLostError(
                 f"FPGA link {link.url}: stream frames lost ({s.dropped - base[0]}) or corrupt ({s.corrupt - base[1]})"
+            )
+        if s.callback_errors > base[2]:  # the recorder (or a procedure's tap) failed on a block
+            raise DeviceError(
+                f"FPGA stream: {s.callback_errors - base[2]} block(s) not taken by a subscriber (recorder?); "
+                "the raw data would be incomplete"
             )
 
 
@@ -541,11 +545,11 @@ class Station:
             return lambda: setattr(self, "_ctx", None)
         from drivers.fpga.protocol import STREAM_COLUMNS
 
-        if hasattr(link, "_gyrobench_stats0"):
-            del link._gyrobench_stats0
         columns = tuple(STREAM_COLUMNS)
         unsubscribe = link.subscribe(lambda block: ctx.record("fpga", columns, block))
         link.start_stream(self.config.devices["fpga"]["decimation"])
+        s = link.stats  # the counters that count for this run start with its stream
+        link._gyrobench_stats0 = (s.dropped, s.corrupt, s.callback_errors)
 
         def stop() -> None:
             try:
