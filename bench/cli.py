@@ -137,12 +137,15 @@ def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None 
 def _print_record(js: dict[str, Any]) -> None:
     print(f"run {js['run_id']}  {js['procedure']}  {js['outcome']}  ({js['end_reason']})")
     truth = js.get("truth") or {}
+    def num(x: Any) -> str:  # as_json gives None for NaN/inf and for an open side of the limits
+        return "-" if x is None else f"{x:.6g}"
+
     rows = [("measurement", "value", "unit", "95% interval", "limits", "outcome", "truth" if truth else "")]
     for name, m in js["measurements"].items():
-        ci = "" if m["ci95"] is None else f"[{m['ci95'][0]:.6g}, {m['ci95'][1]:.6g}]"
-        lim = "" if m["limits"] is None else "[" + ", ".join(f"{x:.6g}" for x in m["limits"]) + "]"
-        t = f"{truth[name]:.6g}" if name in truth else ""
-        rows.append((name, f"{m['value']:.6g}", m["unit"], ci, lim, m["outcome"], t))
+        ci = "" if m["ci95"] is None else f"[{num(m['ci95'][0])}, {num(m['ci95'][1])}]"
+        lim = "" if m["limits"] is None else "[" + ", ".join(num(x) for x in m["limits"]) + "]"
+        t = num(truth[name]) if name in truth else ""
+        rows.append((name, num(m["value"]), m["unit"], ci, lim, m["outcome"], t))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for r in rows:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())

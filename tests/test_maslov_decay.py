@@ -192,3 +192,17 @@ def test_chunked_recursion_equals_the_4x4_loop(hrg_record, model):
         np.testing.assert_allclose(p_chunk / np.outer(sd, sd), p_loop / np.outer(sd, sd), atol=1e-3)
     with pytest.raises(ValueError, match="chunk_blocks=0"):
         recursive_lsq(x, y, 100, chunk_blocks=0)
+
+
+def test_short_record_recursive_starts_on_what_there_is():
+    """A 30-sample record: the default batch start is clamped to the blocks available, so the
+    recursive answer exists and equals the batch one (nothing left to recurse over)."""
+    from bench.analysis.maslov import identify_free_decay
+
+    rng = np.random.default_rng(5)
+    t = np.arange(30) * 0.01
+    q = np.exp(-0.5 * t)[:, None] * np.array([1.0, 0.2, 0.3, -0.1]) + 1e-4 * rng.standard_normal((30, 4))
+    batch = identify_free_decay(t, *q.T)
+    rec = identify_free_decay(t, *q.T, recursive=True)
+    for name in batch.params:
+        assert rec.params[name] == pytest.approx(batch.params[name], rel=1e-6, abs=1e-9), name

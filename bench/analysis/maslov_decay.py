@@ -254,9 +254,14 @@ def _general_fit(q: np.ndarray, dt_s: float, model: str, recursive: bool, n_init
     n_blocks = qs.shape[0]
     k = 8 + ns.shape[-1]
     if recursive:
-        m = n_init if n_init is not None else max(4 * k, n_blocks // 50)
-        if not k <= m <= n_blocks:
-            raise ValueError(f"n_init_blocks={m} must be between {k} and the {n_blocks} blocks")
+        if n_init is None:  # a batch start on 2 % of the record, at least 4 x k blocks, at most all
+            m = min(max(4 * k, n_blocks // 50), n_blocks)
+            if m < k:
+                raise ValueError(f"{n_blocks} Simpson blocks are too few for the {k} parameters of model={model!r}")
+        else:
+            m = n_init
+            if not k <= m <= n_blocks:
+                raise ValueError(f"n_init_blocks={m} must be between {k} and the {n_blocks} blocks")
         z, c = _recursive_from_parts(qs, ns, y, int(m))
     else:
         xtx, xty = _moments(qs, ns, y)

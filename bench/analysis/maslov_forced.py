@@ -145,8 +145,13 @@ def identify_forced(
     nonlinearity (0 for magnetoelectric actuators, the paper's case)."""
     check_model(model)
     n_points = check_finite_arrays(drive_freq_hz=drive_freq_hz, q1=q1, p1=p1, q2=q2, p2=p2)
-    if not (isinstance(natural_freq_hz, (int, float)) and math.isfinite(natural_freq_hz) and natural_freq_hz > 0):
+    try:
+        f_nat = float(natural_freq_hz)  # numpy scalars welcome
+    except (TypeError, ValueError):
+        f_nat = math.nan
+    if not (math.isfinite(f_nat) and f_nat > 0):
         raise ValueError(f"natural_freq_hz={natural_freq_hz!r} must be a finite frequency > 0")
+    natural_freq_hz = f_nat
     if not math.isfinite(mu):
         raise ValueError(f"mu={mu!r} must be finite")
     if not 0 < level < 1:
