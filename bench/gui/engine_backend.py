@@ -5,6 +5,7 @@ link counters, connection flags), so the GUI never talks to an instrument across
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from pathlib import Path
@@ -23,6 +24,8 @@ STATUS_EVERY_WALL_S = 0.5
 def default_station() -> str:
     return DEFAULT_STATION
 
+
+log = logging.getLogger(__name__)
 
 class EngineBackend:
     """GuiBackend over `bench.engine.Runner` on a `bench.station.Station` (opened here)."""
@@ -100,7 +103,10 @@ class EngineBackend:
     def close(self) -> None:
         if self.running():
             self.abort()
-            self.join()
+            # the run's own safe state must finish before its devices close: a slow ramp-down
+            # of a real table takes as long as it takes (the window says so while it waits)
+            while not self.join(30.0):
+                log.warning("waiting for the run to reach its safe state before closing the station")
         self.station.close()
         clock = getattr(self.station.clock, "close", None)
         if clock is not None:
