@@ -254,3 +254,27 @@ def test_abort_requested_before_the_run_starts_still_aborts():
     assert rec.outcome == "ABORTED" and rec.end_reason == "aborted: SIGINT" and rec.safe_state
     assert not station.devices["table"].moved
     assert Runner.run(runner, ThreeSteps, {"wait_s": 0.0}).outcome == "PASS"  # the abort does not leak
+
+
+def test_a_failing_recorder_makes_the_run_an_error_and_the_record_is_still_written(tmp_path, monkeypatch):
+    """Disk full, h5py error...: the run must not end COMPLETE with raw data missing."""
+    from bench.engine import Runner
+    from bench.recorder import Recorder
+    from bench.station import SimStation
+    from procedures.examples.table_spin import TableSpin
+
+    real = Recorder.on_event
+
+    def flaky(self, event):
+        if getattr(event, "stream", "") == "hold":
+            raise OSError("disk full")
+        return real(self, event)
+
+    monkeypatch.setattr(Recorder, "on_event", flaky)
+    station = SimStation("sim-hrg", seed=0).open()
+    try:
+        rec = Runner(station, runs_dir=tmp_path).run(TableSpin, {"hold_s": 0.5})
+    finally:
+        station.close()
+    assert rec.outcome == "ERROR" and "disk full" in rec.end_reason
+    assert rec.safe_state

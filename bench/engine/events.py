@@ -138,4 +138,5 @@ class EventBus:
             try:
                 cb(event)
             except Exception as exc:  # noqa: BLE001 - isolation is the point
-                self.errors.append((cb, exc))
+                if len(self.errors) < 1000:  # the first ones tell the story; keep memory bounded
+                    self.errors.append((cb, exc))

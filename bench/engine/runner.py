@@ -11,8 +11,10 @@ they take effect at the next checkpoint (any bench-clock wait, `ctx.progress`, a
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import functools
+import signal
 import subprocess
 import threading
 import time
@@ -145,14 +147,16 @@ class Runner:
 
     def checkpoint(self) -> None:
         """Raise RunAborted after an abort, hold while paused, raise a lost link the station saw."""
+        check = getattr(self.station, "check_links", None)
         while True:
             if self._abort_reason is not None:
                 raise RunAborted(self._abort_reason)
             if self._running.wait(0.05):
                 break
+            if check is not None:  # paused: a trip or a lost link still ends the run (real time)
+                check()
         if self._abort_reason is not None:
             raise RunAborted(self._abort_reason)
-        check = getattr(self.station, "check_links", None)
         if check is not None:
             check()
 
@@ -266,6 +270,12 @@ class Runner:
             rec.safe_state = report.confirmed
             rec.safe_detail = {"devices": report.devices, "errors": report.errors, "order": report.order}
             rec.measurements = list(ctx.results)
+            rec_errors = [e for cb, e in self.bus.errors if recorder is not None and cb == recorder.on_event]
+            if rec_errors and outcome != ABORTED:
+                outcome = ERROR
+                rec.end_reason += (
+                    f" (raw data incomplete: the recorder failed {len(rec_errors)} time(s): {rec_errors[0]!r})"
+                )
             if outcome is None:
                 outcome = combine_outcomes(r.outcome for r in rec.measurements)
                 if not report.confirmed:
@@ -285,7 +295,10 @@ class Runner:
             if recorder is not None:
                 if unsubscribe_rec is not None:
                     unsubscribe_rec()
-                recorder.close(rec)
+                try:
+                    recorder.close(rec)
+                except Exception as exc:  # noqa: BLE001 - the record and the store must still be written
+                    rec.end_reason += f" (closing the raw file failed: {exc})"
             ctx.close()
             if self.store is not None:
                 try:
@@ -300,10 +313,11 @@ class Runner:
         ctx.publish(ev.StepFinished, name=current, index=idx, status=status)
 
     def _safe_state(self, ctx: RunContext) -> SafeStateReport:
-        try:
-            report = self.station.safe_state()
-        except Exception as exc:  # noqa: BLE001
-            report = SafeStateReport(confirmed=False, errors={"station": f"{type(exc).__name__}: {exc}"})
+        with _sigint_deferred(ctx):
+            try:
+                report = self.station.safe_state()
+            except Exception as exc:  # noqa: BLE001
+                report = SafeStateReport(confirmed=False, errors={"station": f"{type(exc).__name__}: {exc}"})
         level = "INFO" if report.confirmed else "ERROR"
         ctx.publish(
             ev.Log,
@@ -312,3 +326,21 @@ class Runner:
             + (f" errors {report.errors}" if report.errors else ""),
         )
         return report
+
+
+@contextlib.contextmanager
+def _sigint_deferred(ctx: RunContext):
+    """While the safe state runs, Ctrl-C is logged, not raised: a second Ctrl-C must not leave
+    the table turning or the drive on.  (Signal handlers live in the main thread only.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def note(signum, _frame):
+        ctx.log.warning("Ctrl-C during the safe state: finishing it first")
+
+    previous = signal.signal(signal.SIGINT, note)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
