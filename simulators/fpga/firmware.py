@@ -215,18 +215,26 @@ class FpgaFirmware:
         index = block.index
         if dec > 1:
             q = block.q_meas
-            pos = np.flatnonzero(index % dec == 0)
-            csum = np.cumsum(q, axis=0) + self._dec_sum
-            count = np.arange(1, len(index) + 1) + self._dec_n
+            n_blk = len(index)
+            i0 = int(index[0])
+            if int(index[-1]) - i0 == n_blk - 1:  # consecutive samples (every World block): no scan
+                pos = np.arange((-i0) % dec, n_blk, dec)
+            else:
+                pos = np.flatnonzero(index % dec == 0)
+            csum = np.cumsum(q, axis=0)
+            csum += self._dec_sum
             if len(pos):
-                prev_sum = np.vstack([np.zeros((1, 4)), csum[pos[:-1]]])
-                prev_n = np.concatenate([[0], count[pos[:-1]]])
-                means = (csum[pos] - prev_sum) / (count[pos] - prev_n)[:, None]
-                self._dec_sum = csum[-1] - csum[pos[-1]]
-                self._dec_n = int(count[-1] - count[pos[-1]])
+                ends = csum[pos]
+                prev_sum = np.empty_like(ends)
+                prev_sum[0] = 0.0
+                prev_sum[1:] = ends[:-1]
+                count = np.diff(pos, prepend=-1 - self._dec_n)  # samples in each frame's mean
+                means = (ends - prev_sum) / count[:, None]
+                self._dec_sum = csum[-1] - ends[-1]
+                self._dec_n = n_blk - 1 - int(pos[-1])
             else:
                 means = np.empty((0, 4))
-                self._dec_sum, self._dec_n = csum[-1], int(count[-1])
+                self._dec_sum, self._dec_n = csum[-1], n_blk + self._dec_n
             sel = pos
         else:
             sel = slice(None)
