@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import logging
 import math
+import os
 import select
 import threading
 import time
@@ -362,7 +363,13 @@ class FpgaLink:
                     ready, _, _ = select.select([fd], [], [], 0.05)
                     if not ready:
                         continue
-                    data = ser.read(1 << 16)
+                    # one read of what is there (ser.read would select twice more around its recv)
+                    try:
+                        data = os.read(fd, 1 << 16)
+                    except BlockingIOError:  # a spurious wake-up on a non-blocking port
+                        continue
+                    if not data:  # readable yet empty: the other end closed
+                        raise OSError("link closed by the other end")
                 else:
                     ser.timeout = 0.05
                     data = ser.read(max(1, ser.in_waiting))
