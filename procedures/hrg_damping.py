@@ -21,6 +21,8 @@ from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_free_de
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Param, Procedure, Result, step
 
+from .hrg_excitation import HrgExcitation
+
 WINDOWS = "damping_windows"
 WINDOW_COLUMNS = ("kind", "t_start_s", "t_end_s")
 REF = "damping_reference"  # the reference frequency held during the decay, for Q = pi f0 tau
@@ -35,12 +37,10 @@ class _StreamTap:
 
     def __init__(self) -> None:
         self.on = False
-        self.latest: np.ndarray | None = None
         self._rows: list[np.ndarray] = []
         self._lock = threading.Lock()
 
     def __call__(self, block: np.ndarray) -> None:
-        self.latest = block[-1]
         if self.on:
             with self._lock:
                 self._rows.append(block[:, 1:6].copy())
@@ -73,20 +73,14 @@ def block_drift(t_s: np.ndarray, theta_rad: np.ndarray, block_s: float) -> tuple
     return np.asarray(mids), np.asarray(rates)
 
 
-class HrgDamping(Procedure):
+class HrgDamping(HrgExcitation, Procedure):
     """HRG damping non-uniformity from a free decay on a rate table (the patent), with compensation."""
 
     name = "hrg-damping"
     requires = ("table", "frontend", "fpga")
 
-    amplitude = Param(1.0, unit="", low=0.01, high=10.0, doc="amplitude setpoint held by the AGC before the cut")
-    amplitude_tolerance = Param(0.01, unit="", low=1e-4, high=0.5, doc="relative amplitude tolerance to go on")
-    amplitude_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to reach the amplitude")
     rate_dps = Param(500.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate during the decay (patent: 500)")
     accel_dps2 = Param(200.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
-    rate_tolerance_dps = Param(0.05, unit="deg/s", low=1e-4, high=10.0, doc="rate-stability tolerance")
-    rate_hold_s = Param(2.0, unit="s", low=0.0, high=600.0, doc="time the rate must stay within tolerance")
-    rate_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to become stable at rate")
     record_s = Param(900.0, unit="s", low=1.0, high=100000.0, doc="record duration (about 3 tau)")
     stream_hz = Param(100.0, unit="Hz", low=0.1, high=1e6, doc="rate of the samples fitted (boxcar-decimated stream)")
     fit_method = Param("log-linear", choices=METHODS, doc="estimator (bench.analysis.damping)")
@@ -114,23 +108,6 @@ class HrgDamping(Procedure):
         idx = np.rint(rows[:, 0] / period_s).astype(np.int64)
         return rows[idx % dec == 0]
 
-    def _amplitude_now(self, ctx) -> float:
-        ctx.devices.fpga.sync()
-        row = self._tap.latest
-        if row is None:
-            return 0.0
-        return float(orbit_elements(row[2:6])["a"])
-
-    def _hold_amplitude(self, ctx) -> None:
-        tol = self.amplitude_tolerance * self.amplitude
-        ok = ctx.wait_until(lambda: abs(self._amplitude_now(ctx) - self.amplitude) <= tol,
-                            timeout_s=self.amplitude_timeout_s, poll_s=0.5)
-        if not ok:
-            raise TimeoutError(
-                f"amplitude {self._amplitude_now(ctx):.4g} not within {tol:.3g} of the setpoint {self.amplitude:g} "
-                f"after {self.amplitude_timeout_s:g} s"
-            )
-
     def _record(self, ctx, kind: float, duration_s: float, label: str) -> np.ndarray:
         fpga = ctx.devices.fpga
         fpga.sync()
@@ -151,35 +128,25 @@ class HrgDamping(Procedure):
     @step("Excite and hold the amplitude")
     def excite(self, ctx):
         fpga = ctx.devices.fpga
-        self._unsubscribe = fpga.subscribe(self._tap)
-        fpga.set_whole_angle(False)
-        fpga.set_drift_compensation(False)
-        fpga.set_pll(True)
-        fpga.set_quadrature_loop(True)
-        fpga.set_agc(True, self.amplitude)
-        fpga.set_drive_enabled(True)
-        self._hold_amplitude(ctx)
-        ctx.log.info(f"amplitude {self._amplitude_now(ctx):.4f} held (setpoint {self.amplitude:g})")
+        unsubscribe_tap = fpga.subscribe(self._tap)
+        unsubscribe_latest = fpga.subscribe(self._keep_latest)
+        self._unsubscribe = lambda: (unsubscribe_tap(), unsubscribe_latest())
+        self._start_loops(ctx)
+        a = self._hold_amplitude(ctx)
+        ctx.log.info(f"amplitude {a:.4f} held (setpoint {self.amplitude:g})")
 
     @step("Spin the table")
     def spin(self, ctx):
-        table = ctx.devices.table
-        table.enable()
-        table.set_rate(self.rate_dps, self.accel_dps2)
+        self._start_spin(ctx)
 
     @step("Wait for a stable rate")
     def wait_stable(self, ctx):
-        st = ctx.devices.table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
+        st = self._wait_stable(ctx)
         ctx.log.info(f"table stable at {st.rate_dps:.4f} deg/s")
 
     @step("Cut the drive")
     def cut_drive(self, ctx):
-        fpga = ctx.devices.fpga
-        fpga.set_drive_enabled(False)
-        fpga.set_pll(False)  # hold the reference: a PLL cannot follow a decaying wave, and E, theta ignore chi
-        for ch in (1, 2):
-            ctx.devices.frontend.set_drive(ch, output_on=False)
-        ctx.sleep(0.1)  # the forces leave at the next loop block
+        self._cut_drive(ctx)
 
     @step("Record cx, sx, cy, sy")
     def record(self, ctx):

@@ -19,6 +19,8 @@ from bench.analysis.maslov import derived_ci95, identify_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Param, Procedure, Result, step
 
+from .hrg_excitation import HrgExcitation
+
 WINDOW = "decay_window"
 WINDOW_COLUMNS = ("t_start_s", "t_end_s", "ref_freq_hz", "rate_dps")
 _FPGA = {"t_s": 1, "cx": 2, "sx": 3, "cy": 4, "sy": 5}
@@ -56,20 +58,14 @@ def decay_results(
     return out, fit
 
 
-class HrgFreeDecay(Procedure):
+class HrgFreeDecay(HrgExcitation, Procedure):
     """HRG free decay on a rate table, identified with Maslov's slow-variable model."""
 
     name = "hrg-free-decay"
     requires = ("table", "fpga")
 
-    amplitude = Param(1.0, unit="", low=0.01, high=10.0, doc="amplitude held by the AGC before the cut")
-    amplitude_tolerance = Param(0.01, unit="", low=1e-4, high=0.5, doc="relative amplitude tolerance to go on")
-    amplitude_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to reach the amplitude")
     rate_dps = Param(50.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate during the decay")
     accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
-    rate_tolerance_dps = Param(0.05, unit="deg/s", low=1e-4, high=10.0, doc="rate-stability tolerance")
-    rate_hold_s = Param(2.0, unit="s", low=0.0, high=600.0, doc="time the rate must stay within tolerance")
-    rate_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to become stable at rate")
     record_s = Param(300.0, unit="s", low=1.0, high=100000.0, doc="record duration")
     stream_hz = Param(100.0, unit="Hz", low=0.1, high=1e6, doc="rate of the samples fitted (decimated stream)")
     natural_freq_hz = Param(5500.0, unit="Hz", low=1.0, high=1e6, doc="nominal natural frequency w/2pi")
@@ -77,36 +73,21 @@ class HrgFreeDecay(Procedure):
 
     @step("Excite and hold the amplitude")
     def excite(self, ctx):
-        fpga = ctx.devices.fpga
-        self._latest = None
-        self._unsubscribe = fpga.subscribe(self._keep_latest)
-        fpga.set_whole_angle(False)
-        fpga.set_drift_compensation(False)
-        fpga.set_pll(True)
-        fpga.set_quadrature_loop(True)
-        fpga.set_agc(True, self.amplitude)
-        fpga.set_drive_enabled(True)
-        tol = self.amplitude_tolerance * self.amplitude
-        ok = ctx.wait_until(lambda: abs(self._amplitude_now(ctx) - self.amplitude) <= tol,
-                            timeout_s=self.amplitude_timeout_s, poll_s=0.5)
-        if not ok:
-            raise TimeoutError(f"amplitude {self._amplitude_now(ctx):.4g} not within {tol:.3g} of "
-                               f"{self.amplitude:g} after {self.amplitude_timeout_s:g} s")
-        self._unsubscribe()
+        unsubscribe = ctx.devices.fpga.subscribe(self._keep_latest)
+        try:
+            self._start_loops(ctx)
+            self._hold_amplitude(ctx)
+        finally:
+            unsubscribe()
 
     @step("Spin the table")
     def spin(self, ctx):
-        table = ctx.devices.table
-        table.enable()
-        table.set_rate(self.rate_dps, self.accel_dps2)
-        table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
+        self._start_spin(ctx)
+        self._wait_stable(ctx)
 
     @step("Cut the drive")
     def cut_drive(self, ctx):
-        fpga = ctx.devices.fpga
-        fpga.set_drive_enabled(False)
-        fpga.set_pll(False)  # the reference stays where the PLL left it: constant detuning
-        ctx.sleep(0.1)  # the forces leave at the next loop block
+        self._cut_drive(ctx)
 
     @step("Record the decay")
     def record(self, ctx):
@@ -133,15 +114,6 @@ class HrgFreeDecay(Procedure):
         ctx.log.info("identified %s: sigma %.3g, noise %.3g per channel", fit.model, fit.sigma, fit.noise_sigma)
 
     # --- helpers -------------------------------------------------------------------------------
-    def _amplitude_now(self, ctx) -> float:
-        ctx.devices.fpga.sync()
-        row = self._latest
-        return 0.0 if row is None else float(orbit_elements(row[2:6])["a"])
-
-    def _keep_latest(self, block: np.ndarray) -> None:
-        """Stream subscriber (reader thread): keep the newest row only."""
-        self._latest = block[-1].copy()
-
     def _analyse(self, data):
         win = data.array(WINDOW)[-1]
         fpga = data.array("fpga")

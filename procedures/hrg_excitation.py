@@ -1,0 +1,76 @@
+"""What the HRG decay procedures share: excite the resonator and hold its amplitude with the
+FPGA's loops, spin the table to a stable rate, cut the drive.  A parameter mixin (not a
+Procedure, so it is never listed) whose Params and helpers the procedures inherit; the
+self-calibration procedures of the next wave stand on the same pieces."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bench.analysis.slow_model import orbit_elements
+from bench.engine import Param
+
+
+class HrgExcitation:
+    """Params and helpers for 'excite, hold, spin, cut'.  The procedure keeps the newest stream
+    row in `self._latest_row` (a stream subscriber it owns) and calls these from its steps."""
+
+    amplitude = Param(1.0, unit="", low=0.01, high=10.0, doc="amplitude setpoint held by the AGC before the cut")
+    amplitude_tolerance = Param(0.01, unit="", low=1e-4, high=0.5, doc="relative amplitude tolerance to go on")
+    amplitude_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to reach the amplitude")
+    rate_tolerance_dps = Param(0.05, unit="deg/s", low=1e-4, high=10.0, doc="rate-stability tolerance")
+    rate_hold_s = Param(2.0, unit="s", low=0.0, high=600.0, doc="time the rate must stay within tolerance")
+    rate_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to become stable at rate")
+
+    _latest_row: np.ndarray | None = None
+
+    def _keep_latest(self, block: np.ndarray) -> None:
+        """Stream subscriber (the link's reader thread): keep the newest row only."""
+        self._latest_row = block[-1].copy()
+
+    def _amplitude_now(self, ctx) -> float:
+        ctx.devices.fpga.sync()  # every frame up to the bench clock's now has been seen
+        row = self._latest_row
+        return 0.0 if row is None else float(orbit_elements(row[2:6])["a"])
+
+    def _start_loops(self, ctx) -> None:
+        """AGC (at the amplitude setpoint), PLL and quadrature loop on, drive on."""
+        fpga = ctx.devices.fpga
+        fpga.set_whole_angle(False)
+        fpga.set_drift_compensation(False)
+        fpga.set_pll(True)
+        fpga.set_quadrature_loop(True)
+        fpga.set_agc(True, self.amplitude)
+        fpga.set_drive_enabled(True)
+
+    def _hold_amplitude(self, ctx) -> float:
+        """Wait (bench clock) until the amplitude is within tolerance of the setpoint; returns it."""
+        tol = self.amplitude_tolerance * self.amplitude
+        ok = ctx.wait_until(lambda: abs(self._amplitude_now(ctx) - self.amplitude) <= tol,
+                            timeout_s=self.amplitude_timeout_s, poll_s=0.5)
+        if not ok:
+            raise TimeoutError(
+                f"amplitude {self._amplitude_now(ctx):.4g} not within {tol:.3g} of the setpoint {self.amplitude:g} "
+                f"after {self.amplitude_timeout_s:g} s"
+            )
+        return self._amplitude_now(ctx)
+
+    def _start_spin(self, ctx) -> None:
+        table = ctx.devices.table
+        table.enable()
+        table.set_rate(self.rate_dps, self.accel_dps2)
+
+    def _wait_stable(self, ctx):
+        return ctx.devices.table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
+
+    def _cut_drive(self, ctx) -> None:
+        """Drive off; PLL off so the reference holds (a PLL cannot follow a decaying wave, and the
+        detuning then stays constant through the record); front-end outputs off if there is one."""
+        fpga = ctx.devices.fpga
+        fpga.set_drive_enabled(False)
+        fpga.set_pll(False)
+        frontend = ctx.devices.get("frontend")
+        if frontend is not None:
+            for ch in (1, 2):
+                frontend.set_drive(ch, output_on=False)
+        ctx.sleep(0.1)  # the forces leave at the next loop block
