@@ -15,6 +15,7 @@ import tty
 from drivers.rate_table import ascii_protocol as ap
 from drivers.rate_table import modbus_protocol as mp
 
+from .fault_controls import TableFaultControls
 from .mechanics import CommandRejected, TableMechanics
 
 
@@ -150,7 +151,7 @@ class _LinkFaults:
         return None
 
 
-class AsciiTableServer:
+class AsciiTableServer(TableFaultControls):
     """Handle of a running ASCII table: `.host`, `.port` (TCP) or `.url` (pty path or socket://),
     `.mechanics`, `.inject(kind)`, `.stop()`."""
 
@@ -220,20 +221,6 @@ class AsciiTableServer:
                 out = self._reply(raw.decode("ascii", "replace"))
                 if out is not None:
                     os.write(self._master, out)
-
-    def inject(self, kind: str, code: int | None = None) -> None:
-        with self.world.lock:
-            self.mechanics.inject(kind, code)
-
-    def clear(self, kind: str) -> None:
-        with self.world.lock:
-            self.mechanics.clear(kind)
-
-    def corrupt_replies(self, kind: str, count: int = 1) -> None:
-        if kind not in ("short", "garbage", "drop"):
-            raise ValueError(f"corrupt kind={kind!r}: expected 'short', 'garbage' or 'drop'")
-        with self.link_faults.lock:
-            self.link_faults.kind, self.link_faults.count = kind, int(count)
 
     def stop(self) -> None:
         self._stop.set()

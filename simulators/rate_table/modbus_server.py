@@ -15,6 +15,7 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 
 from drivers.rate_table import modbus_protocol as mp
 
+from .fault_controls import TableFaultControls
 from .mechanics import CommandRejected, TableMechanics
 from .pty_bridge import PtyBridge
 
@@ -111,7 +112,7 @@ class _TableRegisters:
         return None
 
 
-class ModbusTableServer:
+class ModbusTableServer(TableFaultControls):
     """Handle of a running Modbus table: `.host`, `.port`, `.url`, `.mechanics`, `.stop()`."""
 
     def __init__(
@@ -169,22 +170,6 @@ class ModbusTableServer:
     def url(self) -> str:
         """What a serial (RTU) client opens through pyserial: the pty path, or `socket://host:port`."""
         return self._bridge.path if self._bridge is not None else f"socket://{self.host}:{self.port}"
-
-    def inject(self, kind: str, code: int | None = None) -> None:
-        """Table fault: "estop", "fault" or "interlock"."""
-        with self.world.lock:
-            self.mechanics.inject(kind, code)
-
-    def clear(self, kind: str) -> None:
-        with self.world.lock:
-            self.mechanics.clear(kind)
-
-    def corrupt_replies(self, kind: str, count: int = 1) -> None:
-        """Spoil the next `count` replies: "short" (truncated), "garbage" (bytes flipped), "drop"."""
-        if kind not in ("short", "garbage", "drop"):
-            raise ValueError(f"corrupt kind={kind!r}: expected 'short', 'garbage' or 'drop'")
-        with self.link_faults.lock:
-            self.link_faults.kind, self.link_faults.count = kind, int(count)
 
     def stop(self) -> None:
         if self._bridge is not None:
