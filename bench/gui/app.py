@@ -4,6 +4,8 @@ headless and save a screenshot of the window at a chosen simulated second."""
 from __future__ import annotations
 
 import math
+import os
+import sys
 import threading
 import time
 from pathlib import Path
@@ -25,8 +27,28 @@ def make_backend(station: str | None, *, seed: int = 0) -> GuiBackend:
     return EngineBackend(station or default_station(), seed=seed)
 
 
+def has_display(environ: dict[str, str] | None = None) -> bool:
+    """Whether a window can be shown: an X or Wayland display on Linux (other systems always)."""
+    env = os.environ if environ is None else environ
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
+
+
+def choose_qt_platform(environ: dict[str, str] | None = None) -> str | None:
+    """With no display and no QT_QPA_PLATFORM, pick Qt's offscreen platform (set in the
+    environment, before the QApplication exists): Qt would otherwise abort the process."""
+    env = os.environ if environ is None else environ
+    if env.get("QT_QPA_PLATFORM") or has_display(env):
+        return None
+    env["QT_QPA_PLATFORM"] = "offscreen"
+    return "offscreen"
+
+
 def _app():
     from PySide6.QtWidgets import QApplication
+
+    choose_qt_platform()
 
     app = QApplication.instance()
     return app if app is not None else QApplication(["gyrobench"])
@@ -97,6 +119,9 @@ def run_gui(station: str | None = None, *, run: str | None = None, screenshot: s
             at_s: float | None = None, seed: int = 0, speed: float | None = None,
             open_run: str | None = None, params: dict[str, str] | None = None) -> int:
     """Open the window (blocking until it closes), or with `screenshot`, run headless and exit."""
+    if screenshot is None and not os.environ.get("QT_QPA_PLATFORM") and not has_display():
+        raise SystemExit("gyrobench gui: no display (DISPLAY / WAYLAND_DISPLAY unset): the window cannot be "
+                         "shown; use --screenshot FILE to run headless, or set QT_QPA_PLATFORM")
     app = _app()
     from .main_window import MainWindow
 
