@@ -427,7 +427,7 @@ def load_config(name_or_path: str | Path) -> StationConfig:
             raise StationError(f"{where} {not_one_of('driver', name, fitting)}")
         spec = DRIVERS[name]
         if spec.role != role:
-            raise StationError(f"{where} driver = {name!r} is a {spec.role!r} driver, not a {role!r} one")
+            raise StationError(f"{where} {not_one_of('driver', name, fitting)} (it is a {spec.role} driver)")
         cfg = check_table(where, table, spec.keys)
         if sim is None:
             missing = [k for k in ("resource", "url") if k in spec.keys and not cfg.get(k)]
@@ -466,7 +466,8 @@ class Station:
         if config.simulation is not None:
             return SimStation(config, **overrides)
         if overrides:
-            raise StationError(f"{config.source}: {sorted(overrides)} only apply to a simulated station")
+            options = ", ".join(f"--{k}" for k in sorted(overrides))
+            raise StationError(f"{config.source}: a real station; {options} apply only to a simulated one")
         return cls(config)
 
     def _make_clock(self) -> Any:
@@ -810,6 +811,8 @@ def parse_fault(text: str) -> tuple[str, float]:
         at_s = float(at)
     except ValueError:
         raise StationError(f"--fault {text!r}: {at!r} is not a number of seconds") from None
-    if not (math.isfinite(at_s) and at_s >= 0):
-        raise StationError(f"--fault {text!r}: {at_s!r} s is outside the allowed range [0, inf)")
+    try:
+        at_s = convert("time", at_s, float, low=0.0, unit="s")
+    except ValidationError as exc:
+        raise StationError(f"--fault {text!r}: {exc}") from None
     return kind, at_s

@@ -43,7 +43,7 @@ def test_real_station_file_is_checked_not_connected(tmp_path):
         (("max_accel_dps2 = 200.0", "max_accel_dps2 = -1.0"), ["max_accel_dps2=-1 deg/s^2 is below the limit 0.001"]),
         (("max_rate_dps = 800.0", 'max_rate_dps = "fast"'), ["max_rate_dps='fast' is not a number"]),
         (('driver = "modbus-table"', 'driver = "telnet-table"'), ["driver='telnet-table' is not one of ascii-table,"]),
-        (('driver = "modbus-table"', 'driver = "fpga-link"'), ["driver", "'fpga-link'", "not a 'table'"]),
+        (('driver = "modbus-table"', 'driver = "fpga-link"'), ["(it is a fpga driver)"]),
         (('host = "10.0.0.5"', 'hots = "10.0.0.5"'), ["hots: unknown key (allowed: device_id, driver, host,"]),
         (("[devices.table]", "[devices.turntable]"), ["unknown role 'turntable'"]),
         (('id = "lab-1"', 'name = "lab-1"'), ["[station] name: unknown key (allowed: description,"]),
@@ -75,7 +75,7 @@ def test_unknown_station_and_faults():
     for bad, part in (
         ("link-drop", "KIND@SECONDS"),
         ("meteor@1", "not one of"),
-        ("table-estop@-1", "[0, inf)"),
+        ("table-estop@-1", "time=-1 s is below the limit 0 s"),
         ("table-estop@soon", "not a number"),
     ):
         with pytest.raises(StationError, match=part.replace("[", r"\[").replace(")", r"\)")):
