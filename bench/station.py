@@ -36,7 +36,7 @@ import numpy as np
 
 from bench.engine.context import GuardedClock
 from bench.engine.safety import SafeStateReport, ordered_roles
-from bench.validation import ValidationError, convert, missing_key, not_a, not_one_of, unknown_name
+from bench.validation import KIND_WORDS, ValidationError, convert, missing_key, not_a, not_one_of, unknown_name
 from drivers.errors import DeviceError, LinkLostError, SafetyTripError
 
 _log = logging.getLogger(__name__)
@@ -80,7 +80,7 @@ class Key:
             lo = "-inf" if self.low is None else f"{self.low:g}"
             hi = "inf" if self.high is None else f"{self.high:g}"
             return f"[{lo}, {hi}]"
-        return f"a {self.type.__name__}"
+        return KIND_WORDS.get(self.type, f"a {self.type.__name__}")
 
     def check(self, where: str, name: str, value: Any) -> Any:
         """The value, checked; StationError `<where> <name>=<value> is ...` (bench.validation)."""
@@ -467,7 +467,8 @@ class Station:
             return SimStation(config, **overrides)
         if overrides:
             options = ", ".join(f"--{k}" for k in sorted(overrides))
-            raise StationError(f"{config.source}: a real station; {options} apply only to a simulated one")
+            verb = "applies" if len(overrides) == 1 else "apply"
+            raise StationError(f"{config.source}: a real station; {options} {verb} only to a simulated one")
         return cls(config)
 
     def _make_clock(self) -> Any:

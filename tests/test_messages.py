@@ -249,3 +249,11 @@ def test_readme_headless_screenshot_without_a_display(tmp_path):
     if sys.platform.startswith("linux"):
         win = _run(["gui", "--station", "sim-hrg"], tmp_path, timeout=120, env=env)
         assert win.returncode == 1 and "no display" in win.stderr and "Traceback" not in win.stderr
+
+
+def test_gui_options_are_checked_in_the_same_words(capsys):
+    """`gyrobench gui --speed fast` was a ValueError from float(); now the shared message."""
+    assert main(["gui", "--speed", "fast"]) == 2
+    assert capsys.readouterr().err.strip() == "gyrobench: --speed='fast' is not a number"
+    assert main(["gui", "--speed", "-3"]) == 2
+    assert capsys.readouterr().err.strip() == "gyrobench: --speed=-3 is below the limit 0"

@@ -10,6 +10,8 @@ import threading
 import time
 from pathlib import Path
 
+from bench.validation import ValidationError, not_one_of, unknown_name
+
 from .backend import GuiBackend
 
 SIM_WORLD = "sim-world"
@@ -79,14 +81,14 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
     idx = window.procedure.findText(procedure)
     if idx < 0:
         names = [window.procedure.itemText(i) for i in range(window.procedure.count())]
-        raise ValueError(f"procedure {procedure!r} is not one of {names}")
+        raise ValidationError(not_one_of("--run", procedure, names))
     window.procedure.setCurrentIndex(idx)
     for k, v in (params or {}).items():
         if k not in window.form.fields:
-            raise ValueError(f"{procedure} has no parameter {k!r}; it has {', '.join(window.form.fields)}")
+            raise ValidationError(unknown_name(k, f"not a parameter of {procedure}", window.form.fields))
         window.form.set_value(k, v)
     if not window.form.is_valid():
-        raise ValueError(f"invalid parameters for {procedure}: {window.form.errors}")
+        raise ValidationError("; ".join(window.form.errors.values()))
     window.start()
     if not window.run_active:
         raise RuntimeError(f"{procedure} did not start (see the log)")
@@ -166,5 +168,9 @@ def run_gui(station: str | None = None, *, run: str | None = None, screenshot: s
 
 
 def parse_speed(text: str) -> float:
-    """'1', '10', '100' or 'max' -> x real time (inf for max)."""
-    return math.inf if text.lower() in ("max", "inf") else float(text)
+    """'1', '10', '100' or 'max' -> x real time (inf for max); ValidationError otherwise."""
+    from bench.validation import convert
+
+    if text.strip().lower() in ("max", "inf"):
+        return math.inf
+    return convert("--speed", text, float, low=0.0, parse_text=True)
