@@ -509,10 +509,11 @@ def main(argv: list[str] | None = None) -> int:
     anything else is one line and a saved traceback (printed with --debug), never a bare trace."""
     import os
 
-    debug = bool(os.environ.get("GYROBENCH_DEBUG"))
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv or bool(os.environ.get("GYROBENCH_DEBUG"))  # anywhere on the line
+    argv = [a for a in argv if a != "--debug"]
     try:
         args = build_parser().parse_args(argv)
-        debug = debug or bool(getattr(args, "debug", False))
         code = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, inside the boundary, not at interpreter exit
         return code

@@ -192,7 +192,7 @@ def test_unexpected_errors_are_one_line_and_a_saved_traceback(tmp_path, capsys, 
     assert "Traceback" not in err and len(err.splitlines()) == 1, err
     saved = Path(re.search(r"traceback saved to (\S+);", err).group(1))
     assert saved.parent == tmp_path / "gyrobench" and "ZeroDivisionError" in saved.read_text()
-    assert main(["--debug", "list"]) == cli.EXIT_INTERNAL
+    assert main(["list", "--debug"]) == cli.EXIT_INTERNAL
     assert "Traceback (most recent call last)" in capsys.readouterr().err
 
 
