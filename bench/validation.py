@@ -93,7 +93,7 @@ def convert(
                     raise ValueError(text)
                 value = text.lower() in TRUE_WORDS
             elif kind is int:
-                value = int(text, 0)
+                value = int(text) if text.lstrip("+-").isdigit() else int(text, 0)  # 010 and 0x10 both
             elif kind is float:
                 value = float(text)
         except ValueError:
