@@ -41,10 +41,11 @@ def _parse_sets(items: list[str]) -> dict[str, str]:
     return out
 
 
-def _store(url: str | None):
+def _store(url: str | None, **kw: Any):
+    """The results store; StoreError (one line) when it cannot be opened or its driver is missing."""
     from bench.results import ResultsStore
 
-    return ResultsStore(url)
+    return ResultsStore(url, **kw)
 
 
 # --- run -----------------------------------------------------------------------------------------
@@ -75,7 +76,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except (ProcedureNotFound, ParamError, StationError, ValueError) as exc:
         _err(str(exc))
         return EXIT_USAGE
-    store = _store(args.results or station.results_url)
+    from bench.results import StoreError
+
+    try:  # a store that is down now still takes the run's record later, through the spool
+        store = _store(args.results or station.results_url, offline_ok=True)
+    except StoreError as exc:
+        _err(str(exc))
+        return EXIT_USAGE
     runner = Runner(
         station, runs_dir=args.runs_dir or station.runs_dir, store=store, operator=args.operator, duts=args.dut
     )
@@ -110,13 +117,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
     js = rec.as_json()
     report = None
     if args.report and js.get("raw_file"):  # beside the raw file, same name with .html
-        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if store else None)
+        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if not rec.store_error else None)
     if args.json:
         print(json.dumps(js))
     else:
         _print_record(js)
         if report is not None:
             print(f"  report {report}")
+    if rec.store_error:  # the run's record is not in the store (it is in the spool): not a clean exit
+        _err(rec.store_error)
+        return EXIT_BAD_OUTCOME
     return EXIT_BAD_OUTCOME if rec.outcome in BAD_OUTCOMES else EXIT_OK
 
 
@@ -187,7 +197,26 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_runs(args: argparse.Namespace) -> int:
-    rows = _store(args.results).list_runs(limit=args.limit, procedure=args.procedure)
+    from pathlib import Path
+
+    from bench.results import StoreError
+
+    spool = Path(args.runs_dir) / "spool"
+    try:
+        store = _store(args.results, spool_dir=spool)
+        if args.sync:
+            submitted, problems = store.sync()
+            for problem in problems:
+                _err(problem)
+            print(f"submitted {len(submitted)} spooled run(s) from {spool}", file=sys.stderr)
+            if problems:
+                return EXIT_BAD_OUTCOME
+        elif store.spool.pending():
+            _err(f"{len(store.spool.pending())} run(s) wait in {spool}; `gyrobench runs --sync` submits them")
+        rows = store.list_runs(limit=args.limit, procedure=args.procedure)
+    except StoreError as exc:
+        _err(str(exc))
+        return EXIT_BAD_OUTCOME
     if args.json:
         print(json.dumps(rows, default=str))
         return EXIT_OK
@@ -200,11 +229,16 @@ def _cmd_runs(args: argparse.Namespace) -> int:
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
+    from bench.results import StoreError
+
     try:
         run = _store(args.results).get_run(args.run)
     except KeyError as exc:
         _err(str(exc.args[0]))
         return EXIT_USAGE
+    except StoreError as exc:
+        _err(str(exc))
+        return EXIT_BAD_OUTCOME
     if args.json:
         print(json.dumps(run, default=str))
         return EXIT_OK
@@ -408,6 +442,8 @@ def build_parser() -> argparse.ArgumentParser:
     runs.add_argument("--procedure", default=None)
     runs.add_argument("--results", default=None)
     runs.add_argument("--json", action="store_true")
+    runs.add_argument("--sync", action="store_true", help="first submit the records spooled while the store was down")
+    runs.add_argument("--runs-dir", default="runs", help="directory of the raw files and their spool/ (default: runs)")
     runs.set_defaults(func=_cmd_runs)
 
     for name, func, helptext in (
