@@ -35,12 +35,15 @@ from .spool import Spool
 DEFAULT_PATH = Path("runs") / "results.sqlite"
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 POSTGRES_EXTRA = "pip install 'gyrobench[postgres]'"
-# what a store that cannot be reached or written raises (OSError: e.g. a full disk for a lock file)
-STORE_ERRORS = (SQLAlchemyError, OSError)
 
 
 class StoreError(Exception):
     """The results store cannot be opened, reached or written; the message is one line for a user."""
+
+
+# what a store that cannot be reached or written raises (OSError: e.g. a full disk for a lock file)
+DB_ERRORS = (SQLAlchemyError, OSError)
+STORE_ERRORS = (StoreError, *DB_ERRORS)
 
 
 def to_url(url_or_path: str | Path | None) -> str:
@@ -149,7 +152,7 @@ class ResultsStore:
             return
         try:
             self.upgrade()
-        except STORE_ERRORS as exc:
+        except DB_ERRORS as exc:
             raise self._fail(exc) from None
         self._ready = True
 
