@@ -221,9 +221,11 @@ def _cmd_runs(args: argparse.Namespace) -> int:
         print(json.dumps(rows, default=str))
         return EXIT_OK
     for r in rows:
+        safe = "-" if r["outcome"] == "RUNNING" else "safe" if r["safe_state"] else "UNSAFE"
+        where = f"on {r['host']}, process {r['pid']}" if r["outcome"] == "RUNNING" else r["end_reason"]
         print(
-            f"{r['run_id']}  {r['started_at'][:19]}  {r['station_id']:<10} {r['procedure']:<18} {r['outcome']:<9} "
-            f"{'safe' if r['safe_state'] else 'UNSAFE'}  {r['end_reason']}"
+            f"{r['run_id']}  {r['started_at'][:19]}  {r['station_id']:<10} {r['procedure']:<18} {r['outcome']:<11} "
+            f"{safe:<6}  {where}"
         )
     return EXIT_OK
 
@@ -258,6 +260,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
         "raw_file",
     ):
         print(f"{key:>17}: {run[key]}")
+    if run.get("host"):  # where it ran, and its last sign of life (RUNNING / INTERRUPTED)
+        print(f"{'host':>17}: {run['host']} (process {run['pid']}, heartbeat {run['heartbeat_at']})")
     print(f"{'params':>17}: {run['params']}")
     if run["duts"]:
         print(f"{'duts':>17}: {', '.join(run['duts'])}")
