@@ -307,6 +307,8 @@ class Runner:
             ctx.close()
             if self.store is not None:  # saved, or kept in the spool: then store_error says so
                 rec.store_error = self.store.finish_run(rec, spool_dir)
+                if rec.store_error:
+                    ctx.publish(ev.Log, level="ERROR", message=rec.store_error)
         return rec
 
     def _step_failed(self, ctx: RunContext, steps: list, current: str, status: str) -> None:

@@ -245,7 +245,7 @@ class ResultsStore:
         try:
             self._ensure_ready()
             self.save_doc(doc)
-        except STORE_ERRORS as exc:
+        except Exception as exc:  # noqa: BLE001 - whatever the store says, the run goes on and spools
             problem = exc if isinstance(exc, StoreError) else self._fail(exc)
             try:
                 path = spool.put(doc)
@@ -281,7 +281,7 @@ class ResultsStore:
         doc = self.record_doc(rec)
         try:
             self.save_run(rec)
-        except STORE_ERRORS as exc:
+        except Exception as exc:  # noqa: BLE001 - the record must not be lost, whatever the store says
             problem = exc if isinstance(exc, StoreError) else self._fail(exc)
             try:
                 path = spool.put(doc)
