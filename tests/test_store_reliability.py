@@ -16,7 +16,7 @@ import pytest
 from bench.engine import Result, RunRecord
 from bench.engine.measurement import INTERRUPTED, RUNNING
 from bench.results import ResultsStore, StoreError
-from bench.results.liveness import host_name
+from bench.results.liveness import age_s, host_name
 from bench.results.spool import Spool
 
 DOWN_PG = "postgresql+psycopg://postgres@127.0.0.1:1/nowhere"  # nothing listens on port 1
@@ -66,6 +66,7 @@ def test_run_row_is_running_with_a_fresh_heartbeat_then_finished(store_url):
     while store.get_run(rec.run_id)["heartbeat_at"] == first and time.monotonic() < deadline:
         time.sleep(0.02)
     assert store.get_run(rec.run_id)["heartbeat_at"] > first  # the run keeps it fresh
+    assert abs(age_s(store.db_now())) < 5.0  # the store's clock (PostgreSQL: the server's), ISO 8601 UTC
     assert store.finish_run(rec) is None
     row = store.get_run(rec.run_id)
     assert row["outcome"] == "PASS" and len(row["measurements"]) == 1

@@ -51,10 +51,17 @@ def process_alive(pid: int | None) -> bool:
         return True
 
 
-def is_interrupted(host: str | None, pid: int | None, heartbeat_at: str | None, *, stale_s: float = STALE_S) -> bool:
-    """A RUNNING row's run is over: its heartbeat is stale, or it ran here and its process is gone.
-    A fresh heartbeat from another host is never judged (that station's run is live)."""
-    if age_s(heartbeat_at) > stale_s:
+def is_interrupted(
+    host: str | None,
+    pid: int | None,
+    heartbeat_at: str | None,
+    *,
+    now: _dt.datetime | None = None,
+    stale_s: float = STALE_S,
+) -> bool:
+    """A RUNNING row's run is over: its heartbeat is stale at `now` (the store's clock), or it ran
+    here and its process is gone.  A fresh heartbeat from another host means that station's run is live."""
+    if age_s(heartbeat_at, now) > stale_s:
         return True
     return host == host_name() and not process_alive(pid)
 

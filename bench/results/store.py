@@ -12,6 +12,7 @@ A record the store cannot take is kept in a spool (`spool.py`) and submitted by 
 
 from __future__ import annotations
 
+import datetime as _dt
 import math
 import os
 from pathlib import Path
@@ -21,7 +22,7 @@ from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from sqlalchemy import create_engine, delete, event, insert, select, update
+from sqlalchemy import create_engine, delete, event, insert, select, text, update
 from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.exc import SQLAlchemyError
 
@@ -35,6 +36,7 @@ from .spool import Spool
 DEFAULT_PATH = Path("runs") / "results.sqlite"
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 POSTGRES_EXTRA = "pip install 'gyrobench[postgres]'"
+PG_NOW_ISO = """SELECT to_char(clock_timestamp() AT TIME ZONE 'UTC', 'YYYY-MM-DD"T"HH24:MI:SS.US"+00:00"')"""
 
 
 class StoreError(Exception):
@@ -156,6 +158,14 @@ class ResultsStore:
             raise self._fail(exc) from None
         self._ready = True
 
+    def db_now(self) -> str:
+        """Wall time for heartbeats, ISO 8601 UTC: the server's clock on PostgreSQL (stations
+        sharing one store then judge heartbeats on one clock), this machine's on SQLite."""
+        if self.engine.dialect.name != "postgresql":
+            return now_iso()
+        with self.engine.connect() as conn:
+            return conn.execute(text(PG_NOW_ISO)).scalar_one()
+
     def upgrade(self, revision: str = "head") -> None:
         """Bring the schema to `revision` under the store's migration lock."""
         cfg = _alembic_config()
@@ -244,6 +254,7 @@ class ResultsStore:
         doc = self.record_doc(rec, outcome=RUNNING)
         try:
             self._ensure_ready()
+            doc["run"]["heartbeat_at"] = self.db_now()
             self.save_doc(doc)
         except Exception as exc:  # noqa: BLE001 - whatever the store says, the run goes on and spools
             problem = exc if isinstance(exc, StoreError) else self._fail(exc)
@@ -266,7 +277,7 @@ class ResultsStore:
             conn.execute(
                 update(runs)
                 .where((runs.c.run_id == run_id) & (runs.c.outcome == RUNNING))
-                .values(heartbeat_at=now_iso())
+                .values(heartbeat_at=self.db_now())
             )
 
     def _stop_heartbeat(self, run_id: str) -> None:
@@ -336,7 +347,10 @@ class ResultsStore:
         cols = (runs.c.run_id, runs.c.host, runs.c.pid, runs.c.heartbeat_at)
         with self.engine.connect() as conn:
             rows = [dict(r._mapping) for r in conn.execute(select(*cols).where(runs.c.outcome == RUNNING))]
-        gone = [r for r in rows if is_interrupted(r["host"], r["pid"], r["heartbeat_at"])]
+        if not rows:
+            return []
+        now = _dt.datetime.fromisoformat(self.db_now())
+        gone = [r for r in rows if is_interrupted(r["host"], r["pid"], r["heartbeat_at"], now=now)]
         done = []
         for r in gone:
             same = (
