@@ -50,12 +50,15 @@ def _parse_sets(items: list[str]) -> dict[str, str]:
     return out
 
 
-def _store(url: str | None):
-    """The results store, or CliError naming it (a directory that is a file, a read-only store)."""
-    from bench.results import ResultsStore
+def _store(url: str | None, **kw: Any):
+    """The results store, or CliError naming it (a directory that is a file, a read-only store, a
+    missing database driver)."""
+    from bench.results import ResultsStore, StoreError
 
     try:
-        return ResultsStore(url)
+        return ResultsStore(url, **kw)
+    except StoreError as exc:
+        raise CliError(str(exc), 1) from exc
     except Exception as exc:  # noqa: BLE001 - OSError, SQLAlchemy's errors, a missing driver: one line
         raise CliError(f"results store {url or 'runs/results.sqlite'}: cannot be opened: {_reason(exc)}", 1) from exc
 
@@ -139,7 +142,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         _err(str(exc))
         return EXIT_USAGE
     _check_runs_dir(args.runs_dir or station.runs_dir)
-    store = _store(args.results or station.results_url)
+    # a store that is down now still takes the run's record later, through the spool
+    store = _store(args.results or station.results_url, offline_ok=True)
     runner = Runner(
         station, runs_dir=args.runs_dir or station.runs_dir, store=store, operator=args.operator, duts=args.dut
     )
@@ -174,7 +178,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     js = rec.as_json()
     report = None
     if args.report and js.get("raw_file"):  # beside the raw file, same name with .html
-        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if store else None)
+        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if not rec.store_error else None)
     if args.json:
         print(json.dumps(js))
     else:
@@ -183,6 +187,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
             print(f"  report {report}")
     sys.stdout.flush()
     _warn_unfired_faults(station, faults)
+    if rec.store_error:  # the run's record is not in the store (it is in the spool): not a clean exit
+        _err(rec.store_error)
+        return EXIT_BAD_OUTCOME
     return EXIT_BAD_OUTCOME if rec.outcome in BAD_OUTCOMES else EXIT_OK
 
 
@@ -253,24 +260,50 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_runs(args: argparse.Namespace) -> int:
-    rows = _store(args.results).list_runs(limit=args.limit, procedure=args.procedure)
+    from pathlib import Path
+
+    from bench.results import StoreError
+
+    spool = Path(args.runs_dir) / "spool"
+    try:
+        store = _store(args.results, spool_dir=spool)
+        if args.sync:
+            submitted, problems = store.sync()
+            for problem in problems:
+                _err(problem)
+            print(f"submitted {len(submitted)} spooled run(s) from {spool}", file=sys.stderr)
+            if problems:
+                return EXIT_BAD_OUTCOME
+        elif store.spool.pending():
+            _err(f"{len(store.spool.pending())} run(s) wait in {spool}; `gyrobench runs --sync` submits them")
+        rows = store.list_runs(limit=args.limit, procedure=args.procedure)
+    except StoreError as exc:
+        _err(str(exc))
+        return EXIT_BAD_OUTCOME
     if args.json:
         print(json.dumps(rows, default=str))
         return EXIT_OK
     for r in rows:
+        safe = "-" if r["outcome"] == "RUNNING" else "safe" if r["safe_state"] else "UNSAFE"
+        where = f"on {r['host']}, process {r['pid']}" if r["outcome"] == "RUNNING" else r["end_reason"]
         print(
-            f"{r['run_id']}  {r['started_at'][:19]}  {r['station_id']:<10} {r['procedure']:<18} {r['outcome']:<9} "
-            f"{'safe' if r['safe_state'] else 'UNSAFE'}  {r['end_reason']}"
+            f"{r['run_id']}  {r['started_at'][:19]}  {r['station_id']:<10} {r['procedure']:<18} {r['outcome']:<11} "
+            f"{safe:<6}  {where}"
         )
     return EXIT_OK
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
+    from bench.results import StoreError
+
     try:
         run = _store(args.results).get_run(args.run)
     except KeyError as exc:
         _err(str(exc.args[0]))
         return EXIT_USAGE
+    except StoreError as exc:
+        _err(str(exc))
+        return EXIT_BAD_OUTCOME
     if args.json:
         print(json.dumps(run, default=str))
         return EXIT_OK
@@ -290,6 +323,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
         "raw_file",
     ):
         print(f"{key:>17}: {run[key]}")
+    if run.get("host"):  # where it ran, and its last sign of life (RUNNING / INTERRUPTED)
+        print(f"{'host':>17}: {run['host']} (process {run['pid']}, heartbeat {run['heartbeat_at']})")
     print(f"{'params':>17}: {run['params']}")
     if run["duts"]:
         print(f"{'duts':>17}: {', '.join(run['duts'])}")
@@ -475,6 +510,8 @@ def build_parser() -> argparse.ArgumentParser:
     runs.add_argument("--procedure", default=None)
     runs.add_argument("--results", default=None)
     runs.add_argument("--json", action="store_true")
+    runs.add_argument("--sync", action="store_true", help="first submit the records spooled while the store was down")
+    runs.add_argument("--runs-dir", default="runs", help="directory of the raw files and their spool/ (default: runs)")
     runs.set_defaults(func=_cmd_runs)
 
     for name, func, helptext in (
