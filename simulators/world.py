@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -23,17 +22,52 @@ from .physics.averaged import Resonator, use_single_thread_blas
 from .physics.params import ResonatorParams
 
 
-@dataclass(frozen=True)
 class SampleBlock:
     """The samples of one block: index and time of each sample end, true and measured states,
-    case rate and case angle."""
+    case rate and case angle (these two made on first access: few devices read them)."""
 
-    index: np.ndarray  # (n,) int64, sample number since the world started
-    t_s: np.ndarray  # (n,)
-    q_true: np.ndarray  # (n, 4) cx, sx, cy, sy without noise
-    q_meas: np.ndarray  # (n, 4) with the pickoff noise
-    rate_dps: np.ndarray  # (n,) case rate (with ripple)
-    angle_deg: np.ndarray  # (n,) case angle
+    __slots__ = (
+        "index", "t_s", "q_true", "q_meas", "_rate", "_angle0", "_t0", "_ripple_rad", "_dt", "_rate_arr", "_angle"
+    )
+
+    def __init__(
+        self,
+        index: np.ndarray,  # (n,) int64, sample number since the world started
+        t_s: np.ndarray,  # (n,)
+        q_true: np.ndarray,  # (n, 4) cx, sx, cy, sy without noise
+        q_meas: np.ndarray,  # (n, 4) with the pickoff noise
+        rate_dps: float,  # case rate held over the block (without ripple)
+        angle0_deg: float,  # case angle at t0_s
+        t0_s: float,  # time at the block's start
+        ripple_angle_rad: np.ndarray | None,  # (n,) in-block angle deviation, or None
+        dt_s: float,  # sample period
+    ) -> None:
+        self.index, self.t_s, self.q_true, self.q_meas = index, t_s, q_true, q_meas
+        self._rate, self._angle0, self._t0, self._ripple_rad = rate_dps, angle0_deg, t0_s, ripple_angle_rad
+        self._dt = dt_s
+        self._rate_arr: np.ndarray | None = None
+        self._angle: np.ndarray | None = None
+
+    @property
+    def rate_dps(self) -> np.ndarray:
+        """(n,) case rate (with ripple)."""
+        if self._rate_arr is None:
+            n = len(self.index)
+            rate_arr = np.full(n, self._rate)
+            if self._ripple_rad is not None and n > 1:
+                rate_arr = rate_arr + _gradient(np.degrees(self._ripple_rad), self._dt)
+            self._rate_arr = rate_arr
+        return self._rate_arr
+
+    @property
+    def angle_deg(self) -> np.ndarray:
+        """(n,) case angle."""
+        if self._angle is None:
+            angle = self._angle0 + self._rate * (self.t_s - self._t0)
+            if self._ripple_rad is not None:
+                angle = angle + np.degrees(self._ripple_rad)
+            self._angle = angle
+        return self._angle
 
 
 def _gradient(f: np.ndarray, dx: float) -> np.ndarray:
@@ -162,38 +196,31 @@ class World:
 
     def _run_block(self, n: int) -> None:
         dt = self.sample_period_s
-        t0 = self.t_s
+        i0 = self.sample_index
+        t0 = i0 * dt
         self.ripple_angle_rad = None
         for dev in self.devices:
             dev.before_block(self, t0, n, dt)
         rate = self.case_rate_dps
+        forces = self._forces
+        if len(forces) == 1:
+            force = next(iter(forces.values()))
+        else:
+            force = self.total_force
         q_true = self.resonator.step_block(
             n,
             dt,
             rate_rad_s=math.radians(rate),
-            force=self.total_force,
+            force=force,
             ref_freq_hz=self.ref_freq_hz,
             ripple_angle_rad=self.ripple_angle_rad,
         )
-        index = self._steps(n) + self.sample_index
-        t = index * dt
+        index = self._steps(n) + i0
         angle0 = self.case_angle_deg
-        angle = angle0 + rate * (t - t0)
-        rate_arr = np.full(n, rate)
-        if self.ripple_angle_rad is not None:
-            ripple_deg = np.degrees(self.ripple_angle_rad)
-            angle = angle + ripple_deg
-            if n > 1:
-                rate_arr = rate_arr + _gradient(ripple_deg, dt)
         block = SampleBlock(
-            index=index,
-            t_s=t,
-            q_true=q_true,
-            q_meas=self.resonator.measure(q_true),
-            rate_dps=rate_arr,
-            angle_deg=angle,
+            index, index * dt, q_true, self.resonator.measure(q_true), rate, angle0, t0, self.ripple_angle_rad, dt
         )
-        self.sample_index += n
+        self.sample_index = i0 + n
         self.case_angle_deg = angle0 + rate * n * dt
         self.last_block = block
         for dev in self.devices:
