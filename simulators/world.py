@@ -110,7 +110,8 @@ class World:
         self.lock = threading.RLock()
         self.sample_index = 0
         self._pending_s = 0.0  # sub-sample remainder of requested advances
-        self.devices: list[Any] = []
+        self.devices: list[Any] = []  # change with attach / detach
+        self._limiters: list[Any] = []  # their max_block_samples methods
         # inputs held over a block, set by devices in before_block
         self.case_rate_dps = 0.0
         self.case_angle_deg = 0.0
@@ -129,11 +130,17 @@ class World:
     def attach(self, device: Any) -> None:
         with self.lock:
             self.devices.append(device)
+            self._update_limiters()
 
     def detach(self, device: Any) -> None:
         with self.lock:
             if device in self.devices:
                 self.devices.remove(device)
+            self._update_limiters()
+
+    def _update_limiters(self) -> None:
+        fns = (getattr(dev, "max_block_samples", None) for dev in self.devices)
+        self._limiters = [fn for fn in fns if fn is not None]
 
     def add_listener(self, callback: Any) -> None:
         """callback(world) after every block: clocks waiting in real-time mode use it."""
@@ -177,12 +184,10 @@ class World:
 
     def _block_limit(self) -> int:
         limit = self.max_block_samples
-        for dev in self.devices:
-            fn = getattr(dev, "max_block_samples", None)
-            if fn is not None:
-                m = fn(self)
-                if m is not None:
-                    limit = min(limit, max(1, int(m)))
+        for fn in self._limiters:
+            m = fn(self)
+            if m is not None:
+                limit = min(limit, max(1, int(m)))
         return limit
 
     def _steps(self, n: int) -> np.ndarray:
@@ -207,7 +212,7 @@ class World:
             force = next(iter(forces.values()))
         else:
             force = self.total_force
-        q_true = self.resonator.step_block(
+        q_true, q_meas = self.resonator.step_and_measure(
             n,
             dt,
             rate_rad_s=math.radians(rate),
@@ -217,9 +222,7 @@ class World:
         )
         index = self._steps(n) + i0
         angle0 = self.case_angle_deg
-        block = SampleBlock(
-            index, index * dt, q_true, self.resonator.measure(q_true), rate, angle0, t0, self.ripple_angle_rad, dt
-        )
+        block = SampleBlock(index, index * dt, q_true, q_meas, rate, angle0, t0, self.ripple_angle_rad, dt)
         self.sample_index = i0 + n
         self.case_angle_deg = angle0 + rate * n * dt
         self.last_block = block

@@ -45,6 +45,7 @@ class FpgaFirmware:
         self.sink: StreamSink | None = None
         self._stream_seq = 0
         self._dec_sum, self._dec_n = np.zeros(4), 0  # boxcar decimator's carry between blocks
+        self._frames = p.stream_frame_buffer(128)  # encoded frames of a block, reused
         self._reset_loops()
 
     # --- registers (called by the server's command thread) ----------------------------------------
@@ -177,27 +178,16 @@ class FpgaFirmware:
         frame carries the mean of the `dec` samples ending at its index, so decimating keeps the
         information (noise falls by sqrt(dec)) instead of throwing samples away."""
         dec = int(self.regs["STREAM_DECIMATION"])
-        index = block.index
         q = block.q_meas
-        if dec > 1:  # a World's block: consecutive samples, so frame j is at first + j dec
-            n_blk = len(index)
-            first = (-int(index[0])) % dec
-            ch = np.empty(((n_blk - first + dec - 1) // dec if n_blk > first else 0, 8))
-            n, self._dec_n = k.boxcar(q, first, dec, self._dec_sum, self._dec_n, ch[:, :4])
-            if n == 0:
-                return
-            sel = slice(first, n_blk, dec)
-            idx = index[sel]
-            t = block.t_s[sel]
-        else:
-            idx, t = index, block.t_s
-            n = len(idx)
-            if n == 0:
-                return
-            ch = np.empty((n, 8))
-            ch[:, :4] = q
-        ch[:, 4:] = self._st[k.S_OUT : k.S_OUT + 4]
-        data = p.encode_stream(self._stream_seq, idx, t, ch)
+        if len(q) > len(self._frames):
+            self._frames = p.stream_frame_buffer(max(len(q), 2 * len(self._frames)))
+        n, self._dec_n = k.emit_frames(
+            q, int(block.index[0]), self.world.sample_period_s, dec, self._dec_sum, self._dec_n,
+            self._st[k.S_OUT : k.S_OUT + 4], self._stream_seq, self._frames, p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
+        )  # fmt: skip
+        if n == 0:
+            return
+        data = self._frames[:n].tobytes()
         self._stream_seq = (self._stream_seq + n) % p.SEQ_MOD
         self.regs["FRAMES_SENT"] += n
         if self.sink is not None:

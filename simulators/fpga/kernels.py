@@ -1,5 +1,5 @@
 """Compiled (numba) per-block work of the simulated FPGA: demodulate a block, update the loops,
-boxcar-decimate the stream.  The same arithmetic as the Python it replaced (orbit elements of the
+boxcar-decimate and encode the stream.  The same arithmetic as the Python it replaced (orbit elements of the
 block mean, PI loops with anti-windup, forces along d q / d a, d q / d k, d q / d theta), in one
 call per block instead of ~40 small numpy operations.  Arrays of named slots carry the registers
 (P_*) and the loop state (S_*) in and out.
@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from drivers.fpga.protocol import put_stream_frame
 
 # loop parameters (registers), packed by FpgaFirmware when a register is written
 P_AGC_SETPOINT, P_PLL_KI, P_PLL_KP, P_FORCE_LIMIT, P_AGC_KP, P_AGC_KI, P_DRIVE_FORCE = range(7)
@@ -105,17 +107,39 @@ def update_loops(q_meas: np.ndarray, t_block_s: float, ctrl: int, prm: np.ndarra
 
 
 @njit(cache=True)
-def boxcar(q_meas: np.ndarray, first: int, dec: int, carry: np.ndarray, carry_n: int, means: np.ndarray) -> tuple:
-    """Frames of a block of consecutive samples decimated by `dec` (boxcar, CIC-1): frame j ends at
-    sample first + j * dec of the block and carries the mean of the `dec` samples ending there
-    (the first frame also counts the `carry_n` samples of `carry` (4,) from the last block).
-    Writes the means (frames, 4) into `means`; returns (frames, new carry_n) and updates carry."""
+def emit_frames(
+    q_meas: np.ndarray,
+    i0: int,
+    dt_s: float,
+    dec: int,
+    carry: np.ndarray,
+    carry_n: int,
+    outputs: np.ndarray,
+    seq0: int,
+    frames: np.ndarray,
+    crc_table: np.ndarray,
+    crc_zeros: int,
+) -> tuple:
+    """Encode a block's stream frames into `frames` (rows of 60 bytes, constant fields preset):
+    samples i0, i0 + 1, ... (n, 4) decimated by `dec` with a boxcar (CIC-1) filter, i.e. a frame
+    at every sample index divisible by dec carrying the mean of the `dec` samples ending there
+    (the first frame also counts the `carry_n` samples summed in `carry` (4,) by the last block),
+    and the loop outputs (4,).  Returns (frames written, new carry_n) and updates carry."""
     n = q_meas.shape[0]
+    row = np.empty(8)
+    for c in range(4):
+        row[4 + c] = outputs[c]
+    if dec <= 1:
+        for i in range(n):
+            for c in range(4):
+                row[c] = q_meas[i, c]
+            put_stream_frame(frames[i], seq0 + i, i0 + i, float(i0 + i) * dt_s, row, crc_table, crc_zeros)
+        return n, carry_n
     c0, c1, c2, c3 = 0.0, 0.0, 0.0, 0.0
     p0, p1, p2, p3 = 0.0, 0.0, 0.0, 0.0
     k0, k1, k2, k3 = carry[0], carry[1], carry[2], carry[3]
     nf = 0
-    nxt = first
+    nxt = (-i0) % dec
     last = -1 - carry_n
     for i in range(n):
         c0 += q_meas[i, 0]
@@ -125,10 +149,11 @@ def boxcar(q_meas: np.ndarray, first: int, dec: int, carry: np.ndarray, carry_n:
         if i == nxt:
             e0, e1, e2, e3 = c0 + k0, c1 + k1, c2 + k2, c3 + k3
             count = i - last
-            means[nf, 0] = (e0 - p0) / count
-            means[nf, 1] = (e1 - p1) / count
-            means[nf, 2] = (e2 - p2) / count
-            means[nf, 3] = (e3 - p3) / count
+            row[0] = (e0 - p0) / count
+            row[1] = (e1 - p1) / count
+            row[2] = (e2 - p2) / count
+            row[3] = (e3 - p3) / count
+            put_stream_frame(frames[nf], seq0 + nf, i0 + i, float(i0 + i) * dt_s, row, crc_table, crc_zeros)
             p0, p1, p2, p3 = e0, e1, e2, e3
             last = i
             nf += 1

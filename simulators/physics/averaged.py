@@ -22,7 +22,8 @@ from .params import TWO_PI, ResonatorParams
 
 _blas_limiter: object | None = None
 _ZERO4 = np.zeros(4)
-_NO_PSI = np.zeros(1)
+_EMPTY = np.empty(0)
+_EMPTY_ROWS = np.empty((0, 4))
 
 
 def use_single_thread_blas() -> None:
@@ -90,37 +91,70 @@ class Resonator:
     ) -> np.ndarray:
         """Advance n_samples steps of dt_s with constant inputs; return the true states at the end
         of each step, shape (n_samples, 4)."""
+        return self.step_and_measure(
+            n_samples, dt_s, rate_rad_s=rate_rad_s, force=force, ref_freq_hz=ref_freq_hz,
+            ripple_angle_rad=ripple_angle_rad, measure=False,
+        )[0]  # fmt: skip
+
+    def step_and_measure(
+        self,
+        n_samples: int,
+        dt_s: float,
+        *,
+        rate_rad_s: float = 0.0,
+        force: np.ndarray | None = None,
+        ref_freq_hz: float | None = None,
+        ripple_angle_rad: np.ndarray | None = None,
+        measure: bool = True,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """step_block and, with `measure`, `measure` of its states: (true, measured) states (the
+        World's block in one compiled call when the model is linear)."""
         if n_samples <= 0:
-            return np.empty((0, 4))
+            return np.empty((0, 4)), (np.empty((0, 4)) if measure else None)
         u = _ZERO4 if force is None else np.asarray(force, dtype=float)
         lam = 0.0 if ref_freq_hz is None else self.detuning_rad_s(ref_freq_hz)
         if self.is_linear:
-            return self._linear_block(n_samples, dt_s, rate_rad_s, u, lam, ripple_angle_rad)
+            return self._linear_block(n_samples, dt_s, rate_rad_s, u, lam, ripple_angle_rad, measure)
         traj = self._nonlinear_block(n_samples, dt_s, self.coeffs.zg(rate_rad_s), u, lam)
         self._q = traj[-1].copy()
         if ripple_angle_rad is None:
             self._psi = 0.0
-            return traj
-        psi = -2.0 * self.coeffs.bryan_factor * np.asarray(ripple_angle_rad, dtype=float)
-        self._psi = float(psi[-1])
-        return rotate_wave(traj, psi)
+        else:
+            psi = -2.0 * self.coeffs.bryan_factor * np.asarray(ripple_angle_rad, dtype=float)
+            self._psi = float(psi[-1])
+            traj = rotate_wave(traj, psi)
+        return traj, (self.measure(traj) if measure else None)
 
     def _linear_block(
-        self, n: int, dt: float, rate_rad_s: float, u: np.ndarray, lam: float, ripple_angle_rad: np.ndarray | None
-    ) -> np.ndarray:
+        self,
+        n: int,
+        dt: float,
+        rate_rad_s: float,
+        u: np.ndarray,
+        lam: float,
+        ripple_angle_rad: np.ndarray | None,
+        measure: bool,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         """Exact steps of dq/dt = A q + u/2 (the top row of exp([[A, I/2], [0, 0]] dt) applied to
-        (q, u) each sample), compiled: see kernels.linear_block."""
+        (q, u) each sample), the ripple rotation and the pickoff noise: kernels.linear_block."""
         zg = self._zg
         zg[1] = 4.0 * self.coeffs.bryan_factor * rate_rad_s + self.coeffs.nu_offset
-        out = np.empty((n, 4))
+        psi_per_rad = -2.0 * self.coeffs.bryan_factor
         if ripple_angle_rad is None:
             self._psi = 0.0
-            linear_block(zg, lam, dt, self._q, u, _NO_PSI, False, out)
+            ripple = _EMPTY
         else:
-            psi = (-2.0 * self.coeffs.bryan_factor) * np.asarray(ripple_angle_rad, dtype=float)
-            self._psi = float(psi[-1])
-            linear_block(zg, lam, dt, self._q, u, psi, True, out)
-        return out
+            ripple = np.ascontiguousarray(ripple_angle_rad, dtype=float)
+            self._psi = float(psi_per_rad * ripple[-1])
+        sigma = self.params.noise_sigma
+        noise = _EMPTY_ROWS
+        if measure and sigma != 0.0:
+            noise = self.rng.standard_normal((n, 4))  # the draws of rng.normal(0, sigma, (n, 4))
+        out = np.empty((n, 4))
+        linear_block(zg, lam, dt, self._q, u, ripple, psi_per_rad, out, noise, sigma)
+        if not measure:
+            return out, None
+        return out, (noise if sigma != 0.0 else out.copy())
 
     def _nonlinear_block(self, n: int, dt: float, zg: np.ndarray, u: np.ndarray, lam: float) -> np.ndarray:
         a = linear_matrix(zg, lam)

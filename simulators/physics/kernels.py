@@ -87,11 +87,22 @@ def exact_step_matrices(a: np.ndarray, dt: float, phi: np.ndarray, gam: np.ndarr
 
 @njit(cache=True)
 def linear_block(
-    zg: np.ndarray, lam: float, dt: float, q: np.ndarray, u: np.ndarray, psi: np.ndarray, rotate: bool, out: np.ndarray
+    zg: np.ndarray,
+    lam: float,
+    dt: float,
+    q: np.ndarray,
+    u: np.ndarray,
+    ripple: np.ndarray,
+    psi_per_rad: float,
+    out: np.ndarray,
+    noise: np.ndarray,
+    sigma: float,
 ) -> None:
     """Exact steps of dq/dt = A(zg, lam) q + u/2 from q over len(out) samples into out (n, 4);
-    q ends as the last (unrotated) state; with `rotate`, out is rotated by psi (n,) electrical
-    (the table ripple).  Inputs are held over the block."""
+    q ends as the last (unrotated) state.  With a ripple (n,) (rad; empty for none), out is
+    rotated by psi = psi_per_rad * ripple electrical.  With noise (n, 4) standard normals (empty
+    for none), noise becomes the measured states out + sigma * noise.  Inputs are held over the
+    block."""
     a = np.empty((4, 4))
     linear_matrix_into(zg, lam, a)
     phi = np.empty((4, 4))
@@ -112,11 +123,16 @@ def linear_block(
         out[k, 3] = y3
         x0, x1, x2, x3 = y0, y1, y2, y3
     q[0], q[1], q[2], q[3] = x0, x1, x2, x3
-    if rotate:
+    if ripple.shape[0] > 0:
         for k in range(out.shape[0]):
-            c, s = np.cos(psi[k]), np.sin(psi[k])
+            psi = psi_per_rad * ripple[k]
+            c, s = np.cos(psi), np.sin(psi)
             q1, p1, q2, p2 = out[k, 0], out[k, 1], out[k, 2], out[k, 3]
             out[k, 0] = q1 * c - q2 * s
             out[k, 1] = p1 * c - p2 * s
             out[k, 2] = q1 * s + q2 * c
             out[k, 3] = p1 * s + p2 * c
+    if noise.shape[0] > 0:  # as rng.normal(0, sigma) added: q + (0 + sigma z)
+        for k in range(out.shape[0]):
+            for i in range(4):
+                noise[k, i] = out[k, i] + (0.0 + sigma * noise[k, i])
