@@ -24,37 +24,51 @@ from .physics.params import ResonatorParams
 
 class SampleBlock:
     """The samples of one block: index and time of each sample end, true and measured states,
-    case rate and case angle (these two made on first access: few devices read them)."""
+    case rate and case angle.  The index, time, rate and angle arrays are made on first access
+    (most devices need only `first_index` and `n`)."""
 
     __slots__ = (
-        "index", "t_s", "q_true", "q_meas", "_rate", "_angle0", "_t0", "_ripple_rad", "_dt", "_rate_arr", "_angle"
-    )
+        "first_index", "n", "q_true", "q_meas", "_rate", "_angle0", "_ripple_rad", "_dt",
+        "_index", "_t", "_rate_arr", "_angle",
+    )  # fmt: skip
 
     def __init__(
         self,
-        index: np.ndarray,  # (n,) int64, sample number since the world started
-        t_s: np.ndarray,  # (n,)
+        first_index: int,  # sample number (since the world started) of the block's first sample
         q_true: np.ndarray,  # (n, 4) cx, sx, cy, sy without noise
         q_meas: np.ndarray,  # (n, 4) with the pickoff noise
         rate_dps: float,  # case rate held over the block (without ripple)
-        angle0_deg: float,  # case angle at t0_s
-        t0_s: float,  # time at the block's start
-        ripple_angle_rad: np.ndarray | None,  # (n,) in-block angle deviation, or None
+        angle0_deg: float,  # case angle at the block's start
         dt_s: float,  # sample period
+        ripple_angle_rad: np.ndarray | None = None,  # (n,) in-block angle deviation, or None
     ) -> None:
-        self.index, self.t_s, self.q_true, self.q_meas = index, t_s, q_true, q_meas
-        self._rate, self._angle0, self._t0, self._ripple_rad = rate_dps, angle0_deg, t0_s, ripple_angle_rad
-        self._dt = dt_s
+        self.first_index, self.n, self.q_true, self.q_meas = first_index, len(q_true), q_true, q_meas
+        self._rate, self._angle0, self._ripple_rad, self._dt = rate_dps, angle0_deg, ripple_angle_rad, dt_s
+        self._index: np.ndarray | None = None
+        self._t: np.ndarray | None = None
         self._rate_arr: np.ndarray | None = None
         self._angle: np.ndarray | None = None
+
+    @property
+    def index(self) -> np.ndarray:
+        """(n,) int64 sample numbers since the world started."""
+        if self._index is None:
+            self._index = np.arange(self.first_index, self.first_index + self.n, dtype=np.int64)
+        return self._index
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """(n,) time of each sample's end: index x sample period."""
+        if self._t is None:
+            self._t = self.index * self._dt
+        return self._t
 
     @property
     def rate_dps(self) -> np.ndarray:
         """(n,) case rate (with ripple)."""
         if self._rate_arr is None:
-            n = len(self.index)
-            rate_arr = np.full(n, self._rate)
-            if self._ripple_rad is not None and n > 1:
+            rate_arr = np.full(self.n, self._rate)
+            if self._ripple_rad is not None and self.n > 1:
                 rate_arr = rate_arr + _gradient(np.degrees(self._ripple_rad), self._dt)
             self._rate_arr = rate_arr
         return self._rate_arr
@@ -63,7 +77,7 @@ class SampleBlock:
     def angle_deg(self) -> np.ndarray:
         """(n,) case angle."""
         if self._angle is None:
-            angle = self._angle0 + self._rate * (self.t_s - self._t0)
+            angle = self._angle0 + self._rate * (self.t_s - (self.first_index - 1) * self._dt)
             if self._ripple_rad is not None:
                 angle = angle + np.degrees(self._ripple_rad)
             self._angle = angle
@@ -120,7 +134,6 @@ class World:
         self._forces: dict[str, np.ndarray] = {}
         self.last_block: SampleBlock | None = None
         self._listeners: list[Any] = []
-        self._steps_cache: dict[int, np.ndarray] = {}
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -190,15 +203,6 @@ class World:
                 limit = min(limit, max(1, int(m)))
         return limit
 
-    def _steps(self, n: int) -> np.ndarray:
-        """1..n as int64 (cached: every block needs it)."""
-        steps = self._steps_cache.get(n)
-        if steps is None:
-            steps = np.arange(1, n + 1, dtype=np.int64)
-            if len(self._steps_cache) < 64:
-                self._steps_cache[n] = steps
-        return steps
-
     def _run_block(self, n: int) -> None:
         dt = self.sample_period_s
         i0 = self.sample_index
@@ -220,9 +224,8 @@ class World:
             ref_freq_hz=self.ref_freq_hz,
             ripple_angle_rad=self.ripple_angle_rad,
         )
-        index = self._steps(n) + i0
         angle0 = self.case_angle_deg
-        block = SampleBlock(index, index * dt, q_true, q_meas, rate, angle0, t0, self.ripple_angle_rad, dt)
+        block = SampleBlock(i0 + 1, q_true, q_meas, rate, angle0, dt, self.ripple_angle_rad)
         self.sample_index = i0 + n
         self.case_angle_deg = angle0 + rate * n * dt
         self.last_block = block

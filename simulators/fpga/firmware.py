@@ -161,13 +161,12 @@ class FpgaFirmware:
     def after_block(self, world, block) -> None:
         with self.lock:
             regs = self.regs
-            index = block.index
-            regs["SAMPLE_INDEX"] = int(index[-1])
+            regs["SAMPLE_INDEX"] = block.first_index + block.n - 1
             ctrl = int(regs["CTRL"])
             if ctrl & (p.DRIVE_EN | p.PLL_EN):  # nothing to update with the drive and PLL off
                 st = self._st
                 st[k.S_PLL_FREQ_HZ] = regs["PLL_FREQ_HZ"]
-                k.update_loops(block.q_meas, len(index) * world.sample_period_s, ctrl, self._params(), st)
+                k.update_loops(block.q_meas, block.n * world.sample_period_s, ctrl, self._params(), st)
                 regs["PLL_FREQ_HZ"] = float(st[k.S_PLL_FREQ_HZ])
             if ctrl & p.STREAM_EN:
                 self._emit(block)
@@ -182,7 +181,7 @@ class FpgaFirmware:
         if len(q) > len(self._frames):
             self._frames = p.stream_frame_buffer(max(len(q), 2 * len(self._frames)))
         n, self._dec_n = k.emit_frames(
-            q, int(block.index[0]), self.world.sample_period_s, dec, self._dec_sum, self._dec_n,
+            q, block.first_index, self.world.sample_period_s, dec, self._dec_sum, self._dec_n,
             self._st[k.S_OUT : k.S_OUT + 4], self._stream_seq, self._frames, p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
         )  # fmt: skip
         if n == 0:

@@ -86,6 +86,8 @@ class TableMechanics:
         self.ref_angle_deg = 0.0  # profile angle (position mode)
         self._noise_state = 0.0  # OU angle jitter, deg
         self._steps_cache: dict[int, np.ndarray] = {}
+        self._ou_key: tuple[float, float, float] | None = None
+        self._ou = (0.0, 0.0)
         self.t_s = 0.0
         # commands
         self.mode = mp.MODE_STOP
@@ -358,8 +360,12 @@ class TableMechanics:
         # (its exact step is cached on the inputs); the rounding goes into the deviation below
         mean_rate = round((a_end - a0) / (n * dt_s), 9)
         if self.noise_deg > 0:
-            e = math.exp(-dt_s / self.noise_tau_s)
-            w = self._rng_noise.standard_normal(n) * (self.noise_deg * math.sqrt(1.0 - e * e))
+            key = (dt_s, self.noise_tau_s, self.noise_deg)
+            if self._ou_key != key:  # the OU step's decay and innovation scale for this dt
+                e = math.exp(-dt_s / self.noise_tau_s)
+                self._ou_key, self._ou = key, (e, self.noise_deg * math.sqrt(1.0 - e * e))
+            e, scale = self._ou
+            w = self._rng_noise.standard_normal(n) * scale
             y_prev = e * self._noise_state
         else:
             e, w, y_prev = 0.0, _NO_ANGLES, 0.0
