@@ -122,6 +122,10 @@ def main() -> None:
         "b": "(b) device world (FPGA loops + stream 100 Hz, table 500 deg/s)",
         "c": "(c) hrg-damping over the real transports",
     }
+    t0 = time.perf_counter()
+    free_decay_world(1.0)  # warm-up, untimed: imports, first calls (loading numba's compiled kernels)
+    device_world(0.5)
+    print(f"warm-up (first calls in this process): {time.perf_counter() - t0:.2f} s")
     load0 = os.getloadavg()[0]
     print(f"load average {load0:.1f} on {os.cpu_count()} cores; {args.repeat} interleaved runs of {','.join(cases)}")
     speeds: dict[str, list[float]] = {c: [] for c in cases}
