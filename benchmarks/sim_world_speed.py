@@ -8,6 +8,15 @@ a, b, c, ...) so a load that changes over time hits each alike; medians and rati
 per wall second (the target) and per CPU second of this process (less sensitive to other load).
 
 Run: .venv/bin/python benchmarks/sim_world_speed.py [--only a,b,c] [--repeat 3] [--device-s 120]
+
+Measured 2026-11-23 on 2 shared cores, load average 8-10 from other jobs, 4 interleaved rounds
+(the tree before issue 14 item 6 against after; medians, x real time per wall s / per CPU s):
+  (a) free-decay World        1,375 / 4,750   ->  3,100 /  9,450
+  (b) device world               34 /   115   ->    650 /  2,050  (another round, load 8-10: 1,770 / 2,700)
+  (c) hrg-damping, 1108 s        63 /   113   ->    108 /    216
+(c) is now dominated by the engine's link health checks (a table status, a SCPI query and an
+FPGA read every 0.35 simulated s, ~0.84 ms wall each here: ~2/3 of its time) and the stream path
+(link reader thread, recorder); the simulated devices are ~10 % of it.
 """
 
 from __future__ import annotations
