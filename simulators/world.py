@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -23,17 +22,66 @@ from .physics.averaged import Resonator, use_single_thread_blas
 from .physics.params import ResonatorParams
 
 
-@dataclass(frozen=True)
 class SampleBlock:
     """The samples of one block: index and time of each sample end, true and measured states,
-    case rate and case angle."""
+    case rate and case angle.  The index, time, rate and angle arrays are made on first access
+    (most devices need only `first_index` and `n`)."""
 
-    index: np.ndarray  # (n,) int64, sample number since the world started
-    t_s: np.ndarray  # (n,)
-    q_true: np.ndarray  # (n, 4) cx, sx, cy, sy without noise
-    q_meas: np.ndarray  # (n, 4) with the pickoff noise
-    rate_dps: np.ndarray  # (n,) case rate (with ripple)
-    angle_deg: np.ndarray  # (n,) case angle
+    __slots__ = (
+        "first_index", "n", "q_true", "q_meas", "_rate", "_angle0", "_ripple_rad", "_dt",
+        "_index", "_t", "_rate_arr", "_angle",
+    )  # fmt: skip
+
+    def __init__(
+        self,
+        first_index: int,  # sample number (since the world started) of the block's first sample
+        q_true: np.ndarray,  # (n, 4) cx, sx, cy, sy without noise
+        q_meas: np.ndarray,  # (n, 4) with the pickoff noise
+        rate_dps: float,  # case rate held over the block (without ripple)
+        angle0_deg: float,  # case angle at the block's start
+        dt_s: float,  # sample period
+        ripple_angle_rad: np.ndarray | None = None,  # (n,) in-block angle deviation, or None
+    ) -> None:
+        self.first_index, self.n, self.q_true, self.q_meas = first_index, len(q_true), q_true, q_meas
+        self._rate, self._angle0, self._ripple_rad, self._dt = rate_dps, angle0_deg, ripple_angle_rad, dt_s
+        self._index: np.ndarray | None = None
+        self._t: np.ndarray | None = None
+        self._rate_arr: np.ndarray | None = None
+        self._angle: np.ndarray | None = None
+
+    @property
+    def index(self) -> np.ndarray:
+        """(n,) int64 sample numbers since the world started."""
+        if self._index is None:
+            self._index = np.arange(self.first_index, self.first_index + self.n, dtype=np.int64)
+        return self._index
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """(n,) time of each sample's end: index x sample period."""
+        if self._t is None:
+            self._t = self.index * self._dt
+        return self._t
+
+    @property
+    def rate_dps(self) -> np.ndarray:
+        """(n,) case rate (with ripple)."""
+        if self._rate_arr is None:
+            rate_arr = np.full(self.n, self._rate)
+            if self._ripple_rad is not None and self.n > 1:
+                rate_arr = rate_arr + _gradient(np.degrees(self._ripple_rad), self._dt)
+            self._rate_arr = rate_arr
+        return self._rate_arr
+
+    @property
+    def angle_deg(self) -> np.ndarray:
+        """(n,) case angle."""
+        if self._angle is None:
+            angle = self._angle0 + self._rate * (self.t_s - (self.first_index - 1) * self._dt)
+            if self._ripple_rad is not None:
+                angle = angle + np.degrees(self._ripple_rad)
+            self._angle = angle
+        return self._angle
 
 
 def _gradient(f: np.ndarray, dx: float) -> np.ndarray:
@@ -76,7 +124,8 @@ class World:
         self.lock = threading.RLock()
         self.sample_index = 0
         self._pending_s = 0.0  # sub-sample remainder of requested advances
-        self.devices: list[Any] = []
+        self.devices: list[Any] = []  # change with attach / detach
+        self._limiters: list[Any] = []  # their max_block_samples methods
         # inputs held over a block, set by devices in before_block
         self.case_rate_dps = 0.0
         self.case_angle_deg = 0.0
@@ -85,7 +134,6 @@ class World:
         self._forces: dict[str, np.ndarray] = {}
         self.last_block: SampleBlock | None = None
         self._listeners: list[Any] = []
-        self._steps_cache: dict[int, np.ndarray] = {}
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -95,11 +143,17 @@ class World:
     def attach(self, device: Any) -> None:
         with self.lock:
             self.devices.append(device)
+            self._update_limiters()
 
     def detach(self, device: Any) -> None:
         with self.lock:
             if device in self.devices:
                 self.devices.remove(device)
+            self._update_limiters()
+
+    def _update_limiters(self) -> None:
+        fns = (getattr(dev, "max_block_samples", None) for dev in self.devices)
+        self._limiters = [fn for fn in fns if fn is not None]
 
     def add_listener(self, callback: Any) -> None:
         """callback(world) after every block: clocks waiting in real-time mode use it."""
@@ -143,57 +197,36 @@ class World:
 
     def _block_limit(self) -> int:
         limit = self.max_block_samples
-        for dev in self.devices:
-            fn = getattr(dev, "max_block_samples", None)
-            if fn is not None:
-                m = fn(self)
-                if m is not None:
-                    limit = min(limit, max(1, int(m)))
+        for fn in self._limiters:
+            m = fn(self)
+            if m is not None:
+                limit = min(limit, max(1, int(m)))
         return limit
-
-    def _steps(self, n: int) -> np.ndarray:
-        """1..n as int64 (cached: every block needs it)."""
-        steps = self._steps_cache.get(n)
-        if steps is None:
-            steps = np.arange(1, n + 1, dtype=np.int64)
-            if len(self._steps_cache) < 64:
-                self._steps_cache[n] = steps
-        return steps
 
     def _run_block(self, n: int) -> None:
         dt = self.sample_period_s
-        t0 = self.t_s
+        i0 = self.sample_index
+        t0 = i0 * dt
         self.ripple_angle_rad = None
         for dev in self.devices:
             dev.before_block(self, t0, n, dt)
         rate = self.case_rate_dps
-        q_true = self.resonator.step_block(
+        forces = self._forces
+        if len(forces) == 1:
+            force = next(iter(forces.values()))
+        else:
+            force = self.total_force
+        q_true, q_meas = self.resonator.step_and_measure(
             n,
             dt,
             rate_rad_s=math.radians(rate),
-            force=self.total_force,
+            force=force,
             ref_freq_hz=self.ref_freq_hz,
             ripple_angle_rad=self.ripple_angle_rad,
         )
-        index = self._steps(n) + self.sample_index
-        t = index * dt
         angle0 = self.case_angle_deg
-        angle = angle0 + rate * (t - t0)
-        rate_arr = np.full(n, rate)
-        if self.ripple_angle_rad is not None:
-            ripple_deg = np.degrees(self.ripple_angle_rad)
-            angle = angle + ripple_deg
-            if n > 1:
-                rate_arr = rate_arr + _gradient(ripple_deg, dt)
-        block = SampleBlock(
-            index=index,
-            t_s=t,
-            q_true=q_true,
-            q_meas=self.resonator.measure(q_true),
-            rate_dps=rate_arr,
-            angle_deg=angle,
-        )
-        self.sample_index += n
+        block = SampleBlock(i0 + 1, q_true, q_meas, rate, angle0, dt, self.ripple_angle_rad)
+        self.sample_index = i0 + n
         self.case_angle_deg = angle0 + rate * n * dt
         self.last_block = block
         for dev in self.devices:

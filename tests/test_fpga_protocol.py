@@ -94,3 +94,21 @@ def test_register_map_is_consistent():
     assert not p.in_range(p.BY_NAME["STREAM_DECIMATION"], 0)
     assert not p.in_range(p.BY_NAME["STREAM_DECIMATION"], 2.5)
     assert not p.in_range(p.BY_NAME["AGC_SETPOINT"], float("nan"))
+
+
+def test_compiled_stream_encoder_matches_the_layout_byte_for_byte():
+    """encode_stream (compiled, position-table CRC) against struct packing and crc_hqx, across the
+    32-bit sequence wrap, with float64 channels rounded to float32 as the frame carries them."""
+    rng = np.random.default_rng(5)
+    n, seq0 = 7, p.SEQ_MOD - 3
+    index = np.array([0, 1, 2**40, 5, 6, 2**63 - 1, 9], dtype=np.int64)
+    t_s = rng.normal(size=n) * 1e3
+    ch = rng.normal(size=(n, 8))
+    want = b""
+    for i in range(n):
+        body = struct.pack("<BBIHQd8f", p.STREAM, p.STREAM_PAYLOAD, (seq0 + i) % p.SEQ_MOD, 0, int(index[i]),
+                           float(t_s[i]), *ch[i].astype(np.float32))  # fmt: skip
+        want += b"\xa5\x5a" + body + struct.pack("<H", crc_hqx(body, 0xFFFF))
+    assert p.encode_stream(seq0, index, t_s, ch) == want
+    rows = np.frombuffer(want, np.uint8).reshape(n, p.STREAM_FRAME_SIZE)
+    assert p.crc16_frames(rows).tolist() == [crc_hqx(r[2:-2].tobytes(), 0xFFFF) for r in rows]

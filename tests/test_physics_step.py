@@ -1,4 +1,4 @@
-"""The resonator's exact linear step (force carried as state, cached powers) against a direct
+"""The resonator's exact linear step (force carried as state, compiled kernel) against a direct
 scipy expm of the forced system, step by step: both are exact, so they agree to rounding."""
 
 from __future__ import annotations
@@ -10,7 +10,6 @@ import pytest
 from scipy.linalg import expm
 
 from bench.analysis.slow_model import linear_matrix
-from simulators.physics import averaged
 from simulators.physics.averaged import Resonator
 from simulators.physics.params import ResonatorParams
 
@@ -53,8 +52,7 @@ def test_forced_blocks_with_a_new_force_each_block_match_scipy_expm(rate_dps, re
         q = want[-1]
 
 
-def test_long_block_runs_in_chunks_and_matches_scipy_expm(monkeypatch):
-    monkeypatch.setattr(averaged, "_POWERS_CHUNK", 64)  # force several chunks
+def test_long_block_matches_scipy_expm():
     r = Resonator(PARAMS, state=np.array([1.0, 0.0, 0.0, 0.0]))
     u = np.array([0.1, -0.05, 0.02, 0.3])
     got = r.step_block(1000, 1e-3, force=u, ref_freq_hz=PARAMS.f0_hz)
@@ -70,3 +68,12 @@ def test_unforced_step_is_the_plain_matrix_exponential():
     phi = expm(a * 1e-2)
     want = [np.linalg.matrix_power(phi, k) @ np.array([0.3, 0.4, -0.5, 0.1]) for k in range(1, 21)]
     np.testing.assert_allclose(got, np.array(want), rtol=0, atol=1e-13)
+
+
+def test_compiled_linear_matrix_is_the_model_s():
+    from simulators.physics.kernels import linear_matrix_into
+
+    zg = np.random.default_rng(3).normal(size=8)
+    got = np.empty((4, 4))
+    linear_matrix_into(zg, 1.7, got)
+    np.testing.assert_allclose(got, linear_matrix(zg, 1.7), rtol=0, atol=1e-15)

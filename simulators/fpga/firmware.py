@@ -22,14 +22,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from bench.analysis.slow_model import orbit_elements
 from drivers.fpga import protocol as p
 
+from . import kernels as k
+
 StreamSink = Callable[[bytes, int], None]  # (encoded frames, frame count)
-
-
-def _clamp(x: float, limit: float) -> float:
-    return max(-limit, min(limit, x))
 
 
 class FpgaFirmware:
@@ -48,6 +45,7 @@ class FpgaFirmware:
         self.sink: StreamSink | None = None
         self._stream_seq = 0
         self._dec_sum, self._dec_n = np.zeros(4), 0  # boxcar decimator's carry between blocks
+        self._frames = p.stream_frame_buffer(128)  # encoded frames of a block, reused
         self._reset_loops()
 
     # --- registers (called by the server's command thread) ----------------------------------------
@@ -70,6 +68,7 @@ class FpgaFirmware:
                 self._set_ctrl(int(value))
                 return value
             self.regs[reg.name] = int(value) if reg.kind == "u" else float(value)
+            self._prm = None  # repacked for the loop kernel at the next block
             if reg.name == "STREAM_DECIMATION":
                 self._dec_sum, self._dec_n = np.zeros(4), 0
             if reg.name == "REF_FREQ_HZ" and not int(self.regs["CTRL"]) & p.PLL_EN:
@@ -85,14 +84,15 @@ class FpgaFirmware:
             self._dec_sum, self._dec_n = np.zeros(4), 0
             self.regs["FRAMES_SENT"] = 0
             self.regs["STREAM_START_INDEX"] = self.regs["SAMPLE_INDEX"]
+        st = self._st
         if rising & p.PLL_EN:
-            self._pll_int_hz = float(self.regs["PLL_FREQ_HZ"])
+            st[k.S_PLL_INT_HZ] = float(self.regs["PLL_FREQ_HZ"])
         if rising & p.AGC_EN:
-            self._agc_int = 0.0
+            st[k.S_AGC_INT] = 0.0
         if rising & p.QUAD_EN:
-            self._quad_int = 0.0
+            st[k.S_QUAD_INT] = 0.0
         if not new & p.DRIVE_EN:
-            self._agc_int = self._quad_int = 0.0
+            st[k.S_AGC_INT] = st[k.S_QUAD_INT] = 0.0
         self.regs["CTRL"] = new
 
     def _status(self) -> int:
@@ -100,9 +100,10 @@ class FpgaFirmware:
         st = 0
         if ctrl & p.DRIVE_EN:
             st |= p.ST_DRIVE_ON
-        if ctrl & p.AGC_EN and abs(self.regs["AGC_SETPOINT"] - self._a) <= 0.01 * self.regs["AGC_SETPOINT"]:
+        a, phase_err = float(self._st[k.S_A]), float(self._st[k.S_PHASE_ERR])
+        if ctrl & p.AGC_EN and abs(self.regs["AGC_SETPOINT"] - a) <= 0.01 * self.regs["AGC_SETPOINT"]:
             st |= p.ST_AGC_SETTLED
-        if ctrl & p.PLL_EN and abs(self._phase_err) < 0.05:
+        if ctrl & p.PLL_EN and abs(phase_err) < 0.05:
             st |= p.ST_PLL_LOCKED
         if ctrl & p.STREAM_EN:
             st |= p.ST_STREAMING
@@ -110,101 +111,65 @@ class FpgaFirmware:
 
     # --- loops ----------------------------------------------------------------------------------
     def _reset_loops(self) -> None:
-        self._agc_int = 0.0
-        self._quad_int = 0.0
-        self._pll_int_hz = float(self.regs["PLL_FREQ_HZ"])
+        self._st = np.zeros(k.N_STATE)  # loop integrators, amplitude, phase error, force, outputs
+        self._st[k.S_PLL_INT_HZ] = float(self.regs["PLL_FREQ_HZ"])
+        self._prm: np.ndarray | None = None  # loop registers packed for the kernel (None: repack)
         self._owns_ref = False  # the world's reference follows this NCO only while active
-        self._phase_err = 0.0
-        self._a = 0.0
-        self._elements = (0.0, 0.0, 0.0, 0.0)  # a, k, theta, chi
-        self._out = np.zeros(4)  # amp, freq (Hz), quad, prec outputs
-        self._u: np.ndarray | None = np.zeros(4)
+        self._u_on = True  # the force is applied (False once the drive is cut, until it is on again)
+
+    def _params(self) -> np.ndarray:
+        prm = self._prm
+        if prm is None:
+            prm = self._prm = np.array([float(self.regs[name]) for name in k.PARAM_REGS])
+        return prm
 
     def max_block_samples(self, world) -> int | None:
         """Loops update once per block: while any loop runs, blocks last one loop period."""
         with self.lock:
-            ctrl = int(self.regs["CTRL"])
-            if ctrl & (p.DRIVE_EN | p.PLL_EN) or (self.regs["FM_AMPLITUDE_HZ"] and self.regs["FM_RATE_HZ"]):
-                return max(1, int(round(self.regs["LOOP_PERIOD_S"] / world.sample_period_s)))
+            regs = self.regs
+            if int(regs["CTRL"]) & (p.DRIVE_EN | p.PLL_EN) or (regs["FM_AMPLITUDE_HZ"] and regs["FM_RATE_HZ"]):
+                return max(1, int(round(regs["LOOP_PERIOD_S"] / world.sample_period_s)))
         return None
 
     def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
         with self.lock:
-            ctrl = int(self.regs["CTRL"])
+            regs = self.regs
+            ctrl = int(regs["CTRL"])
             fm = 0.0
-            if self.regs["FM_AMPLITUDE_HZ"] and self.regs["FM_RATE_HZ"]:
+            fm_on = bool(regs["FM_AMPLITUDE_HZ"] and regs["FM_RATE_HZ"])
+            if fm_on:
                 t_mid = t_s + 0.5 * n * dt_s
-                fm = self.regs["FM_AMPLITUDE_HZ"] * math.sin(2 * math.pi * self.regs["FM_RATE_HZ"] * t_mid)
+                fm = regs["FM_AMPLITUDE_HZ"] * math.sin(2 * math.pi * regs["FM_RATE_HZ"] * t_mid)
             # the FPGA's NCO is the world's reference only while it drives, tracks or modulates;
             # idle, it leaves the reference to whoever drives (the front end in a MEMS sweep)
             # (one more block after going idle, so the reference ends at the NCO's final value)
-            active = bool(ctrl & (p.DRIVE_EN | p.PLL_EN) or (self.regs["FM_AMPLITUDE_HZ"] and self.regs["FM_RATE_HZ"]))
+            active = bool(ctrl & (p.DRIVE_EN | p.PLL_EN) or fm_on)
             if active or self._owns_ref:
-                world.ref_freq_hz = self.regs["PLL_FREQ_HZ"] + fm
+                world.ref_freq_hz = regs["PLL_FREQ_HZ"] + fm
             self._owns_ref = active
-            self._out[1] = self.regs["PLL_FREQ_HZ"] + fm - self.regs["REF_FREQ_HZ"]
+            st = self._st
+            st[k.S_OUT + 1] = regs["PLL_FREQ_HZ"] + fm - regs["REF_FREQ_HZ"]
             if ctrl & p.DRIVE_EN:
-                world.set_force("fpga", self._u)
-            elif self._u is not None:
-                self._u = None
-                self._out[0] = self._out[2] = self._out[3] = 0.0
+                self._u_on = True
+                world.set_force("fpga", st[k.S_U : k.S_U + 4].copy())
+            elif self._u_on:
+                self._u_on = False
+                st[k.S_U : k.S_U + 4] = 0.0
+                st[k.S_OUT] = st[k.S_OUT + 2] = st[k.S_OUT + 3] = 0.0
                 world.set_force("fpga", None)
 
     def after_block(self, world, block) -> None:
         with self.lock:
-            self.regs["SAMPLE_INDEX"] = int(block.index[-1])
-            ctrl = int(self.regs["CTRL"])
+            regs = self.regs
+            regs["SAMPLE_INDEX"] = block.first_index + block.n - 1
+            ctrl = int(regs["CTRL"])
             if ctrl & (p.DRIVE_EN | p.PLL_EN):  # nothing to update with the drive and PLL off
-                self._update_loops(block.q_meas.mean(axis=0), len(block.index) * world.sample_period_s)
+                st = self._st
+                st[k.S_PLL_FREQ_HZ] = regs["PLL_FREQ_HZ"]
+                k.update_loops(block.q_meas, block.n * world.sample_period_s, ctrl, self._params(), st)
+                regs["PLL_FREQ_HZ"] = float(st[k.S_PLL_FREQ_HZ])
             if ctrl & p.STREAM_EN:
                 self._emit(block)
-
-    def _update_loops(self, q: np.ndarray, t_block_s: float) -> None:
-        el = orbit_elements(q)
-        a, k, theta = float(el["a"]), float(el["k"]), float(el["theta_rad"])
-        c2, s2 = math.cos(2 * theta), math.sin(2 * theta)
-        chi = math.atan2(-(q[1] * c2 + q[3] * s2), q[0] * c2 + q[2] * s2)
-        self._a = a
-        self._phase_err = (chi + 0.5 * math.pi) % math.pi - 0.5 * math.pi
-        regs = self.regs
-        ctrl = int(regs["CTRL"])
-        if ctrl & p.PLL_EN and a > 0.01 * max(regs["AGC_SETPOINT"], 1e-12):
-            self._pll_int_hz += regs["PLL_KI"] * self._phase_err * t_block_s
-            regs["PLL_FREQ_HZ"] = self._pll_int_hz + regs["PLL_KP"] * self._phase_err
-        if not ctrl & p.DRIVE_EN:
-            return
-        limit = regs["FORCE_LIMIT"]
-        weak = a < 0.01 * max(regs["AGC_SETPOINT"], 1e-12)
-        if weak:  # no wave to lock onto yet: excite along the x pickoff axis, in phase
-            theta, chi, k = 0.0, 0.0, 0.0
-            c2, s2 = 1.0, 0.0
-        cc, sc = math.cos(chi), math.sin(chi)
-        e_a = np.array([c2 * cc, -c2 * sc, s2 * cc, -s2 * sc])
-        e_k = np.array([-s2 * sc, -s2 * cc, c2 * sc, c2 * cc])
-        e_p = np.array([-s2 * cc, s2 * sc, c2 * cc, -c2 * sc])
-        if ctrl & p.AGC_EN:
-            err = regs["AGC_SETPOINT"] - a
-            f_a = regs["AGC_KP"] * err + self._agc_int
-            if abs(f_a) < limit or f_a * err < 0:  # anti-windup: integrate only off the stop
-                self._agc_int += regs["AGC_KI"] * err * t_block_s
-            f_a = _clamp(f_a, limit)
-        else:
-            f_a = _clamp(regs["DRIVE_FORCE"], limit)
-        f_q = 0.0
-        if ctrl & p.QUAD_EN and not weak:
-            f_q = -(regs["QUAD_KP"] * k + self._quad_int)
-            if abs(f_q) < limit or f_q * k > 0:
-                self._quad_int += regs["QUAD_KI"] * k * t_block_s
-            f_q = _clamp(f_q, limit)
-        f_p = 0.0
-        if ctrl & p.WHOLE_ANGLE and not weak:
-            f_p = 4.0 * a * math.radians(regs["PRECESSION_RATE_DPS"])
-            if ctrl & p.DRIFT_COMP_EN:
-                th_tau = math.radians(regs["DRIFT_THETA_TAU_DEG"])
-                f_p -= a * regs["DRIFT_D_PER_S"] * math.sin(4.0 * (theta - th_tau))
-            f_p = _clamp(f_p, limit)
-        self._u = f_a * e_a + f_q * e_k + f_p * e_p
-        self._out[0], self._out[2], self._out[3] = f_a, f_q, f_p
 
     # --- stream ---------------------------------------------------------------------------------
     def _emit(self, block) -> None:
@@ -212,41 +177,16 @@ class FpgaFirmware:
         frame carries the mean of the `dec` samples ending at its index, so decimating keeps the
         information (noise falls by sqrt(dec)) instead of throwing samples away."""
         dec = int(self.regs["STREAM_DECIMATION"])
-        index = block.index
-        if dec > 1:
-            q = block.q_meas
-            n_blk = len(index)
-            i0 = int(index[0])
-            if int(index[-1]) - i0 == n_blk - 1:  # consecutive samples (every World block): no scan
-                pos = np.arange((-i0) % dec, n_blk, dec)
-            else:
-                pos = np.flatnonzero(index % dec == 0)
-            csum = np.cumsum(q, axis=0)
-            csum += self._dec_sum
-            if len(pos):
-                ends = csum[pos]
-                prev_sum = np.empty_like(ends)
-                prev_sum[0] = 0.0
-                prev_sum[1:] = ends[:-1]
-                count = np.diff(pos, prepend=-1 - self._dec_n)  # samples in each frame's mean
-                means = (ends - prev_sum) / count[:, None]
-                self._dec_sum = csum[-1] - ends[-1]
-                self._dec_n = n_blk - 1 - int(pos[-1])
-            else:
-                means = np.empty((0, 4))
-                self._dec_sum, self._dec_n = csum[-1], n_blk + self._dec_n
-            sel = pos
-        else:
-            sel = slice(None)
-            means = block.q_meas
-        idx = index[sel]
-        n = len(idx)
+        q = block.q_meas
+        if len(q) > len(self._frames):
+            self._frames = p.stream_frame_buffer(max(len(q), 2 * len(self._frames)))
+        n, self._dec_n = k.emit_frames(
+            q, block.first_index, self.world.sample_period_s, dec, self._dec_sum, self._dec_n,
+            self._st[k.S_OUT : k.S_OUT + 4], self._stream_seq, self._frames, p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
+        )  # fmt: skip
         if n == 0:
             return
-        ch = np.empty((n, 8))
-        ch[:, :4] = means
-        ch[:, 4:] = self._out
-        data = p.encode_stream(self._stream_seq, idx, block.t_s[sel], ch)
+        data = self._frames[:n].tobytes()
         self._stream_seq = (self._stream_seq + n) % p.SEQ_MOD
         self.regs["FRAMES_SENT"] += n
         if self.sink is not None:

@@ -2,25 +2,28 @@
 an adaptive Runge-Kutta integrator when the resonator has cubic or quintic nonlinearity.
 
 Inputs are held constant over a block of samples (piecewise-constant case rate, forcing and
-reference frequency); a whole block of samples comes out of one call, vectorised, which is what
-makes a 300 s decay at 1 kHz cost milliseconds.  Table-rate ripple enters as a per-sample wave
-rotation of -2 K (ripple angle) electrical: the rotation commutes with the isotropic part of the
-dynamics, so carrying it outside the exact step is accurate to O(D x ripple angle).
+reference frequency); a whole block of samples comes out of one compiled call (kernels.py), which
+is what makes a 300 s decay at 1 kHz cost milliseconds and a 50 ms loop block a few microseconds.
+Table-rate ripple enters as a per-sample wave rotation of -2 K (ripple angle) electrical: the
+rotation commutes with the isotropic part of the dynamics, so carrying it outside the exact step
+is accurate to O(D x ripple angle).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.integrate import solve_ivp
-from scipy.linalg import expm
 from threadpoolctl import threadpool_limits
 
 from bench.analysis.slow_model import k_cubic, k_quintic, linear_matrix
 
+from .kernels import linear_block
 from .params import TWO_PI, ResonatorParams
 
 _blas_limiter: object | None = None
-_POWERS_CHUNK = 4096  # samples per cached run of matrix powers (4096 x 4 x 8 doubles = 1 MB)
+_ZERO4 = np.zeros(4)
+_EMPTY = np.empty(0)
+_EMPTY_ROWS = np.empty((0, 4))
 
 
 def use_single_thread_blas() -> None:
@@ -45,21 +48,6 @@ def rotate_wave(q: np.ndarray, psi_rad: np.ndarray | float) -> np.ndarray:
     return out
 
 
-def _matrix_powers(phi: np.ndarray, n: int) -> np.ndarray:
-    """phi^1 .. phi^n, shape (n, m, m), by doubling (log2 n batched matmuls)."""
-    m = phi.shape[0]
-    out = np.empty((n, m, m))
-    out[0] = phi
-    have = 1
-    step = phi
-    while have < n:
-        step = out[have - 1]  # phi^have
-        take = min(have, n - have)
-        out[have : have + take] = out[:take] @ step
-        have += take
-    return out
-
-
 class Resonator:
     """The resonator's slow state and its integration.  Not thread-safe: the World locks it."""
 
@@ -70,9 +58,7 @@ class Resonator:
         self.rng = np.random.default_rng(seed)
         self._q = np.zeros(4) if state is None else np.asarray(state, dtype=float).copy()
         self._psi = 0.0  # current ripple rotation (electrical rad) applied to the output
-        self._cache_key: tuple | None = None
-        self._cache_powers: np.ndarray | None = None
-        self._cache_phi: np.ndarray | None = None
+        self._zg = self.coeffs.zg(0.0)  # the kernel's parameter vector; nu is set per block
 
     # --- state -------------------------------------------------------------------------------
     @property
@@ -105,49 +91,70 @@ class Resonator:
     ) -> np.ndarray:
         """Advance n_samples steps of dt_s with constant inputs; return the true states at the end
         of each step, shape (n_samples, 4)."""
+        return self.step_and_measure(
+            n_samples, dt_s, rate_rad_s=rate_rad_s, force=force, ref_freq_hz=ref_freq_hz,
+            ripple_angle_rad=ripple_angle_rad, measure=False,
+        )[0]  # fmt: skip
+
+    def step_and_measure(
+        self,
+        n_samples: int,
+        dt_s: float,
+        *,
+        rate_rad_s: float = 0.0,
+        force: np.ndarray | None = None,
+        ref_freq_hz: float | None = None,
+        ripple_angle_rad: np.ndarray | None = None,
+        measure: bool = True,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """step_block and, with `measure`, `measure` of its states: (true, measured) states (the
+        World's block in one compiled call when the model is linear)."""
         if n_samples <= 0:
-            return np.empty((0, 4))
-        u = np.zeros(4) if force is None else np.asarray(force, dtype=float)
+            return np.empty((0, 4)), (np.empty((0, 4)) if measure else None)
+        u = _ZERO4 if force is None else np.asarray(force, dtype=float)
         lam = 0.0 if ref_freq_hz is None else self.detuning_rad_s(ref_freq_hz)
-        zg = self.coeffs.zg(rate_rad_s)
         if self.is_linear:
-            traj = self._linear_block(n_samples, dt_s, zg, u, lam)
-        else:
-            traj = self._nonlinear_block(n_samples, dt_s, zg, u, lam)
+            return self._linear_block(n_samples, dt_s, rate_rad_s, u, lam, ripple_angle_rad, measure)
+        traj = self._nonlinear_block(n_samples, dt_s, self.coeffs.zg(rate_rad_s), u, lam)
         self._q = traj[-1].copy()
         if ripple_angle_rad is None:
             self._psi = 0.0
-            return traj
-        psi = -2.0 * self.coeffs.bryan_factor * np.asarray(ripple_angle_rad, dtype=float)
-        self._psi = float(psi[-1])
-        return rotate_wave(traj, psi)
+        else:
+            psi = -2.0 * self.coeffs.bryan_factor * np.asarray(ripple_angle_rad, dtype=float)
+            self._psi = float(psi[-1])
+            traj = rotate_wave(traj, psi)
+        return traj, (self.measure(traj) if measure else None)
 
-    def _linear_block(self, n: int, dt: float, zg: np.ndarray, u: np.ndarray, lam: float) -> np.ndarray:
-        """Exact steps of dq/dt = A q + u/2 with the force as state: exp of [[A, I/2], [0, 0]] dt
-        is [[Phi, Gamma], [0, I]], so x_k = (q_k, u) = M^k x_0 and the cached powers of M serve
-        any force (a loop that changes its force every block costs no matrix exponential)."""
-        key = (dt, zg.tobytes(), lam)
-        if key != self._cache_key:
-            aug = np.zeros((8, 8))
-            aug[:4, :4] = linear_matrix(zg, lam)
-            aug[:4, 4:] = 0.5 * np.eye(4)
-            self._cache_phi = expm(aug * dt)
-            self._cache_key = key
-            self._cache_powers = None
-        m = min(n, _POWERS_CHUNK)
-        if self._cache_powers is None or len(self._cache_powers) < m:
-            # rows of M^k that give q_k (the force rows of M^k are the identity), contiguous
-            self._cache_powers = np.ascontiguousarray(_matrix_powers(self._cache_phi, m)[:, :4, :])
-        powers = self._cache_powers
+    def _linear_block(
+        self,
+        n: int,
+        dt: float,
+        rate_rad_s: float,
+        u: np.ndarray,
+        lam: float,
+        ripple_angle_rad: np.ndarray | None,
+        measure: bool,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Exact steps of dq/dt = A q + u/2 (the top row of exp([[A, I/2], [0, 0]] dt) applied to
+        (q, u) each sample), the ripple rotation and the pickoff noise: kernels.linear_block."""
+        zg = self._zg
+        zg[1] = 4.0 * self.coeffs.bryan_factor * rate_rad_s + self.coeffs.nu_offset
+        psi_per_rad = -2.0 * self.coeffs.bryan_factor
+        if ripple_angle_rad is None:
+            self._psi = 0.0
+            ripple = _EMPTY
+        else:
+            ripple = np.ascontiguousarray(ripple_angle_rad, dtype=float)
+            self._psi = float(psi_per_rad * ripple[-1])
+        sigma = self.params.noise_sigma
+        noise = _EMPTY_ROWS
+        if measure and sigma != 0.0:
+            noise = self.rng.standard_normal((n, 4))  # the draws of rng.normal(0, sigma, (n, 4))
         out = np.empty((n, 4))
-        x = np.empty(8)
-        x[:4] = self._q
-        x[4:] = u
-        for start in range(0, n, _POWERS_CHUNK):  # long blocks in chunks: bounded memory
-            k = min(_POWERS_CHUNK, n - start)
-            out[start : start + k] = (powers[:k].reshape(4 * k, 8) @ x).reshape(k, 4)
-            x[:4] = out[start + k - 1]
-        return out
+        linear_block(zg, lam, dt, self._q, u, ripple, psi_per_rad, out, noise, sigma)
+        if not measure:
+            return out, None
+        return out, (noise if sigma != 0.0 else out.copy())
 
     def _nonlinear_block(self, n: int, dt: float, zg: np.ndarray, u: np.ndarray, lam: float) -> np.ndarray:
         a = linear_matrix(zg, lam)

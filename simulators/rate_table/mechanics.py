@@ -17,9 +17,12 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from scipy.signal import lfilter
 
 from drivers.rate_table import modbus_protocol as mp
+
+from .kernels import deviation_rad
+
+_NO_ANGLES = np.empty(0)
 
 
 class CommandRejected(Exception):
@@ -82,8 +85,9 @@ class TableMechanics:
         self.angle_deg = 0.0  # actual multi-turn angle, without ripple and noise
         self.ref_angle_deg = 0.0  # profile angle (position mode)
         self._noise_state = 0.0  # OU angle jitter, deg
-        self._ar1_cache: dict[tuple[int, float], tuple[np.ndarray, np.ndarray]] = {}
         self._steps_cache: dict[int, np.ndarray] = {}
+        self._ou_key: tuple[float, float, float] | None = None
+        self._ou = (0.0, 0.0)
         self.t_s = 0.0
         # commands
         self.mode = mp.MODE_STOP
@@ -328,26 +332,6 @@ class TableMechanics:
         self.check_watchdog()
         return None if self.settled() else self.accel_block_samples
 
-    def _ar1(self, w: np.ndarray, e: float, y_prev: float, dt_s: float) -> np.ndarray:
-        """y_k = e y_(k-1) + w_k from y_(-1) = y_prev / e, i.e. lfilter([1], [1, -e], w, zi=[y_prev]):
-        closed form y_k = e^k (y_prev + sum_(j<=k) e^-j w_j), vectorised; scipy's lfilter when the
-        block is long against the jitter time (e^-n would lose range)."""
-        n = len(w)
-        decay = (n - 1) * dt_s / self.noise_tau_s
-        if decay > 30.0:
-            jitter, _ = lfilter([1.0], [1.0, -e], w, zi=[y_prev])
-            return jitter
-        key = (n, e)
-        powers = self._ar1_cache.get(key)
-        if powers is None:
-            k = np.arange(n)
-            powers = (e**k, e ** (-k.astype(float)))
-            self._ar1_cache = {key: powers} if len(self._ar1_cache) > 16 else {**self._ar1_cache, key: powers}
-        grow, shrink = powers
-        acc = np.cumsum(w * shrink)
-        acc += y_prev
-        return acc * grow
-
     def _steps(self, n: int) -> np.ndarray:
         """1.0 .. n, cached per block size (never written to)."""
         steps = self._steps_cache.get(n)
@@ -358,24 +342,40 @@ class TableMechanics:
 
     def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
         """Move the table over the block; hand the world its mean rate and the in-block angle
-        deviation (profile curvature, ripple, jitter) as `ripple_angle_rad`."""
+        deviation (profile curvature, ripple, jitter) as `ripple_angle_rad` (compiled kernel)."""
         self.check_watchdog()
         a0 = self.angle_deg
-        angles = self._step(n, dt_s)
-        t_rel = dt_s * self._steps(n)
+        settled = self.settled()
+        if settled:  # constant rate: the angles are a0 + rate dt k, made in the kernel
+            rate_step = self.rate_dps * dt_s
+            a_end = a0 + rate_step * float(n)
+            angles = _NO_ANGLES
+            self.angle_deg = a_end
+            self.ref_angle_deg += self.ref_dps * dt_s * n
+        else:
+            rate_step = 0.0
+            angles = self._step(n, dt_s)
+            a_end = float(angles[-1])
         # rounded to 1 ndeg/s so a table at rate gives the resonator the same rate every block
         # (its exact step is cached on the inputs); the rounding goes into the deviation below
-        mean_rate = round((angles[-1] - a0) / (n * dt_s), 9)
+        mean_rate = round((a_end - a0) / (n * dt_s), 9)
         if self.noise_deg > 0:
-            e = math.exp(-dt_s / self.noise_tau_s)
-            w = self._rng_noise.standard_normal(n) * self.noise_deg * math.sqrt(1.0 - e * e)
-            jitter = self._ar1(w, e, e * self._noise_state, dt_s)
-            self._noise_state = float(jitter[-1])
+            key = (dt_s, self.noise_tau_s, self.noise_deg)
+            if self._ou_key != key:  # the OU step's decay and innovation scale for this dt
+                e = math.exp(-dt_s / self.noise_tau_s)
+                self._ou_key, self._ou = key, (e, self.noise_deg * math.sqrt(1.0 - e * e))
+            e, scale = self._ou
+            w = self._rng_noise.standard_normal(n) * scale
+            y_prev = e * self._noise_state
         else:
-            jitter = 0.0
-        dev_deg = angles - a0 - mean_rate * t_rel + self.ripple_angle_deg(angles) + jitter
+            e, w, y_prev = 0.0, _NO_ANGLES, 0.0
+        dev = np.empty(n)
+        r1, r2 = self.ripple_deg
+        y = deviation_rad(angles, settled, a0, rate_step, mean_rate, dt_s, r1, r2, w, e, y_prev, dev)
+        if self.noise_deg > 0:
+            self._noise_state = y
         world.case_rate_dps = float(mean_rate)
-        world.ripple_angle_rad = np.radians(dev_deg)
+        world.ripple_angle_rad = dev
         self.t_s = t_s + n * dt_s
 
     def after_block(self, world, block) -> None:

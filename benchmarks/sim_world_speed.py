@@ -1,0 +1,161 @@
+"""Simulated seconds per wall second (x real time) of the simulated devices (issue 14, item 6):
+  (a) the free-decay World alone: the resonator, a 300 s decay at 1 kHz, case at 500 deg/s;
+  (b) the in-process device world: FPGA firmware (drive, AGC, PLL, quadrature loop on, stream
+      at 100 Hz, frames encoded) and table mechanics (500 deg/s) on one World, no transports;
+  (c) the whole `hrg-damping` procedure on `sim-hrg` (real drivers over loopback, lockstep).
+Targets: (b) >= 2000x, (c) >= 1000x on a quiet machine.  The cases run interleaved (a, b, c,
+a, b, c, ...) so a load that changes over time hits each alike; medians and ratios are printed,
+per wall second (the target) and per CPU second of this process (less sensitive to other load).
+
+Run: .venv/bin/python benchmarks/sim_world_speed.py [--only a,b,c] [--repeat 3] [--device-s 120]
+
+Measured 2026-11-23 on 2 shared cores, load average 8-10 from other jobs, 4 interleaved rounds
+(the tree before issue 14 item 6 against after; medians, x real time per wall s / per CPU s):
+  (a) free-decay World        1,375 / 4,750   ->  3,100 /  9,450
+  (b) device world               34 /   115   ->    650 /  2,050  (another round, load 8-10: 1,770 / 2,700)
+  (c) hrg-damping, 1108 s        63 /   113   ->    108 /    216
+(c) is now dominated by the engine's link health checks (a table status, a SCPI query and an
+FPGA read every 0.35 simulated s, ~0.84 ms wall each here: ~2/3 of its time) and the stream path
+(link reader thread, recorder); the simulated devices are ~10 % of it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import tempfile
+import time
+
+from bench.analysis.slow_model import state_from_elements
+from simulators.physics.params import preset
+from simulators.world import World
+
+
+class _Spin:
+    """The case turning at a constant rate (no table mechanics): the free-decay world's only device."""
+
+    def __init__(self, rate_dps: float) -> None:
+        self.rate_dps = rate_dps
+
+    def before_block(self, world, t_s, n, dt_s):
+        world.case_rate_dps = self.rate_dps
+
+    def after_block(self, world, block):
+        pass
+
+
+def free_decay_world(duration_s: float = 300.0) -> tuple[float, float]:
+    """(a) x real time of the World alone over a free decay."""
+    world = World(preset("hrg"), seed=1, sample_period_s=1e-3)
+    world.resonator.set_state(state_from_elements(1.0, 0.0, 0.0))
+    world.attach(_Spin(500.0))
+    t0, c0 = time.perf_counter(), time.process_time()
+    world.advance(duration_s)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    assert world.sample_index == round(duration_s * 1000)
+    return duration_s / wall, duration_s / cpu
+
+
+def device_world(duration_s: float = 120.0, seed: int = 1) -> tuple[float, float]:
+    """(b) x real time of the World with the FPGA firmware and the table attached, loops on."""
+    from drivers.fpga import protocol as p
+    from drivers.rate_table import modbus_protocol as mp
+    from simulators.fpga.firmware import FpgaFirmware
+    from simulators.rate_table.mechanics import TableMechanics
+
+    params = preset("hrg")
+    world = World(params, seed=seed, sample_period_s=1e-3)
+    world.resonator.set_state(state_from_elements(1.0, 0.0, 0.0))
+    fw = FpgaFirmware(world)
+    frames = [0]
+
+    def sink(data: bytes, n: int) -> None:
+        frames[0] += n
+
+    fw.sink = sink
+    world.attach(fw)
+    table = TableMechanics(seed=seed, watchdog_s=0.0)
+    world.attach(table)
+    regs = {"REF_FREQ_HZ": params.f0_hz, "AGC_SETPOINT": 1.0, "STREAM_DECIMATION": 10}
+    for name, value in regs.items():
+        fw.write(p.register(name), value)
+    fw.write(p.register("CTRL"), p.DRIVE_EN | p.AGC_EN | p.PLL_EN | p.QUAD_EN | p.STREAM_EN)
+    table.set_enabled(True)
+    table.command(mp.MODE_RATE, 500.0, 0.0, 1000.0)
+    world.advance(2.0)  # the table reaches its rate; not timed
+    assert table.settled() and abs(table.rate_dps - 500.0) < 1e-6
+    f0 = frames[0]
+    t0, c0 = time.perf_counter(), time.process_time()
+    world.advance(duration_s)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    assert frames[0] - f0 == round(duration_s * 100), frames[0] - f0
+    return duration_s / wall, duration_s / cpu
+
+
+def damping_procedure(runs_dir: str, seed: int = 0) -> tuple[float, float]:
+    """(c) x real time of the whole hrg-damping procedure (its defaults) on sim-hrg."""
+    from bench.engine import Runner
+    from bench.station import SimStation
+    from procedures.hrg_damping import HrgDamping
+
+    station = SimStation("sim-hrg", seed=seed).open()
+    try:
+        c0 = time.process_time()
+        record = Runner(station, runs_dir=runs_dir).run(HrgDamping, {})
+        cpu = time.process_time() - c0
+    finally:
+        station.close()
+    assert record.outcome in ("PASS", "COMPLETE"), record.outcome
+    return record.simulated_s / record.wall_s, record.simulated_s / cpu
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", default="a,b,c", help="cases to run, comma-separated (a, b, c)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs of each case (interleaved)")
+    ap.add_argument("--device-s", type=float, default=120.0, help="simulated seconds of case (b)")
+    args = ap.parse_args()
+    cases = [c.strip() for c in args.only.split(",") if c.strip()]
+    bad = set(cases) - {"a", "b", "c"}
+    if bad:
+        ap.error(f"--only: unknown cases {sorted(bad)} (expected a, b, c)")
+    tmp = tempfile.mkdtemp(prefix="gyrobench-simspeed-")
+    runs = {
+        "a": lambda: free_decay_world(),
+        "b": lambda: device_world(args.device_s),
+        "c": lambda: damping_procedure(tmp),
+    }
+    names = {
+        "a": "(a) free-decay World (resonator, 300 s at 1 kHz)",
+        "b": "(b) device world (FPGA loops + stream 100 Hz, table 500 deg/s)",
+        "c": "(c) hrg-damping over the real transports",
+    }
+    t0 = time.perf_counter()
+    free_decay_world(1.0)  # warm-up, untimed: imports, first calls (loading numba's compiled kernels)
+    device_world(0.5)
+    print(f"warm-up (first calls in this process): {time.perf_counter() - t0:.2f} s")
+    load0 = os.getloadavg()[0]
+    print(f"load average {load0:.1f} on {os.cpu_count()} cores; {args.repeat} interleaved runs of {','.join(cases)}")
+    speeds: dict[str, list[float]] = {c: [] for c in cases}
+    cpu_speeds: dict[str, list[float]] = {c: [] for c in cases}
+    for r in range(args.repeat):
+        for c in cases:
+            wall, cpu = runs[c]()
+            speeds[c].append(wall)
+            cpu_speeds[c].append(cpu)
+            print(f"  run {r + 1} {c}: {wall:,.0f}x per wall s, {cpu:,.0f}x per CPU s", flush=True)
+    print(f"load average at the end {os.getloadavg()[0]:.1f}")
+    med = {c: statistics.median(v) for c, v in speeds.items()}
+    med_cpu = {c: statistics.median(v) for c, v in cpu_speeds.items()}
+    for c in cases:
+        v = speeds[c]
+        print(f"{names[c]:66s} median {med[c]:8,.0f}x real time (min {min(v):,.0f}x, max {max(v):,.0f}x); "
+              f"{med_cpu[c]:,.0f}x per CPU s")
+    for x, y in (("a", "b"), ("b", "c"), ("a", "c")):
+        if x in med and y in med:
+            print(f"ratio {x}/{y}: {med[x] / med[y]:.2f} (per CPU s {med_cpu[x] / med_cpu[y]:.2f})")
+
+
+if __name__ == "__main__":
+    main()
