@@ -2,7 +2,8 @@
 
 Reads retry on timeout or a bad reply; writes are retried only when idempotent (enable,
 disable, stop, watchdog settings, heartbeat), never a motion command or a fault reset.
-Modbus exception responses become DeviceError naming the exception.
+Modbus exception responses become DeviceError naming the exception; a lost, reset or silent
+link becomes LinkLostError naming the table's address.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ class ModbusRateTable(RateTable):
                 raise ValueError("ModbusRateTable needs host= (TCP) or use ModbusRateTable.rtu(port)")
             client = ModbusTcpClient(host, port=port, timeout=timeout_s, retries=0)
         self.client = client
+        self.address = _address_of(client)
         self.device_id = device_id
         self.read_retries = int(read_retries)
         self.watchdog_s = float(watchdog_s)
@@ -69,9 +71,17 @@ class ModbusRateTable(RateTable):
 
     # --- link ----------------------------------------------------------------------------------
     def connect(self) -> None:
-        if not self.client.connect():
-            raise LinkLostError(f"rate table: cannot connect to {self.client.comm_params.host}")
-        self._write(mp.HR_WATCHDOG_MS, [int(round(self.watchdog_s * 1000))], idempotent=True)
+        try:
+            connected = self.client.connect()
+        except OSError as exc:
+            raise LinkLostError(f"rate table at {self.address}: cannot connect ({exc!r})") from exc
+        if not connected:
+            raise LinkLostError(f"rate table at {self.address}: cannot connect")
+        try:
+            self._write(mp.HR_WATCHDOG_MS, [int(round(self.watchdog_s * 1000))], idempotent=True)
+        except Exception:
+            self.client.close()
+            raise
         self.heartbeat.start()
 
     def close(self) -> None:
@@ -89,15 +99,21 @@ class ModbusRateTable(RateTable):
             try:
                 with self._io_lock:
                     rr = fn()
-            except (ModbusIOException, ConnectionException) as exc:
+            except (ModbusIOException, ConnectionException, OSError) as exc:
+                # OSError: the peer reset or closed the connection mid-transaction
                 last = exc
                 continue
             if rr.isError():
                 code = getattr(rr, "exception_code", None)
                 name = mp.EXCEPTION_NAMES.get(code, "unknown")
-                raise DeviceError(f"rate table refused {what}: Modbus exception {code} ({name})")
+                raise DeviceError(
+                    f"rate table at {self.address} (unit {self.device_id}) refused {what}: "
+                    f"Modbus exception {code} ({name})"
+                )
             return rr
-        raise LinkLostError(f"rate table: no valid reply to {what} ({last})")
+        raise LinkLostError(
+            f"rate table at {self.address} (unit {self.device_id}): no valid reply to {what} ({last!r})"
+        )
 
     def _write(self, address: int, values: list[int], *, idempotent: bool) -> None:
         self._call(
@@ -154,4 +170,14 @@ class ModbusRateTable(RateTable):
                 watchdog_expired=bool(bits & mp.ST_WATCHDOG_EXPIRED),
                 fault_code=code,
             )
-        raise ProtocolError(f"rate table: malformed status reply ({last})")
+        raise ProtocolError(f"rate table at {self.address}: malformed status reply ({last})")
+
+
+def _address_of(client) -> str:
+    """host:port of a TCP client, the port (device path or URL) of a serial one."""
+    params = getattr(client, "comm_params", None)
+    host = getattr(params, "host", None)
+    port = getattr(params, "port", None)
+    if host and port:  # a serial client's port is 0
+        return f"{host}:{port}"
+    return str(host or port or client)
