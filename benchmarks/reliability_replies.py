@@ -426,7 +426,9 @@ def fpga_mangles() -> dict[str, Callable[[bytes, bytes], Actions]]:
         }
     )
     for code in (1, 3, 4):
-        m[f"nack-{code}"] = lambda r, g, code=code: send(fp.encode_frame(fp.NACK, _seq(r), PLL.addr, struct.pack("<Q", code)))
+        m[f"nack-{code}"] = lambda r, g, code=code: send(
+            fp.encode_frame(fp.NACK, _seq(r), PLL.addr, struct.pack("<Q", code))
+        )
     return m
 
 

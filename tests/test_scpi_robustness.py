@@ -244,3 +244,23 @@ def test_a_refused_query_is_a_device_error_not_a_timeout(bench):
         fe._query("SOUR3:VOLT?")
     assert time.monotonic() - t0 < 0.5
     assert fe.ch1.amplitude_v == 0.5
+
+
+@pytest.mark.parametrize("bad", [b"nan", b"inf", b"-inf"])
+def test_a_non_finite_setting_value_is_a_protocol_error(bad):
+    """An amplitude read back as NaN or inf is no amplitude: ProtocolError, never the value."""
+
+    def non_finite(conn: socket.socket, reply: bytes) -> None:
+        conn.sendall(reply.replace(b"0;", bad + b";", 1) + b"\n")
+
+    device = MisbehavingDevice(non_finite)
+    clock = SimClock(World(ResonatorParams(f0_hz=5500.0, tau_s=3000.0), seed=1))
+    fe = ScpiFrontEnd(device.resource_name, clock=clock, timeout_s=1.0)
+    try:
+        fe.connect()
+        with pytest.raises(ProtocolError, match="not a valid"):
+            fe.ch2.amplitude_v  # noqa: B018
+    finally:
+        fe.close()
+        clock.close()
+        device.close()

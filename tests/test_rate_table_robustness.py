@@ -166,3 +166,163 @@ def test_connection_reset_during_connect_is_a_named_link_error(reset_after_bytes
         table.close()
         srv.close()
         clock.close()
+
+
+# --- replies that parse but may answer another request ------------------------------------------
+STATUS_REGS = mp.encode_status(12.5, 30.0, mp.ST_ENABLED, 0)
+STALE_REGS = mp.encode_status(-99.0, 271.0, 0, 0)
+
+
+def _crc(data: bytes) -> bytes:
+    crc = 0xFFFF
+    for b in data:
+        crc ^= b
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return struct.pack("<H", crc)
+
+
+def _fc4_pdu(regs: list[int], fc: int = 4) -> bytes:
+    return bytes([fc, 2 * len(regs)]) + b"".join(struct.pack(">H", r) for r in regs)
+
+
+class FakeDevice:
+    """A loopback TCP device: `reply(request bytes) -> bytes to send` for each request that
+    `split(buffer)` cuts off (None while incomplete)."""
+
+    def __init__(self, split, reply) -> None:
+        self.split, self.reply = split, reply
+        self.srv = socket.socket()
+        self.srv.bind(("127.0.0.1", 0))
+        self.srv.listen()
+        self.port = self.srv.getsockname()[1]
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def _serve(self) -> None:
+        try:
+            conn, _ = self.srv.accept()
+        except OSError:
+            return
+        buf = b""
+        with conn:
+            while True:
+                try:
+                    data = conn.recv(4096)
+                except OSError:
+                    return
+                if not data:
+                    return
+                buf += data
+                while (cut := self.split(buf)) is not None:
+                    req, buf = cut
+                    conn.sendall(self.reply(req))
+
+    def close(self) -> None:
+        self.srv.close()
+
+
+def _tcp_split(buf: bytes):
+    n = 6 + struct.unpack(">H", buf[4:6])[0] if len(buf) >= 7 else 1 << 30
+    return (buf[:n], buf[n:]) if len(buf) >= n else None
+
+
+def _rtu_split(buf: bytes):
+    n = (9 + buf[6] if buf[1] == 16 else 8) if len(buf) >= 8 else 1 << 30
+    return (buf[:n], buf[n:]) if len(buf) >= n else None
+
+
+def _table(dev: FakeDevice, rtu: bool) -> ModbusRateTable:
+    clock = SimClock(World(preset("hrg"), seed=3))
+    kw = dict(limits=LIMITS, clock=clock, timeout_s=0.3, read_retries=2, heartbeat_s=1e6)
+    if rtu:
+        return ModbusRateTable.rtu(f"socket://127.0.0.1:{dev.port}", **kw)
+    return ModbusRateTable("127.0.0.1", dev.port, **kw)
+
+
+def test_a_reply_of_another_function_code_is_not_taken_for_the_status():
+    """An FC3 reply (another request's registers) to the FC4 status read: retried, then refused."""
+
+    def reply(req: bytes) -> bytes:
+        pdu = req[7:12] if req[7] == 16 else _fc4_pdu(STALE_REGS, fc=3)
+        return req[:4] + struct.pack(">H", len(pdu) + 1) + req[6:7] + pdu
+
+    dev = FakeDevice(_tcp_split, reply)
+    table = _table(dev, rtu=False)
+    try:
+        table.connect()
+        with pytest.raises(LinkLostError, match="reply of function 3, not 4"):
+            table.status()
+    finally:
+        table.close()
+        table.clock.close()
+        dev.close()
+
+
+@pytest.mark.parametrize("stale_every_time", [False, True])
+def test_an_rtu_reply_with_a_stale_frame_before_it_is_never_returned(stale_every_time):
+    """RTU has no transaction id: a stale status frame arriving with the real one makes both
+    suspect; the read is retried (the true status) or fails, never returns the stale values."""
+    sent = {"stale": 0}
+
+    def reply(req: bytes) -> bytes:
+        if req[1] == 16:
+            body = req[:6]
+        else:
+            body = req[:1] + _fc4_pdu(STATUS_REGS)
+            if stale_every_time or sent["stale"] == 0:
+                sent["stale"] += 1
+                stale = req[:1] + _fc4_pdu(STALE_REGS)
+                return stale + _crc(stale) + body + _crc(body)
+        return body + _crc(body)
+
+    dev = FakeDevice(_rtu_split, reply)
+    table = _table(dev, rtu=True)
+    try:
+        table.connect()
+        if stale_every_time:
+            with pytest.raises(LinkLostError, match="bytes came for a 17-byte reply"):
+                table.status()
+        else:
+            st = table.status()
+            assert (st.rate_dps, st.angle_deg, st.enabled) == (12.5, 30.0, True)
+    finally:
+        table.close()
+        table.clock.close()
+        dev.close()
+
+
+def test_ascii_stale_line_before_the_reply_is_never_returned():
+    """A stale STAT? line arrives ahead of the real one: the reply is refused and retried."""
+    from drivers.rate_table import AsciiRateTable
+    from drivers.rate_table import ascii_protocol as ap
+
+    count = {"stat": 0}
+
+    def reply(req: bytes) -> bytes:
+        text = req.decode().strip()
+        if text == ap.Q_IDN:
+            return (ap.IDN + "\n").encode()
+        if text == ap.Q_STAT:
+            count["stat"] += 1
+            good = (ap.format_status(12.5, 30.0, mp.ST_ENABLED, 0) + "\n").encode()
+            stale = (ap.format_status(-99.0, 271.0, 0, 0) + "\n").encode()
+            return stale + good if count["stat"] == 1 else good
+        return b"OK\n"
+
+    def split(buf: bytes):
+        i = buf.find(b"\n")
+        return (buf[: i + 1], buf[i + 1 :]) if i >= 0 else None
+
+    dev = FakeDevice(split, reply)
+    clock = SimClock(World(preset("hrg"), seed=3))
+    table = AsciiRateTable(f"127.0.0.1:{dev.port}", limits=LIMITS, clock=clock, timeout_s=0.3, heartbeat_s=1e6)
+    try:
+        table.connect()
+        st = table.status()
+        assert (st.rate_dps, st.angle_deg, st.enabled) == (12.5, 30.0, True)
+        assert count["stat"] == 2  # the first reply was refused, the retry read the true one
+    finally:
+        table.close()
+        table.clock.close()
+        dev.close()
+        clock.close()
