@@ -268,10 +268,16 @@ class ScpiFrontEnd:
             raise DeviceError(f"front end gave no reply to {command!r}: instrument errors {self.check_errors()}")
         return text
 
-    def _out_of_step(self, res: Any, command: str, line: bytes, deadline: float, why: str) -> ProtocolError:
-        """A reply that may belong to another query: clear the input, mark the link suspect."""
+    def _out_of_step(self, res: Any, command: str, line: bytes, deadline: float, why: str) -> Exception:
+        """A reply that may belong to another query: clear the input, mark the link suspect (the
+        error to raise; LinkLostError when the device is still sending at the deadline)."""
+        import pyvisa
+
         self._suspect = True
-        transport.drain(res, deadline)
+        try:
+            transport.drain(res, deadline)
+        except (pyvisa.errors.VisaIOError, OSError, transport.DeadlineExpired) as exc:
+            return self._link_lost(exc, command)
         return ProtocolError(
             f"front end {self.resource_name}: {command!r} answered {line[:80]!r} ({why}): not its own reply; "
             "input cleared, the link is confirmed before the next query"
