@@ -9,6 +9,7 @@ import threading
 import time
 from collections.abc import Callable
 
+import numpy as np
 import pytest
 
 from bench.clock import SimClock
@@ -264,3 +265,17 @@ def test_a_non_finite_setting_value_is_a_protocol_error(bad):
         fe.close()
         clock.close()
         device.close()
+
+
+def test_a_stray_line_before_a_capture_block_is_caught_and_the_block_read_again(bench):
+    server, fe = bench
+    first = fe.capture(1, 2000)
+    np.testing.assert_array_equal(first, server.last_capture(1))
+    server.send_unsolicited(b"0.5;3")
+    time.sleep(0.02)
+    try:
+        again = fe.fetch_capture(1, expected_samples=2000)
+    except ProtocolError:
+        again = fe.fetch_capture(1, expected_samples=2000)
+    np.testing.assert_array_equal(again, first)
+    assert fe.ch1.amplitude_v == 0.5
