@@ -133,6 +133,7 @@ COMMON: dict[str, Callable[[bytes, bytes], Actions]] = {
     "garbage-prefix": lambda r, g: send(garbage(7) + g),
     "silence": lambda r, g: [],
     "dripped": lambda r, g: [("drip", g, TIMEOUT_S * 0.8)],
+    "dripped-0.4s": lambda r, g: [("drip", g, 0.4)],
     "oversize": lambda r, g: send(g + garbage(4096)),
     "duplicate": lambda r, g: send(g + g),
     "close": lambda r, g: [("close",)],
@@ -446,6 +447,7 @@ class Family:
     follow: Callable  # driver -> value (a different read)
     follow_truth: object
     bound_s: float  # the driver's own worst case for one read (all retries)
+    deadline: bool = False  # bound_s is a deadline from the start of the read (link checks included)
 
 
 def _status_tuple(table) -> tuple:
@@ -498,10 +500,10 @@ def families() -> list[Family]:
         Family("ascii", line_split, ascii_good, lambda r: r.strip() == b"STAT?", ascii_mangles(), _ascii_open,
                _status_tuple, STATUS_TRUTH, _status_tuple, STATUS_TRUTH, 9 * TIMEOUT_S),
         Family("scpi", line_split, scpi_good, scpi_target(b"SOUR2:VOLT?"), scpi_mangles(), _scpi_open,
-               lambda fe: fe.ch2.amplitude_v, 0.25, lambda fe: fe.ch1.amplitude_v, 0.5, 0.5),
+               lambda fe: fe.ch2.amplitude_v, 0.25, lambda fe: fe.ch1.amplitude_v, 0.5, 0.5, deadline=True),
         Family("scpi-block", line_split, scpi_good, scpi_target(b"FETC:CAPT1?"), scpi_block_mangles(), _scpi_open,
                lambda fe: list(fe.fetch_capture(1, expected_samples=4)), [float(v) for v in BLOCK],
-               lambda fe: fe.ch1.amplitude_v, 0.5, 0.5 + 16 / 10e6),
+               lambda fe: fe.ch1.amplitude_v, 0.5, 0.5 + 16 / 10e6, deadline=True),
         Family("fpga", fpga_split, fpga_good, lambda r: r[2] == fp.READ and r[8] == PLL.addr, fpga_mangles(),
                _fpga_open, lambda link: link.read_register("PLL_FREQ_HZ"), 5432.25,
                lambda link: link.read_register("SAMPLE_PERIOD_S"), 1e-4, 3 * TIMEOUT_S),
@@ -552,9 +554,10 @@ def run_case(fam: Family, name: str, count: int, clock) -> tuple[bool, str]:
         driver = value
         verdicts = []
         for read, truth, bound in ((fam.read, fam.truth, fam.bound_s), (fam.follow, fam.follow_truth, fam.bound_s)):
-            # a stale line may sit in the input, the driver may check the link first: the bound of
-            # one read plus one more of its own (the confirmation or the drain)
-            limit = bound * 2 + SLACK_S
+            # a deadline holds from the start of the read, plus one low-level read (SCPI: 10 ms
+            # slices, 16-byte pieces); otherwise a stale line may sit in the input and the driver
+            # may clear it first: the bound of one read plus one more
+            limit = bound + 0.1 + SLACK_S if fam.deadline else bound * 2 + SLACK_S
             kind, value, elapsed = _timed(lambda read=read: read(driver), limit)
             if kind == "hang" or elapsed > limit:
                 return False, f"{kind} after {elapsed:.2f} s (limit {limit:.2f} s)"
