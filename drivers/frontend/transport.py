@@ -87,14 +87,25 @@ def read_line(res: Any, deadline: float, *, max_bytes: int = MAX_LINE_BYTES) -> 
             count = PIECE_BYTES
 
 
-def read_exact(res: Any, n_bytes: int, deadline: float, *, piece_bytes: int = 1 << 16) -> bytes:
-    """Exactly n_bytes (read termination off) before `deadline`; DeadlineExpired otherwise."""
+def read_exact(res: Any, n_bytes: int, deadline: float, *, max_piece: int = 1 << 20) -> bytes:
+    """Exactly n_bytes (read termination off) before `deadline`; DeadlineExpired otherwise.
+
+    The first read asks for FIRST_PIECE_BYTES; each next one for what the bytes came at so far
+    would bring in half the time left (PIECE_BYTES .. max_piece), so a fast link reads a large
+    block in a few reads and a slow drip still hands control back before the deadline."""
     buf = bytearray()
+    t0 = time.monotonic()
+    piece = FIRST_PIECE_BYTES
     with _quiet_reads(res):
         while len(buf) < n_bytes:
-            if time.monotonic() >= deadline:
+            now = time.monotonic()
+            if now >= deadline:
                 raise DeadlineExpired(bytes(buf))
-            buf += _piece(res, min(n_bytes - len(buf), piece_bytes))
+            buf += _piece(res, min(n_bytes - len(buf), piece))
+            elapsed = time.monotonic() - t0
+            if buf and elapsed > 0:
+                wanted = len(buf) / elapsed * (deadline - time.monotonic()) / 2
+                piece = int(min(max_piece, max(PIECE_BYTES, wanted)))
     return bytes(buf)
 
 
