@@ -199,9 +199,12 @@ def test_garbled_replies_raise_protocol_error(bench):
         with pytest.raises(ProtocolError):
             read()
     with pytest.raises(ProtocolError):
-        fe.ch1.amplitude_v = 0.5  # the error-queue confirmation arrives garbled
+        fe.ch1.amplitude_v = 0.5  # the link check before it arrives garbled: nothing is sent
+    assert server.model.channels[1].amplitude_v == 0.0
     server.inject("none")
-    assert fe.ch1.amplitude_v == 0.5  # the setting itself went through; the link is in step
+    assert fe.ch1.amplitude_v == 0.0  # the link is confirmed again and back in step
+    fe.ch1.amplitude_v = 0.5
+    assert fe.ch1.amplitude_v == 0.5
     with pytest.raises(ValueError, match="melt"):
         server.inject("melt")
 

@@ -36,6 +36,9 @@ RST = "*RST"
 CLS = "*CLS"
 OPC = "*OPC?"
 ESR = "*ESR?"
+#: *ESE <n> / *ESE? (IEEE 488.2 event status enable, 0..255): the driver's transaction tag
+ESE = "*ESE"
+TAG_RANGE: tuple[int, int] = (1, 255)
 SYST_ERR = "SYST:ERR?"
 DRIVE_AMPLITUDE = "SOUR{ch}:VOLT"
 DRIVE_FREQUENCY = "SOUR{ch}:FREQ"

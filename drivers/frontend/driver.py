@@ -4,8 +4,10 @@ Speaks SCPI over any VISA resource (`TCPIP::host::port::SOCKET` through pyvisa-p
 simulator).  Properties are declared once with their validators and units (`properties.control`);
 every setting is sent together with `SYST:ERR?` in one compound message, so a refused setting
 raises DeviceError at once.  Out-of-range values raise LimitError before anything is sent.
-Transport timeouts are wall time (`timeout_s`); waits for the instrument (a capture filling) go
-through the bench clock, so they are virtual time on a simulated bench.
+Every query has a wall-clock deadline of `timeout_s` from its start and carries a tag
+(`*ESE <n>;<query>;*ESE?`), so a reply that is not its own is never returned: the input is then
+cleared and the link confirmed before the next query.  Waits for the instrument (a capture
+filling) go through the bench clock, so they are virtual time on a simulated bench.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,6 +24,7 @@ import numpy as np
 from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
 
 from . import commands as cmd
+from . import transport
 from .properties import (
     boolean,
     control,
@@ -137,6 +141,8 @@ class ScpiFrontEnd:
         self._own_rm = resource_manager is None
         self._res: Any = None
         self._lost = False
+        self._suspect = False  # an unexpected reply was seen: confirm the link before the next query
+        self._tag = 0
         self._lock = threading.RLock()
         self.channels = {ch: FrontEndChannel(self, ch) for ch in cmd.CHANNELS}
         self.ch1, self.ch2 = self.channels[1], self.channels[2]
@@ -157,11 +163,15 @@ class ScpiFrontEnd:
                     write_termination=cmd.TERMINATION,
                     timeout=int(round(self.timeout_s * 1000)),
                 )
+                # each low-level read waits one slice; the query's deadline is ours (transport.py)
+                self._res.timeout = transport.SLICE_S * 1000.0
+                transport.return_partial_reads(self._res)
                 self._res.chunk_size = 1 << 20
             except (pyvisa.errors.VisaIOError, OSError) as exc:
                 self._res = None
                 raise LinkLostError(f"front end {self.resource_name}: cannot open ({exc})") from exc
             self._lost = False
+            self._suspect = False
             self._write(cmd.CLS)
             self.idn  # noqa: B018 - the first query proves the link
         return self
@@ -200,8 +210,12 @@ class ScpiFrontEnd:
 
     def _link_lost(self, exc: Exception, what: str) -> LinkLostError:
         self._lost = True
+        if isinstance(exc, transport.DeadlineExpired):
+            detail = f"{len(exc.partial)} bytes came, no complete reply" if exc.partial else "nothing came"
+        else:
+            detail = str(exc)
         return LinkLostError(
-            f"front end {self.resource_name}: no answer to {what!r} within {self.timeout_s:g} s ({exc})"
+            f"front end {self.resource_name}: no answer to {what!r} within {self.timeout_s:g} s ({detail})"
         )
 
     def _write(self, command: str) -> None:
@@ -215,17 +229,70 @@ class ScpiFrontEnd:
                 raise self._link_lost(exc, command) from exc
 
     def _query(self, command: str) -> str:
-        """One query, its reply without the terminator; LinkLostError on timeout."""
+        """One query, its reply without the terminator, complete within timeout_s of wall time from
+        the start (LinkLostError otherwise); ProtocolError for a reply that is not this query's."""
         import pyvisa
 
         with self._lock:
             res = self._resource()
+            deadline = time.monotonic() + self.timeout_s
             try:
-                return res.query(command)
-            except (pyvisa.errors.VisaIOError, OSError) as exc:
+                if self._suspect:
+                    self._confirm(res, command, deadline)
+                return self._tagged(res, command, deadline)
+            except (pyvisa.errors.VisaIOError, OSError, transport.DeadlineExpired) as exc:
                 raise self._link_lost(exc, command) from exc
-            except UnicodeDecodeError as exc:
-                raise ProtocolError(f"{command!r}: reply is not text ({exc})") from exc
+
+    def _next_tag(self) -> int:
+        lo, hi = cmd.TAG_RANGE
+        self._tag = lo if not lo <= self._tag < hi else self._tag + 1
+        return self._tag
+
+    def _tagged(self, res: Any, command: str, deadline: float) -> str:
+        """Send `*ESE <tag>;<command>;*ESE?` and read its one reply line; the tag at its end proves
+        that the line answers this message and no other."""
+        tag = self._next_tag()
+        res.write(f"{cmd.ESE} {tag}{cmd.SEPARATOR}{command}{cmd.SEPARATOR}{cmd.ESE}?")
+        try:
+            line = transport.read_line(res, deadline)
+        except transport.ReplyTooLong as exc:
+            raise self._out_of_step(res, command, b"", deadline, str(exc)) from None
+        body, sep, tail = line.rpartition(cmd.SEPARATOR.encode())
+        if tail.strip().lstrip(b"+") != str(tag).encode():
+            raise self._out_of_step(res, command, line, deadline, f"no tag {tag} at its end")
+        try:
+            text = body.decode("ascii")
+        except UnicodeDecodeError:
+            raise ProtocolError(f"{command!r}: reply {body!r} is not text") from None
+        if not sep:  # only the tag came back: the instrument refused the query itself
+            raise DeviceError(f"front end gave no reply to {command!r}: instrument errors {self.check_errors()}")
+        return text
+
+    def _out_of_step(self, res: Any, command: str, line: bytes, deadline: float, why: str) -> Exception:
+        """A reply that may belong to another query: clear the input, mark the link suspect (the
+        error to raise; LinkLostError when the device is still sending at the deadline)."""
+        import pyvisa
+
+        self._suspect = True
+        try:
+            transport.drain(res, deadline)
+        except (pyvisa.errors.VisaIOError, OSError, transport.DeadlineExpired) as exc:
+            return self._link_lost(exc, command)
+        return ProtocolError(
+            f"front end {self.resource_name}: {command!r} answered {line[:80]!r} ({why}): not its own reply; "
+            "input cleared, the link is confirmed before the next query"
+        )
+
+    def _confirm(self, res: Any, command: str, deadline: float) -> None:
+        """Clear the input and prove the link in step with a tagged *OPC? before `command`."""
+        transport.drain(res, deadline)
+        try:
+            reply = self._tagged(res, cmd.OPC, deadline)
+        except ProtocolError as exc:
+            raise ProtocolError(f"front end {self.resource_name}: link out of step before {command!r}: {exc}") from None
+        if reply.strip() != "1":
+            raise ProtocolError(f"front end {self.resource_name}: link check *OPC? answered {reply!r}")
+        self._suspect = False
 
     def _set(self, command: str) -> None:
         """Send a setting with SYST:ERR? in one message; DeviceError if the instrument refused it."""
@@ -363,32 +430,40 @@ class ScpiFrontEnd:
         """Read the last capture of one channel as an IEEE 488.2 definite-length block [V].
 
         The read termination is switched off for the block and exact byte counts are read (a
-        0x0A byte inside the data must not end the read: see TRANSPORTS.md)."""
+        0x0A byte inside the data must not end the read: see TRANSPORTS.md); the tag follows it."""
         import pyvisa
 
         ch = self.channel(channel).channel_id
         query = cmd.CAPTURE_FETCH.format(ch=ch)
         with self._lock:
             res = self._resource()
+            # a block may be large: its deadline is the timeout plus its transfer at 10 MB/s
+            n_max = 4 * (expected_samples or cmd.CAPTURE_POINTS_RANGE[1])
+            deadline = time.monotonic() + self.timeout_s + n_max / 10e6
             try:
-                res.write(query)
+                if self._suspect:
+                    self._confirm(res, query, deadline)
+                tag = self._next_tag()
+                res.write(f"{cmd.ESE} {tag}{cmd.SEPARATOR}{query}{cmd.SEPARATOR}{cmd.ESE}?")
                 with res.read_termination_context(None):
-                    head = res.read_bytes(2)
+                    head = transport.read_exact(res, 2, deadline)
                     if head[:1] != b"#" or not head[1:2].isdigit() or head[1:2] == b"0":
-                        self._lost = True  # the rest of the reply is still in flight: resynchronise
-                        raise ProtocolError(f"{query!r}: expected a definite-length block, got {head!r}")
+                        raise self._out_of_step(res, query, head, deadline, "not a definite-length block")
                     n_digits = int(head[1:2])
-                    count_text = res.read_bytes(n_digits)
+                    count_text = transport.read_exact(res, n_digits, deadline)
                     if not count_text.isdigit():
-                        self._lost = True
-                        raise ProtocolError(f"{query!r}: bad block length {count_text!r}")
+                        raise self._out_of_step(res, query, head + count_text, deadline, "bad block length")
                     n_bytes = int(count_text)
-                    payload = res.read_bytes(n_bytes + 1, chunk_size=n_bytes + 1)
-            except (pyvisa.errors.VisaIOError, OSError) as exc:
+                    if n_bytes > n_max:
+                        raise self._out_of_step(res, query, head + count_text, deadline, f"over {n_max} bytes")
+                    payload = transport.read_exact(res, n_bytes, deadline)
+                trailer = transport.read_line(res, deadline, max_bytes=16)
+            except transport.ReplyTooLong:
+                raise self._out_of_step(res, query, b"", deadline, "no terminator after the block") from None
+            except (pyvisa.errors.VisaIOError, OSError, transport.DeadlineExpired) as exc:
                 raise self._link_lost(exc, query) from exc
-        if payload[-1:] != cmd.TERMINATION.encode():
-            self._lost = True  # the stream is out of step: reconnect before trusting it again
-            raise ProtocolError(f"{query!r}: block of {n_bytes} bytes not followed by the terminator")
+            if trailer != f"{cmd.SEPARATOR}{tag}".encode():
+                raise self._out_of_step(res, query, trailer, deadline, f"block not followed by tag {tag}")
         if n_bytes == 0:
             errors = self.check_errors()
             raise DeviceError(f"{query!r}: empty block; instrument errors {errors}")

@@ -64,7 +64,11 @@ def format_float(value: float) -> str:
 
 
 def parse_float(reply: str) -> float:
-    return float(reply)
+    """A finite number; ValueError for anything else (NaN and inf are never a setting's value)."""
+    x = float(reply)
+    if not math.isfinite(x):
+        raise ValueError(f"{reply!r} is not a finite number")
+    return x
 
 
 def parse_bool(reply: str) -> bool:

@@ -89,8 +89,15 @@ class AsciiRateTable(RateTable):
                 self._ser.reset_input_buffer()
                 self._ser.write((line + ap.TERMINATOR).encode("ascii"))
                 raw = self._ser.read_until(b"\n")
+                extra = raw.endswith(b"\n") and self._ser.in_waiting > 0
+                if extra:
+                    self._ser.reset_input_buffer()
             except (serial.SerialException, OSError) as exc:
-                raise LinkLostError(f"rate table: link error on {line!r}: {exc}") from exc
+                raise LinkLostError(f"rate table at {self.url}: link error on {line!r}: {exc}") from exc
+        if extra:
+            # one request, one reply line: more input means a stray or stale line came first, and
+            # the line read may answer another request
+            raise ProtocolError(f"rate table at {self.url}: more than one reply line to {line!r} (got {raw!r} first)")
         if not raw.endswith(b"\n"):
             raise LinkLostError(f"rate table: no reply to {line!r} within {self.timeout_s} s (got {raw!r})")
         try:

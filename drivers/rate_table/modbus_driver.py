@@ -2,7 +2,8 @@
 
 Reads retry on timeout or a bad reply; writes are retried only when idempotent (enable,
 disable, stop, watchdog settings, heartbeat), never a motion command or a fault reset.
-Modbus exception responses become DeviceError naming the exception.
+Modbus exception responses become DeviceError naming the exception; a lost, reset or silent
+link becomes LinkLostError naming the table's address.
 """
 
 from __future__ import annotations
@@ -44,12 +45,14 @@ class ModbusRateTable(RateTable):
                 raise ValueError("ModbusRateTable needs host= (TCP) or use ModbusRateTable.rtu(port)")
             client = ModbusTcpClient(host, port=port, timeout=timeout_s, retries=0)
         self.client = client
+        self.address = _address_of(client)
         self.device_id = device_id
         self.read_retries = int(read_retries)
         self.watchdog_s = float(watchdog_s)
         self._io_lock = threading.Lock()
         self.heartbeat = Heartbeat(self._beat, heartbeat_s if heartbeat_s else max(0.05, self.watchdog_s / 8))
         self._beat_count = 0
+        self._rx: _ReceivedBytes | None = None  # RTU: what a transaction received, to spot extra frames
 
     @classmethod
     def rtu(
@@ -64,14 +67,27 @@ class ModbusRateTable(RateTable):
         **kw,
     ) -> ModbusRateTable:
         """RTU framing on a serial port: a device path, a pty, or a pyserial URL (`socket://h:p`)."""
-        client = ModbusSerialClient(port, framer=FramerType.RTU, baudrate=baudrate, timeout=timeout_s, retries=0)
-        return cls(limits=limits, clock=clock, device_id=device_id, client=client, **kw)
+        rx = _ReceivedBytes()
+        client = ModbusSerialClient(
+            port, framer=FramerType.RTU, baudrate=baudrate, timeout=timeout_s, retries=0, trace_packet=rx
+        )
+        table = cls(limits=limits, clock=clock, device_id=device_id, client=client, **kw)
+        table._rx = rx
+        return table
 
     # --- link ----------------------------------------------------------------------------------
     def connect(self) -> None:
-        if not self.client.connect():
-            raise LinkLostError(f"rate table: cannot connect to {self.client.comm_params.host}")
-        self._write(mp.HR_WATCHDOG_MS, [int(round(self.watchdog_s * 1000))], idempotent=True)
+        try:
+            connected = self.client.connect()
+        except OSError as exc:
+            raise LinkLostError(f"rate table at {self.address}: cannot connect ({exc!r})") from exc
+        if not connected:
+            raise LinkLostError(f"rate table at {self.address}: cannot connect")
+        try:
+            self._write(mp.HR_WATCHDOG_MS, [int(round(self.watchdog_s * 1000))], idempotent=True)
+        except Exception:
+            self.client.close()
+            raise
         self.heartbeat.start()
 
     def close(self) -> None:
@@ -82,28 +98,48 @@ class ModbusRateTable(RateTable):
         self._beat_count = (self._beat_count + 1) & 0xFFFF
         self._write(mp.HR_HEARTBEAT, [self._beat_count], idempotent=True)
 
-    def _call(self, what: str, fn, *, attempts: int):
-        """One transaction (with the I/O lock), retried `attempts - 1` times on a lost reply."""
+    def _call(self, what: str, fn, *, attempts: int, fc: int):
+        """One transaction of function `fc` (with the I/O lock), retried `attempts - 1` times on a
+        lost reply, a reply of another function, or (RTU) one that came with extra bytes."""
         last: Exception | None = None
         for _ in range(max(1, attempts)):
             try:
                 with self._io_lock:
+                    if self._rx is not None:
+                        self._rx.n_bytes = 0
+                        _flush_input(self.client)  # what is left of an earlier, spoiled reply
                     rr = fn()
-            except (ModbusIOException, ConnectionException) as exc:
+                    received = self._rx.n_bytes + _waiting(self.client) if self._rx is not None else 0
+            except (ModbusIOException, ConnectionException, OSError) as exc:
+                # OSError: the peer reset or closed the connection mid-transaction
                 last = exc
+                continue
+            if (rr.function_code & 0x7F) != fc:
+                last = ProtocolError(f"reply of function {rr.function_code & 0x7F}, not {fc}")
+                continue
+            if self._rx is not None and received > _rtu_reply_bytes(rr):
+                # no transaction id on a serial line: a frame that came with another may be a
+                # stale reply to an earlier request, so neither can be trusted
+                last = ProtocolError(f"{received} bytes came for a {_rtu_reply_bytes(rr)}-byte reply")
                 continue
             if rr.isError():
                 code = getattr(rr, "exception_code", None)
                 name = mp.EXCEPTION_NAMES.get(code, "unknown")
-                raise DeviceError(f"rate table refused {what}: Modbus exception {code} ({name})")
+                raise DeviceError(
+                    f"rate table at {self.address} (unit {self.device_id}) refused {what}: "
+                    f"Modbus exception {code} ({name})"
+                )
             return rr
-        raise LinkLostError(f"rate table: no valid reply to {what} ({last})")
+        raise LinkLostError(
+            f"rate table at {self.address} (unit {self.device_id}): no valid reply to {what} ({last!r})"
+        )
 
     def _write(self, address: int, values: list[int], *, idempotent: bool) -> None:
         self._call(
             f"write of {values} at register {address}",
             lambda: self.client.write_registers(address, values, device_id=self.device_id),
             attempts=1 + (self.read_retries if idempotent else 0),
+            fc=16,
         )
         self.heartbeat.note_write()
 
@@ -136,6 +172,7 @@ class ModbusRateTable(RateTable):
                 "status read",
                 lambda: self.client.read_input_registers(mp.IR_RATE_ACT, count=mp.IR_COUNT, device_id=self.device_id),
                 attempts=1 + self.read_retries,
+                fc=4,
             )
             try:
                 rate, angle, bits, code = mp.decode_status(rr.registers)
@@ -154,4 +191,52 @@ class ModbusRateTable(RateTable):
                 watchdog_expired=bool(bits & mp.ST_WATCHDOG_EXPIRED),
                 fault_code=code,
             )
-        raise ProtocolError(f"rate table: malformed status reply ({last})")
+        raise ProtocolError(f"rate table at {self.address}: malformed status reply ({last})")
+
+
+class _ReceivedBytes:
+    """pymodbus trace_packet hook: the size of the receive buffer a transaction decoded from."""
+
+    def __init__(self) -> None:
+        self.n_bytes = 0
+
+    def __call__(self, sending: bool, data: bytes) -> bytes:
+        if not sending:
+            self.n_bytes = len(data)
+        return data
+
+
+def _flush_input(client) -> None:
+    """Discard whatever a serial client's input holds (pymodbus reads only what in_waiting says,
+    and pyserial's socket:// says at most 1)."""
+    try:
+        client.socket.reset_input_buffer()
+    except (AttributeError, OSError):
+        pass
+
+
+def _waiting(client) -> int:
+    """Bytes (pyserial's socket:// says 0 or 1) already in a serial client's input, 0 if unknown."""
+    try:
+        return int(client.socket.in_waiting)
+    except (AttributeError, OSError, ValueError, TypeError):
+        return 0
+
+
+def _rtu_reply_bytes(rr) -> int:
+    """RTU frame size of a decoded reply: address, PDU, CRC."""
+    if rr.isError():
+        return 5
+    if rr.function_code in (3, 4):
+        return 5 + 2 * len(rr.registers)
+    return 8  # FC6 / FC16 echo
+
+
+def _address_of(client) -> str:
+    """host:port of a TCP client, the port (device path or URL) of a serial one."""
+    params = getattr(client, "comm_params", None)
+    host = getattr(params, "host", None)
+    port = getattr(params, "port", None)
+    if host and port:  # a serial client's port is 0
+        return f"{host}:{port}"
+    return str(host or port or client)

@@ -61,6 +61,8 @@ EXCEPTION_NAMES = {
     0x03: "illegal data value",
     0x04: "device failure (command refused in this state)",
     0x06: "device busy",
+    0x0A: "gateway path unavailable",
+    0x0B: "gateway target device failed to respond (no such unit id)",
 }
 
 

@@ -78,6 +78,7 @@ class FrontEndModel:
         self.rng = np.random.default_rng(seed)
         self.errors: deque[tuple[int, str]] = deque()
         self.esr = 0
+        self.ese = 0  # *ESE: kept over *RST and *CLS (IEEE 488.2)
         self.lockin = np.zeros(4)  # filtered (cx, sx, cy, sy), model units
         self._lockin_weights_key: tuple[int, float] | None = None
         self._lockin_weights = np.empty(0)
@@ -256,7 +257,15 @@ class FrontEndModel:
             raise ScpiError(cmd.PARAMETER_NOT_ALLOWED, arg)
 
     def _common(self, key: str, query: bool, arg: str) -> str | None:
+        if key == "*ESE" and not query:
+            value = self._parse_value("int", arg, (0, 255), key) if arg else None
+            if value is None:
+                raise ScpiError(cmd.MISSING_PARAMETER, key)
+            self.ese = int(value)
+            return None
         self._no_arg(arg)
+        if key == "*ESE" and query:
+            return str(self.ese)
         if key == "*IDN" and query:
             return ",".join(cmd.IDN_FIELDS)
         if key == "*RST" and not query:

@@ -2,7 +2,8 @@
 
 Lines terminated by '\\n' come in; each is executed under `world.lock` and its reply (text, or a
 definite-length block) goes out with a '\\n'.  Faults: "hang" reads commands and never answers,
-"garble" corrupts every reply (two noise bytes, then the first half of the reply); "none" clears.
+"garble" corrupts every reply (two noise bytes, then the first half of the reply), "duplicate"
+sends every reply twice; "none" clears.  `send_unsolicited(line)` writes a stray line now.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import numpy as np
 
 from .model import FORCE_SOURCE, FrontEndModel
 
-FAULTS = ("none", "hang", "garble")
+FAULTS = ("none", "hang", "garble", "duplicate")
 
 
 class FrontEndServer:
@@ -29,6 +30,7 @@ class FrontEndServer:
         self._server: asyncio.AbstractServer | None = None
         self._ready = threading.Event()
         self._error: BaseException | None = None
+        self._writers: set[asyncio.StreamWriter] = set()
         self._thread = threading.Thread(target=self._run, name=f"frontend-sim:{port}", daemon=True)
 
     @property
@@ -44,11 +46,25 @@ class FrontEndServer:
         return self
 
     def inject(self, fault: str | None) -> None:
-        """Inject a fault: "hang" (stop answering), "garble" (corrupt replies), "none"/None (clear)."""
+        """Inject a fault: "hang" (stop answering), "garble" (corrupt replies), "duplicate" (every
+        reply twice), "none"/None (clear)."""
         fault = "none" if fault is None else fault
         if fault not in FAULTS:
             raise ValueError(f"unknown front-end fault {fault!r}; known: {FAULTS}")
         self.fault = fault
+
+    def send_unsolicited(self, line: bytes) -> None:
+        """Write one line (a '\\n' is added) to every connected client now, answering nothing."""
+        loop = self._loop
+        if loop is None:
+            raise RuntimeError("front-end simulator is not running")
+
+        async def send() -> None:
+            for writer in list(self._writers):
+                writer.write(line + b"\n")
+                await writer.drain()
+
+        asyncio.run_coroutine_threadsafe(send(), loop).result(timeout=5.0)
 
     def last_capture(self, channel: int) -> np.ndarray | None:
         """The instrument's own copy of the last capture (for tests; never over the protocol)."""
@@ -95,6 +111,7 @@ class FrontEndServer:
             loop.close()
 
     async def _serve_client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        self._writers.add(writer)
         try:
             while True:
                 try:
@@ -113,8 +130,11 @@ class FrontEndServer:
                 if self.fault == "garble":
                     reply = b"\xff\xfe" + reply[: len(reply) // 2]
                 writer.write(reply + b"\n")
+                if self.fault == "duplicate":
+                    writer.write(reply + b"\n")
                 await writer.drain()
         except (ConnectionError, asyncio.CancelledError):
             return
         finally:
+            self._writers.discard(writer)
             writer.close()

@@ -10,8 +10,10 @@ from dataclasses import dataclass, field
 
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
+from pymodbus.exceptions import NoSuchIdException
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
+from pymodbus.simulator.simcore import SimCore
 
 from drivers.rate_table import modbus_protocol as mp
 
@@ -55,6 +57,10 @@ class _TableRegisters:
     async def handle(self, fc, start_address, address, count, registers, set_values):
         if fc not in _READ_FCS + _WRITE_FCS:
             return ExcCodes.ILLEGAL_FUNCTION
+        if fc in _WRITE_FCS and set_values is None:
+            # pymodbus reads the written register back (FC6 echo) through the action: the write
+            # has already been applied and pymodbus stored the written values, so echo them
+            return None
         if fc in _WRITE_FCS:
             self.mech.feed()  # every write feeds the watchdog, without waiting for the world
             if address == mp.HR_HEARTBEAT and count == 1:
@@ -112,6 +118,28 @@ class _TableRegisters:
         return None
 
 
+class _OneUnitCore(SimCore):
+    """The server's datastore, answering only its own unit id (and 255 on TCP, the id the Modbus
+    TCP guide reserves for "this server"); any other id raises NoSuchIdException, which pymodbus
+    turns into silence (RTU) or exception 0x0B (TCP), see docs/rate_table_modbus.md."""
+
+    def __init__(self, device: SimDevice, *, also: tuple[int, ...] = ()) -> None:
+        super().__init__(device)
+        self._runtime = self.devices[device.id]
+        self._ids = {device.id, *also}
+
+    def _unit(self, device_id: int):
+        if device_id not in self._ids:
+            raise NoSuchIdException(f"unit id {device_id} is not this controller's")
+        return self._runtime
+
+    async def async_getValues(self, device_id, func_code, address, count=1):
+        return await self._unit(device_id).async_getValues(func_code, address, count)
+
+    async def async_setValues(self, device_id, func_code, address, values):
+        return await self._unit(device_id).async_setValues(func_code, address, values)
+
+
 class ModbusTableServer(TableFaultControls):
     """Handle of a running Modbus table: `.host`, `.port`, `.url`, `.mechanics`, `.stop()`."""
 
@@ -136,6 +164,9 @@ class ModbusTableServer(TableFaultControls):
             framer=FramerType.SOCKET if framer == "tcp" else FramerType.RTU,
             address=(host, port),
             trace_packet=self.link_faults.apply,
+            # a slave on a serial line answers only its own address; a TCP server that is
+            # asked for another unit answers "gateway target device failed to respond" (0x0B)
+            ignore_missing_devices=framer == "rtu",
         )
         self._device = device
         self._loop = asyncio.new_event_loop()
@@ -152,6 +183,9 @@ class ModbusTableServer(TableFaultControls):
 
     async def _start(self) -> None:
         self._server = ModbusTcpServer(self._device, **self._server_args)
+        # pymodbus's own SimCore falls back to unit 0 and fails with a KeyError inside the
+        # server for any unknown unit id: ours refuses it as a real controller does
+        self._server.context = _OneUnitCore(self._device, also=(255,) if self.framer == "tcp" else ())
         await self._server.serve_forever(background=True)
 
     def _run(self, started: threading.Event) -> None:
