@@ -343,7 +343,14 @@ class Recorder:
         with contextlib.suppress(Exception):
             self._f.close()
         self._f = None
-        self._f = h5py.File(self.path, "r+")
+        try:
+            self._f = h5py.File(self.path, "r+")
+        except OSError as exc:  # the superblock's end of file went to disk, the data at its end did not
+            stored = re.search(r"truncated file: .*stored_eof = (\d+)", str(exc))
+            if stored is None:
+                raise
+            os.truncate(self.path, int(stored.group(1)))  # a hole: no block of the disk is needed
+            self._f = h5py.File(self.path, "r+")
         self._log, self._meas = self._f["log"], self._f["measurements"]
         self._datasets = {name: self._f["streams"][name] for name in self._f["streams"]}
 
