@@ -443,9 +443,17 @@ def compact(path: str | Path, filters: dict[str, Any], chunk_rows: int = COMPACT
         return False
 
 
+class MissingStream(KeyError):
+    """A stream the analysis needs is not in the raw file (the run ended before writing it)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
 class RunData:
     """Read access to a run's raw file (during the run or long after): attributes decoded, each
-    stream as a dict of columns."""
+    stream as a dict of columns.  `incomplete` says why a run's data may be partial; an
+    analysis hook adds to `notes` what it did about it."""
 
     def __init__(self, source: str | Path | h5py.File) -> None:
         self._own = not isinstance(source, h5py.File)
@@ -464,6 +472,33 @@ class RunData:
             elif isinstance(value, np.generic):
                 value = value.item()
             self.attrs[key] = value
+        self.notes: list[str] = []
+
+    @property
+    def incomplete(self) -> str | None:
+        """Why the recorded data may be partial (killed, aborted, failed, disk full); None when
+        the run went through all its steps."""
+        a = self.attrs
+        if "outcome" not in a:
+            return "the run did not finish (the process was killed or is still running)"
+        if a.get("incomplete"):
+            return str(a["incomplete"])
+        if a["outcome"] in ("ERROR", "ABORTED"):
+            return f"the run ended {a['outcome']} ({a.get('end_reason', '')})"
+        return None
+
+    def step_span(self, step: str) -> tuple[float | None, float | None]:
+        """Bench times at which a step started and ended (None where the log has no such row)."""
+        start = end = None
+        for r in self.log():
+            kind, _, name = str(r.get("msg", "")).partition(" ")
+            if r.get("level") != "STEP" or name != step:
+                continue
+            if kind == "step_started":
+                start, end = r["t_sim_s"], None
+            else:
+                end = r["t_sim_s"]
+        return start, end
 
     @property
     def params(self) -> dict[str, Any]:
@@ -476,11 +511,20 @@ class RunData:
     def streams(self) -> list[str]:
         return list(self.f["streams"].keys())
 
+    def _stream(self, stream: str) -> h5py.Dataset:
+        if stream not in self.f["streams"]:
+            why = self.incomplete
+            raise MissingStream(
+                f"{self.path.name} has no stream {stream!r} (it has: {', '.join(self.streams()) or 'none'})"
+                + (f"; {why}" if why else "")
+            )
+        return self.f["streams"][stream]
+
     def columns(self, stream: str) -> list[str]:
-        return json.loads(self.f["streams"][stream].attrs["columns"])
+        return json.loads(self._stream(stream).attrs["columns"])
 
     def array(self, stream: str) -> np.ndarray:
-        return self.f["streams"][stream][...]
+        return self._stream(stream)[...]
 
     def table(self, stream: str) -> dict[str, np.ndarray]:
         """Columns of a stream by name: `data.table("fpga")["cx"]`."""

@@ -297,3 +297,50 @@ def test_a_disk_that_fills_ends_the_run_at_once_in_the_safe_state(tmp_path):
     finally:
         if tmpfs:
             subprocess.run(["umount", str(mnt)], check=False)
+
+
+# --- analyze and report of an incomplete run (issue 13, item 6) ----------------------------------
+def _cut_short(src: Path, dst: Path, *, drop_streams: tuple[str, ...]) -> Path:
+    """A copy of a finished run's raw file as a run killed earlier leaves it: no end attributes,
+    and without the streams written only later."""
+    dst.write_bytes(src.read_bytes())
+    with h5py.File(dst, "r+") as f:
+        for key in ("outcome", "end_reason", "safe_state", "safe_detail", "result", "finished_at"):
+            del f.attrs[key]
+        for name in drop_streams:
+            del f["streams"][name]
+    return dst
+
+
+def test_analyze_and_report_of_an_incomplete_run_say_so(tmp_path):
+    """Killed during the record: the decay recorded so far is fitted and marked as from an
+    incomplete run; killed before any FPGA data: one message naming what the file lacks.  Both
+    used to end in a KeyError traceback."""
+    r = _run(["run", "hrg-damping", "--set", "record_s=30", "--set", "compensate=false", "--seed", "3", "--json"],
+             tmp_path)
+    assert r.returncode == 0, r.stderr
+    raw = Path(json.loads(r.stdout)["raw_file"])
+    killed = _cut_short(raw, tmp_path / "killed.h5", drop_streams=("damping_windows", "damping_reference"))
+    ana = _run(["analyze", str(killed), "--json"], tmp_path)
+    assert ana.returncode == 0 and "Traceback" not in ana.stderr, ana.stderr
+    out = json.loads(ana.stdout)
+    assert out["incomplete"].startswith("the run did not finish")
+    assert any("no damping_windows stream" in n for n in out["notes"])
+    tau = out["measurements"]["tau_s"]  # truth 300 s, from the whole record to the last sample
+    assert tau["ci95"][0] < 300.0 < tau["ci95"][1] and "q_factor" not in out["measurements"]
+    text = _run(["analyze", str(killed)], tmp_path).stdout
+    assert "from an INCOMPLETE run: the run did not finish" in text
+    rep = _run(["report", str(killed), "-o", str(tmp_path / "killed.html")], tmp_path)
+    assert rep.returncode == 0 and "INCOMPLETE RUN" in (tmp_path / "killed.html").read_text(), rep.stderr
+
+    early = _cut_short(raw, tmp_path / "early.h5", drop_streams=("damping_windows", "damping_reference", "fpga"))
+    ana = _run(["analyze", str(early)], tmp_path)
+    assert ana.returncode == 1 and "Traceback" not in ana.stderr and ana.stdout == ""
+    assert ana.stderr.count("\n") == 1 and "early.h5 has no stream 'fpga' (it has: table)" in ana.stderr
+    assert "the run did not finish" in ana.stderr
+    rep = _run(["report", str(early), "-o", str(tmp_path / "early.html")], tmp_path)
+    assert rep.returncode == 0 and "INCOMPLETE RUN" in (tmp_path / "early.html").read_text(), rep.stderr
+    bad = tmp_path / "not.h5"
+    bad.write_text("not hdf5")
+    ana = _run(["analyze", str(bad)], tmp_path)
+    assert ana.returncode == 1 and "Traceback" not in ana.stderr and "not.h5" in ana.stderr
