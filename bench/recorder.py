@@ -430,7 +430,8 @@ def compact(path: str | Path, filters: dict[str, Any], chunk_rows: int = COMPACT
             for name, ds in src["streams"].items():
                 n, ncols = ds.shape
                 out = streams.create_dataset(
-                    name, shape=ds.shape, maxshape=(None, ncols), dtype=ds.dtype, chunks=(chunk_rows, ncols), **filters
+                    name, shape=ds.shape, maxshape=(None, ncols), dtype=ds.dtype,
+                    chunks=(max(1, min(n, chunk_rows)), ncols), **filters,
                 )
                 for a in range(0, n, 8 * chunk_rows):
                     out[a : a + 8 * chunk_rows] = ds[a : a + 8 * chunk_rows]

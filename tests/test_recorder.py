@@ -178,3 +178,30 @@ def test_a_full_tmpfs_keeps_the_flushed_data_and_closes_cleanly(tmp_path, check_
         assert [p.name for p in mnt.iterdir()] == ["full.h5"]  # the reserve is gone
     finally:
         subprocess.run(["umount", str(mnt)], check=False)
+
+
+def test_the_closed_file_has_its_streams_compressed_and_reads_back_the_same(tmp_path):
+    """Issue 13, item 7: gzip with shuffle (the stock tools read it), applied when the file is
+    closed; while the run goes on the streams stay uncompressed (a killed run's file stays readable)."""
+    rng = np.random.default_rng(7)
+    t = np.arange(20000) * 1e-3
+    sig = np.column_stack([t, np.exp(-t / 300) * np.cos(t), 1e-3 * rng.normal(size=t.size)])
+    rec = Recorder(tmp_path / "c.h5", {"params": {"x": 1}})
+    for k in range(0, len(t), 100):
+        rec.on_event(ev.SampleBlock(run_id="r", t_sim_s=t[k + 99], stream="fpga", columns=("t_s", "c", "n"),
+                                    data=sig[k : k + 100]))
+    rec.on_event(ev.Log(run_id="r", t_sim_s=20.0, message="end"))
+    rec.on_event(ev.FitUpdate(run_id="r", t_sim_s=20.0, name="decay", curves={"t_s": np.arange(3.0)}))
+    assert rec.data().f["streams/fpga"].compression is None  # as written during the run
+    rec.close()
+    assert [p.name for p in tmp_path.iterdir()] == ["c.h5"]  # no reserve, no temporary file left
+    with h5py.File(tmp_path / "c.h5", "r") as f:
+        ds = f["streams/fpga"]
+        assert ds.compression == "gzip" and ds.shuffle and ds.compression_opts == 4
+        assert f["streams/fpga"].id.get_storage_size() < 0.8 * sig.nbytes
+    with open_run(tmp_path / "c.h5") as d:
+        np.testing.assert_array_equal(d.array("fpga"), sig)
+        assert d.params == {"x": 1} and d.log()[-1]["msg"] == "end" and d.columns("fpga") == ["t_s", "c", "n"]
+        np.testing.assert_array_equal(d.fits()["decay"]["t_s"], np.arange(3.0))
+    if shutil.which("h5dump"):
+        assert subprocess.run(["h5dump", str(tmp_path / "c.h5")], capture_output=True).returncode == 0
