@@ -26,6 +26,7 @@ import errno
 import json
 import os
 import re
+import resource
 import threading
 import time
 from pathlib import Path
@@ -70,6 +71,8 @@ def _why(exc: BaseException) -> str:
         return "disk full" if exc.strerror == os.strerror(errno.ENOSPC) else f"disk full ({exc.strerror})"
     if "errno = 28," in text:
         return "disk full"
+    if isinstance(exc, OSError) and exc.errno == errno.EFBIG:
+        return "file size limit reached" + (f" ({exc.strerror})" if exc.strerror != os.strerror(errno.EFBIG) else "")
     if isinstance(exc, OSError) and exc.strerror:
         return f"write failed ({exc.strerror})"
     found = re.search(r"error message = '([^']*)'", text)
@@ -113,6 +116,9 @@ class Recorder:
                     self._f.close()
             where = self.path if self.path.parent.is_dir() else self.path.parent
             why = _why(exc).removeprefix("write failed (").removesuffix(")")
+            blocking = next((p for p in (self.path.parent, *self.path.parent.parents) if p.exists()), None)
+            if blocking is not None and not blocking.is_dir():
+                where, why = blocking, "it is a file, not a directory"
             raise RawDataError(f"raw data: cannot create {where}: {why}") from exc
         self._datasets: dict[str, h5py.Dataset] = {}
         self._pending: dict[str, list[np.ndarray]] = {}
@@ -278,7 +284,14 @@ class Recorder:
 
     def _check_space(self) -> None:
         """Disk full is declared while RESERVE_BYTES are still free, before a write fails: a write
-        that HDF5 saw fail may leave its internal state (and the file it closes) inconsistent."""
+        that HDF5 saw fail may leave its internal state (and the file it closes) inconsistent.
+        The same for the process's file size limit (ulimit -f)."""
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        if limit != resource.RLIM_INFINITY:
+            size = self.path.stat().st_size
+            if size + RESERVE_BYTES > limit:
+                raise _NoRoom(errno.EFBIG, f"{size / 1e6:.2f} MB written, the process's file size limit is "
+                                           f"{limit / 1e6:.2f} MB")
         st = os.statvfs(self.path.parent)
         free = st.f_bavail * st.f_frsize
         if free < RESERVE_BYTES:

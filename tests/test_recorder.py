@@ -205,3 +205,24 @@ def test_the_closed_file_has_its_streams_compressed_and_reads_back_the_same(tmp_
         np.testing.assert_array_equal(d.fits()["decay"]["t_s"], np.arange(3.0))
     if shutil.which("h5dump"):
         assert subprocess.run(["h5dump", str(tmp_path / "c.h5")], capture_output=True).returncode == 0
+
+
+@pytest.mark.parametrize("case", ["file", "under-a-file"])
+def test_a_runs_dir_that_cannot_hold_files_ends_the_run_before_its_first_step(tmp_path, case):
+    """The raw file cannot be created: the run ends ERROR at its first checkpoint, in the safe
+    state, with one message naming the path (it used to be a FileExistsError traceback)."""
+    from bench.engine import Runner
+    from bench.station import SimStation
+    from procedures.examples.table_spin import TableSpin
+
+    blocker = tmp_path / "runs"
+    blocker.write_text("a file")
+    runs_dir = blocker if case == "file" else blocker / "deeper"
+    station = SimStation("sim-hrg", seed=0).open()
+    try:
+        rec = Runner(station, runs_dir=runs_dir).run(TableSpin, {"hold_s": 0.5})
+    finally:
+        station.close()
+    assert rec.outcome == "ERROR" and rec.safe_state and rec.raw_file is None
+    assert rec.end_reason == f"raw data: cannot create {blocker}: it is a file, not a directory"
+    assert rec.failed_step == "spin_up" and rec.simulated_s < 0.5 and rec.traceback is None
