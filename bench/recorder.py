@@ -73,10 +73,12 @@ def _why(exc: BaseException) -> str:
         return "disk full"
     if isinstance(exc, OSError) and exc.errno == errno.EFBIG:
         return "file size limit reached" + (f" ({exc.strerror})" if exc.strerror != os.strerror(errno.EFBIG) else "")
+    found = re.search(r"error message = '([^']*)'", text)  # HDF5's words for the system's error
+    if found:
+        return f"write failed ({found.group(1)})"
     if isinstance(exc, OSError) and exc.strerror:
         return f"write failed ({exc.strerror})"
-    found = re.search(r"error message = '([^']*)'", text)
-    return f"write failed ({found.group(1) if found else (text.splitlines() or [type(exc).__name__])[0]})"
+    return f"write failed ({(text.splitlines() or [type(exc).__name__])[0]})"
 
 
 def _pid_alive(pid: int) -> bool:
@@ -119,6 +121,9 @@ class Recorder:
             blocking = next((p for p in (self.path.parent, *self.path.parent.parents) if p.exists()), None)
             if blocking is not None and not blocking.is_dir():
                 where, why = blocking, "it is a file, not a directory"
+            elif why == "disk full":
+                st = os.statvfs(self.path.parent)
+                why += f" ({st.f_bavail * st.f_frsize / 1e6:.2f} MB free, a run needs {RESERVE_BYTES / 1e6:.2f} MB)"
             raise RawDataError(f"raw data: cannot create {where}: {why}") from exc
         self._datasets: dict[str, h5py.Dataset] = {}
         self._pending: dict[str, list[np.ndarray]] = {}
@@ -341,7 +346,7 @@ class Recorder:
                 self._reopen()
             self._cut_back()
         except Exception as again:  # noqa: BLE001 - the disk refuses even this
-            self.failure += f" (the raw file may be damaged: {_why(again)})"
+            self.failure += f" (and reopening it to close it: {_why(again)}; the file may lack its last second)"
         raise RawDataError(self.failure) from exc
 
     def _reopen(self) -> None:

@@ -11,6 +11,7 @@ Needs root (tmpfs mounts).  Prints one line per case, then "full or read-only di
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import resource
@@ -29,6 +30,7 @@ import numpy as np
 
 GYROBENCH = [sys.executable, "-m", "bench.cli"]
 DAMPING = ["run", "hrg-damping", "--seed", "1"]
+EXT4_IOC_SHUTDOWN = 0x8004587D  # _IOR('X', 125, __u32)
 SPIN = ["run", "table-spin", "--set", "hold_s=300", "--seed", "1"]
 
 
@@ -87,13 +89,16 @@ def judge(done: subprocess.CompletedProcess, raw_dir: Path, *, expect_fail: bool
                 problems.append(f"unclear message {reason!r}")
         elif done.returncode != 0:
             problems.append(f"exit {done.returncode}: {reason}")
-    files = [p for p in raw_dir.glob("*") if p.name != "filler"] if raw_dir.is_dir() else []
+    files = [p for p in raw_dir.glob("*") if p.name not in ("filler", "lost+found")] if raw_dir.is_dir() else []
+    notes = []
     for p in files:
-        if p.suffix != ".h5":
+        if ".reserve-" in p.name:  # a dead disk could not unlink it; the next run there removes it
+            notes.append(f"left behind: {p.name}")
+        elif p.suffix != ".h5":
             problems.append(f"left behind: {p.name}")
         elif (why := readable(p)) is not None:
             problems.append(f"{p.name} unreadable: {why}")
-    return not problems, "; ".join(problems) or reason[:150]
+    return not problems, "; ".join(problems) or "; ".join([reason[:150], *notes])
 
 
 def run(args: list[str], raw_dir: Path, store: Path, *, during: Callable[[], None] | None = None,
@@ -168,6 +173,27 @@ def main() -> int:
             d.mkdir(parents=True)
             return run(DAMPING, d, store, limit_bytes=4_000_000)
 
+        def shut_down_mid_run(d: Path) -> subprocess.CompletedProcess:
+            """An ext4 disk that fails mid-run (EXT4_IOC_SHUTDOWN: every later write is an I/O error);
+            judged after mounting it again."""
+            img = tmp / "ext4.img"
+            subprocess.run(["truncate", "-s", "64M", str(img)], check=True)
+            subprocess.run(["mkfs.ext4", "-q", "-F", str(img)], check=True)
+            d.mkdir(parents=True)
+            subprocess.run(["mount", "-o", "loop", str(img), str(d)], check=True)
+
+            def shut_down() -> None:
+                fd = os.open(d, os.O_RDONLY)
+                try:
+                    fcntl.ioctl(fd, EXT4_IOC_SHUTDOWN, b"\0\0\0\0")
+                finally:
+                    os.close(fd)
+
+            done = run(DAMPING, d, store, during=when_file_reaches(d, 3_000_000, shut_down))
+            subprocess.run(["umount", str(d)], check=True)
+            subprocess.run(["mount", "-o", "loop", str(img), str(d)], check=True)
+            return done
+
         cases += [
             ("tmpfs 8 MB, hrg-damping (fills in the record)", *tmpfs_case("8m", DAMPING)),
             ("tmpfs 3 MB, hrg-damping (fills before the record)", *tmpfs_case("3m", DAMPING)),
@@ -180,6 +206,7 @@ def main() -> int:
             ("runs dir is a file", is_a_file, True),
             ("runs dir under a file", under_a_file, True),
             ("file size limit 4 MB (a quota), hrg-damping", size_limit, True),
+            ("ext4 disk failing mid-run (shut down: I/O errors)", shut_down_mid_run, True),
         ]
         for k, (name, go, expect_fail) in enumerate(cases):
             d = tmp / f"case{k}"
