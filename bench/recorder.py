@@ -439,7 +439,9 @@ def compact(path: str | Path, filters: dict[str, Any], chunk_rows: int = COMPACT
     if st.f_bavail * st.f_frsize < path.stat().st_size + RESERVE_BYTES:
         return False  # a write failing inside HDF5 is what the recorder never lets happen
     try:
-        with h5py.File(path, "r") as src, h5py.File(tmp, "w") as dst:
+        # no lock on the source, as RunData: a window may open the run's report meanwhile (the
+        # run has finished for it; a mismatch of lock flags in one process refuses the open)
+        with h5py.File(path, "r", locking=False) as src, h5py.File(tmp, "w") as dst:
             dst.attrs.update(src.attrs)
             for name in src:
                 if name != "streams":
