@@ -11,7 +11,16 @@ import time
 from typing import Any
 
 EXIT_OK, EXIT_BAD_OUTCOME, EXIT_USAGE = 0, 1, 2
+EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 70, 130, 141
 BAD_OUTCOMES = ("ERROR", "ABORTED", "FAIL")
+
+
+class CliError(Exception):
+    """A failure the user can act on (a path, a store, an option): one line and an exit code."""
+
+    def __init__(self, message: str, code: int = EXIT_USAGE) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -35,16 +44,73 @@ def _parse_sets(items: list[str]) -> dict[str, str]:
     out: dict[str, str] = {}
     for item in items:
         name, sep, value = item.partition("=")
-        if not sep or not name:
-            raise ValueError(f"--set {item!r}: expected name=value")
+        if not sep or not name.strip():
+            raise CliError(f"--set {item!r}: expected NAME=VALUE, e.g. --set rate_dps=200")
         out[name.strip()] = value.strip()
     return out
 
 
-def _store(url: str | None):
-    from bench.results import ResultsStore
+def _store(url: str | None, **kw: Any):
+    """The results store, or CliError naming it (a directory that is a file, a read-only store, a
+    missing database driver)."""
+    from bench.results import ResultsStore, StoreError
 
-    return ResultsStore(url)
+    try:
+        return ResultsStore(url, **kw)
+    except StoreError as exc:
+        raise CliError(str(exc), 1) from exc
+    except Exception as exc:  # noqa: BLE001 - OSError, SQLAlchemy's errors, a missing driver: one line
+        raise CliError(f"results store {url or 'runs/results.sqlite'}: cannot be opened: {_reason(exc)}", 1) from exc
+
+
+def _reason(exc: BaseException) -> str:
+    """An exception as a short reason: OSError's text and file, SQLAlchemy's original error."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{exc.strerror}: {exc.filename}" if exc.filename else exc.strerror
+    orig = getattr(exc, "orig", None)  # SQLAlchemy wraps the database driver's error
+    if orig is not None:
+        return f"{type(orig).__name__}: {orig}"
+    return f"{type(exc).__name__}: {exc}"
+
+
+def _check_runs_dir(path: str) -> None:
+    """The raw-data directory exists (or is made) and takes a file, before any device moves."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise CliError(f"--runs-dir {path}: is a file, not a directory")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=p, prefix=".gyrobench-probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise CliError(f"--runs-dir {path}: raw data cannot be written there ({_reason(exc)})") from None
+
+
+def _speed(value: float | None) -> float | None:
+    """--speed checked here, naming the option (not the station file)."""
+    if value is None:
+        return None
+    from bench.validation import ValidationError, convert
+
+    try:
+        return convert("--speed", value, float, low=0.0, high=1e6)
+    except ValidationError as exc:
+        raise CliError(f"{exc} (allowed: 0 = lockstep, or 0 to 1e6 x real time)") from None
+
+
+def _warn_unfired_faults(station: Any, faults: list[tuple[str, float]]) -> None:
+    """A --fault whose time the run never reached did not test anything: say so."""
+    sched = getattr(station, "faults", None)
+    if sched is None or not faults:
+        return
+    end_s = float(getattr(station.world, "t_s", 0.0))
+    for at_s, kind in list(sched.pending):
+        _err(f"warning: fault {kind}@{at_s:g} s never fired: the run ended at {end_s:.1f} s")
 
 
 # --- run -----------------------------------------------------------------------------------------
@@ -61,7 +127,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if args.seed is not None:
             overrides["seed"] = args.seed
         if args.speed is not None:
-            overrides["speed"] = args.speed
+            overrides["speed"] = _speed(args.speed)
+        faults = [parse_fault(f) for f in args.fault]
         station = Station.load(args.station, **overrides)
         missing = [r for r in proc_cls.requires if r not in station.config.devices]
         if missing:
@@ -69,13 +136,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 f"procedure {proc_cls.name!r} needs device role(s) {missing}; station "
                 f"{station.id!r} has {sorted(station.config.devices)}"
             )
-        faults = [parse_fault(f) for f in args.fault]
         if faults and not isinstance(station, SimStation):
             raise StationError(f"--fault needs a simulated station; {args.station!r} is real")
     except (ProcedureNotFound, ParamError, StationError, ValueError) as exc:
         _err(str(exc))
         return EXIT_USAGE
-    store = _store(args.results or station.results_url)
+    _check_runs_dir(args.runs_dir or station.runs_dir)
+    # a store that is down now still takes the run's record later, through the spool
+    store = _store(args.results or station.results_url, offline_ok=True)
     runner = Runner(
         station, runs_dir=args.runs_dir or station.runs_dir, store=store, operator=args.operator, duts=args.dut
     )
@@ -110,13 +178,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
     js = rec.as_json()
     report = None
     if args.report and js.get("raw_file"):  # beside the raw file, same name with .html
-        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if store else None)
+        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if not rec.store_error else None)
     if args.json:
         print(json.dumps(js))
     else:
         _print_record(js)
         if report is not None:
             print(f"  report {report}")
+    sys.stdout.flush()
+    _warn_unfired_faults(station, faults)
+    if rec.store_error:  # the run's record is not in the store (it is in the spool): not a clean exit
+        _err(rec.store_error)
+        return EXIT_BAD_OUTCOME
     return EXIT_BAD_OUTCOME if rec.outcome in BAD_OUTCOMES else EXIT_OK
 
 
@@ -187,24 +260,50 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_runs(args: argparse.Namespace) -> int:
-    rows = _store(args.results).list_runs(limit=args.limit, procedure=args.procedure)
+    from pathlib import Path
+
+    from bench.results import StoreError
+
+    spool = Path(args.runs_dir) / "spool"
+    try:
+        store = _store(args.results, spool_dir=spool)
+        if args.sync:
+            submitted, problems = store.sync()
+            for problem in problems:
+                _err(problem)
+            print(f"submitted {len(submitted)} spooled run(s) from {spool}", file=sys.stderr)
+            if problems:
+                return EXIT_BAD_OUTCOME
+        elif store.spool.pending():
+            _err(f"{len(store.spool.pending())} run(s) wait in {spool}; `gyrobench runs --sync` submits them")
+        rows = store.list_runs(limit=args.limit, procedure=args.procedure)
+    except StoreError as exc:
+        _err(str(exc))
+        return EXIT_BAD_OUTCOME
     if args.json:
         print(json.dumps(rows, default=str))
         return EXIT_OK
     for r in rows:
+        safe = "-" if r["outcome"] == "RUNNING" else "safe" if r["safe_state"] else "UNSAFE"
+        where = f"on {r['host']}, process {r['pid']}" if r["outcome"] == "RUNNING" else r["end_reason"]
         print(
-            f"{r['run_id']}  {r['started_at'][:19]}  {r['station_id']:<10} {r['procedure']:<18} {r['outcome']:<9} "
-            f"{'safe' if r['safe_state'] else 'UNSAFE'}  {r['end_reason']}"
+            f"{r['run_id']}  {r['started_at'][:19]}  {r['station_id']:<10} {r['procedure']:<18} {r['outcome']:<11} "
+            f"{safe:<6}  {where}"
         )
     return EXIT_OK
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
+    from bench.results import StoreError
+
     try:
         run = _store(args.results).get_run(args.run)
     except KeyError as exc:
         _err(str(exc.args[0]))
         return EXIT_USAGE
+    except StoreError as exc:
+        _err(str(exc))
+        return EXIT_BAD_OUTCOME
     if args.json:
         print(json.dumps(run, default=str))
         return EXIT_OK
@@ -224,6 +323,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
         "raw_file",
     ):
         print(f"{key:>17}: {run[key]}")
+    if run.get("host"):  # where it ran, and its last sign of life (RUNNING / INTERRUPTED)
+        print(f"{'host':>17}: {run['host']} (process {run['pid']}, heartbeat {run['heartbeat_at']})")
     print(f"{'params':>17}: {run['params']}")
     if run["duts"]:
         print(f"{'duts':>17}: {', '.join(run['duts'])}")
@@ -384,6 +485,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 # --- parser --------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gyrobench", description="Calibrate Coriolis vibratory gyroscopes.")
+    parser.add_argument("--debug", action="store_true", help="print the traceback of an unexpected error")
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="simulated HRG free decay on a spinning table, with a summary")
     demo.add_argument("--seed", type=int, default=0)
@@ -428,6 +530,8 @@ def build_parser() -> argparse.ArgumentParser:
     runs.add_argument("--procedure", default=None)
     runs.add_argument("--results", default=None)
     runs.add_argument("--json", action="store_true")
+    runs.add_argument("--sync", action="store_true", help="first submit the records spooled while the store was down")
+    runs.add_argument("--runs-dir", default="runs", help="directory of the raw files and their spool/ (default: runs)")
     runs.set_defaults(func=_cmd_runs)
 
     for name, func, helptext in (
@@ -458,8 +562,89 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    return int(args.func(args))
+    """Run one command.  The one error boundary: a known failure is one line and an exit code;
+    anything else is one line and a saved traceback (printed with --debug), never a bare trace."""
+    import os
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv or bool(os.environ.get("GYROBENCH_DEBUG"))  # anywhere on the line
+    argv = [a for a in argv if a != "--debug"]
+    try:
+        args = build_parser().parse_args(argv)
+        code = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe shows here, inside the boundary, not at interpreter exit
+        return code
+    except BrokenPipeError:  # `gyrobench runs | head`: the reader left; say nothing more
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
+    except KeyboardInterrupt:
+        _err("interrupted (Ctrl-C)")
+        return EXIT_INTERRUPTED
+    except CliError as exc:
+        _err(str(exc))
+        return exc.code
+    except Exception as exc:  # noqa: BLE001 - the boundary: classify, never print a bare traceback
+        return _report_exception(exc, debug)
+
+
+def _known_error(exc: BaseException) -> str | None:
+    """The one-line message of an error the user can act on, or None for an unexpected one."""
+    from bench.validation import ValidationError
+
+    station_error = getattr(sys.modules.get("bench.station"), "StationError", ())
+    param_error = getattr(sys.modules.get("bench.engine.params"), "ParamError", ())
+    not_found = getattr(sys.modules.get("procedures"), "ProcedureNotFound", ())
+    if isinstance(exc, (ValidationError, *[c for c in (station_error, param_error, not_found) if c])):
+        return str(exc)
+    if isinstance(exc, OSError) and exc.strerror:
+        return _reason(exc)
+    sa_exc = sys.modules.get("sqlalchemy.exc")
+    if sa_exc is not None and isinstance(exc, sa_exc.SQLAlchemyError):
+        return f"results store: {_reason(exc)}"
+    return None
+
+
+def _report_exception(exc: BaseException, debug: bool) -> int:
+    import traceback
+
+    text = "".join(traceback.format_exception(exc))
+    known = _known_error(exc)
+    if debug:
+        print(text, file=sys.stderr, end="")
+    if known is not None:
+        _err(known)
+        return EXIT_USAGE if isinstance(exc, ValueError | LookupError) else EXIT_BAD_OUTCOME
+    saved = _save_traceback(text)
+    where = f"traceback saved to {saved}" if saved else "the traceback could not be saved"
+    _err(f"internal error: {type(exc).__name__}: {exc} ({where}; --debug prints it)")
+    return EXIT_INTERNAL
+
+
+def _save_traceback(text: str) -> str | None:
+    """Write a traceback to a file in the temporary directory; its path (None if that failed)."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    try:
+        folder = Path(tempfile.gettempdir()) / "gyrobench"
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"traceback-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.txt"
+        path.write_text(" ".join(sys.argv) + "\n\n" + text)
+        return str(path)
+    except OSError:
+        return None
+
+
+def _silence_stdout() -> None:
+    """After a broken pipe, point stdout at /dev/null so the interpreter's exit flush is quiet."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
 
 
 if __name__ == "__main__":

@@ -21,6 +21,8 @@ change.  Example (`bench/stations/sim-hrg.toml`):
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import math
 import threading
 import time
@@ -34,8 +36,10 @@ import numpy as np
 
 from bench.engine.context import GuardedClock
 from bench.engine.safety import SafeStateReport, ordered_roles
+from bench.validation import KIND_WORDS, ValidationError, convert, missing_key, not_a, not_one_of, unknown_name
 from drivers.errors import DeviceError, LinkLostError, SafetyTripError
 
+_log = logging.getLogger(__name__)
 BUILTIN_DIR = Path(__file__).resolve().parent / "stations"
 ROLES = ("table", "frontend", "fpga")
 #: station fault kinds (`--fault KIND@SECONDS`) -> (role, simulator inject kind)
@@ -58,7 +62,7 @@ class StationError(ValueError):
 # --- config keys ---------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Key:
-    """One allowed key of a device table: its type, range (inclusive) and default."""
+    """One allowed key of a device table: its type, range (inclusive), unit and default."""
 
     type: type
     default: Any = None
@@ -67,6 +71,7 @@ class Key:
     required: bool = False
     doc: str = ""
     choices: tuple[Any, ...] | None = None
+    unit: str = ""
 
     def range_text(self) -> str:
         if self.choices is not None:
@@ -75,37 +80,29 @@ class Key:
             lo = "-inf" if self.low is None else f"{self.low:g}"
             hi = "inf" if self.high is None else f"{self.high:g}"
             return f"[{lo}, {hi}]"
-        return f"a {self.type.__name__}"
+        return KIND_WORDS.get(self.type, f"a {self.type.__name__}")
 
     def check(self, where: str, name: str, value: Any) -> Any:
-        ok = True
-        if self.type is float and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        if not isinstance(value, self.type) or (self.type is int and isinstance(value, bool)):
-            ok = False
-        elif self.choices is not None and value not in self.choices:
-            ok = False
-        elif self.type in (int, float):
-            if not math.isfinite(value):
-                ok = False
-            elif (self.low is not None and value < self.low) or (self.high is not None and value > self.high):
-                ok = False
-        if not ok:
-            raise StationError(f"{where} {name} = {value!r} is outside the allowed range {self.range_text()}")
-        return value
+        """The value, checked; StationError `<where> <name>=<value> is ...` (bench.validation)."""
+        try:
+            return convert(name, value, self.type, low=self.low, high=self.high, unit=self.unit, choices=self.choices)
+        except ValidationError as exc:
+            raise StationError(f"{where} {exc}".strip()) from None
 
 
-def check_table(where: str, table: dict[str, Any], keys: dict[str, Key]) -> dict[str, Any]:
+def check_table(where: str, table: Any, keys: dict[str, Key]) -> dict[str, Any]:
     """Check every key of a TOML table against its Key; defaults filled in."""
+    if not isinstance(table, dict):
+        raise StationError(f"{where} is {table!r}, not a table")
     out: dict[str, Any] = {}
     for name in table:
         if name not in keys:
-            raise StationError(f"{where} unknown key {name!r} (allowed: {', '.join(sorted(keys))})")
+            raise StationError(f"{where} {unknown_name(name, 'unknown key', keys)}")
     for name, key in keys.items():
         if name in table:
             out[name] = key.check(where, name, table[name])
         elif key.required:
-            raise StationError(f"{where} missing key {name!r} ({key.range_text()})")
+            raise StationError(f"{where} {missing_key(name, key.range_text())}")
         else:
             out[name] = key.default
     return out
@@ -142,10 +139,10 @@ def register_driver(spec: DriverSpec) -> DriverSpec:
 def _table_keys(address: dict[str, Key]) -> dict[str, Key]:
     return {
         "driver": Key(str, required=True),
-        "max_rate_dps": Key(float, 1000.0, 1e-3, 20000.0, doc="rate limit"),
-        "max_accel_dps2": Key(float, 500.0, 1e-3, 100000.0, doc="acceleration limit"),
-        "watchdog_s": Key(float, 2.0, 0.1, 60.0),
-        "timeout_s": Key(float, 1.0, 0.01, 30.0),
+        "max_rate_dps": Key(float, 1000.0, 1e-3, 20000.0, doc="rate limit", unit="deg/s"),
+        "max_accel_dps2": Key(float, 500.0, 1e-3, 100000.0, doc="acceleration limit", unit="deg/s^2"),
+        "watchdog_s": Key(float, 2.0, 0.1, 60.0, unit="s"),
+        "timeout_s": Key(float, 1.0, 0.01, 30.0, unit="s"),
         **address,
     }
 
@@ -278,8 +275,8 @@ register_driver(
         keys={
             "driver": Key(str, required=True),
             "resource": Key(str, "", doc="VISA resource name"),
-            "max_amplitude_v": Key(float, 5.0, 0.0, 10.0),
-            "timeout_s": Key(float, 2.0, 0.05, 60.0),
+            "max_amplitude_v": Key(float, 5.0, 0.0, 10.0, unit="V"),
+            "timeout_s": Key(float, 2.0, 0.05, 60.0, unit="s"),
         },
         build=_build_frontend,
         serve=_serve_frontend,
@@ -337,7 +334,7 @@ register_driver(
         keys={
             "driver": Key(str, required=True),
             "url": Key(str, "", doc="serial port or pyserial URL"),
-            "timeout_s": Key(float, 1.0, 0.01, 30.0),
+            "timeout_s": Key(float, 1.0, 0.01, 30.0, unit="s"),
             "decimation": Key(int, 1, 1, 100000),
         },
         build=_build_fpga,
@@ -357,7 +354,7 @@ SIM_KEYS = {
     "preset": Key(str, "hrg", choices=("hrg", "mems")),
     "seed": Key(int, 0, 0, 2**63 - 1),
     "speed": Key(float, 0.0, 0.0, 1e6, doc="0 = lockstep, else x real time"),
-    "sample_period_s": Key(float, 1e-3, 1e-5, 0.1),
+    "sample_period_s": Key(float, 1e-3, 1e-5, 0.1, unit="s"),
 }
 
 
@@ -396,14 +393,23 @@ def load_config(name_or_path: str | Path) -> StationConfig:
     """Read and check a station file; StationError names the file, key, value and range."""
     path = find_station_file(name_or_path)
     try:
-        raw = tomllib.loads(path.read_text())
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise StationError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise StationError(
+            f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start}); save it as UTF-8"
+        ) from None
+    except OSError as exc:
+        raise StationError(f"{path}: cannot be read: {exc.strerror or exc}") from None
     for top in raw:
         if top not in ("station", "simulation", "devices"):
             raise StationError(f"{path}: unknown table [{top}] (allowed: station, simulation, devices)")
     if "station" not in raw:
         raise StationError(f'{path}: missing table [station] with id = "..."')
+    for top in ("station", "simulation", "devices"):
+        if top in raw and not isinstance(raw[top], dict):
+            raise StationError(f"{path}: {not_a(top, raw[top], 'a table ([' + top + '])')}")
     station = check_table(f"{path}: [station]", raw["station"], STATION_KEYS)
     sim = check_table(f"{path}: [simulation]", raw["simulation"], SIM_KEYS) if "simulation" in raw else None
     devices: dict[str, dict[str, Any]] = {}
@@ -412,18 +418,21 @@ def load_config(name_or_path: str | Path) -> StationConfig:
         if role not in ROLES:
             raise StationError(f"{path}: [devices.{role}] unknown role {role!r} (allowed: {', '.join(ROLES)})")
         if not isinstance(table, dict):
-            raise StationError(f"{where} must be a table")
+            raise StationError(f"{path}: {not_a(f'devices.{role}', table, 'a table')}")
         name = table.get("driver")
-        if name not in DRIVERS:
-            raise StationError(f"{where} driver = {name!r} is outside the allowed range: one of {sorted(DRIVERS)}")
+        fitting = sorted(n for n, spec in DRIVERS.items() if spec.role == role)
+        if name is None:
+            raise StationError(f"{where} {missing_key('driver', 'one of ' + ', '.join(fitting))}")
+        if not isinstance(name, str) or name not in DRIVERS:
+            raise StationError(f"{where} {not_one_of('driver', name, fitting)}")
         spec = DRIVERS[name]
         if spec.role != role:
-            raise StationError(f"{where} driver = {name!r} is a {spec.role!r} driver, not a {role!r} one")
+            raise StationError(f"{where} {not_one_of('driver', name, fitting)} (it is a {spec.role} driver)")
         cfg = check_table(where, table, spec.keys)
         if sim is None:
             missing = [k for k in ("resource", "url") if k in spec.keys and not cfg.get(k)]
             if missing:
-                raise StationError(f"{where} missing key {missing[0]!r}: a real device needs its address")
+                raise StationError(f"{where} {missing_key(missing[0], 'a real device needs its address')}")
         devices[role] = cfg
     if not devices:
         raise StationError(f"{path}: no [devices.*] table (roles: {', '.join(ROLES)})")
@@ -457,7 +466,9 @@ class Station:
         if config.simulation is not None:
             return SimStation(config, **overrides)
         if overrides:
-            raise StationError(f"{config.source}: {sorted(overrides)} only apply to a simulated station")
+            options = ", ".join(f"--{k}" for k in sorted(overrides))
+            verb = "applies" if len(overrides) == 1 else "apply"
+            raise StationError(f"{config.source}: a real station; {options} {verb} only to a simulated one")
         return cls(config)
 
     def _make_clock(self) -> Any:
@@ -569,23 +580,46 @@ class Station:
         for role in ordered_roles(self.devices):
             report.order.append(role)
             ok = False
+            failed: list[str] = []  # every failed attempt stays in the record, even when a retry succeeds
             for attempt in range(3):
                 dev = self.devices[role]
                 try:
                     if attempt:
                         self._reconnect(role)
                         dev = self.devices[role]
-                    ok = bool(dev.safe_state())
+                    with _warnings_of("drivers") as said:  # a driver reports its trouble in its log
+                        ok = bool(dev.safe_state())
+                    if not ok:
+                        why = f" ({'; '.join(said)})" if said else ""
+                        failed.append(f"attempt {attempt + 1}: not confirmed by read-back{why}")
                 except Exception as exc:  # noqa: BLE001 - the next device must still be made safe
-                    report.errors[role] = f"{type(exc).__name__}: {exc}"
+                    failed.append(f"attempt {attempt + 1}: {type(exc).__name__}: {exc}")
                     ok = False
                 if ok:
-                    report.errors.pop(role, None)
                     break
                 time.sleep(0.5 * attempt)
+            if failed:
+                report.errors[role] = "; ".join(failed)
+                if ok:
+                    report.errors[role] += f"; confirmed on attempt {attempt + 1} after reconnecting"
+                self._note_safe_state_retry(role, ok, attempt + 1, failed)
             report.devices[role] = ok
             report.confirmed = report.confirmed and ok
         return report
+
+    def _note_safe_state_retry(self, role: str, ok: bool, attempts: int, failed: list[str]) -> None:
+        """Say on the console and in the run's log how a device's safe state went after a failure."""
+        if ok:
+            msg = f"safe state: {role} confirmed on attempt {attempts}, after reconnecting ({failed[0]})"
+        else:
+            msg = f"safe state: {role} NOT confirmed after {attempts} attempts ({'; '.join(failed)})"
+        _log.warning(msg)
+        ctx = self._ctx
+        if ctx is not None:
+            try:
+                ctx.log.warning(msg)
+            except Exception:  # noqa: BLE001 - a log line must not stop the safe state
+                pass
 
     def _reconnect(self, role: str) -> None:
         dev = self.devices[role]
@@ -595,6 +629,24 @@ class Station:
             pass
         cfg = self.config.devices[role]
         self.devices[role] = DRIVERS[cfg["driver"]].build(self._device_cfg(role, cfg), self.clock)
+
+
+@contextlib.contextmanager
+def _warnings_of(logger_name: str):
+    """The warnings a logger (and its children) emits inside the block, as a list of texts."""
+    said: list[str] = []
+
+    class _Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            said.append(record.getMessage())
+
+    handler = _Keep(logging.WARNING)
+    logger = logging.getLogger(logger_name)
+    logger.addHandler(handler)
+    try:
+        yield said
+    finally:
+        logger.removeHandler(handler)
 
 
 class _FaultScheduler:
@@ -644,12 +696,16 @@ class SimStation(Station):
         if config.simulation is None:
             raise StationError(f"{config.source}: not a simulated station (no [simulation] table)")
         sim = dict(config.simulation)
+        # overrides come from the command line or the window, not the file: name the option
         if seed is not None:
-            sim["seed"] = SIM_KEYS["seed"].check(f"{config.source}: [simulation]", "seed", int(seed))
+            sim["seed"] = SIM_KEYS["seed"].check("", "--seed", seed)
         if speed is not None:
-            sim["speed"] = SIM_KEYS["speed"].check(f"{config.source}: [simulation]", "speed", float(speed))
+            try:
+                sim["speed"] = SIM_KEYS["speed"].check("", "--speed", speed)
+            except StationError as exc:
+                raise StationError(f"{exc} (allowed: 0 = lockstep, or 0 to 1e6 x real time)") from None
         if preset is not None:
-            sim["preset"] = SIM_KEYS["preset"].check(f"{config.source}: [simulation]", "preset", preset)
+            sim["preset"] = SIM_KEYS["preset"].check("", "preset", preset)
         config = StationConfig(config.source, config.station, sim, config.devices)
         from simulators.physics.params import preset as make_preset
         from simulators.world import World
@@ -739,6 +795,8 @@ class SimStation(Station):
             raise StationError(f"fault {kind!r} is not one of {', '.join(FAULTS)}")
         if not (math.isfinite(at_s) and at_s >= 0):
             raise StationError(f"fault {kind!r} at {at_s!r} s: the time must be >= 0")
+        if FAULTS[kind][0] not in self.config.devices:
+            raise StationError(f"--fault {kind}: station {self.id!r} has no {FAULTS[kind][0]} to fault")
         with self.world.lock:
             self.faults.add(kind, at_s)
 
@@ -754,6 +812,8 @@ def parse_fault(text: str) -> tuple[str, float]:
         at_s = float(at)
     except ValueError:
         raise StationError(f"--fault {text!r}: {at!r} is not a number of seconds") from None
-    if not (math.isfinite(at_s) and at_s >= 0):
-        raise StationError(f"--fault {text!r}: {at_s!r} s is outside the allowed range [0, inf)")
+    try:
+        at_s = convert("time", at_s, float, low=0.0, unit="s")
+    except ValidationError as exc:
+        raise StationError(f"--fault {text!r}: {exc}") from None
     return kind, at_s

@@ -53,7 +53,14 @@ def load_file(path: str | Path) -> type:
     spec = importlib.util.spec_from_file_location(mod_name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[mod_name] = module
-    spec.loader.exec_module(module)
+    try:
+        spec.loader.exec_module(module)
+    except SyntaxError as exc:
+        sys.modules.pop(mod_name, None)
+        raise ProcedureNotFound(f"{path}, line {exc.lineno}: {exc.msg} (not a valid Python file)") from None
+    except Exception as exc:  # noqa: BLE001 - an import error or any failure of the file's own code
+        sys.modules.pop(mod_name, None)
+        raise ProcedureNotFound(f"{path}: loading it failed: {type(exc).__name__}: {exc}") from exc
     procs = _procedures_in(module)
     if not procs:
         raise ProcedureNotFound(f"{path}: defines no Procedure subclass")

@@ -1,3 +1,50 @@
 import os
+import uuid
+
+import pytest
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+PG_URL_ENV = "GYROBENCH_TEST_PG_URL"  # e.g. postgresql+psycopg://postgres@127.0.0.1:5432/gyrobench_test
+
+
+def _missing(reason: str) -> None:
+    """Under CI a test whose real part (a PostgreSQL server) is missing fails; elsewhere it skips."""
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail(f"{reason} (CI=true: the PostgreSQL tests must run; .ci/run starts a server)")
+    pytest.skip(reason)
+
+
+@pytest.fixture
+def pg_url():
+    """A fresh, empty schema on the test PostgreSQL server ($GYROBENCH_TEST_PG_URL), as a store URL."""
+    base = os.environ.get(PG_URL_ENV)
+    if not base:
+        _missing(f"{PG_URL_ENV} is not set: no PostgreSQL server to test against")
+    from sqlalchemy import create_engine, text
+    from sqlalchemy.exc import SQLAlchemyError
+
+    try:
+        admin = create_engine(base, isolation_level="AUTOCOMMIT")
+    except ImportError as exc:
+        _missing(f"no PostgreSQL driver: {exc}")
+    schema = f"t_{uuid.uuid4().hex[:12]}"
+    try:
+        with admin.connect() as conn:
+            conn.execute(text(f"CREATE SCHEMA {schema}"))
+    except SQLAlchemyError as exc:
+        admin.dispose()
+        _missing(f"PostgreSQL at {base} is unreachable: {str(getattr(exc, 'orig', exc)).splitlines()[0]}")
+    sep = "&" if "?" in base else "?"
+    yield f"{base}{sep}options=-csearch_path%3D{schema}"
+    with admin.connect() as conn:
+        conn.execute(text(f"DROP SCHEMA {schema} CASCADE"))
+    admin.dispose()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def store_url(request, tmp_path):
+    """A fresh results store URL on each engine: a SQLite file, and a schema on PostgreSQL."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'results.sqlite'}"
+    return request.getfixturevalue("pg_url")

@@ -50,7 +50,7 @@ def test_param_spec_errors_name_the_value_and_the_limit():
     assert spec.parse(" 250 ") == 250.0
     with pytest.raises(ValueError, match=r"rate_dps=1500 deg/s is above the limit 1000 deg/s"):
         spec.parse("1500")
-    with pytest.raises(ValueError, match="must be finite"):
+    with pytest.raises(ValueError, match="is not a finite number"):
         spec.parse("nan")
     assert ParamSpec("n", "int", low=3).parse("7") == 7
     with pytest.raises(ValueError, match="not an integer"):

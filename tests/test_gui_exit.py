@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from needs import need
 
 pytest.importorskip("pyqtgraph")
 
@@ -64,11 +65,9 @@ def _xcb_missing_libs() -> list[str]:
 def test_screenshot_on_a_real_x_server(tmp_path, qapp):
     """The window comes up on a real display (Xvfb, installed by .ci/run), not only offscreen."""
     xvfb_run = shutil.which("xvfb-run")
-    if xvfb_run is None or shutil.which("Xvfb") is None:
-        pytest.skip("Xvfb is not installed (.ci/run installs it from the distribution's packages)")
+    need(xvfb_run is not None and shutil.which("Xvfb") is not None, "Xvfb is not installed")
     missing = _xcb_missing_libs()
-    if missing:
-        pytest.skip(f"the Qt xcb plugin lacks {', '.join(missing)} (.ci/run installs them)")
+    need(not missing, f"the Qt xcb plugin lacks {', '.join(missing)}")
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     env["QT_QPA_PLATFORM"] = "xcb"
     out = tmp_path / "shot.png"

@@ -11,7 +11,7 @@ from bench.results import ResultsStore, to_url
 from bench.results.schema import metadata
 
 
-def _record(run_id: str, started: str, outcome: str = "PASS", duts=()) -> RunRecord:
+def _record(run_id: str, started: str, outcome: str = "PASS", duts=(), seed: int = 7) -> RunRecord:
     return RunRecord(
         run_id=run_id,
         procedure="table-spin",
@@ -32,24 +32,29 @@ def _record(run_id: str, started: str, outcome: str = "PASS", duts=()) -> RunRec
         software_version="0.1.0",
         operator="ana",
         duts=list(duts),
-        seed=7,
+        seed=seed,
     )
 
 
-def test_migrated_schema_matches_declared_tables(tmp_path):
-    store = ResultsStore(tmp_path / "r.sqlite")
-    assert store.revision() == ResultsStore.head() == "0001"
+def test_migrated_schema_matches_declared_tables(store_url):
+    store = ResultsStore(store_url)
+    assert store.revision() == ResultsStore.head() == "0003"
     insp = inspect(store.engine)
     for table in metadata.sorted_tables:
         cols = {c["name"] for c in insp.get_columns(table.name)}
         assert cols == {c.name for c in table.columns}, table.name
         idx = {i["name"] for i in insp.get_indexes(table.name)}
         assert idx == {i.name for i in table.indexes}, table.name
-    ResultsStore(tmp_path / "r.sqlite")  # re-opening an up-to-date store is a no-op
+    ResultsStore(store_url)  # re-opening an up-to-date store is a no-op
 
 
-def test_roundtrip_runs_measurements_truth_duts(tmp_path):
-    store = ResultsStore(to_url(tmp_path / "r.sqlite"))
+def test_sqlite_path_becomes_url(tmp_path):
+    assert to_url(tmp_path / "r.sqlite") == f"sqlite:///{tmp_path / 'r.sqlite'}"
+    assert to_url("postgresql://u@h/db") == to_url("postgres://u@h/db") == "postgresql+psycopg://u@h/db"
+
+
+def test_roundtrip_runs_measurements_truth_duts(store_url):
+    store = ResultsStore(store_url)
     store.save_run(_record("20260101-000000-aaaaaa", "2026-01-01T00:00:00+00:00", duts=["SN1", "SN2"]))
     store.save_run(_record("20260102-000000-bbbbbb", "2026-01-02T00:00:00+00:00", outcome="FAIL"))
     rows = store.list_runs()
@@ -70,8 +75,8 @@ def test_roundtrip_runs_measurements_truth_duts(tmp_path):
     assert again["outcome"] == "ERROR" and again["duts"] == [] and len(again["measurements"]) == 2
 
 
-def test_unknown_and_ambiguous_run_ids(tmp_path):
-    store = ResultsStore(tmp_path / "r.sqlite")
+def test_unknown_and_ambiguous_run_ids(store_url):
+    store = ResultsStore(store_url)
     with pytest.raises(KeyError, match="no runs yet"):
         store.resolve("last")
     store.save_run(_record("20260101-000000-aaaaaa", "2026-01-01T00:00:00+00:00"))
@@ -80,3 +85,11 @@ def test_unknown_and_ambiguous_run_ids(tmp_path):
         store.resolve("20260101")
     with pytest.raises(KeyError, match="no run 'zzz'"):
         store.get_run("zzz")
+
+
+def test_63_bit_seed_keeps_its_row(store_url):
+    """A station accepts seeds up to 2**63 - 1; PostgreSQL's INTEGER column lost such a run."""
+    store = ResultsStore(store_url)
+    for seed in (3_000_000_000, 2**63 - 1):
+        store.save_run(_record(f"20260101-000000-{seed % 999999:06d}", "2026-01-01T00:00:00+00:00", seed=seed))
+        assert store.get_run(f"20260101-000000-{seed % 999999:06d}")["seed"] == seed

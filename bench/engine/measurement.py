@@ -13,7 +13,9 @@ from dataclasses import dataclass
 from typing import Any
 
 PASS, FAIL, MARGINAL, COMPLETE, ERROR, ABORTED = "PASS", "FAIL", "MARGINAL", "COMPLETE", "ERROR", "ABORTED"
-OUTCOMES = (PASS, FAIL, MARGINAL, COMPLETE, ERROR, ABORTED)
+# a run's row in the results store while it runs, and once its process is gone without a record
+RUNNING, INTERRUPTED = "RUNNING", "INTERRUPTED"
+OUTCOMES = (PASS, FAIL, MARGINAL, COMPLETE, ERROR, ABORTED, RUNNING, INTERRUPTED)
 
 
 @dataclass(frozen=True)

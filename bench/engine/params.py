@@ -9,18 +9,19 @@ Reading `self.rate_dps` on a procedure instance gives the validated value for th
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
+
+from bench.validation import ValidationError, convert, not_a, unknown_name
 
 
 class ParamError(ValueError):
     """A procedure parameter is unknown, of the wrong type or outside its limits.  The message
-    names the parameter, the value and the limit."""
+    names the parameter, the value and the limit (wording: bench.validation)."""
 
-    def __init__(self, name: str, value: Any, limit: str) -> None:
+    def __init__(self, name: str, value: Any, limit: str, message: str | None = None) -> None:
         self.name, self.value, self.limit = name, value, limit
-        super().__init__(f"parameter {name}={value!r} is outside the limit {limit}")
+        super().__init__(message or f"parameter {name}={value!r} is outside the limit {limit}")
 
 
 _MISSING = object()
@@ -67,33 +68,24 @@ class Param:
     def convert(self, value: Any) -> Any:
         """Parse (a string from `--set name=value`) and check a value; ParamError if bad."""
         typ = self.type
+        if typ not in (float, int, bool, str):
+            try:  # a parameter of another type takes its text through its constructor
+                value = typ(value) if isinstance(value, str) else value
+            except (TypeError, ValueError):
+                raise ParamError(self.name, value, self.limit_text(), not_a(self.name, value, typ)) from None
         try:
-            if isinstance(value, str) and typ is not str:
-                if typ is bool:
-                    low = value.strip().lower()
-                    if low not in ("1", "0", "true", "false", "yes", "no", "on", "off"):
-                        raise ValueError(value)
-                    value = low in ("1", "true", "yes", "on")
-                elif typ is int:
-                    value = int(value, 0)
-                else:
-                    value = typ(value)
-            elif typ is float and isinstance(value, (int, float)) and not isinstance(value, bool):
-                value = float(value)
-            elif typ is int and isinstance(value, float) and value.is_integer():
-                value = int(value)
-            if not isinstance(value, typ):
-                raise TypeError(value)
-        except (TypeError, ValueError):
-            raise ParamError(self.name, value, self.limit_text()) from None
-        if self.choices is not None and value not in self.choices:
-            raise ParamError(self.name, value, self.limit_text())
-        if typ in (int, float):
-            if isinstance(value, float) and not math.isfinite(value):
-                raise ParamError(self.name, value, self.limit_text())
-            if (self.low is not None and value < self.low) or (self.high is not None and value > self.high):
-                raise ParamError(self.name, value, self.limit_text())
-        return value
+            return convert(
+                self.name,
+                value,
+                typ,
+                low=self.low,
+                high=self.high,
+                unit=self.unit,
+                choices=self.choices,
+                parse_text=True,
+            )
+        except ValidationError as exc:
+            raise ParamError(self.name, value, self.limit_text(), str(exc)) from None
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -123,7 +115,9 @@ def resolve_params(cls: type, given: dict[str, Any] | None) -> dict[str, Any]:
     given = dict(given or {})
     unknown = sorted(set(given) - set(decl))
     if unknown:
-        raise ParamError(unknown[0], given[unknown[0]], "a declared parameter: " + ", ".join(sorted(decl)))
+        owner = getattr(cls, "name", "") or cls.__name__
+        msg = unknown_name(unknown[0], f"not a parameter of {owner}", decl)
+        raise ParamError(unknown[0], given[unknown[0]], "a declared parameter: " + ", ".join(sorted(decl)), msg)
     values: dict[str, Any] = {}
     for name, p in decl.items():
         values[name] = p.convert(given[name]) if name in given else p.convert(p.default)

@@ -83,6 +83,7 @@ class RunRecord:
     seed: int | None = None
     failed_step: str | None = None
     traceback: str | None = None
+    store_error: str | None = None  # the results store did not take the record (it is in the spool)
 
     def as_json(self) -> dict[str, Any]:
         """The shape of `gyrobench run --json`."""
@@ -240,6 +241,10 @@ class Runner:
             checkpoint=self.checkpoint,
             station=st,
         )
+        spool_dir = None if self.runs_dir is None else self.runs_dir / "spool"  # records the store refused
+        if self.store is not None:  # the run's RUNNING row (and heartbeat); never raises
+            for note in self.store.begin_run(rec, spool_dir):
+                ctx.log.warning(note)
         ctx.publish(
             ev.RunStarted,
             procedure=proc.name,
@@ -321,11 +326,10 @@ class Runner:
                     rec.outcome = ERROR
                     rec.end_reason += f" (closing the raw file failed: {exc})"
             ctx.close()
-            if self.store is not None:
-                try:
-                    self.store.save_run(rec)
-                except Exception as exc:  # noqa: BLE001 - the raw file is still there
-                    rec.end_reason += f" (results store failed: {exc})"
+            if self.store is not None:  # saved, or kept in the spool: then store_error says so
+                rec.store_error = self.store.finish_run(rec, spool_dir)
+                if rec.store_error:
+                    ctx.publish(ev.Log, level="ERROR", message=rec.store_error)
         return rec
 
     def _step_failed(self, ctx: RunContext, steps: list, current: str, status: str) -> None:

@@ -4,9 +4,13 @@ headless and save a screenshot of the window at a chosen simulated second."""
 from __future__ import annotations
 
 import math
+import os
+import sys
 import threading
 import time
 from pathlib import Path
+
+from bench.validation import ValidationError, not_one_of, unknown_name
 
 from .backend import GuiBackend
 
@@ -25,8 +29,28 @@ def make_backend(station: str | None, *, seed: int = 0) -> GuiBackend:
     return EngineBackend(station or default_station(), seed=seed)
 
 
+def has_display(environ: dict[str, str] | None = None) -> bool:
+    """Whether a window can be shown: an X or Wayland display on Linux (other systems always)."""
+    env = os.environ if environ is None else environ
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
+
+
+def choose_qt_platform(environ: dict[str, str] | None = None) -> str | None:
+    """With no display and no QT_QPA_PLATFORM, pick Qt's offscreen platform (set in the
+    environment, before the QApplication exists): Qt would otherwise abort the process."""
+    env = os.environ if environ is None else environ
+    if env.get("QT_QPA_PLATFORM") or has_display(env):
+        return None
+    env["QT_QPA_PLATFORM"] = "offscreen"
+    return "offscreen"
+
+
 def _app():
     from PySide6.QtWidgets import QApplication
+
+    choose_qt_platform()
 
     app = QApplication.instance()
     return app if app is not None else QApplication(["gyrobench"])
@@ -57,14 +81,14 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
     idx = window.procedure.findText(procedure)
     if idx < 0:
         names = [window.procedure.itemText(i) for i in range(window.procedure.count())]
-        raise ValueError(f"procedure {procedure!r} is not one of {names}")
+        raise ValidationError(not_one_of("--run", procedure, names))
     window.procedure.setCurrentIndex(idx)
     for k, v in (params or {}).items():
         if k not in window.form.fields:
-            raise ValueError(f"{procedure} has no parameter {k!r}; it has {', '.join(window.form.fields)}")
+            raise ValidationError(unknown_name(k, f"not a parameter of {procedure}", window.form.fields))
         window.form.set_value(k, v)
     if not window.form.is_valid():
-        raise ValueError(f"invalid parameters for {procedure}: {window.form.errors}")
+        raise ValidationError("; ".join(window.form.errors.values()))
     window.start()
     if not window.run_active:
         raise RuntimeError(f"{procedure} did not start (see the log)")
@@ -97,6 +121,9 @@ def run_gui(station: str | None = None, *, run: str | None = None, screenshot: s
             at_s: float | None = None, seed: int = 0, speed: float | None = None,
             open_run: str | None = None, params: dict[str, str] | None = None) -> int:
     """Open the window (blocking until it closes), or with `screenshot`, run headless and exit."""
+    if screenshot is None and not os.environ.get("QT_QPA_PLATFORM") and not has_display():
+        raise SystemExit("gyrobench gui: no display (DISPLAY / WAYLAND_DISPLAY unset): the window cannot be "
+                         "shown; use --screenshot FILE to run headless, or set QT_QPA_PLATFORM")
     app = _app()
     from .main_window import MainWindow
 
@@ -141,5 +168,9 @@ def run_gui(station: str | None = None, *, run: str | None = None, screenshot: s
 
 
 def parse_speed(text: str) -> float:
-    """'1', '10', '100' or 'max' -> x real time (inf for max)."""
-    return math.inf if text.lower() in ("max", "inf") else float(text)
+    """'1', '10', '100' or 'max' -> x real time (inf for max); ValidationError otherwise."""
+    from bench.validation import convert
+
+    if text.strip().lower() in ("max", "inf"):
+        return math.inf
+    return convert("--speed", text, float, low=0.0, parse_text=True)

@@ -45,7 +45,7 @@ class EngineBackend:
             try:
                 from bench.results import ResultsStore
 
-                store = ResultsStore(results_url or self.station.results_url)
+                store = ResultsStore(results_url or self.station.results_url, offline_ok=True)  # down: spool
             except Exception:  # noqa: BLE001 - the window works without an index
                 store = None
         self.runs_dir = Path(runs_dir or self.station.runs_dir) if record else None

@@ -25,7 +25,7 @@ from PySide6.QtWidgets import (
 from .backend import SPEEDS
 
 OUTCOME_COLOURS = {"PASS": "#b7e4b7", "FAIL": "#f4b6b6", "MARGINAL": "#ffe29a", "ERROR": "#f4b6b6",
-                   "ABORTED": "#dddddd", "COMPLETE": "#ffffff"}
+                   "ABORTED": "#dddddd", "COMPLETE": "#ffffff", "RUNNING": "#cfe3ff", "INTERRUPTED": "#f4b6b6"}
 STATUS_MARKS = {"running": "\u25b6", "done": "\u2713", "error": "\u2717", "aborted": "\u25a0", "skipped": "-",
                 "pending": " "}
 

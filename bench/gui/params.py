@@ -7,9 +7,10 @@ the form before Start is enabled, and again in the engine before any device move
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
+
+from bench.validation import ValidationError, convert, not_one_of
 
 
 @dataclass(frozen=True)
@@ -27,35 +28,16 @@ class ParamSpec:
     doc: str = ""
 
     def parse(self, text: str) -> Any:
-        """The value typed in the form, or ValueError naming the value and the limit."""
+        """The value typed in the form, or ValueError naming the value and the limit (the wording
+        of bench.validation, the same as the engine's and the station file's)."""
         text = text.strip()
-        if self.kind == "bool":
-            low = text.lower()
-            if low in ("1", "true", "yes", "on"):
-                return True
-            if low in ("0", "false", "no", "off"):
-                return False
-            raise ValueError(f"{self.name}={text!r} is not a yes/no value")
-        if self.kind == "str":
-            return text
         if self.kind == "choice":
             for c in self.choices:
                 if str(c) == text:
                     return c
-            raise ValueError(f"{self.name}={text!r} is not one of {', '.join(map(str, self.choices))}")
-        try:
-            value: float | int = int(text) if self.kind == "int" else float(text)
-        except ValueError:
-            what = "an integer" if self.kind == "int" else "a number"
-            raise ValueError(f"{self.name}={text!r} is not {what}") from None
-        if isinstance(value, float) and not math.isfinite(value):
-            raise ValueError(f"{self.name}={text!r} must be finite")
-        unit = f" {self.unit}" if self.unit else ""
-        if self.low is not None and value < self.low:
-            raise ValueError(f"{self.name}={value:g}{unit} is below the limit {self.low:g}{unit}")
-        if self.high is not None and value > self.high:
-            raise ValueError(f"{self.name}={value:g}{unit} is above the limit {self.high:g}{unit}")
-        return value
+            raise ValidationError(not_one_of(self.name, text, self.choices))
+        kind = {"float": float, "int": int, "bool": bool, "str": str}.get(self.kind, float)
+        return convert(self.name, text, kind, low=self.low, high=self.high, unit=self.unit, parse_text=True)
 
     def format(self, value: Any) -> str:
         if value is None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from sqlalchemy import (
     JSON,
+    BigInteger,
     Boolean,
     Column,
     Float,
@@ -40,9 +41,13 @@ runs = Table(
     Column("raw_file", Text),
     Column("software_version", String(64), nullable=False, default=""),
     Column("operator", String(128), nullable=False, default=""),
-    Column("seed", Integer),
+    Column("seed", BigInteger),  # a station's seed is 63-bit (migration 0002)
     Column("params", JSON, nullable=False),
     Column("safe_detail", JSON),
+    # the run's liveness while RUNNING (migration 0003): where it runs and its heartbeat (wall time)
+    Column("host", String(255)),
+    Column("pid", Integer),
+    Column("heartbeat_at", String(40)),
     Index("ix_runs_started_at", "started_at"),
     Index("ix_runs_station_id", "station_id"),
     Index("ix_runs_procedure", "procedure"),

@@ -1,0 +1,118 @@
+"""One wording for every bad value a user can give (station keys, --set, --speed, the GUI form).
+
+Each check returns the converted value or raises `ValidationError`, whose message names the value
+and what was expected, in one of these shapes:
+
+    rate_dps='abc' is not a number
+    rate_dps=99999 deg/s is above the limit 1000 deg/s
+    driver: missing key (one of modbus-table, ascii-table)
+    nosuchparam: not a parameter of table-spin (allowed: hold_s, rate_dps)
+
+Callers add where the value came from (a file and table) in front of the message.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import Any
+
+KIND_WORDS = {float: "a number", int: "an integer", bool: "true or false", str: "text", dict: "a table"}
+TRUE_WORDS, FALSE_WORDS = ("1", "true", "yes", "on"), ("0", "false", "no", "off")
+
+
+class ValidationError(ValueError):
+    """A value that is of the wrong kind, outside its limits, missing or unknown; the message says
+    which value and what was expected."""
+
+
+def fmt_value(value: Any, unit: str = "") -> str:
+    """A value as shown in a message: numbers plainly with their unit, anything else as repr."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return repr(value)
+    text = f"{value:.10g}" if isinstance(value, float) else str(value)
+    return f"{text} {unit}" if unit else text
+
+
+def not_a(name: str, value: Any, kind: type | str) -> str:
+    what = kind if isinstance(kind, str) else KIND_WORDS.get(kind, f"a {kind.__name__}")
+    return f"{name}={value!r} is not {what}"
+
+
+def above(name: str, value: float, limit: float, unit: str = "") -> str:
+    return f"{name}={fmt_value(value, unit)} is above the limit {fmt_value(limit, unit)}"
+
+
+def below(name: str, value: float, limit: float, unit: str = "") -> str:
+    return f"{name}={fmt_value(value, unit)} is below the limit {fmt_value(limit, unit)}"
+
+
+def not_one_of(name: str, value: Any, choices: Iterable[Any]) -> str:
+    return f"{name}={value!r} is not one of {', '.join(map(str, choices))}"
+
+
+def missing_key(name: str, expected: str) -> str:
+    return f"{name}: missing key ({expected})"
+
+
+def unknown_name(name: str, what: str, allowed: Iterable[str]) -> str:
+    """`nosuchparam: not a parameter of table-spin (allowed: a, b)`; `hots: unknown key (...)`."""
+    names = ", ".join(sorted(allowed)) or "none"
+    return f"{name}: {what} (allowed: {names})"
+
+
+def range_text(low: float | None, high: float | None, unit: str = "") -> str:
+    """`0 to 1000 deg/s`, `at least 0 s`, `at most 5 V`, or '' when unbounded."""
+    if low is not None and high is not None:
+        return f"{fmt_value(low)} to {fmt_value(high, unit)}"
+    if low is not None:
+        return f"at least {fmt_value(low, unit)}"
+    if high is not None:
+        return f"at most {fmt_value(high, unit)}"
+    return ""
+
+
+def convert(
+    name: str,
+    value: Any,
+    kind: type,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    unit: str = "",
+    choices: Iterable[Any] | None = None,
+    parse_text: bool = False,
+) -> Any:
+    """`value` as `kind` (float, int, bool, str), within [low, high] and `choices`, or
+    ValidationError.  With parse_text a string (from `--set`, a form) is parsed first."""
+    if parse_text and isinstance(value, str) and kind is not str:
+        text = value.strip()
+        try:
+            if kind is bool:
+                if text.lower() not in TRUE_WORDS + FALSE_WORDS:
+                    raise ValueError(text)
+                value = text.lower() in TRUE_WORDS
+            elif kind is int:
+                value = int(text) if text.lstrip("+-").isdigit() else int(text, 0)  # 010 and 0x10 both
+            elif kind is float:
+                value = float(text)
+        except ValueError:
+            raise ValidationError(not_a(name, value, kind)) from None
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if kind is int and isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if not isinstance(value, kind) or (kind in (int, float) and isinstance(value, bool)):
+        raise ValidationError(not_a(name, value, kind))
+    if choices is not None:
+        choices = tuple(choices)
+        if value not in choices:
+            raise ValidationError(not_one_of(name, value, choices))
+    if kind in (int, float):
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ValidationError(not_a(name, value, "a finite number"))
+        if low is not None and value < low:
+            raise ValidationError(below(name, value, low, unit))
+        if high is not None and value > high:
+            raise ValidationError(above(name, value, high, unit))
+    return value
