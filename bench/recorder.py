@@ -390,8 +390,10 @@ class Recorder:
         self._f.flush()
 
     def data(self) -> RunData:
-        """What is recorded so far, through the open file."""
+        """What is recorded so far, through the open file (RawDataError once a write failed)."""
         with self._lock:
+            if self.failure is not None:
+                raise RawDataError(self.failure)
             self.flush()
             return RunData(self._f)
 

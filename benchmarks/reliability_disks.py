@@ -2,7 +2,8 @@
 case runs `gyrobench run ... --json` with its raw files on a disk that is or becomes full or
 read-only, and checks that it ended clean: safe state confirmed, one clear message (the
 end_reason starting "raw data: "), a non-zero exit, no traceback or crash on stderr, and every
-raw file left behind readable by h5py (every stream, bench time increasing) and h5dump.
+raw file left behind readable by h5py (every stream, bench time increasing) and h5dump.  A run
+the CLI refuses before it starts (one line "gyrobench: ...", exit 1 or 2, no file) is clean too.
 
     sudo .venv/bin/python benchmarks/reliability_disks.py
 
@@ -77,9 +78,14 @@ def judge(done: subprocess.CompletedProcess, raw_dir: Path, *, expect_fail: bool
         out = json.loads(done.stdout)
     except ValueError:
         out = None
-        problems.append(f"no JSON result (stderr: {done.stderr.strip()[-200:]!r})")
-    reason = "" if out is None else out["end_reason"]
-    if out is not None:
+    err = done.stderr.strip()
+    refused = out is None and done.returncode in (1, 2) and len(err.splitlines()) == 1 and err.startswith("gyrobench: ")
+    if out is None and not refused:
+        problems.append(f"no JSON result and no one-line refusal (stderr: {err[-200:]!r})")
+    reason = err if refused else "" if out is None else out["end_reason"]
+    if refused:  # the CLI refused before the run started: nothing moved, no file
+        pass
+    elif out is not None:
         if not out["safe_state"]:
             problems.append("safe state not confirmed")
         if expect_fail:
