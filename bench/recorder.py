@@ -141,12 +141,13 @@ class Recorder:
     # --- the space reserve ---------------------------------------------------------------
     def _take_reserve(self) -> None:
         """Hold RESERVE_BYTES on the file's disk (freed to close the file when the disk fills);
-        reserves left by killed processes are removed."""
-        for old in self.path.parent.glob(".*.reserve-*"):
-            pid = old.name.rpartition("-")[2]
-            if pid.isdigit() and not _pid_alive(int(pid)):
-                with contextlib.suppress(OSError):
-                    old.unlink()
+        reserves and half-written compressed copies left by killed processes are removed."""
+        for pattern in (".*.reserve-*", ".*.compact-*"):
+            for old in self.path.parent.glob(pattern):
+                pid = old.name.rpartition("-")[2]
+                if pid.isdigit() and not _pid_alive(int(pid)):
+                    with contextlib.suppress(OSError):
+                        old.unlink()
         reserve = self.path.parent / f".{self.path.name}.reserve-{os.getpid()}"
         fd = os.open(reserve, os.O_CREAT | os.O_WRONLY | os.O_TRUNC, 0o600)
         self._reserve = reserve

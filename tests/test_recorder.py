@@ -225,3 +225,18 @@ def test_a_runs_dir_that_cannot_hold_files_ends_the_run_before_its_first_step(tm
     assert rec.outcome == "ERROR" and rec.safe_state and rec.raw_file is None
     assert rec.end_reason == f"raw data: cannot create {blocker}: it is a file, not a directory"
     assert rec.failed_step == "spin_up" and rec.simulated_s < 0.5 and rec.traceback is None
+
+
+def test_leftovers_of_a_killed_recorder_are_removed_by_the_next(tmp_path):
+    """A SIGKILLed run leaves its space reserve (and perhaps a half-written compressed copy); the
+    next recorder in that directory removes those whose process is gone, and no other."""
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(dead.stdout)
+    stale = [tmp_path / f".a.h5.reserve-{dead_pid}", tmp_path / f".a.h5.compact-{dead_pid}"]
+    live = tmp_path / f".b.h5.reserve-{os.getpid()}"
+    for p in (*stale, live):
+        p.write_bytes(b"x")
+    rec = Recorder(tmp_path / "c.h5")
+    assert not any(p.exists() for p in stale) and live.exists()
+    rec.close()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, "c.h5"])
