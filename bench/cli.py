@@ -361,6 +361,9 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     except KeyError as exc:
         _err(str(exc.args[0]))
         return EXIT_USAGE
+    except OSError as exc:  # not an HDF5 file, or damaged
+        _err(f"cannot read the raw file of {args.run!r}: {exc}")
+        return EXIT_BAD_OUTCOME
     with data:
         try:
             cls = find_procedure(args.procedure or data.attrs["procedure"])
@@ -371,15 +374,29 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
         if not cls.has_analysis():
             _err(f"procedure {cls.name!r} has no analysis hook; nothing to re-fit")
             return EXIT_USAGE
-        results = proc.analysis(data)
+        incomplete = data.incomplete
+        try:
+            results = proc.analysis(data)
+        except Exception as exc:  # noqa: BLE001 - a hook on data it cannot use: one message, no traceback
+            why = f"{exc}" if isinstance(exc, (KeyError, ValueError)) else f"{type(exc).__name__}: {exc}"
+            if incomplete and incomplete not in why:
+                why += f" (incomplete run: {incomplete})"
+            _err(f"cannot analyse run {run_id} with {cls.name!r}: {why}")
+            return EXIT_BAD_OUTCOME
+        notes = list(data.notes)
         truth = data.truth or {}
     if store is not None:
         store.save_analysis(run_id, results)
     out = {r.name if r.dut is None else f"{r.dut}:{r.name}": r.as_json() for r in results}
     if args.json:
-        print(json.dumps({"run_id": run_id, "measurements": out, "truth": truth or None}))
+        print(json.dumps({"run_id": run_id, "measurements": out, "truth": truth or None, "incomplete": incomplete,
+                          "notes": notes}))
     else:
         print(f"re-analysis of run {run_id} ({cls.name})")
+        if incomplete:
+            print(f"  from an INCOMPLETE run: {incomplete}")
+        for note in notes:
+            print(f"  note: {note}")
         for name, m in out.items():
             t = f"  truth {truth[name]:.6g}" if name in truth else ""
             print(f"  {name} = {m['value']} {m['unit']}  ci95 {m['ci95']}  {m['outcome']}{t}")
@@ -394,6 +411,9 @@ def _cmd_report(args: argparse.Namespace) -> int:
     except KeyError as exc:
         _err(str(exc.args[0]))
         return EXIT_USAGE
+    except OSError as exc:  # not an HDF5 file, or damaged
+        _err(f"cannot read the raw file of {args.run!r}: {exc}")
+        return EXIT_BAD_OUTCOME
     with data:
         row = store.get_run(run_id) if store is not None else None
         raw_file = str(data.path)

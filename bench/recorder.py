@@ -6,11 +6,27 @@ run's attributes on the root (params, station, software_version, truth when simu
 procedure, run_id, ...; outcome, end_reason and safe_state once the run ends).  The file is
 flushed whenever a second of data (bench-clock time) or a second of wall time has passed since
 the last flush, so a process killed mid-run leaves a readable file with all but the last second.
+
+While the run goes on the streams are stored uncompressed: fixed-size chunks never move, so the
+index on disk after any flush points at valid data whatever happens next (a compressed chunk
+that grows is moved at every flush and its old place reused, so a kill between the two could
+leave the index pointing at another chunk's bytes).  `close()` then rewrites the file with the
+streams gzip-compressed with shuffle (readable by the stock HDF5 tools; about 4x smaller; see
+benchmarks/raw_compression.py) into a temporary file that replaces the original atomically.
+
+A write that fails (disk full, read-only or failing disk) ends the recording: the recorder frees
+a space reserve it holds beside the file, cuts the streams back to what the last flush put on
+disk, closes the file cleanly and raises `RawDataError` (the runner ends the run on it).
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
+import os
+import re
+import resource
 import threading
 import time
 from pathlib import Path
@@ -20,14 +36,59 @@ import h5py
 import numpy as np
 
 from bench.engine import events as ev
+from bench.engine.context import RunAborted
 
 CHUNK_ROWS = 4096
 FLUSH_EVERY_S = 1.0
+#: filters of the streams in the closed file: readable by the stock HDF5 tools (h5dump); chosen by
+#: benchmarks/raw_compression.py.  None keeps the file as written.
+STREAM_FILTERS: dict[str, Any] | None = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+COMPACT_CHUNK_ROWS = 16384
+#: bytes held beside the raw file and freed when the disk fills, so that the file can still be closed
+RESERVE_BYTES = 1 << 20
 _STR = h5py.string_dtype()
+
+
+class RawDataError(RunAborted):
+    """The raw file cannot be written (disk full, read-only, I/O error): the run ends at once, as
+    an abort does, but with outcome ERROR."""
+
+    outcome = "ERROR"
+
+
+class _NoRoom(OSError):
+    """Less room left than the recorder keeps free: disk full, declared before any write fails."""
 
 
 def _json(value: Any) -> str:
     return json.dumps(value, default=lambda o: o.tolist() if isinstance(o, np.ndarray) else str(o))
+
+
+def _why(exc: BaseException) -> str:
+    """'disk full' or the system's words for a failed write (h5py wraps errno in its message)."""
+    text = str(exc)
+    if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+        return "disk full" if exc.strerror == os.strerror(errno.ENOSPC) else f"disk full ({exc.strerror})"
+    if "errno = 28," in text:
+        return "disk full"
+    if isinstance(exc, OSError) and exc.errno == errno.EFBIG:
+        return "file size limit reached" + (f" ({exc.strerror})" if exc.strerror != os.strerror(errno.EFBIG) else "")
+    found = re.search(r"error message = '([^']*)'", text)  # HDF5's words for the system's error
+    if found:
+        return f"write failed ({found.group(1)})"
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"write failed ({exc.strerror})"
+    return f"write failed ({(text.splitlines() or [type(exc).__name__])[0]})"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
 
 
 class Recorder:
@@ -35,22 +96,76 @@ class Recorder:
 
     def __init__(self, path: str | Path, attrs: dict[str, Any] | None = None) -> None:
         self.path = Path(path).resolve()
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.failure: str | None = None  # the message, once a write has failed
         self._lock = threading.RLock()
-        self._f = h5py.File(self.path, "w")  # default format: no open-for-write flag to clear after a crash
-        self._f.create_group("streams")
-        self._f.create_group("fits")
-        self._log = self._text_dataset("log")
-        self._meas = self._text_dataset("measurements")
-        for key, value in (attrs or {}).items():
-            self._f.attrs[key] = value if isinstance(value, (str, int, float, bool)) else _json(value)
+        self._f: h5py.File | None = None
+        self._reserve: Path | None = None
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._take_reserve()
+            self._f = h5py.File(self.path, "w")  # default format: no open-for-write flag to clear after a crash
+            self._f.create_group("streams")
+            self._f.create_group("fits")
+            self._log = self._text_dataset("log")
+            self._meas = self._text_dataset("measurements")
+            for key, value in (attrs or {}).items():
+                self._f.attrs[key] = value if isinstance(value, (str, int, float, bool)) else _json(value)
+            self._f.flush()
+        except (OSError, RuntimeError) as exc:
+            self._drop_reserve()
+            if self._f is not None:
+                with contextlib.suppress(Exception):
+                    self._f.close()
+            where = self.path if self.path.parent.is_dir() else self.path.parent
+            why = _why(exc).removeprefix("write failed (").removesuffix(")")
+            blocking = next((p for p in (self.path.parent, *self.path.parent.parents) if p.exists()), None)
+            if blocking is not None and not blocking.is_dir():
+                where, why = blocking, "it is a file, not a directory"
+            elif why == "disk full":
+                st = os.statvfs(self.path.parent)
+                why += f" ({st.f_bavail * st.f_frsize / 1e6:.2f} MB free, a run needs {RESERVE_BYTES / 1e6:.2f} MB)"
+            raise RawDataError(f"raw data: cannot create {where}: {why}") from exc
         self._datasets: dict[str, h5py.Dataset] = {}
         self._pending: dict[str, list[np.ndarray]] = {}
         self._ncols: dict[str, int] = {}
         self._pending_rows: dict[str, int] = {}
+        # rows of each stream from the start of its last flushed chunk on (first row index, blocks):
+        # what is rewritten from memory when a failed write may have left that chunk unreadable
+        self._tail: dict[str, tuple[int, list[np.ndarray]]] = {}
+        self._flushed_rows: dict[str, int] = {"log": 0, "measurements": 0}
+        self._flushed_t: float | None = None
+        self._last_t: float | None = None
         self._last_flush_sim: float | None = None
         self._last_flush_wall = time.monotonic()
-        self._f.flush()
+
+    # --- the space reserve ---------------------------------------------------------------
+    def _take_reserve(self) -> None:
+        """Hold RESERVE_BYTES on the file's disk (freed to close the file when the disk fills);
+        reserves and half-written compressed copies left by killed processes are removed."""
+        for pattern in (".*.reserve-*", ".*.compact-*"):
+            for old in self.path.parent.glob(pattern):
+                pid = old.name.rpartition("-")[2]
+                if pid.isdigit() and not _pid_alive(int(pid)):
+                    with contextlib.suppress(OSError):
+                        old.unlink()
+        reserve = self.path.parent / f".{self.path.name}.reserve-{os.getpid()}"
+        fd = os.open(reserve, os.O_CREAT | os.O_WRONLY | os.O_TRUNC, 0o600)
+        self._reserve = reserve
+        try:
+            try:
+                os.posix_fallocate(fd, 0, RESERVE_BYTES)
+            except OSError as exc:
+                if exc.errno not in (errno.EOPNOTSUPP, errno.EINVAL):
+                    raise
+                os.write(fd, bytes(RESERVE_BYTES))  # a file system without fallocate
+        finally:
+            os.close(fd)
+
+    def _drop_reserve(self) -> None:
+        if self._reserve is not None:
+            with contextlib.suppress(OSError):
+                self._reserve.unlink()
+            self._reserve = None
 
     @classmethod
     def for_run(cls, runs_dir: str | Path, record: Any, station: dict[str, Any] | None = None) -> Recorder:
@@ -78,27 +193,35 @@ class Recorder:
 
     # --- writing -------------------------------------------------------------------------
     def on_event(self, event: ev.Event) -> None:
+        """Write one event; raises RawDataError once, on the write that fails."""
         with self._lock:
-            if self._f is None or not self._f.id.valid:
+            if self._f is None or self.failure is not None or not self._f.id.valid:
                 return
-            if isinstance(event, ev.SampleBlock):
-                self.append(event.stream, event.columns, event.data)
-            elif isinstance(event, ev.Measurement):
-                row = {k: getattr(event, k) for k in ("name", "value", "unit", "ci95", "low", "high", "outcome", "dut")}
-                row["t_sim_s"] = event.t_sim_s
-                self._append_text(self._meas, _json(row))
-            elif isinstance(event, ev.Log):
-                self._log_row(event.t_sim_s, event.level, event.message)
-            elif isinstance(event, (ev.StepStarted, ev.StepFinished)):
-                kind = "step_started" if isinstance(event, ev.StepStarted) else f"step_{event.status}"
-                self._log_row(event.t_sim_s, "STEP", f"{kind} {event.name}")
-            elif isinstance(event, ev.FitUpdate):
-                grp = self._f["fits"].require_group(event.name)
-                for key, arr in event.curves.items():
-                    if key in grp:
-                        del grp[key]
-                    grp.create_dataset(key, data=np.asarray(arr))
-            self._maybe_flush(event.t_sim_s)
+            self._last_t = event.t_sim_s
+            try:
+                self._write_event(event)
+                self._maybe_flush(event.t_sim_s)
+            except (OSError, RuntimeError) as exc:
+                self._fail(exc)
+
+    def _write_event(self, event: ev.Event) -> None:
+        if isinstance(event, ev.SampleBlock):
+            self.append(event.stream, event.columns, event.data)
+        elif isinstance(event, ev.Measurement):
+            row = {k: getattr(event, k) for k in ("name", "value", "unit", "ci95", "low", "high", "outcome", "dut")}
+            row["t_sim_s"] = event.t_sim_s
+            self._append_text(self._meas, _json(row))
+        elif isinstance(event, ev.Log):
+            self._log_row(event.t_sim_s, event.level, event.message)
+        elif isinstance(event, (ev.StepStarted, ev.StepFinished)):
+            kind = "step_started" if isinstance(event, ev.StepStarted) else f"step_{event.status}"
+            self._log_row(event.t_sim_s, "STEP", f"{kind} {event.name}")
+        elif isinstance(event, ev.FitUpdate):
+            grp = self._f["fits"].require_group(event.name)
+            for key, arr in event.curves.items():
+                if key in grp:
+                    del grp[key]
+                grp.create_dataset(key, data=np.asarray(arr))
 
     def append(self, stream: str, columns: tuple[str, ...], data: np.ndarray) -> None:
         """Append rows to a stream; the first block fixes its columns.  Rows are buffered and
@@ -120,6 +243,8 @@ class Recorder:
                 self._datasets[stream] = ds
                 self._pending[stream] = []
                 self._ncols[stream] = arr.shape[1]
+                self._flushed_rows.setdefault(stream, 0)
+                self._tail[stream] = (0, [])
             if arr.shape[1] != self._ncols[stream]:
                 raise ValueError(f"stream {stream!r}: block has {arr.shape[1]} columns, the stream has {ds.shape[1]}")
             pend = self._pending[stream]
@@ -144,6 +269,7 @@ class Recorder:
         fspace = dsid.get_space()
         fspace.select_hyperslab((n0, 0), (n, ncols))
         dsid.write(h5py.h5s.create_simple((n, ncols)), fspace, rows)
+        self._tail[stream][1].append(rows)
 
     def _log_row(self, t_sim_s: float, level: str, message: str) -> None:
         self._append_text(self._log, _json({"t_sim_s": t_sim_s, "level": level, "msg": message}))
@@ -158,21 +284,117 @@ class Recorder:
         if self._last_flush_sim is None:
             self._last_flush_sim = t_sim_s
         if t_sim_s - self._last_flush_sim >= FLUSH_EVERY_S or now - self._last_flush_wall >= FLUSH_EVERY_S:
-            self.flush()
+            self._flush()
             self._last_flush_sim = t_sim_s
             self._last_flush_wall = now
 
+    def _check_space(self) -> None:
+        """Disk full is declared while RESERVE_BYTES are still free, before a write fails: a write
+        that HDF5 saw fail may leave its internal state (and the file it closes) inconsistent.
+        The same for the process's file size limit (ulimit -f)."""
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        if limit != resource.RLIM_INFINITY:
+            size = self.path.stat().st_size
+            if size + RESERVE_BYTES > limit:
+                raise _NoRoom(errno.EFBIG, f"{size / 1e6:.2f} MB written, the process's file size limit is "
+                                           f"{limit / 1e6:.2f} MB")
+        st = os.statvfs(self.path.parent)
+        free = st.f_bavail * st.f_frsize
+        if free < RESERVE_BYTES:
+            raise _NoRoom(
+                errno.ENOSPC,
+                f"{free / 1e6:.2f} MB free on {self.path.parent}, "
+                f"the recorder stops below {RESERVE_BYTES / 1e6:.2f} MB",
+            )
+
+    def _flush(self) -> None:
+        self._check_space()
+        for stream in self._pending:
+            self._write_pending(stream)
+        self._f.flush()
+        # what is on disk now: a failure later cuts the file back to this
+        for name, ds in (*self._datasets.items(), ("log", self._log), ("measurements", self._meas)):
+            self._flushed_rows[name] = ds.shape[0]
+        for stream, (start, blocks) in self._tail.items():
+            n = self._flushed_rows[stream]
+            keep_from = (n // CHUNK_ROWS) * CHUNK_ROWS
+            rows = np.concatenate(blocks) if len(blocks) > 1 else (blocks[0] if blocks else np.empty((0, 0)))
+            self._tail[stream] = (keep_from, [rows[keep_from - start : n - start]] if n > keep_from else [])
+        self._flushed_t = self._last_t
+
     def flush(self) -> None:
-        """Write the buffered rows and flush the file to disk."""
+        """Write the buffered rows and flush the file to disk (RawDataError if that fails)."""
         with self._lock:
-            if self._f is not None and self._f.id.valid:
-                for stream in self._pending:
-                    self._write_pending(stream)
-                self._f.flush()
+            if self._f is not None and self.failure is None and self._f.id.valid:
+                try:
+                    self._flush()
+                except (OSError, RuntimeError) as exc:
+                    self._fail(exc)
+
+    # --- a failed write ----------------------------------------------------------------------
+    def _fail(self, exc: BaseException) -> None:
+        """Keep what the last flush put on disk, close the file cleanly, raise RawDataError."""
+        if self.failure is not None:
+            raise RawDataError(self.failure) from exc
+        t = "?" if self._last_t is None else f"{self._last_t:.1f}"
+        kept = "nothing" if self._flushed_t is None else f"the data up to t = {self._flushed_t:.1f} s"
+        kind, _, detail = _why(exc).partition(" (")
+        detail = f" ({detail}" if detail else ""
+        self.failure = f"raw data: {kind} at t = {t} s{detail}; {kept} is kept in {self.path}"
+        self._drop_reserve()  # room for the file's last metadata
+        try:
+            if not isinstance(exc, _NoRoom):  # HDF5 saw a write fail: its state is not to be trusted
+                self._reopen()
+            self._cut_back()
+        except Exception as again:  # noqa: BLE001 - the disk refuses even this
+            self.failure += f" (and reopening it to close it: {_why(again)}; the file may lack its last second)"
+        raise RawDataError(self.failure) from exc
+
+    def _reopen(self) -> None:
+        """Close the file without letting HDF5 write any more (its descriptor is pointed at
+        /dev/null first), then open it again from what is on disk."""
+        fd = self._f.id.get_vfd_handle()
+        null = os.open(os.devnull, os.O_RDWR)
+        try:
+            os.dup2(null, fd)
+        finally:
+            os.close(null)
+        with contextlib.suppress(Exception):
+            self._f.close()
+        self._f = None
+        try:
+            self._f = h5py.File(self.path, "r+")
+        except OSError as exc:  # the superblock's end of file went to disk, the data at its end did not
+            stored = re.search(r"truncated file: .*stored_eof = (\d+)", str(exc))
+            if stored is None:
+                raise
+            os.truncate(self.path, int(stored.group(1)))  # a hole: no block of the disk is needed
+            self._f = h5py.File(self.path, "r+")
+        self._log, self._meas = self._f["log"], self._f["measurements"]
+        self._datasets = {name: self._f["streams"][name] for name in self._f["streams"]}
+
+    def _cut_back(self) -> None:
+        """Each stream, the log and the measurements back to the last flush (rows after it may
+        never have reached the disk), the last flushed chunk rewritten from memory, the failure
+        logged, then flushed."""
+        for name, ds in (*self._datasets.items(), ("log", self._log), ("measurements", self._meas)):
+            n = min(ds.shape[0], self._flushed_rows.get(name, 0))
+            if ds.shape[0] != n:
+                ds.resize(n, axis=0)
+        for stream, (start, blocks) in self._tail.items():
+            n = self._flushed_rows.get(stream, 0)
+            if stream in self._datasets and blocks and n > start:
+                self._datasets[stream][start:n] = np.concatenate(blocks)[: n - start]
+        for pend in self._pending.values():
+            pend.clear()
+        self._log_row(self._last_t or 0.0, "ERROR", self.failure)
+        self._f.flush()
 
     def data(self) -> RunData:
-        """What is recorded so far, through the open file."""
+        """What is recorded so far, through the open file (RawDataError once a write failed)."""
         with self._lock:
+            if self.failure is not None:
+                raise RawDataError(self.failure)
             self.flush()
             return RunData(self._f)
 
@@ -181,25 +403,81 @@ class Recorder:
         with self._lock:
             if self._f is None:
                 return
-            for stream in self._pending:
-                self._write_pending(stream)
-            if record is not None:
-                a = self._f.attrs
-                a["outcome"] = record.outcome
-                a["end_reason"] = record.end_reason
-                a["safe_state"] = bool(record.safe_state)
-                a["safe_detail"] = _json(record.safe_detail)
-                a["simulated_s"] = float(record.simulated_s)
-                a["wall_s"] = float(record.wall_s)
-                a["finished_at"] = record.finished_at
-                a["result"] = _json(record.as_json())
-            self._f.close()
-            self._f = None
+            try:
+                if self.failure is None:
+                    for stream in self._pending:
+                        self._write_pending(stream)
+                if record is not None:
+                    a = self._f.attrs
+                    a["outcome"] = record.outcome
+                    a["end_reason"] = record.end_reason
+                    a["safe_state"] = bool(record.safe_state)
+                    a["safe_detail"] = _json(record.safe_detail)
+                    a["simulated_s"] = float(record.simulated_s)
+                    a["wall_s"] = float(record.wall_s)
+                    a["finished_at"] = record.finished_at
+                    a["result"] = _json(record.as_json())
+                    if self.failure is not None:
+                        a["incomplete"] = self.failure
+            except (OSError, RuntimeError) as exc:
+                failed_now = self.failure is None
+                with contextlib.suppress(RawDataError):
+                    self._fail(exc)
+                if failed_now:
+                    raise RawDataError(self.failure) from exc
+            finally:
+                f, self._f = self._f, None
+                self._drop_reserve()
+                f.close()
+            if STREAM_FILTERS is not None and self.failure is None:
+                compact(self.path, STREAM_FILTERS)
+
+
+def compact(path: str | Path, filters: dict[str, Any], chunk_rows: int = COMPACT_CHUNK_ROWS) -> bool:
+    """Rewrite a closed raw file with its streams filtered (compressed); the original is replaced
+    atomically and kept as it is if anything fails (a full disk).  True when it was replaced."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.compact-{os.getpid()}")
+    st = os.statvfs(path.parent)
+    if st.f_bavail * st.f_frsize < path.stat().st_size + RESERVE_BYTES:
+        return False  # a write failing inside HDF5 is what the recorder never lets happen
+    try:
+        # no lock on the source, as RunData: a window may open the run's report meanwhile (the
+        # run has finished for it; a mismatch of lock flags in one process refuses the open)
+        with h5py.File(path, "r", locking=False) as src, h5py.File(tmp, "w") as dst:
+            dst.attrs.update(src.attrs)
+            for name in src:
+                if name != "streams":
+                    src.copy(src[name], dst, name=name)
+            streams = dst.create_group("streams")
+            for name, ds in src["streams"].items():
+                n, ncols = ds.shape
+                out = streams.create_dataset(
+                    name, shape=ds.shape, maxshape=(None, ncols), dtype=ds.dtype,
+                    chunks=(max(1, min(n, chunk_rows)), ncols), **filters,
+                )
+                for a in range(0, n, 8 * chunk_rows):
+                    out[a : a + 8 * chunk_rows] = ds[a : a + 8 * chunk_rows]
+                out.attrs.update(ds.attrs)
+        os.replace(tmp, path)
+        return True
+    except Exception:  # noqa: BLE001 - whatever went wrong, the file as written stays
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        return False
+
+
+class MissingStream(KeyError):
+    """A stream the analysis needs is not in the raw file (the run ended before writing it)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
 
 
 class RunData:
     """Read access to a run's raw file (during the run or long after): attributes decoded, each
-    stream as a dict of columns."""
+    stream as a dict of columns.  `incomplete` says why a run's data may be partial; an
+    analysis hook adds to `notes` what it did about it."""
 
     def __init__(self, source: str | Path | h5py.File) -> None:
         self._own = not isinstance(source, h5py.File)
@@ -218,6 +496,33 @@ class RunData:
             elif isinstance(value, np.generic):
                 value = value.item()
             self.attrs[key] = value
+        self.notes: list[str] = []
+
+    @property
+    def incomplete(self) -> str | None:
+        """Why the recorded data may be partial (killed, aborted, failed, disk full); None when
+        the run went through all its steps."""
+        a = self.attrs
+        if "outcome" not in a:
+            return "the run did not finish (the process was killed or is still running)"
+        if a.get("incomplete"):
+            return str(a["incomplete"])
+        if a["outcome"] in ("ERROR", "ABORTED"):
+            return f"the run ended {a['outcome']} ({a.get('end_reason', '')})"
+        return None
+
+    def step_span(self, step: str) -> tuple[float | None, float | None]:
+        """Bench times at which a step started and ended (None where the log has no such row)."""
+        start = end = None
+        for r in self.log():
+            kind, _, name = str(r.get("msg", "")).partition(" ")
+            if r.get("level") != "STEP" or name != step:
+                continue
+            if kind == "step_started":
+                start, end = r["t_sim_s"], None
+            else:
+                end = r["t_sim_s"]
+        return start, end
 
     @property
     def params(self) -> dict[str, Any]:
@@ -230,11 +535,20 @@ class RunData:
     def streams(self) -> list[str]:
         return list(self.f["streams"].keys())
 
+    def _stream(self, stream: str) -> h5py.Dataset:
+        if stream not in self.f["streams"]:
+            why = self.incomplete
+            raise MissingStream(
+                f"{self.path.name} has no stream {stream!r} (it has: {', '.join(self.streams()) or 'none'})"
+                + (f"; {why}" if why else "")
+            )
+        return self.f["streams"][stream]
+
     def columns(self, stream: str) -> list[str]:
-        return json.loads(self.f["streams"][stream].attrs["columns"])
+        return json.loads(self._stream(stream).attrs["columns"])
 
     def array(self, stream: str) -> np.ndarray:
-        return self.f["streams"][stream][...]
+        return self._stream(stream)[...]
 
     def table(self, stream: str) -> dict[str, np.ndarray]:
         """Columns of a stream by name: `data.table("fpga")["cx"]`."""

@@ -117,6 +117,12 @@ def render_report(data: Any, run_row: dict[str, Any] | None = None) -> str:
         f"{html.escape(str(a.get('end_reason', 'the run did not finish (killed?)')))}; safe state "
         f"{'confirmed' if a.get('safe_state') else 'NOT confirmed'}</p>"
     )
+    incomplete = data.incomplete
+    if incomplete:
+        parts.append(
+            f"<p class='ERROR'><b>INCOMPLETE RUN</b>: {html.escape(incomplete)}. The data, measurements and "
+            "re-analyses below are from what was recorded before the run ended.</p>"
+        )
     ident = [
         [k, a.get(k, "")]
         for k in (
@@ -145,7 +151,7 @@ def render_report(data: Any, run_row: dict[str, Any] | None = None) -> str:
             if m["source"] == "analyze":
                 rows.append(
                     [
-                        m["name"] + " (re-analysis)",
+                        m["name"] + (" (re-analysis, incomplete run)" if incomplete else " (re-analysis)"),
                         m["value"],
                         m["unit"],
                         [m["ci95_low"], m["ci95_high"]],

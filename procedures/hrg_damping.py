@@ -261,9 +261,21 @@ class HrgDamping(HrgExcitation, Procedure):
         return results, curves
 
     def analysis(self, data) -> list[Result]:
-        """Re-fit a recorded run: the decay and verification windows of `damping_windows`."""
-        win = data.array(WINDOWS)
+        """Re-fit a recorded run: the decay and verification windows of `damping_windows`.  A run
+        that ended during the record (killed, aborted, disk full) has no window yet: the decay
+        recorded so far is fitted, from the start of the record step to the last sample."""
         fpga = data.array("fpga")
+        if WINDOWS in data:
+            win = data.array(WINDOWS)
+        else:
+            t0, t1 = data.step_span("record")
+            t1 = min(fpga[-1, 1], math.inf if t1 is None else t1)
+            if t0 is None or t1 <= t0:
+                raise ValueError(f"{data.path.name} holds no decay: the run ended before the record step "
+                                 f"({data.incomplete or 'no damping_windows stream'})")
+            win = np.array([[DECAY, t0, t1]])
+            data.notes.append(f"no {WINDOWS} stream: the decay fitted is the {t1 - t0:.1f} s recorded from the "
+                              f"start of the record step (t = {t0:.1f} s) on, of the {self.record_s:g} s asked")
         rows = fpga[:, [_COLS["t_s"], _COLS["cx"], _COLS["sx"], _COLS["cy"], _COLS["sy"]]]
         period = float(np.median(np.diff(fpga[:, 1]) / np.maximum(np.diff(fpga[:, 0]), 1)))
 
@@ -277,8 +289,12 @@ class HrgDamping(HrgExcitation, Procedure):
         decay = self._decimate(window(DECAY), period)
         fit = fit_free_decay(*decay.T, method=self.fit_method, model=self.fit_model)
         f0_hz = float(data.array(REF)[-1, 1]) if REF in data else None
+        if f0_hz is None:
+            data.notes.append(f"no {REF} stream: the reference frequency is unknown, so is q_factor")
         out = self._decay_results(fit, f0_hz)
         off, on = window(VERIFY_OFF), window(VERIFY_ON)
         if off is not None and on is not None:
             out += self._verify_results(off, on)[0]
+        elif self.compensate:
+            data.notes.append("no verification windows: the drift before and after compensation was not measured")
         return out

@@ -125,6 +125,7 @@ class Runner:
         self.operator = operator
         self.duts = list(duts)
         self._abort_reason: str | None = None
+        self._fatal: RunAborted | None = None  # an essential subscriber (the recorder) failed
         self._running = threading.Event()
         self._running.set()
         self._in_run = False
@@ -150,16 +151,29 @@ class Runner:
         """Raise RunAborted after an abort, hold while paused, raise a lost link the station saw."""
         check = getattr(self.station, "check_links", None)
         while True:
+            if self._fatal is not None:
+                raise self._fatal
             if self._abort_reason is not None:
                 raise RunAborted(self._abort_reason)
             if self._running.wait(0.05):
                 break
             if check is not None:  # paused: a trip or a lost link still ends the run (real time)
                 check()
+        if self._fatal is not None:
+            raise self._fatal
         if self._abort_reason is not None:
             raise RunAborted(self._abort_reason)
         if check is not None:
             check()
+
+    def _essential_failed(self, _subscriber: Any, exc: BaseException) -> None:
+        """The recorder could not write: the run ends at the next checkpoint (outcome ERROR)."""
+        if self._fatal is None:
+            if not isinstance(exc, RunAborted):
+                exc = RunAborted(f"raw data: {type(exc).__name__}: {exc}")
+                exc.outcome = ERROR
+            self._fatal = exc
+        self._running.set()
 
     # --- the run -----------------------------------------------------------------------------
     def run(self, procedure: type[Procedure] | Procedure, params: dict[str, Any] | None = None) -> RunRecord:
@@ -179,6 +193,7 @@ class Runner:
         finally:
             self._in_run = False
             self._abort_reason = None
+            self._fatal = None
             self._running.set()
 
     def _run(self, proc: Procedure) -> RunRecord:
@@ -206,11 +221,16 @@ class Runner:
         recorder = None
         unsubscribe_rec = None
         if self.runs_dir is not None:
-            from bench.recorder import Recorder
+            from bench.recorder import RawDataError, Recorder
 
-            recorder = Recorder.for_run(self.runs_dir, rec, station=st.describe())
-            rec.raw_file = str(recorder.path)
-            unsubscribe_rec = self.bus.subscribe(recorder.on_event)
+            try:
+                recorder = Recorder.for_run(self.runs_dir, rec, station=st.describe())
+            except RawDataError as exc:  # ends the run at its first checkpoint, before anything moves
+                self._fatal = exc
+            else:
+                rec.raw_file = str(recorder.path)
+                self.bus.on_essential_error = self._essential_failed
+                unsubscribe_rec = self.bus.subscribe(recorder.on_event, essential=True)
         ctx = RunContext(
             run_id=run_id,
             params=proc.params,
@@ -247,8 +267,9 @@ class Runner:
                 ctx.publish(ev.StepFinished, name=name, index=index, status="done")
             rec.end_reason = "completed"
         except RunAborted as exc:
-            outcome, rec.end_reason = ABORTED, f"aborted: {exc.reason}"
-            self._step_failed(ctx, steps, current, "aborted")
+            outcome = getattr(exc, "outcome", ABORTED)  # ERROR when the raw data cannot be written
+            rec.end_reason = f"aborted: {exc.reason}" if outcome == ABORTED else exc.reason
+            self._step_failed(ctx, steps, current, "aborted" if outcome == ABORTED else "error")
         except KeyboardInterrupt:
             outcome, rec.end_reason = ABORTED, "aborted: SIGINT"
             self._step_failed(ctx, steps, current, "aborted")
@@ -275,12 +296,10 @@ class Runner:
             rec.safe_state = report.confirmed
             rec.safe_detail = {"devices": report.devices, "errors": report.errors, "order": report.order}
             rec.measurements = list(ctx.results)
-            rec_errors = [e for cb, e in self.bus.errors if recorder is not None and cb == recorder.on_event]
-            if rec_errors and outcome != ABORTED:
+            fatal = self._fatal
+            if fatal is not None and fatal.reason not in rec.end_reason:  # failed after the last checkpoint
+                rec.end_reason = fatal.reason if outcome is None else f"{rec.end_reason}; {fatal.reason}"
                 outcome = ERROR
-                rec.end_reason += (
-                    f" (raw data incomplete: the recorder failed {len(rec_errors)} time(s): {rec_errors[0]!r})"
-                )
             if outcome is None:
                 outcome = combine_outcomes(r.outcome for r in rec.measurements)
                 if not report.confirmed:
@@ -300,9 +319,11 @@ class Runner:
             if recorder is not None:
                 if unsubscribe_rec is not None:
                     unsubscribe_rec()
+                    self.bus.on_essential_error = None
                 try:
                     recorder.close(rec)
                 except Exception as exc:  # noqa: BLE001 - the record and the store must still be written
+                    rec.outcome = ERROR
                     rec.end_reason += f" (closing the raw file failed: {exc})"
             ctx.close()
             if self.store is not None:  # saved, or kept in the spool: then store_error says so

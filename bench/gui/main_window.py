@@ -263,7 +263,7 @@ class MainWindow(QMainWindow):
             return
         try:
             events = replay_events(path)
-        except (OSError, ValueError, KeyError) as exc:
+        except (OSError, RuntimeError, ValueError, KeyError) as exc:  # h5py: RuntimeError on a file mid-write
             self.log.add(self.t_sim_s, "ERROR", f"cannot open {path}: {exc}")
             return
         self.on_events(events)
@@ -286,7 +286,7 @@ class MainWindow(QMainWindow):
     def _open_report(self) -> None:
         try:
             path = self.render_report()
-        except (OSError, KeyError, ValueError) as exc:
+        except (OSError, RuntimeError, KeyError, ValueError) as exc:
             self.log.add(self.t_sim_s, "ERROR", f"report failed: {exc}")
             return
         if path:
