@@ -1,4 +1,4 @@
-"""The `gyrobench` command line: run, list, runs, show, analyze, report, sim (and demo, gui)."""
+"""The `gyrobench` command line: run, list, runs, show, analyze, report, sim (and gui)."""
 
 from __future__ import annotations
 
@@ -21,13 +21,6 @@ class CliError(Exception):
     def __init__(self, message: str, code: int = EXIT_USAGE) -> None:
         super().__init__(message)
         self.code = code
-
-
-def _cmd_demo(args: argparse.Namespace) -> int:
-    from bench.demo import run_decay_demo
-
-    run_decay_demo(seed=args.seed, rate_dps=args.rate_dps, duration_s=args.duration_s)
-    return 0
 
 
 def _add_gui(sub) -> None:
@@ -432,12 +425,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gyrobench", description="Calibrate Coriolis vibratory gyroscopes.")
     parser.add_argument("--debug", action="store_true", help="print the traceback of an unexpected error")
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="simulated HRG free decay on a spinning table, with a summary")
-    demo.add_argument("--seed", type=int, default=0)
-    demo.add_argument("--rate-dps", type=float, default=500.0)
-    demo.add_argument("--duration-s", type=float, default=300.0)
-    demo.set_defaults(func=_cmd_demo)
-
     run = sub.add_parser("run", help="run a procedure (a registered name or a .py file) on a station")
     run.add_argument("procedure")
     run.add_argument("--station", default="sim-hrg", help="built-in station name or a station TOML file")

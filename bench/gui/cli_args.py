@@ -8,7 +8,7 @@ import argparse
 def add_gui_subcommand(sub) -> argparse.ArgumentParser:
     """Register `gui` on the CLI's subparsers."""
     p = sub.add_parser("gui", help="the lab engineer's window (live plots, Start/Pause/Abort, replay)")
-    p.add_argument("--station", default=None, help="station name (sim-hrg, sim-mems, sim-world) or station file")
+    p.add_argument("--station", default=None, help="station name (sim-hrg, sim-mems) or station file")
     p.add_argument("--run", default=None, metavar="PROC", help="procedure to select (and run with --screenshot)")
     p.add_argument("--screenshot", default=None, metavar="FILE", help="run headless, save a PNG of the window, exit")
     p.add_argument("--at", dest="at_s", type=float, default=None, metavar="SECONDS",
