@@ -8,7 +8,13 @@ and what was expected, in one of these shapes:
     driver: missing key (one of modbus-table, ascii-table)
     nosuchparam: not a parameter of table-spin (allowed: hold_s, rate_dps)
 
-Callers add where the value came from (a file and table) in front of the message.
+Callers add where the value came from (a file and table) in front of the message.  Procedure
+parameters (`Param.convert`), station keys (`Key.check`), the window's form (through `Param`) and
+the drivers' limits (`check_limit`, raising `LimitError`) all check here, in these words.
+
+A library such as pydantic could do the type checks, but its messages ("Input should be a valid
+number, unable to parse string as a number") name neither the key nor the unit nor the limit,
+and would need translating back into these shapes; the checks themselves are a few lines.
 """
 
 from __future__ import annotations
@@ -24,6 +30,17 @@ TRUE_WORDS, FALSE_WORDS = ("1", "true", "yes", "on"), ("0", "false", "no", "off"
 class ValidationError(ValueError):
     """A value that is of the wrong kind, outside its limits, missing or unknown; the message says
     which value and what was expected."""
+
+
+class LimitError(ValidationError):
+    """A value a driver was asked to write is outside a configured or device limit; raised before
+    anything is written.  `name`, `value`, `limit` (text) and `unit` say which and why."""
+
+    def __init__(self, name: str, value: Any, limit: str | float = "", unit: str = "",
+                 message: str | None = None) -> None:
+        self.name, self.value, self.limit, self.unit = name, value, limit, unit
+        u = f" {unit}" if unit else ""
+        super().__init__(message or f"{name}={fmt_value(value, unit)} is outside the limit {limit}{u}")
 
 
 def fmt_value(value: Any, unit: str = "") -> str:
@@ -45,6 +62,16 @@ def above(name: str, value: float, limit: float, unit: str = "") -> str:
 
 def below(name: str, value: float, limit: float, unit: str = "") -> str:
     return f"{name}={fmt_value(value, unit)} is below the limit {fmt_value(limit, unit)}"
+
+
+def not_below(name: str, value: float, limit: float, unit: str = "") -> str:
+    """An open upper bound: `angle_deg=360 deg is not below the limit 360 deg`."""
+    return f"{name}={fmt_value(value, unit)} is not below the limit {fmt_value(limit, unit)}"
+
+
+def not_above(name: str, value: float, limit: float, unit: str = "") -> str:
+    """An open lower bound: `accel_dps2=0 deg/s^2 is not above the limit 0 deg/s^2`."""
+    return f"{name}={fmt_value(value, unit)} is not above the limit {fmt_value(limit, unit)}"
 
 
 def not_one_of(name: str, value: Any, choices: Iterable[Any]) -> str:
@@ -82,10 +109,15 @@ def convert(
     unit: str = "",
     choices: Iterable[Any] | None = None,
     parse_text: bool = False,
+    low_open: bool = False,
+    high_open: bool = False,
 ) -> Any:
-    """`value` as `kind` (float, int, bool, str), within [low, high] and `choices`, or
-    ValidationError.  With parse_text a string (from `--set`, a form) is parsed first."""
-    if parse_text and isinstance(value, str) and kind is not str:
+    """`value` as `kind` (float, int, bool, str), within [low, high] (an open end with low_open,
+    high_open) and `choices`, or ValidationError.  With parse_text a string (from `--set`, a
+    form) is parsed first; surrounding spaces never count."""
+    if parse_text and isinstance(value, str) and kind is str:
+        value = value.strip()
+    elif parse_text and isinstance(value, str):
         text = value.strip()
         try:
             if kind is bool:
@@ -115,4 +147,29 @@ def convert(
             raise ValidationError(below(name, value, low, unit))
         if high is not None and value > high:
             raise ValidationError(above(name, value, high, unit))
+        if low_open and value == low:
+            raise ValidationError(not_above(name, value, low, unit))
+        if high_open and value == high:
+            raise ValidationError(not_below(name, value, high, unit))
     return value
+
+
+def check_limit(name: str, value: Any, kind: type = float, *, low: float | None = None, high: float | None = None,
+                unit: str = "", low_open: bool = False, high_open: bool = False) -> Any:
+    """A driver's check of a value it is about to write: `convert`, raising LimitError (which the
+    engine tells apart from a lost link) in the same words."""
+    try:
+        return convert(name, value, kind, low=low, high=high, unit=unit, low_open=low_open, high_open=high_open)
+    except ValidationError as exc:
+        lo = fmt_value(-math.inf if low is None else low)
+        hi = fmt_value(math.inf if high is None else high)
+        limit = f"{'(' if low_open else '['}{lo}, {hi}{')' if high_open else ']'}"
+        raise LimitError(name, value, limit, unit, message=str(exc)) from None
+
+
+def parse_assignment(item: str, option: str = "--set") -> tuple[str, str]:
+    """`NAME=VALUE` from the command line as (name, value text); ValidationError otherwise."""
+    name, sep, value = item.partition("=")
+    if not sep or not name.strip():
+        raise ValidationError(f"{option} {item!r}: expected NAME=VALUE, e.g. {option} rate_dps=200")
+    return name.strip(), value

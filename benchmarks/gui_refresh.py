@@ -40,7 +40,7 @@ def main() -> None:
     app = QApplication.instance() or QApplication([])
     os.chdir(tempfile.mkdtemp(prefix="gui_refresh_"))  # the run's raw file and results index
     backend = EngineBackend(args.station, seed=0)
-    procedure, params = "hrg-damping", {"record_s": "3600", "compensate": "false"}
+    procedure, params = "hrg-damping", {"record_s": "3600", "compensate": "false", "stream_hz": "1000"}  # 1 kHz
     win = MainWindow(backend)
     win.station.set_speed(float("inf"))
     win.show()
