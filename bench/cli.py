@@ -34,13 +34,10 @@ def _err(msg: str) -> None:
 
 
 def _parse_sets(items: list[str]) -> dict[str, str]:
-    out: dict[str, str] = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip():
-            raise CliError(f"--set {item!r}: expected NAME=VALUE, e.g. --set rate_dps=200")
-        out[name.strip()] = value.strip()
-    return out
+    """`--set NAME=VALUE` items by name, the values as typed (Param.convert parses them)."""
+    from bench.validation import parse_assignment
+
+    return dict(parse_assignment(item) for item in items)
 
 
 def _store(url: str | None):

@@ -26,11 +26,8 @@ def cmd_gui(args: argparse.Namespace) -> int:
     from .app import parse_speed, run_gui
 
     speed = None if args.speed is None else parse_speed(args.speed)
-    params: dict[str, str] = {}
-    for item in args.set:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip():
-            raise SystemExit(f"gyrobench gui: --set {item!r}: expected NAME=VALUE")
-        params[name.strip()] = value.strip()
+    from bench.validation import parse_assignment
+
+    params = dict(parse_assignment(item) for item in args.set)  # the same reading as `gyrobench run --set`
     return run_gui(args.station, run=args.run, screenshot=args.screenshot, at_s=args.at_s, seed=args.seed,
                    speed=speed, open_run=args.open_run, params=params)

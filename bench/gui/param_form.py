@@ -15,12 +15,11 @@ INVALID_STYLE = "QLineEdit { background: #ffd6d6; border: 1px solid #c00000; }"
 
 
 def format_value(value: Any) -> str:
-    """A default as the form shows it: floats to 15 significant digits (the value round-trips)."""
+    """A default as the form shows it: a float in its shortest text that reads back to the same
+    float (the run gets exactly the declared default)."""
     if value is None:
         return ""
-    if isinstance(value, float):
-        return f"{value:.15g}"
-    return str(value)
+    return repr(value) if isinstance(value, float) else str(value)
 
 
 class ParameterForm(QWidget):
