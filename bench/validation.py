@@ -20,6 +20,7 @@ and would need translating back into these shapes; the checks themselves are a f
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Iterable
 from typing import Any
 
@@ -44,16 +45,17 @@ class LimitError(ValidationError):
 
 
 def fmt_value(value: Any, unit: str = "") -> str:
-    """A value as shown in a message: numbers plainly with their unit, anything else as repr."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    """A value as shown in a message: numbers (numpy's too) plainly with their unit, anything
+    else as repr."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
         return repr(value)
-    text = f"{value:.10g}" if isinstance(value, float) else str(value)
+    text = str(int(value)) if isinstance(value, numbers.Integral) else f"{float(value):.10g}"
     return f"{text} {unit}" if unit else text
 
 
 def not_a(name: str, value: Any, kind: type | str) -> str:
     what = kind if isinstance(kind, str) else KIND_WORDS.get(kind, f"a {kind.__name__}")
-    return f"{name}={value!r} is not {what}"
+    return f"{name}={fmt_value(value)} is not {what}"
 
 
 def above(name: str, value: float, limit: float, unit: str = "") -> str:
@@ -75,7 +77,7 @@ def not_above(name: str, value: float, limit: float, unit: str = "") -> str:
 
 
 def not_one_of(name: str, value: Any, choices: Iterable[Any]) -> str:
-    return f"{name}={value!r} is not one of {', '.join(map(str, choices))}"
+    return f"{name}={fmt_value(value)} is not one of {', '.join(map(str, choices))}"
 
 
 def missing_key(name: str, expected: str) -> str:
@@ -130,10 +132,13 @@ def convert(
                 value = float(text)
         except ValueError:
             raise ValidationError(not_a(name, value, kind)) from None
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
-        value = float(value)
-    if kind is int and isinstance(value, float) and value.is_integer():
-        value = int(value)
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):  # numpy's scalars too
+        if kind is float:
+            value = float(value)
+        elif kind is int and isinstance(value, numbers.Integral):
+            value = int(value)
+        elif kind is int and float(value).is_integer():
+            value = int(value)
     if not isinstance(value, kind) or (kind in (int, float) and isinstance(value, bool)):
         raise ValidationError(not_a(name, value, kind))
     if choices is not None:

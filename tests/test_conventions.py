@@ -199,7 +199,7 @@ def test_every_scpi_property_is_documented_and_checked_in_the_shared_words(cls_n
         bad, words = 1, f"{qual}=1 is not true or false"
     elif prop.validator is pr.strict_discrete_set:
         bad = max(allowed) * 3
-        words = f"{qual}={bad!r} is not one of " + ", ".join(map(str, allowed))
+        words = f"{qual}={fmt_value(bad)} is not one of " + ", ".join(map(str, allowed))
     else:
         lo, hi = allowed
         bad = hi + max(1, abs(hi))

@@ -98,7 +98,7 @@ def test_long_forms_and_default_suffix_are_understood(bench):
         (lambda fe: setattr(fe.ch1, "phase_deg", float("nan")), "ch1.phase_deg=nan is not a finite number"),
         (lambda fe: setattr(fe.ch2, "bias_v", 51.0), "ch2.bias_v=51 V is above the limit 50 V"),
         (lambda fe: setattr(fe.ch1, "input_range_v", 3.0),
-         "ch1.input_range_v=3.0 is not one of 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0"),
+         "ch1.input_range_v=3 is not one of 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0"),
         (lambda fe: setattr(fe.ch1, "output_on", 1), "ch1.output_on=1 is not true or false"),
         (lambda fe: setattr(fe, "sample_rate_hz", 5e6), "sample_rate_hz=5000000 Hz is above the limit"),
         (lambda fe: setattr(fe, "lockin_tc_s", -1.0), "lockin_tc_s=-1 s is below the limit 0 s"),
