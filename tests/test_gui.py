@@ -81,6 +81,7 @@ def test_decay_run_fills_the_plots_and_results(window, qtbot):
     qtbot.waitUntil(lambda: win.last_finished is not None, timeout=WAIT_MS)
     fin = win.last_finished
     assert fin.outcome in ("PASS", "COMPLETE") and fin.safe_state, fin.end_reason
+    assert win.backend.join(60)  # the runner closes the raw file after it announced the end
     with h5py.File(fin.raw_file, "r") as f:
         cols = json.loads(f["streams/fpga"].attrs["columns"])
         fpga = f["streams/fpga"][:][:, [cols.index(c) for c in ("t_s", "cx", "sx", "cy", "sy")]]
@@ -193,6 +194,7 @@ def test_replay_of_a_recorded_run(window, qtbot):
     _start(qtbot, win, "hrg-damping", record_s=3.0, compensate=False)
     qtbot.waitUntil(lambda: win.last_finished is not None, timeout=WAIT_MS)
     path = win.last_finished.raw_file
+    assert win.backend.join(60)  # the runner closes the raw file after it announced the end
     with h5py.File(path, "r") as f:
         n_fpga, n_table = len(f["streams/fpga"]), len(f["streams/table"])
         n_results = len(f["measurements"])
