@@ -1,4 +1,4 @@
-"""The `gyrobench` command line: run, list, runs, show, analyze, report, sim (and demo, gui)."""
+"""The `gyrobench` command line: run, list, runs, show, analyze, report, sim (and gui)."""
 
 from __future__ import annotations
 
@@ -23,13 +23,6 @@ class CliError(Exception):
         self.code = code
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    from bench.demo import run_decay_demo
-
-    run_decay_demo(seed=args.seed, rate_dps=args.rate_dps, duration_s=args.duration_s)
-    return 0
-
-
 def _add_gui(sub) -> None:
     from bench.gui.cli_args import add_gui_subcommand
 
@@ -41,13 +34,10 @@ def _err(msg: str) -> None:
 
 
 def _parse_sets(items: list[str]) -> dict[str, str]:
-    out: dict[str, str] = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip():
-            raise CliError(f"--set {item!r}: expected NAME=VALUE, e.g. --set rate_dps=200")
-        out[name.strip()] = value.strip()
-    return out
+    """`--set NAME=VALUE` items by name, the values as typed (Param.convert parses them)."""
+    from bench.validation import parse_assignment
+
+    return dict(parse_assignment(item) for item in items)
 
 
 def _store(url: str | None, **kw: Any):
@@ -487,12 +477,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gyrobench", description="Calibrate Coriolis vibratory gyroscopes.")
     parser.add_argument("--debug", action="store_true", help="print the traceback of an unexpected error")
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="simulated HRG free decay on a spinning table, with a summary")
-    demo.add_argument("--seed", type=int, default=0)
-    demo.add_argument("--rate-dps", type=float, default=500.0)
-    demo.add_argument("--duration-s", type=float, default=300.0)
-    demo.set_defaults(func=_cmd_demo)
-
     run = sub.add_parser("run", help="run a procedure (a registered name or a .py file) on a station")
     run.add_argument("procedure")
     run.add_argument("--station", default="sim-hrg", help="built-in station name or a station TOML file")

@@ -141,8 +141,8 @@ def _table_keys(address: dict[str, Key]) -> dict[str, Key]:
         "driver": Key(str, required=True),
         "max_rate_dps": Key(float, 1000.0, 1e-3, 20000.0, doc="rate limit", unit="deg/s"),
         "max_accel_dps2": Key(float, 500.0, 1e-3, 100000.0, doc="acceleration limit", unit="deg/s^2"),
-        "watchdog_s": Key(float, 2.0, 0.1, 60.0, unit="s"),
-        "timeout_s": Key(float, 1.0, 0.01, 30.0, unit="s"),
+        "watchdog_s": Key(float, 2.0, 0.1, 60.0, doc="table stops itself without a command for this long", unit="s"),
+        "timeout_s": Key(float, 1.0, 0.01, 30.0, doc="wall time allowed for a reply", unit="s"),
         **address,
     }
 
@@ -187,10 +187,10 @@ register_driver(
         role="table",
         keys=_table_keys(
             {
-                "host": Key(str, "127.0.0.1"),
-                "port": Key(int, 502, 1, 65535),
+                "host": Key(str, "127.0.0.1", doc="Modbus TCP host"),
+                "port": Key(int, 502, 1, 65535, doc="Modbus TCP port"),
                 "serial_port": Key(str, "", doc="RTU on a serial port instead of TCP"),
-                "device_id": Key(int, 1, 0, 247),
+                "device_id": Key(int, 1, 0, 247, doc="Modbus unit id"),
             }
         ),
         build=_build_modbus_table,
@@ -233,7 +233,7 @@ register_driver(
         keys=_table_keys(
             {
                 "url": Key(str, "", doc="serial port, pyserial URL or host:port"),
-                "baudrate": Key(int, 115200, 300, 4_000_000),
+                "baudrate": Key(int, 115200, 300, 4_000_000, doc="serial line speed (bit/s)"),
             }
         ),
         build=_build_ascii_table,
@@ -275,8 +275,8 @@ register_driver(
         keys={
             "driver": Key(str, required=True),
             "resource": Key(str, "", doc="VISA resource name"),
-            "max_amplitude_v": Key(float, 5.0, 0.0, 10.0, unit="V"),
-            "timeout_s": Key(float, 2.0, 0.05, 60.0, unit="s"),
+            "max_amplitude_v": Key(float, 5.0, 0.0, 10.0, doc="drive amplitude limit", unit="V"),
+            "timeout_s": Key(float, 2.0, 0.05, 60.0, doc="wall time allowed for a reply", unit="s"),
         },
         build=_build_frontend,
         serve=_serve_frontend,
@@ -334,8 +334,8 @@ register_driver(
         keys={
             "driver": Key(str, required=True),
             "url": Key(str, "", doc="serial port or pyserial URL"),
-            "timeout_s": Key(float, 1.0, 0.01, 30.0, unit="s"),
-            "decimation": Key(int, 1, 1, 100000),
+            "timeout_s": Key(float, 1.0, 0.01, 30.0, doc="wall time allowed for a reply", unit="s"),
+            "decimation": Key(int, 1, 1, 100000, doc="stream every Nth sample"),
         },
         build=_build_fpga,
         serve=_serve_fpga,
@@ -345,16 +345,16 @@ register_driver(
 )
 
 STATION_KEYS = {
-    "id": Key(str, required=True),
+    "id": Key(str, required=True, doc="the station's name in runs and results"),
     "results": Key(str, "runs/results.sqlite", doc="SQLite file or database URL"),
-    "runs_dir": Key(str, "runs"),
-    "description": Key(str, ""),
+    "runs_dir": Key(str, "runs", doc="folder of the raw files"),
+    "description": Key(str, "", doc="one line for people"),
 }
 SIM_KEYS = {
-    "preset": Key(str, "hrg", choices=("hrg", "mems")),
-    "seed": Key(int, 0, 0, 2**63 - 1),
+    "preset": Key(str, "hrg", choices=("hrg", "mems"), doc="simulated resonator"),
+    "seed": Key(int, 0, 0, 2**63 - 1, doc="random seed of the simulation"),
     "speed": Key(float, 0.0, 0.0, 1e6, doc="0 = lockstep, else x real time"),
-    "sample_period_s": Key(float, 1e-3, 1e-5, 0.1, unit="s"),
+    "sample_period_s": Key(float, 1e-3, 1e-5, 0.1, doc="simulated sample period", unit="s"),
 }
 
 

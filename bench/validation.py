@@ -8,12 +8,19 @@ and what was expected, in one of these shapes:
     driver: missing key (one of modbus-table, ascii-table)
     nosuchparam: not a parameter of table-spin (allowed: hold_s, rate_dps)
 
-Callers add where the value came from (a file and table) in front of the message.
+Callers add where the value came from (a file and table) in front of the message.  Procedure
+parameters (`Param.convert`), station keys (`Key.check`), the window's form (through `Param`) and
+the drivers' limits (`check_limit`, raising `LimitError`) all check here, in these words.
+
+A library such as pydantic could do the type checks, but its messages ("Input should be a valid
+number, unable to parse string as a number") name neither the key nor the unit nor the limit,
+and would need translating back into these shapes; the checks themselves are a few lines.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Iterable
 from typing import Any
 
@@ -26,17 +33,29 @@ class ValidationError(ValueError):
     which value and what was expected."""
 
 
+class LimitError(ValidationError):
+    """A value a driver was asked to write is outside a configured or device limit; raised before
+    anything is written.  `name`, `value`, `limit` (text) and `unit` say which and why."""
+
+    def __init__(self, name: str, value: Any, limit: str | float = "", unit: str = "",
+                 message: str | None = None) -> None:
+        self.name, self.value, self.limit, self.unit = name, value, limit, unit
+        u = f" {unit}" if unit else ""
+        super().__init__(message or f"{name}={fmt_value(value, unit)} is outside the limit {limit}{u}")
+
+
 def fmt_value(value: Any, unit: str = "") -> str:
-    """A value as shown in a message: numbers plainly with their unit, anything else as repr."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    """A value as shown in a message: numbers (numpy's too) plainly with their unit, anything
+    else as repr."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
         return repr(value)
-    text = f"{value:.10g}" if isinstance(value, float) else str(value)
+    text = str(int(value)) if isinstance(value, numbers.Integral) else f"{float(value):.10g}"
     return f"{text} {unit}" if unit else text
 
 
 def not_a(name: str, value: Any, kind: type | str) -> str:
     what = kind if isinstance(kind, str) else KIND_WORDS.get(kind, f"a {kind.__name__}")
-    return f"{name}={value!r} is not {what}"
+    return f"{name}={fmt_value(value)} is not {what}"
 
 
 def above(name: str, value: float, limit: float, unit: str = "") -> str:
@@ -47,8 +66,18 @@ def below(name: str, value: float, limit: float, unit: str = "") -> str:
     return f"{name}={fmt_value(value, unit)} is below the limit {fmt_value(limit, unit)}"
 
 
+def not_below(name: str, value: float, limit: float, unit: str = "") -> str:
+    """An open upper bound: `angle_deg=360 deg is not below the limit 360 deg`."""
+    return f"{name}={fmt_value(value, unit)} is not below the limit {fmt_value(limit, unit)}"
+
+
+def not_above(name: str, value: float, limit: float, unit: str = "") -> str:
+    """An open lower bound: `accel_dps2=0 deg/s^2 is not above the limit 0 deg/s^2`."""
+    return f"{name}={fmt_value(value, unit)} is not above the limit {fmt_value(limit, unit)}"
+
+
 def not_one_of(name: str, value: Any, choices: Iterable[Any]) -> str:
-    return f"{name}={value!r} is not one of {', '.join(map(str, choices))}"
+    return f"{name}={fmt_value(value)} is not one of {', '.join(map(str, choices))}"
 
 
 def missing_key(name: str, expected: str) -> str:
@@ -82,10 +111,15 @@ def convert(
     unit: str = "",
     choices: Iterable[Any] | None = None,
     parse_text: bool = False,
+    low_open: bool = False,
+    high_open: bool = False,
 ) -> Any:
-    """`value` as `kind` (float, int, bool, str), within [low, high] and `choices`, or
-    ValidationError.  With parse_text a string (from `--set`, a form) is parsed first."""
-    if parse_text and isinstance(value, str) and kind is not str:
+    """`value` as `kind` (float, int, bool, str), within [low, high] (an open end with low_open,
+    high_open) and `choices`, or ValidationError.  With parse_text a string (from `--set`, a
+    form) is parsed first; surrounding spaces never count."""
+    if parse_text and isinstance(value, str) and kind is str:
+        value = value.strip()
+    elif parse_text and isinstance(value, str):
         text = value.strip()
         try:
             if kind is bool:
@@ -98,10 +132,13 @@ def convert(
                 value = float(text)
         except ValueError:
             raise ValidationError(not_a(name, value, kind)) from None
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
-        value = float(value)
-    if kind is int and isinstance(value, float) and value.is_integer():
-        value = int(value)
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):  # numpy's scalars too
+        if kind is float:
+            value = float(value)
+        elif kind is int and isinstance(value, numbers.Integral):
+            value = int(value)
+        elif kind is int and float(value).is_integer():
+            value = int(value)
     if not isinstance(value, kind) or (kind in (int, float) and isinstance(value, bool)):
         raise ValidationError(not_a(name, value, kind))
     if choices is not None:
@@ -115,4 +152,29 @@ def convert(
             raise ValidationError(below(name, value, low, unit))
         if high is not None and value > high:
             raise ValidationError(above(name, value, high, unit))
+        if low_open and value == low:
+            raise ValidationError(not_above(name, value, low, unit))
+        if high_open and value == high:
+            raise ValidationError(not_below(name, value, high, unit))
     return value
+
+
+def check_limit(name: str, value: Any, kind: type = float, *, low: float | None = None, high: float | None = None,
+                unit: str = "", low_open: bool = False, high_open: bool = False) -> Any:
+    """A driver's check of a value it is about to write: `convert`, raising LimitError (which the
+    engine tells apart from a lost link) in the same words."""
+    try:
+        return convert(name, value, kind, low=low, high=high, unit=unit, low_open=low_open, high_open=high_open)
+    except ValidationError as exc:
+        lo = fmt_value(-math.inf if low is None else low)
+        hi = fmt_value(math.inf if high is None else high)
+        limit = f"{'(' if low_open else '['}{lo}, {hi}{')' if high_open else ']'}"
+        raise LimitError(name, value, limit, unit, message=str(exc)) from None
+
+
+def parse_assignment(item: str, option: str = "--set") -> tuple[str, str]:
+    """`NAME=VALUE` from the command line as (name, value text); ValidationError otherwise."""
+    name, sep, value = item.partition("=")
+    if not sep or not name.strip():
+        raise ValidationError(f"{option} {item!r}: expected NAME=VALUE, e.g. {option} rate_dps=200")
+    return name.strip(), value

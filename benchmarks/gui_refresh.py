@@ -1,6 +1,7 @@
 """GUI refresh rate and event-loop latency while a 1 kHz stream runs.
 
-The HRG world (SimWorldBackend) runs a free decay; first as fast as the CPU allows until the
+The engine on a simulated station (default sim-hrg: the simulators on loopback transports, one
+World at 1 kHz) runs `hrg-damping`'s free decay; first as fast as the CPU allows until the
 plots hold `--prefill-s` of history (the issue's 300 s worst case), then at real time (1 kHz,
 delivered in 10 ms blocks) for `--measure-s` wall seconds, then again at max speed.  Printed:
 redraws per second, redraw cost, lateness of a 10 ms QTimer (event-loop latency) and the delay
@@ -12,8 +13,8 @@ from publish in the engine thread to delivery in the GUI thread.
 from __future__ import annotations
 
 import argparse
-import math
 import os
+import tempfile
 import time
 
 import numpy as np
@@ -27,29 +28,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--prefill-s", type=float, default=280.0)
     ap.add_argument("--measure-s", type=float, default=10.0)
-    ap.add_argument("--station", default="sim-world",
-                    help="sim-world (in-process HRG source) or sim-hrg (engine, simulators on loopback, hrg-damping)")
+    ap.add_argument("--station", default="sim-hrg", help="a simulated station with an FPGA stream (name or file)")
     args = ap.parse_args()
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
+    from bench.gui.engine_backend import EngineBackend
     from bench.gui.main_window import MainWindow
-    from bench.gui.sim_backend import SimWorldBackend
 
     app = QApplication.instance() or QApplication([])
-    if args.station == "sim-world":
-        backend = SimWorldBackend(seed=0, speed=math.inf)
-        procedure, params = "demo-decay", {"duration_s": "3600"}
-    else:
-        import tempfile
-
-        from bench.gui.engine_backend import EngineBackend
-
-        os.chdir(tempfile.mkdtemp(prefix="gui_refresh_"))  # the run's raw file and results index
-        backend = EngineBackend(args.station, seed=0)
-        procedure, params = "hrg-damping", {"record_s": "3600", "compensate": "false"}
+    os.chdir(tempfile.mkdtemp(prefix="gui_refresh_"))  # the run's raw file and results index
+    backend = EngineBackend(args.station, seed=0)
+    procedure, params = "hrg-damping", {"record_s": "3600", "compensate": "false", "stream_hz": "1000"}  # 1 kHz
     win = MainWindow(backend)
+    win.station.set_speed(float("inf"))
     win.show()
 
     def pump_until(cond, timeout_s: float) -> None:
@@ -108,7 +101,7 @@ def main() -> None:
     print(f"station {args.station}, procedure {procedure}")
     print(f"prefill: {win.t_sim_s:.0f} s of 1 kHz simulated in {time.perf_counter() - t0:.1f} s wall (max speed)")
     measure(f"max speed with {args.prefill_s:.0f} s of history", 3.0)
-    backend.set_speed(1.0)
+    win.station.set_speed(1.0)  # the window's control: the clock and the bridge's backpressure follow
     pump_until(lambda: False, 0.5)
     measure(f"real time (1 kHz stream) with ~{args.prefill_s:.0f} s of history", args.measure_s)
     win.abort()

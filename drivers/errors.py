@@ -2,19 +2,13 @@
 
 from __future__ import annotations
 
+from bench.validation import LimitError  # the shared wording of a bad value (bench.validation)
+
+__all__ = ["DeviceError", "LimitError", "LinkLostError", "ProtocolError", "SafetyTripError"]
+
 
 class DeviceError(RuntimeError):
     """The device reported an error (exception response, error queue entry, NACK, fault bit)."""
-
-
-class LimitError(ValueError):
-    """A requested value is outside a configured or device limit; raised before anything is
-    written.  The message names the value and the limit."""
-
-    def __init__(self, name: str, value: float, limit: str | float, unit: str = "") -> None:
-        self.name, self.value, self.limit, self.unit = name, value, limit, unit
-        u = f" {unit}" if unit else ""
-        super().__init__(f"{name}={value!r}{u} is outside the limit {limit}{u}")
 
 
 class LinkLostError(ConnectionError):

@@ -143,8 +143,10 @@ class MemsSweep(Procedure):
         super().__init__(params)
         if self.stop_hz <= self.start_hz:
             from bench.engine.params import ParamError
+            from bench.validation import not_above
 
-            raise ParamError("stop_hz", self.stop_hz, f"> start_hz = {self.start_hz}")
+            message = not_above("stop_hz", self.stop_hz, self.start_hz, "Hz") + " (start_hz)"
+            raise ParamError("stop_hz", self.stop_hz, f"above start_hz = {self.start_hz}", message)
         self.rows: list[list[float]] = []
 
     # --- steps ---------------------------------------------------------------------------------

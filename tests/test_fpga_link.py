@@ -58,11 +58,11 @@ def test_register_round_trips(bench):
 def test_bad_values_raise_before_anything_is_written(bench):
     _, _, server, link = bench
     before = server.firmware.regs["AGC_SETPOINT"]
-    with pytest.raises(LimitError, match=r"AGC_SETPOINT=-1.*\[0, 100\]"):
+    with pytest.raises(LimitError, match="^AGC_SETPOINT=-1 is below the limit 0$"):
         link.write_register("AGC_SETPOINT", -1.0)
-    with pytest.raises(LimitError, match="decimation=0"):
+    with pytest.raises(LimitError, match="^decimation=0 is below the limit 1$"):
         link.start_stream(0)
-    with pytest.raises(LimitError, match="FM_RATE_HZ=nan"):
+    with pytest.raises(LimitError, match="^FM_RATE_HZ=nan is not a finite number$"):
         link.set_whole_angle(True, 1.0, 0.1, float("nan"))
     with pytest.raises(LimitError, match="read-only"):
         link.write_register("STATUS", 1)

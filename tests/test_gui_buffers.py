@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.gui.params import ParamSpec
 from bench.gui.ringbuffer import MinMaxHistory, RingBuffer
 
 
@@ -43,15 +42,3 @@ def test_minmax_history_keeps_peaks_and_bounds_the_points():
     win = MinMaxHistory(1, max_points=100, history_s=10.0)
     win.append(t[:30_000], y[:30_000, None])
     assert win.curve(0)[0][0] >= t[30_000 - 1] - 10.0 - win.bucket_rows * 1e-3
-
-
-def test_param_spec_errors_name_the_value_and_the_limit():
-    spec = ParamSpec("rate_dps", "float", "deg/s", 100.0, -1000.0, 1000.0)
-    assert spec.parse(" 250 ") == 250.0
-    with pytest.raises(ValueError, match=r"rate_dps=1500 deg/s is above the limit 1000 deg/s"):
-        spec.parse("1500")
-    with pytest.raises(ValueError, match="is not a finite number"):
-        spec.parse("nan")
-    assert ParamSpec("n", "int", low=3).parse("7") == 7
-    with pytest.raises(ValueError, match="not an integer"):
-        ParamSpec("n", "int").parse("7.5")

@@ -18,7 +18,7 @@ from needs import need
 pytest.importorskip("pyqtgraph")
 
 ROOT = Path(__file__).resolve().parents[1]
-SHOT = ["-m", "bench.cli", "gui", "--station", "sim-world", "--run", "demo-decay", "--at", "2"]
+SHOT = ["-m", "bench.cli", "gui", "--station", "sim-hrg", "--run", "hrg-free-decay", "--set", "record_s=5", "--at", "2"]
 
 
 def test_void_qt_calls_keep_the_reference_to_none(qapp):

@@ -116,24 +116,25 @@ def test_position_move_and_shortest_way(bench):
 
 
 @pytest.mark.parametrize(
-    "call, name",
+    "call, name, message",
     [
-        (lambda t: t.set_rate(500.1), "rate_dps"),
-        (lambda t: t.set_rate(-600.0), "rate_dps"),
-        (lambda t: t.set_rate(math.nan), "rate_dps"),
-        (lambda t: t.set_rate(100.0, 301.0), "accel_dps2"),
-        (lambda t: t.set_rate(100.0, 0.0), "accel_dps2"),
-        (lambda t: t.move_to(360.0), "angle_deg"),
-        (lambda t: t.move_to(-1.0), "angle_deg"),
-        (lambda t: t.move_to(10.0, 501.0), "rate_dps"),
+        (lambda t: t.set_rate(500.1), "rate_dps", "rate_dps=500.1 deg/s is above the limit 500 deg/s"),
+        (lambda t: t.set_rate(-600.0), "rate_dps", "rate_dps=-600 deg/s is below the limit -500 deg/s"),
+        (lambda t: t.set_rate(math.nan), "rate_dps", "rate_dps=nan is not a finite number"),
+        (lambda t: t.set_rate(100.0, 301.0), "accel_dps2", "accel_dps2=301 deg/s^2 is above the limit 300 deg/s^2"),
+        (lambda t: t.set_rate(100.0, 0.0), "accel_dps2", "accel_dps2=0 deg/s^2 is not above the limit 0 deg/s^2"),
+        (lambda t: t.move_to(360.0), "angle_deg", "angle_deg=360 deg is not below the limit 360 deg"),
+        (lambda t: t.move_to(-1.0), "angle_deg", "angle_deg=-1 deg is below the limit 0 deg"),
+        (lambda t: t.move_to(10.0, 501.0), "rate_dps", "rate_dps=501 deg/s is above the limit 500 deg/s"),
     ],
 )
-def test_limit_errors_name_value_and_limit_and_write_nothing(bench_tcp, call, name):
+def test_limit_errors_name_value_and_limit_and_write_nothing(bench_tcp, call, name, message):
+    """The shared wording (bench.validation), the value and the limit with their unit."""
     world, clock, server, table = bench_tcp
     table.enable()
     with pytest.raises(LimitError) as err:
         call(table)
-    assert err.value.name == name and name in str(err.value) and "limit" in str(err.value)
+    assert err.value.name == name and str(err.value) == message
     assert server.mechanics.mode == mp.MODE_STOP and server.mechanics.target_rate_dps == 0.0
 
 

@@ -12,16 +12,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from bench.validation import ValidationError, convert, not_a, unknown_name
+from bench.validation import KIND_WORDS, ValidationError, convert, not_a, range_text, unknown_name
 
 
-class ParamError(ValueError):
+class ParamError(ValidationError):
     """A procedure parameter is unknown, of the wrong type or outside its limits.  The message
     names the parameter, the value and the limit (wording: bench.validation)."""
 
-    def __init__(self, name: str, value: Any, limit: str, message: str | None = None) -> None:
+    def __init__(self, name: str, value: Any, limit: str, message: str) -> None:
         self.name, self.value, self.limit = name, value, limit
-        super().__init__(message or f"parameter {name}={value!r} is outside the limit {limit}")
+        super().__init__(message)
 
 
 _MISSING = object()
@@ -55,15 +55,12 @@ class Param:
         return obj.params.get(self.name, self.default)
 
     def limit_text(self) -> str:
-        """The allowed range as text, for errors and `gyrobench list`."""
+        """What is allowed, as text (the window's tooltip, ParamError.limit): `-1000 to 1000 deg/s`."""
         if self.choices is not None:
-            return "one of " + ", ".join(repr(c) for c in self.choices)
-        u = f" {self.unit}" if self.unit else ""
-        lo = "-inf" if self.low is None else f"{self.low:g}"
-        hi = "inf" if self.high is None else f"{self.high:g}"
+            return "one of " + ", ".join(map(str, self.choices))
         if self.type in (int, float):
-            return f"[{lo}, {hi}]{u}"
-        return f"a {self.type.__name__}"
+            return range_text(self.low, self.high, self.unit) or "any number"
+        return KIND_WORDS.get(self.type, f"a {self.type.__name__}")
 
     def convert(self, value: Any) -> Any:
         """Parse (a string from `--set name=value`) and check a value; ParamError if bad."""

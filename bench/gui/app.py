@@ -14,16 +14,9 @@ from bench.validation import ValidationError, not_one_of, unknown_name
 
 from .backend import GuiBackend
 
-SIM_WORLD = "sim-world"
-
 
 def make_backend(station: str | None, *, seed: int = 0) -> GuiBackend:
-    """The engine on a station (built-in name or file; sim-hrg when none is given), or
-    `sim-world`: the in-process HRG world source the GUI's own tests use."""
-    if station == SIM_WORLD:
-        from .sim_backend import SimWorldBackend
-
-        return SimWorldBackend(seed=seed)
+    """The engine on a station (built-in name or file; sim-hrg when none is given)."""
     from .engine_backend import EngineBackend, default_station
 
     return EngineBackend(station or default_station(), seed=seed)

@@ -9,8 +9,7 @@ from __future__ import annotations
 from typing import Any, Protocol
 
 from bench.engine.events import EventBus
-
-from .params import ParamSpec
+from bench.engine.params import Param
 
 SPEEDS: tuple[tuple[str, float], ...] = (
     ("real time", 1.0),
@@ -27,8 +26,8 @@ class GuiBackend(Protocol):
     station_name: str
     simulated: bool
 
-    def procedures(self) -> dict[str, tuple[ParamSpec, ...]]:
-        """Procedure name -> its declared parameters, in declaration order."""
+    def procedures(self) -> dict[str, tuple[Param, ...]]:
+        """Procedure name -> its declared parameters (the engine's own Param objects), in order."""
         ...
 
     def start(self, procedure: str, values: dict[str, Any]) -> None:

@@ -8,7 +8,7 @@ import argparse
 def add_gui_subcommand(sub) -> argparse.ArgumentParser:
     """Register `gui` on the CLI's subparsers."""
     p = sub.add_parser("gui", help="the lab engineer's window (live plots, Start/Pause/Abort, replay)")
-    p.add_argument("--station", default=None, help="station name (sim-hrg, sim-mems, sim-world) or station file")
+    p.add_argument("--station", default=None, help="station name (sim-hrg, sim-mems) or station file")
     p.add_argument("--run", default=None, metavar="PROC", help="procedure to select (and run with --screenshot)")
     p.add_argument("--screenshot", default=None, metavar="FILE", help="run headless, save a PNG of the window, exit")
     p.add_argument("--at", dest="at_s", type=float, default=None, metavar="SECONDS",
@@ -26,11 +26,8 @@ def cmd_gui(args: argparse.Namespace) -> int:
     from .app import parse_speed, run_gui
 
     speed = None if args.speed is None else parse_speed(args.speed)
-    params: dict[str, str] = {}
-    for item in args.set:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip():
-            raise SystemExit(f"gyrobench gui: --set {item!r}: expected NAME=VALUE")
-        params[name.strip()] = value.strip()
+    from bench.validation import parse_assignment
+
+    params = dict(parse_assignment(item) for item in args.set)  # the same reading as `gyrobench run --set`
     return run_gui(args.station, run=args.run, screenshot=args.screenshot, at_s=args.at_s, seed=args.seed,
                    speed=speed, open_run=args.open_run, params=params)

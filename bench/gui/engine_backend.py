@@ -14,8 +14,7 @@ from typing import Any
 import numpy as np
 
 from bench.engine import events as ev
-
-from .params import ParamSpec, spec_from_declared
+from bench.engine.params import Param
 
 DEFAULT_STATION = "sim-hrg"
 STATUS_EVERY_WALL_S = 0.5
@@ -58,11 +57,10 @@ class EngineBackend:
         self.publish_status()
 
     # --- GuiBackend ------------------------------------------------------------------------
-    def procedures(self) -> dict[str, tuple[ParamSpec, ...]]:
+    def procedures(self) -> dict[str, tuple[Param, ...]]:
         from procedures import all_procedures
 
-        return {name: tuple(spec_from_declared(p, decl) for p, decl in cls.param_specs().items())
-                for name, cls in all_procedures().items()}
+        return {name: tuple(cls.param_specs().values()) for name, cls in all_procedures().items()}
 
     def start(self, procedure: str, values: dict[str, Any]) -> None:
         from procedures import find_procedure

@@ -1,6 +1,6 @@
-"""The parameter form, generated from a procedure's declared parameters: one field per
-parameter with its unit and limits; an invalid value is marked red with the reason, and the
-form reports whether every value is valid (the window enables Start on that)."""
+"""The parameter form, built from a procedure's own `Param` declarations: one field per
+parameter with its unit and limits; each field's text goes through `Param.convert`, the code the
+engine and `gyrobench run --set` use, so the window accepts, refuses and words exactly as they do."""
 
 from __future__ import annotations
 
@@ -9,27 +9,33 @@ from typing import Any
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import QCheckBox, QComboBox, QFormLayout, QLabel, QLineEdit, QWidget
 
-from .params import ParamSpec
+from bench.engine.params import Param
 
 INVALID_STYLE = "QLineEdit { background: #ffd6d6; border: 1px solid #c00000; }"
 
 
+def format_value(value: Any) -> str:
+    """A default as the form shows it: a float in its shortest text that reads back to the same
+    float (the run gets exactly the declared default)."""
+    if value is None:
+        return ""
+    return repr(value) if isinstance(value, float) else str(value)
+
+
 class ParameterForm(QWidget):
-    """Fields for a tuple of ParamSpec; `values()` parses them, `errors` names what is wrong."""
+    """Fields for a tuple of Param; `values()` converts them, `errors` names what is wrong."""
 
     validity_changed = Signal(bool)
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.layout_ = QFormLayout(self)
-        self.specs: tuple[ParamSpec, ...] = ()
+        self.specs: tuple[Param, ...] = ()
         self.fields: dict[str, QWidget] = {}
         self.errors: dict[str, str] = {}
         self.error_label = QLabel("")
-        self.error_label.setStyleSheet("color: #c00000;")
-        self.error_label.setWordWrap(True)
 
-    def set_specs(self, specs: tuple[ParamSpec, ...]) -> None:
+    def set_specs(self, specs: tuple[Param, ...]) -> None:
         while self.layout_.rowCount():
             self.layout_.removeRow(0)
         self.specs = tuple(specs)
@@ -37,39 +43,35 @@ class ParameterForm(QWidget):
         self.error_label = QLabel("")
         self.error_label.setStyleSheet("color: #c00000;")
         self.error_label.setWordWrap(True)
-        for spec in self.specs:
-            field = self._make_field(spec)
-            self.fields[spec.name] = field
-            label = spec.name + (f" [{spec.unit}]" if spec.unit else "")
-            lim = []
-            if spec.low is not None or spec.high is not None:
-                lim.append(f"limits {spec.low if spec.low is not None else '-inf'} .. "
-                           f"{spec.high if spec.high is not None else 'inf'}")
-            field.setToolTip("; ".join([spec.doc, *lim]).strip("; "))
+        for param in self.specs:
+            field = self._make_field(param)
+            self.fields[param.name] = field
+            label = param.name + (f" [{param.unit}]" if param.unit else "")
+            field.setToolTip("; ".join(t for t in (param.doc, param.limit_text()) if t))
             self.layout_.addRow(label, field)
         self.layout_.addRow(self.error_label)
         self.validate()
 
-    def _make_field(self, spec: ParamSpec) -> QWidget:
-        if spec.kind == "bool":
+    def _make_field(self, param: Param) -> QWidget:
+        if param.type is bool:
             box = QCheckBox()
-            box.setChecked(bool(spec.default))
+            box.setChecked(bool(param.default))
             box.stateChanged.connect(lambda _s: self.validate())
             return box
-        if spec.kind == "choice":
+        if param.choices is not None:
             combo = QComboBox()
-            combo.addItems([str(c) for c in spec.choices])
-            if spec.default is not None:
-                combo.setCurrentText(str(spec.default))
+            combo.addItems([format_value(c) for c in param.choices])
+            combo.setCurrentText(format_value(param.default))
             combo.currentTextChanged.connect(lambda _t: self.validate())
             return combo
-        edit = QLineEdit(spec.format(spec.default))
-        edit.setObjectName(f"param_{spec.name}")
+        edit = QLineEdit(format_value(param.default))
+        edit.setObjectName(f"param_{param.name}")
         edit.textChanged.connect(lambda _t: self.validate())
         return edit
 
-    def _text(self, spec: ParamSpec) -> str:
-        w = self.fields[spec.name]
+    def text(self, name: str) -> str:
+        """What the field for `name` holds, as the text `--set name=<text>` would give."""
+        w = self.fields[name]
         if isinstance(w, QCheckBox):
             return "true" if w.isChecked() else "false"
         if isinstance(w, QComboBox):
@@ -81,21 +83,21 @@ class ParameterForm(QWidget):
         if isinstance(w, QCheckBox):
             w.setChecked(bool(value))
         elif isinstance(w, QComboBox):
-            w.setCurrentText(str(value))
+            w.setCurrentText(format_value(value))
         else:
-            w.setText(str(value))  # type: ignore[attr-defined]
+            w.setText(value if isinstance(value, str) else format_value(value))  # type: ignore[attr-defined]
 
     def validate(self) -> bool:
-        """Parse every field; mark the invalid ones; emit validity_changed."""
+        """Convert every field; mark the invalid ones; emit validity_changed."""
         self.errors = {}
-        for spec in self.specs:
+        for param in self.specs:
             try:
-                spec.parse(self._text(spec))
+                param.convert(self.text(param.name))
                 ok = True
             except ValueError as exc:
-                self.errors[spec.name] = str(exc)
+                self.errors[param.name] = str(exc)
                 ok = False
-            w = self.fields[spec.name]
+            w = self.fields[param.name]
             if isinstance(w, QLineEdit):
                 w.setStyleSheet("" if ok else INVALID_STYLE)
         self.error_label.setText("\n".join(self.errors.values()))
@@ -107,5 +109,5 @@ class ParameterForm(QWidget):
         return not self.errors
 
     def values(self) -> dict[str, Any]:
-        """The parsed values (ValueError on the first invalid one)."""
-        return {spec.name: spec.parse(self._text(spec)) for spec in self.specs}
+        """The converted values (ParamError, a ValueError, on the first invalid one)."""
+        return {param.name: param.convert(self.text(param.name)) for param in self.specs}

@@ -11,17 +11,18 @@ from __future__ import annotations
 
 import itertools
 import logging
-import math
 import os
 import select
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import serial
 
+from bench.validation import check_limit
 from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
 
 from . import protocol as p
@@ -44,14 +45,17 @@ class LinkStats:
     callback_errors: int = 0
 
 
+def _check_register(reg: p.Register, value: Any, name: str = "") -> None:
+    """A register write's value: finite, within [lo, hi], an integer for 'u' (bench.validation's words)."""
+    check_limit(name or reg.name, value, int if reg.kind == "u" else float, low=reg.lo, high=reg.hi, unit=reg.unit)
+
+
 class FpgaLink:
     """Driver of the FPGA register link; the same code runs on a real port, socket:// and a pty."""
 
     def __init__(self, url: str, *, clock=None, timeout_s: float = 1.0, retries: int = 2) -> None:
-        if not (timeout_s > 0 and math.isfinite(timeout_s)):
-            raise LimitError("timeout_s", timeout_s, "(0, inf)", "s")
-        if retries < 0:
-            raise LimitError("retries", retries, ">= 0")
+        check_limit("timeout_s", timeout_s, low=0.0, low_open=True, unit="s")
+        check_limit("retries", retries, int, low=0)
         self.url = url
         self.clock = clock
         self.timeout_s = float(timeout_s)
@@ -140,10 +144,8 @@ class FpgaLink:
         """Write one register after checking its limits; returns the value the device stored."""
         reg = p.register(name_or_addr)
         if reg.access == "ro":
-            raise LimitError(reg.name, value, "read-only register")
-        if not p.in_range(reg, value):
-            kind = " (an integer)" if reg.kind == "u" else ""
-            raise LimitError(reg.name, value, f"[{reg.lo:g}, {reg.hi:g}]{kind}", reg.unit)
+            raise LimitError(reg.name, value, "read-only", message=f"{reg.name}: a read-only register, not written")
+        _check_register(reg, value)
         reply = self._command(p.WRITE, reg.addr, p.encode_value(reg, value), f"write {reg.name}={value!r}")
         return p.decode_value(reg, reply.payload)
 
@@ -230,9 +232,7 @@ class FpgaLink:
             ("FM_AMPLITUDE_HZ", fm_amplitude_hz),
             ("FM_RATE_HZ", fm_rate_hz),
         ):
-            reg = p.BY_NAME[name]
-            if not p.in_range(reg, value):
-                raise LimitError(name, value, f"[{reg.lo:g}, {reg.hi:g}]", reg.unit)
+            _check_register(p.BY_NAME[name], value)
         self.write_register("PRECESSION_RATE_DPS", precession_cmd_dps)
         self.write_register("FM_AMPLITUDE_HZ", fm_amplitude_hz)
         self.write_register("FM_RATE_HZ", fm_rate_hz)
@@ -242,9 +242,7 @@ class FpgaLink:
         """Cancel the damping drift (D/4) sin 4(theta - theta_tau) with a precession force
         (whole-angle mode); D and theta_tau as identified by the bench."""
         for name, value in (("DRIFT_D_PER_S", d_per_s), ("DRIFT_THETA_TAU_DEG", theta_tau_deg)):
-            reg = p.BY_NAME[name]
-            if not p.in_range(reg, value):
-                raise LimitError(name, value, f"[{reg.lo:g}, {reg.hi:g}]", reg.unit)
+            _check_register(p.BY_NAME[name], value)
         self.write_register("DRIFT_D_PER_S", d_per_s)
         self.write_register("DRIFT_THETA_TAU_DEG", theta_tau_deg)
         self._set_bits(p.DRIFT_COMP_EN, enabled)
@@ -262,9 +260,7 @@ class FpgaLink:
     # --- stream --------------------------------------------------------------------------------
     def start_stream(self, decimation: int = 1) -> None:
         """Stream every `decimation`-th sample; counters restart from this point."""
-        reg = p.BY_NAME["STREAM_DECIMATION"]
-        if not p.in_range(reg, decimation):
-            raise LimitError("decimation", decimation, f"[{reg.lo:g}, {reg.hi:g}] (an integer)")
+        _check_register(p.BY_NAME["STREAM_DECIMATION"], decimation, "decimation")
         self._set_bits(p.STREAM_EN, False)
         self.write_register("STREAM_DECIMATION", decimation)
         with self._cond:

@@ -15,29 +15,20 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from bench.validation import check_limit, not_one_of
 from drivers.errors import LimitError, ProtocolError
 
 Validator = Callable[[str, Any, Any, str], Any]
 
 
 def strict_range(name: str, value: Any, values: tuple[float, float], unit: str = "") -> float:
-    """A finite number within [lo, hi]; LimitError otherwise."""
-    lo, hi = values
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise LimitError(name, value, f"[{lo:g}, {hi:g}]", unit) from None
-    if isinstance(value, bool) or not math.isfinite(x) or not lo <= x <= hi:
-        raise LimitError(name, value, f"[{lo:g}, {hi:g}]", unit)
-    return x
+    """A finite number within [lo, hi]; LimitError otherwise (bench.validation's words)."""
+    return check_limit(name, value, float, low=values[0], high=values[1], unit=unit)
 
 
 def strict_int_range(name: str, value: Any, values: tuple[int, int], unit: str = "") -> int:
     """An integer within [lo, hi]; LimitError otherwise (floats with a fraction are refused)."""
-    lo, hi = values
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value) or not lo <= value <= hi:
-        raise LimitError(name, value, f"[{lo}, {hi}] (integer)", unit)
-    return int(value)
+    return check_limit(name, value, int, low=values[0], high=values[1], unit=unit)
 
 
 def strict_discrete_set(name: str, value: Any, values: Sequence[Any], unit: str = "") -> Any:
@@ -48,14 +39,12 @@ def strict_discrete_set(name: str, value: Any, values: Sequence[Any], unit: str 
                 return v
         elif value == v:
             return v
-    raise LimitError(name, value, f"one of {list(values)}", unit)
+    raise LimitError(name, value, f"one of {list(values)}", unit, message=not_one_of(name, value, values))
 
 
 def boolean(name: str, value: Any, values: Any = None, unit: str = "") -> bool:
     """True or False only (1 and 0 are not silently accepted as on/off)."""
-    if not isinstance(value, bool):
-        raise LimitError(name, value, "True or False", unit)
-    return value
+    return check_limit(name, value, bool)
 
 
 def format_float(value: float) -> str:

@@ -3,11 +3,11 @@ state written once on top of `status()` so every table model behaves the same.""
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
-from drivers.errors import DeviceError, LimitError, LinkLostError, SafetyTripError
+from bench.validation import check_limit
+from drivers.errors import DeviceError, LinkLostError, SafetyTripError
 
 #: |rate| below which the table counts as at rest (deg/s): safe_state and stop confirmations.
 REST_RATE_DPS = 0.05
@@ -28,10 +28,8 @@ class TableLimits:
     max_accel_dps2: float
 
     def __post_init__(self) -> None:
-        for name in ("max_rate_dps", "max_accel_dps2"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"TableLimits.{name}={v!r} must be finite and > 0")
+        check_limit("max_rate_dps", self.max_rate_dps, low=0.0, low_open=True, unit="deg/s")
+        check_limit("max_accel_dps2", self.max_accel_dps2, low=0.0, low_open=True, unit="deg/s^2")
 
 
 @dataclass(frozen=True)
@@ -110,15 +108,12 @@ class RateTable(ABC):
     def _check_accel(self, accel_dps2: float | None) -> float:
         if accel_dps2 is None:
             return self.limits.max_accel_dps2
-        if not (math.isfinite(accel_dps2) and 0 < accel_dps2 <= self.limits.max_accel_dps2):
-            raise LimitError("accel_dps2", accel_dps2, f"(0, {self.limits.max_accel_dps2}]", "deg/s^2")
-        return float(accel_dps2)
+        return check_limit("accel_dps2", accel_dps2, low=0.0, low_open=True, high=self.limits.max_accel_dps2,
+                           unit="deg/s^2")
 
     def _check_rate(self, rate_dps: float, *, name: str = "rate_dps") -> float:
         lim = self.limits.max_rate_dps
-        if not (math.isfinite(rate_dps) and abs(rate_dps) <= lim):
-            raise LimitError(name, rate_dps, f"[-{lim}, {lim}]", "deg/s")
-        return float(rate_dps)
+        return check_limit(name, rate_dps, low=-lim, high=lim, unit="deg/s")
 
     def set_rate(self, rate_dps: float, accel_dps2: float | None = None) -> None:
         """Rate mode: ramp to rate_dps at accel_dps2 (default: the station's max acceleration)."""
@@ -130,11 +125,9 @@ class RateTable(ABC):
 
     def move_to(self, angle_deg: float, rate_dps: float | None = None, accel_dps2: float | None = None) -> None:
         """Position mode: move (shortest way) to angle_deg in [0, 360) at most at rate_dps, ramping at accel_dps2."""
-        if not (math.isfinite(angle_deg) and 0.0 <= angle_deg < 360.0):
-            raise LimitError("angle_deg", angle_deg, "[0, 360)", "deg")
-        speed = self.limits.max_rate_dps if rate_dps is None else self._check_rate(rate_dps)
-        if speed <= 0:
-            raise LimitError("rate_dps", speed, f"(0, {self.limits.max_rate_dps}]", "deg/s")
+        angle_deg = check_limit("angle_deg", angle_deg, low=0.0, high=360.0, high_open=True, unit="deg")
+        speed = self.limits.max_rate_dps if rate_dps is None else rate_dps
+        speed = check_limit("rate_dps", speed, low=0.0, low_open=True, high=self.limits.max_rate_dps, unit="deg/s")
         accel = self._check_accel(accel_dps2)
         self._write_move(float(angle_deg), float(speed), accel)
         self.commanded_rate_dps = 0.0
