@@ -90,9 +90,9 @@ class FpgaFirmware:
         if rising & p.AGC_EN:
             st[k.S_AGC_INT] = 0.0
         if rising & p.QUAD_EN:
-            st[k.S_QUAD_INT] = 0.0
+            st[k.S_QUAD_INT_C] = st[k.S_QUAD_INT_S] = 0.0
         if not new & p.DRIVE_EN:
-            st[k.S_AGC_INT] = st[k.S_QUAD_INT] = 0.0
+            st[k.S_AGC_INT] = st[k.S_QUAD_INT_C] = st[k.S_QUAD_INT_S] = 0.0
         self.regs["CTRL"] = new
 
     def _status(self) -> int:
@@ -145,12 +145,13 @@ class FpgaFirmware:
             # (one more block after going idle, so the reference ends at the NCO's final value)
             active = bool(ctrl & (p.DRIVE_EN | p.PLL_EN) or fm_on)
             if active or self._owns_ref:
-                world.ref_freq_hz = regs["PLL_FREQ_HZ"] + fm
+                world.ref_freq_hz = regs["PLL_FREQ_HZ"] + fm  # held over the block (its forces need it)
             self._owns_ref = active
             st = self._st
             st[k.S_OUT + 1] = regs["PLL_FREQ_HZ"] + fm - regs["REF_FREQ_HZ"]
             if ctrl & p.DRIVE_EN:
                 self._u_on = True
+                k.wave_force(t_s, n, dt_s, world.ref_freq_hz, ctrl, self._params(), st)
                 world.set_force("fpga", st[k.S_U : k.S_U + 4].copy())
             elif self._u_on:
                 self._u_on = False
@@ -166,7 +167,9 @@ class FpgaFirmware:
             if ctrl & (p.DRIVE_EN | p.PLL_EN):  # nothing to update with the drive and PLL off
                 st = self._st
                 st[k.S_PLL_FREQ_HZ] = regs["PLL_FREQ_HZ"]
-                k.update_loops(block.q_meas, block.n * world.sample_period_s, ctrl, self._params(), st)
+                dt = world.sample_period_s
+                t_end = (block.first_index + block.n - 1) * dt
+                k.update_loops(block.q_meas, t_end, dt, world.ref_freq_hz, ctrl, self._params(), st)
                 regs["PLL_FREQ_HZ"] = float(st[k.S_PLL_FREQ_HZ])
             if ctrl & p.STREAM_EN:
                 self._emit(block)
