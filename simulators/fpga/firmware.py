@@ -89,10 +89,11 @@ class FpgaFirmware:
             st[k.S_PLL_INT_HZ] = float(self.regs["PLL_FREQ_HZ"])
         if rising & p.AGC_EN:
             st[k.S_AGC_INT] = 0.0
-        if rising & p.QUAD_EN:
-            st[k.S_QUAD_INT_C] = st[k.S_QUAD_INT_S] = 0.0
+        if rising & p.QUAD_EN:  # the split observer starts afresh (kept over a drive cut: the split stays)
+            st[k.S_QUAD_INT] = 0.0
+            st[k.S_M_CC : k.S_H_S + 1] = 0.0
         if not new & p.DRIVE_EN:
-            st[k.S_AGC_INT] = st[k.S_QUAD_INT_C] = st[k.S_QUAD_INT_S] = 0.0
+            st[k.S_AGC_INT] = st[k.S_QUAD_INT] = 0.0
         self.regs["CTRL"] = new
 
     def _status(self) -> int:

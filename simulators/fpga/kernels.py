@@ -10,11 +10,17 @@ into electrode forces at the angle and phase the wave is predicted to have at th
 block they are held over.  Without that prediction a force held over a block acts along the
 wave's direction one block period ago: while the wave turns at Omega, the amplitude force f_a then
 leaks -f_a Omega T / (2 a) into dtheta/dt, a precession scale error of -gamma T / 2 (0.017 % at
-50 ms blocks).  The quadrature loop integrates in the case frame (two integrators on k cos 4 theta
-and k sin 4 theta), where the frequency split that pumps quadrature is constant: a wave-frame
-integrator must follow the split's sin 4 (theta - theta_w) as the wave turns, leaves a quadrature
-k that lags it, and the split then turns that k into a drift -(Dw/2) (k/a) cos 4 (theta - theta_w)
-with a mean and an 8 theta part (25 deg/h each, output-referred, for a 5 mHz split at 2 deg/s).
+50 ms blocks).  The quadrature loop is a PI on k plus the split's pattern fed forward: a frequency
+split pumps quadrature at a rate (d/a) = h_c cos 4 theta + h_s sin 4 theta fixed in the case frame,
+which a PI in the wave's frame must follow as the wave turns and cannot (at 2 deg/s the 4 theta
+pattern turns at 0.14 rad/s, under the PI's 1 rad/s): the k it leaves lags the pattern, and the
+split turns that k into a drift -(Dw/2) (k/a) cos 4 (theta - theta_w) with a mean and an 8 theta
+part (25 deg/h each, output-referred, for a 5 mHz split).  The observer measures the pumping
+(dk/dt - f_q/2 between block estimates), fits (h_c, h_s) by exponentially weighted least squares
+on the angle it was seen at, and `wave_force` cancels it at the predicted angle; the PI is left
+with the rest.  At a fixed angle only one combination is seen; the other is learnt once the
+wave turns (about 10 s at 2 deg/s).  The observer keeps its estimate over a drive cut (the
+split is the resonator's) and starts afresh when the quadrature loop is switched on.
 """
 
 from __future__ import annotations
@@ -34,15 +40,20 @@ PARAM_REGS = (
     "QUAD_KP", "QUAD_KI", "PRECESSION_RATE_DPS", "DRIFT_D_PER_S", "DRIFT_THETA_TAU_DEG",
 )  # fmt: skip
 # loop state
-S_AGC_INT, S_QUAD_INT_C, S_QUAD_INT_S, S_PLL_INT_HZ, S_A, S_PHASE_ERR, S_PLL_FREQ_HZ = range(7)
-S_U = 7  # 7..10: the force held over the block (set by wave_force)
-S_OUT = 11  # 11..14: amp, freq, quad, prec outputs (freq is set per block by before_block)
+S_AGC_INT, S_QUAD_INT, S_PLL_INT_HZ, S_A, S_PHASE_ERR, S_PLL_FREQ_HZ = range(6)
+S_U = 6  # 6..9: the force held over the block (set by wave_force)
+S_OUT = 10  # 10..13: amp, freq, quad, prec outputs (freq is set per block by before_block)
 # the wave estimate: valid flag (0 none, 1 angle and phase, 2 with rates), time of the estimate,
 # theta and chi there, their rates (chi's relative to the reference of the block), the reference
 # of the block, the block's end time, and the wave-frame forces without the compensation term
-S_EST, S_T_EST, S_THETA, S_CHI, S_THETA_RATE, S_CHI_RATE, S_REF_HZ, S_T_END = range(15, 23)
-S_WEAK, S_F_A, S_F_Q_P, S_F_P = range(23, 27)
-N_STATE = 27
+S_EST, S_T_EST, S_THETA, S_CHI, S_THETA_RATE, S_CHI_RATE, S_REF_HZ, S_T_END = range(14, 22)
+S_WEAK, S_F_A, S_F_Q_P, S_F_P = range(22, 26)
+# the split observer (case frame): the last block's k, applied f_q and length, whether it learned,
+# the information matrix (m_cc, m_cs, m_ss), its right-hand side (v_c, v_s) and the estimate (h_c, h_s)
+S_OBS_K, S_OBS_FQ, S_OBS_N, S_OBS_OK, S_M_CC, S_M_CS, S_M_SS, S_V_C, S_V_S, S_H_C, S_H_S = range(26, 37)
+N_STATE = 37
+OBS_MEMORY_S = 100.0  # the observer forgets data older than this (exponential weight)
+OBS_RIDGE = 0.05**3  # prior weight of a zero pattern: one 50 ms block's (weights are span^3: 1/variance)
 
 # control bits (drivers.fpga.protocol), repeated here as compile-time constants
 _DRIVE_EN, _AGC_EN, _PLL_EN, _QUAD_EN, _WHOLE_ANGLE, _DRIFT_COMP_EN = 0x01, 0x02, 0x04, 0x08, 0x10, 0x40
@@ -57,6 +68,30 @@ def _clamp(x: float, limit: float) -> float:
 def _wrap(x: float, period: float) -> float:
     """x modulo period, in [-period/2, period/2)."""
     return (x + 0.5 * period) % period - 0.5 * period
+
+
+@njit(cache=True)
+def _observe_split(st: np.ndarray, k_rel: float, a: float, theta: float, span: float, n: int, dt_s: float) -> None:
+    """One step of the split observer: the quadrature pumping d/a = (dk/dt - f_q/2) / a between the
+    last block's estimate and this one's, regressed (exponentially weighted least squares) on
+    cos 4 theta, sin 4 theta at the midpoint angle: the case-frame pattern h_c cos 4 theta + h_s sin 4 theta."""
+    # f_q held over the last block from its mean sample time to its end, then this block's up to now
+    n_prev = st[S_OBS_N]
+    f_int = st[S_OBS_FQ] * 0.5 * (n_prev - 1) * dt_s + (st[S_OUT + 2] / a) * 0.5 * (n + 1) * dt_s
+    y = (k_rel - st[S_OBS_K] - 0.5 * f_int) / span
+    th_m = st[S_THETA] + 0.5 * _wrap(theta - st[S_THETA], 0.5 * math.pi)
+    c4, s4 = math.cos(4.0 * th_m), math.sin(4.0 * th_m)
+    lam = math.exp(-span / OBS_MEMORY_S)
+    w = span * span * span
+    st[S_M_CC] = lam * st[S_M_CC] + w * c4 * c4
+    st[S_M_CS] = lam * st[S_M_CS] + w * c4 * s4
+    st[S_M_SS] = lam * st[S_M_SS] + w * s4 * s4
+    st[S_V_C] = lam * st[S_V_C] + w * c4 * y
+    st[S_V_S] = lam * st[S_V_S] + w * s4 * y
+    m_cc, m_cs, m_ss = st[S_M_CC] + OBS_RIDGE, st[S_M_CS], st[S_M_SS] + OBS_RIDGE
+    det = m_cc * m_ss - m_cs * m_cs
+    st[S_H_C] = (m_ss * st[S_V_C] - m_cs * st[S_V_S]) / det
+    st[S_H_S] = (m_cc * st[S_V_S] - m_cs * st[S_V_C]) / det
 
 
 @njit(cache=True)
@@ -96,11 +131,14 @@ def update_loops(
     # the wave estimate and its rates (from the last block's, when that block came just before)
     t_est = t_end_s - 0.5 * (n - 1) * dt_s
     t_start = t_end_s - t_block_s
+    quad_on = ctrl & _QUAD_EN and ctrl & _DRIVE_EN and not weak
     if weak:
         st[S_EST] = 0.0
     else:
         if st[S_EST] > 0 and abs(st[S_T_END] - t_start) < 0.5 * dt_s and t_est > st[S_T_EST]:
             span = t_est - st[S_T_EST]
+            if quad_on and st[S_OBS_OK] > 0:
+                _observe_split(st, k / a, a, theta, span, n, dt_s)
             st[S_THETA_RATE] = _wrap(theta - st[S_THETA], 0.5 * math.pi) / span
             # chi is relative to the reference: add back the reference's change since the last estimate
             d_chi = _wrap(chi - st[S_CHI], math.pi) + 2.0 * math.pi * (st[S_REF_HZ] - ref_hz) * (t_start - st[S_T_EST])
@@ -114,6 +152,10 @@ def update_loops(
         st[S_T_EST] = t_est
         st[S_REF_HZ] = ref_hz
     st[S_T_END] = t_end_s
+    st[S_OBS_OK] = 1.0 if quad_on else 0.0
+    st[S_OBS_K] = k / a if a > 0 else 0.0
+    st[S_OBS_FQ] = st[S_OUT + 2] / a if a > 0 else 0.0  # the quadrature force held over this block
+    st[S_OBS_N] = n
     if ctrl & _PLL_EN and a > 0.01 * max(setpoint, 1e-12):
         st[S_PLL_INT_HZ] += prm[P_PLL_KI] * phase_err * t_block_s
         st[S_PLL_FREQ_HZ] = st[S_PLL_INT_HZ] + prm[P_PLL_KP] * phase_err
@@ -131,9 +173,9 @@ def update_loops(
         f_a = _clamp(prm[P_DRIVE_FORCE], limit)
     f_q = 0.0
     if ctrl & _QUAD_EN and not weak:
-        f_q = -(prm[P_QUAD_KP] * k + st[S_QUAD_INT_C])
+        f_q = -(prm[P_QUAD_KP] * k + st[S_QUAD_INT])
         if abs(f_q) < limit or f_q * k > 0:
-            st[S_QUAD_INT_C] += prm[P_QUAD_KI] * k * t_block_s
+            st[S_QUAD_INT] += prm[P_QUAD_KI] * k * t_block_s
         f_q = _clamp(f_q, limit)
     f_p = 0.0
     if ctrl & _WHOLE_ANGLE and not weak:
@@ -166,7 +208,16 @@ def wave_force(
         if ctrl & _WHOLE_ANGLE and ctrl & _DRIFT_COMP_EN:
             th_tau = math.radians(prm[P_DRIFT_THETA_TAU_DEG])
             f_p -= st[S_A] * prm[P_DRIFT_D_PER_S] * math.sin(4.0 * (theta - th_tau))
-        f_p = _clamp(f_p, limit)
+        # a turning wave: the block mean shrinks the amplitude estimate by s1 and a force held in
+        # one direction pushes along the turning wave by s2 on average (both 1 - (Omega T)^2 / 6)
+        x = st[S_THETA_RATE] * dt_s
+        n_est = st[S_OBS_N]
+        s1 = math.sin(n_est * x) / (n_est * math.sin(x)) if x != 0.0 and n_est > 0 else 1.0
+        s2 = math.sin(n * x) / (n * x) if x != 0.0 else 1.0
+        f_p = _clamp(f_p / (s1 * s2), limit)
+        if ctrl & _QUAD_EN:  # cancel the split's quadrature pumping at the predicted angle
+            c4, s4 = math.cos(4.0 * theta), math.sin(4.0 * theta)
+            f_q = _clamp(f_q - 2.0 * st[S_A] * (st[S_H_C] * c4 + st[S_H_S] * s4), limit)
     c2, s2 = math.cos(2 * theta), math.sin(2 * theta)
     cc, sc = math.cos(chi), math.sin(chi)
     # u = f_a e_a + f_q e_k + f_p e_p with the unit forces along a, k and theta
