@@ -719,8 +719,11 @@ class DriftHarmonics:
 def fit_drift_harmonics(theta_rad, rate, orders: tuple[int, ...] = (4, 8, 12)) -> DriftHarmonics:
     """Least-squares fit of mean + sum_m (A_m cos m theta + B_m sin m theta) to a drift rate against
     the wave angle: the damping drift is the 4 theta term, a loop or split defect shows in the mean
-    and the other harmonics.  Intervals: Student t on the residual scatter (amplitudes by the delta
-    method, clipped at 0); the record should cover a whole period of the lowest order."""
+    and the other harmonics.  Intervals (95 %): the mean's from Student t on the residual scatter;
+    an amplitude's from the joint confidence ellipse of its (A, B) (radius^2 = 2 F(2, dof)), i.e.
+    the distances of its nearest and farthest points from 0, so the interval holds 0 exactly when
+    (0, 0) is a plausible (A, B) (a Rayleigh-biased amplitude alone would exclude 0 15 % of the
+    time for an absent term).  The record should cover a whole period of the lowest order."""
     th = np.asarray(theta_rad, dtype=float).reshape(-1)
     y = np.asarray(rate, dtype=float).reshape(-1)
     n_par = 1 + 2 * len(orders)
@@ -740,20 +743,23 @@ def fit_drift_harmonics(theta_rad, rate, orders: tuple[int, ...] = (4, 8, 12)) -
     s2 = float(r @ r) / dof
     cov = s2 * np.linalg.pinv(x.T @ x)
     t = float(special.stdtrit(dof, 0.975))
+    radius = math.sqrt(2.0 * float(special.fdtri(2, dof, 0.95)))
     hs = {}
     for i, m in enumerate(orders):
         j = 1 + 2 * i
-        a, b = float(p[j]), float(p[j + 1])
+        ab = p[j : j + 2]
+        a, b = float(ab[0]), float(ab[1])
         amp = math.hypot(a, b)
         c = cov[j : j + 2, j : j + 2]
-        if amp > 0:
-            g = np.array([a, b]) / amp
-            sd = math.sqrt(max(float(g @ c @ g), 0.0))
-        else:
-            sd = math.sqrt(max(0.5 * (c[0, 0] + c[1, 1]), 0.0))
+        reach = radius * math.sqrt(max(float(np.linalg.eigvalsh(c)[-1]), 0.0))  # farthest ellipse point from (A, B)
+        try:
+            holds_zero = float(ab @ np.linalg.solve(c, ab)) <= radius * radius
+        except np.linalg.LinAlgError:
+            holds_zero = amp <= reach
+        lo = 0.0 if holds_zero else max(0.0, amp - reach)
         # A cos + B sin = amp sin(m th + psi), psi = atan2(A, B)  ->  phase = -psi / m
         phase = (-math.atan2(a, b) / m) % (2 * math.pi / m)
-        hs[m] = DriftHarmonic(m, amp, phase, (max(0.0, amp - t * sd), amp + t * sd))
+        hs[m] = DriftHarmonic(m, amp, phase, (lo, amp + reach))
     half = t * math.sqrt(max(float(cov[0, 0]), 0.0))
     return DriftHarmonics(float(p[0]), (float(p[0]) - half, float(p[0]) + half), hs, math.sqrt(float(r @ r) / th.size),
                           int(th.size))
