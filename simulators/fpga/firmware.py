@@ -157,6 +157,7 @@ class FpgaFirmware:
             elif self._u_on:
                 self._u_on = False
                 st[k.S_U : k.S_U + 4] = 0.0
+                st[k.S_F_A] = st[k.S_F_Q_P] = st[k.S_F_P] = 0.0  # no force until the loops update again
                 st[k.S_OUT] = st[k.S_OUT + 2] = st[k.S_OUT + 3] = 0.0
                 world.set_force("fpga", None)
 

@@ -195,6 +195,10 @@ def wave_force(
     compensation evaluated there too; the outputs amp, quad, prec (S_OUT) are these forces."""
     limit = prm[P_FORCE_LIMIT]
     f_a, f_q, f_p = st[S_F_A], st[S_F_Q_P], st[S_F_P]
+    if abs(st[S_T_END] - t_start_s) >= 0.5 * dt_s:  # no update from the block just before (a drive cut)
+        st[S_U : S_U + 4] = 0.0
+        st[S_OUT + 0] = st[S_OUT + 2] = st[S_OUT + 3] = 0.0
+        return
     if st[S_WEAK] > 0 or st[S_EST] <= 0:  # no wave to lock onto yet: excite along the x pickoff axis, in phase
         theta, chi, f_q, f_p = 0.0, 0.0, 0.0, 0.0
     else:
