@@ -2,10 +2,13 @@
 
 The World's averaged model already gives the pickoffs demodulated at the reference (cx, sx, cy,
 sy); the firmware reads them once per block, computes the wave's elements (amplitude a,
-quadrature k, angle theta, phase chi) and updates its loops, whose outputs it holds over the
-next block:
+quadrature k, angle theta, phase chi, and the rates of theta and chi) and updates its loops; just
+before the next block it turns their wave-frame forces onto the electrodes at the wave's angle and
+phase predicted for that block's middle, and holds them over it (kernels.py says why: a force held
+along the wave of the block before moves the wave itself):
   * AGC (PI on setpoint - a): a force along the wave (d q / d a), so da/dt gains F_a / 2;
-  * quadrature loop (PI on k): a force along d q / d k, dk/dt gains F_q / 2;
+  * quadrature loop (PI on k): a force along d q / d k, dk/dt gains F_q / 2, plus the frequency
+    split's quadrature pumping, learnt in the case frame by an observer, cancelled feed-forward;
   * PLL (PI on the phase chi, modulo pi): moves the reference frequency (world.ref_freq_hz);
   * whole-angle mode: a precession force along d q / d theta, F_p = 4 a Omega_cmd turns the wave
     at Omega_cmd; with drift compensation it adds -a D sin 4(theta - theta_tau), the force that
