@@ -71,7 +71,9 @@ def _wrap(x: float, period: float) -> float:
 
 
 @njit(cache=True)
-def _observe_split(st: np.ndarray, k_rel: float, a: float, theta: float, span: float, n: int, dt_s: float) -> None:
+def _observe_split(
+    st: np.ndarray, k_rel: float, a: float, theta: float, span: float, n: int, dt_s: float, a_rel: float
+) -> None:
     """One step of the split observer: the quadrature pumping d/a = (dk/dt - f_q/2) / a between the
     last block's estimate and this one's, regressed (exponentially weighted least squares) on
     cos 4 theta, sin 4 theta at the midpoint angle: the case-frame pattern h_c cos 4 theta + h_s sin 4 theta."""
@@ -82,7 +84,7 @@ def _observe_split(st: np.ndarray, k_rel: float, a: float, theta: float, span: f
     th_m = st[S_THETA] + 0.5 * _wrap(theta - st[S_THETA], 0.5 * math.pi)
     c4, s4 = math.cos(4.0 * th_m), math.sin(4.0 * th_m)
     lam = math.exp(-span / OBS_MEMORY_S)
-    w = span * span * span
+    w = span * span * span * min(a_rel * a_rel, 1.0)  # 1/variance: k/a's noise goes as 1/a, its slope's as span^-3/2
     st[S_M_CC] = lam * st[S_M_CC] + w * c4 * c4
     st[S_M_CS] = lam * st[S_M_CS] + w * c4 * s4
     st[S_M_SS] = lam * st[S_M_SS] + w * s4 * s4
@@ -138,7 +140,7 @@ def update_loops(
         if st[S_EST] > 0 and abs(st[S_T_END] - t_start) < 0.5 * dt_s and t_est > st[S_T_EST]:
             span = t_est - st[S_T_EST]
             if quad_on and st[S_OBS_OK] > 0:
-                _observe_split(st, k / a, a, theta, span, n, dt_s)
+                _observe_split(st, k / a, a, theta, span, n, dt_s, a / max(setpoint, 1e-12))
             st[S_THETA_RATE] = _wrap(theta - st[S_THETA], 0.5 * math.pi) / span
             # chi is relative to the reference: add back the reference's change since the last estimate
             d_chi = _wrap(chi - st[S_CHI], math.pi) + 2.0 * math.pi * (st[S_REF_HZ] - ref_hz) * (t_start - st[S_T_EST])
