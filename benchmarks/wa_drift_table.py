@@ -12,8 +12,8 @@ before the fix (forces held along the wave of the block before; a wave-frame qua
 | compensation off | -28.01 [-29.05, -26.98] | 27.06 [25.22, 28.91] | 24.70 [22.85, 26.54] | 1.23 [0.00, 3.07] | 4.70 |
 | compensation on  | -28.64 [-29.48, -27.80] |  3.06 [1.57, 4.56]   | 24.95 [23.46, 26.45] | 1.05 [0.00, 2.54] | 3.82 |
 after (forces along the predicted wave; the split's quadrature pumping learnt in the case frame)
-| compensation off |  0.17 [-0.72, 1.05] | 29.58 [27.99, 31.16] | 0.24 [0.00, 1.82] | 0.99 [0.00, 2.57] | 4.04 |
-| compensation on  | -0.06 [-0.92, 0.79] |  0.57 [0.00, 2.09]   | 0.35 [0.00, 1.87] | 0.93 [0.00, 2.45] | 3.88 |
+| compensation off |  0.42 [-0.47, 1.31] | 29.39 [27.81, 30.97] | 0.19 [0.00, 1.77] | 0.89 [0.00, 2.48] | 4.04 |
+| compensation on  | -0.03 [-0.88, 0.83] |  0.58 [0.00, 2.10]   | 0.33 [0.00, 1.84] | 0.93 [0.00, 2.45] | 3.88 |
 (columns: mean, 4, 8, 12 theta, rest rms; truth (D/4)/K = 29.79; the decay fit's own error
 predicts 1.87 [0, 3.23] of 4 theta after compensation; seeds 1 and 2 alike, every term but 4 theta
 within noise.)
