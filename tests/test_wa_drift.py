@@ -68,7 +68,7 @@ def test_ideal_resonator_precesses_at_the_command_with_no_drift(rate_dps):
     theta) the wave turns at the command within 1e-4 relative and the drift's mean and every
     harmonic are under 0.1 deg/h output-referred.  (Forces held over a 50 ms block along the
     wave's angle of the block before gave -4.2 deg/h at 2 deg/s, 1.6e-4 of the rate.)"""
-    params = preset("hrg", delta_inv_tau_per_s=0.0, split_hz=0.0, noise_sigma=0.0)
+    params = preset("hrg-ideal")
     record_s = 180.0 / abs(rate_dps)
     t_s, theta = _whole_angle(params, rate_dps, 15.0, record_s)
     rate = math.degrees(np.polyfit(t_s, theta, 1)[0])

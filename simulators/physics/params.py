@@ -258,6 +258,10 @@ PRESETS: dict[str, ResonatorParams] = {
     ),
 }
 
+#: The HRG without damping anisotropy, split or pickoff noise: whatever drift a whole-angle run shows
+#: on it comes from the loops or the measurement (tests/test_wa_drift.py holds it under 0.1 deg/h).
+PRESETS["hrg-ideal"] = replace(PRESETS["hrg"], delta_inv_tau_per_s=0.0, split_hz=0.0, noise_sigma=0.0)
+
 
 def preset(name: str, **overrides: float) -> ResonatorParams:
     """A named preset ("hrg", "mems"), optionally with some parameters changed."""
