@@ -682,3 +682,84 @@ def fit_angle_drift(theta_rad, rate_rad_s) -> AngleDriftFit:
         residual_rms_rad_s=math.sqrt(s2),
         n_samples=int(th.size),
     )
+
+
+@dataclass(frozen=True)
+class DriftHarmonic:
+    """One harmonic m of a drift against the wave angle: amplitude sin m(theta - phase)."""
+
+    order: int
+    amplitude: float
+    phase_rad: float
+    ci95: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class DriftHarmonics:
+    """A drift against the wave angle in full: its mean, each harmonic fitted (with 95 % intervals)
+    and the rms of what is left.  Units are those of the rate given (rad/s, deg/h...)."""
+
+    mean: float
+    mean_ci95: tuple[float, float]
+    harmonics: Mapping[int, DriftHarmonic]
+    rest_rms: float
+    n_samples: int
+
+    def scaled(self, factor: float) -> DriftHarmonics:
+        """The same fit in other units (factor > 0, e.g. rad/s -> output-referred deg/h)."""
+        if not factor > 0:
+            raise ValueError(f"factor={factor!r} must be > 0")
+        hs = {m: DriftHarmonic(m, h.amplitude * factor, h.phase_rad, (h.ci95[0] * factor, h.ci95[1] * factor))
+              for m, h in self.harmonics.items()}
+        lo, hi = self.mean_ci95
+        return DriftHarmonics(self.mean * factor, (lo * factor, hi * factor), hs, self.rest_rms * factor,
+                              self.n_samples)
+
+
+def fit_drift_harmonics(theta_rad, rate, orders: tuple[int, ...] = (4, 8, 12)) -> DriftHarmonics:
+    """Least-squares fit of mean + sum_m (A_m cos m theta + B_m sin m theta) to a drift rate against
+    the wave angle: the damping drift is the 4 theta term, a loop or split defect shows in the mean
+    and the other harmonics.  Intervals (95 %): the mean's from Student t on the residual scatter;
+    an amplitude's from the joint confidence ellipse of its (A, B) (radius^2 = 2 F(2, dof)), i.e.
+    the distances of its nearest and farthest points from 0, so the interval holds 0 exactly when
+    (0, 0) is a plausible (A, B) (a Rayleigh-biased amplitude alone would exclude 0 15 % of the
+    time for an absent term).  The record should cover a whole period of the lowest order."""
+    th = np.asarray(theta_rad, dtype=float).reshape(-1)
+    y = np.asarray(rate, dtype=float).reshape(-1)
+    n_par = 1 + 2 * len(orders)
+    if th.size != y.size:
+        raise ValueError(f"theta_rad has {th.size} samples but rate has {y.size}")
+    if th.size <= n_par:
+        raise ValueError(f"fit_drift_harmonics needs more than {n_par} samples for orders {orders}, got {th.size}")
+    if not (np.all(np.isfinite(th)) and np.all(np.isfinite(y))):
+        raise ValueError("theta_rad and rate must be finite")
+    cols = [np.ones_like(th)]
+    for m in orders:
+        cols += [np.cos(m * th), np.sin(m * th)]
+    x = np.column_stack(cols)
+    p, *_ = np.linalg.lstsq(x, y, rcond=None)
+    r = y - x @ p
+    dof = th.size - n_par
+    s2 = float(r @ r) / dof
+    cov = s2 * np.linalg.pinv(x.T @ x)
+    t = float(special.stdtrit(dof, 0.975))
+    radius = math.sqrt(2.0 * float(special.fdtri(2, dof, 0.95)))
+    hs = {}
+    for i, m in enumerate(orders):
+        j = 1 + 2 * i
+        ab = p[j : j + 2]
+        a, b = float(ab[0]), float(ab[1])
+        amp = math.hypot(a, b)
+        c = cov[j : j + 2, j : j + 2]
+        reach = radius * math.sqrt(max(float(np.linalg.eigvalsh(c)[-1]), 0.0))  # farthest ellipse point from (A, B)
+        try:
+            holds_zero = float(ab @ np.linalg.solve(c, ab)) <= radius * radius
+        except np.linalg.LinAlgError:
+            holds_zero = amp <= reach
+        lo = 0.0 if holds_zero else max(0.0, amp - reach)
+        # A cos + B sin = amp sin(m th + psi), psi = atan2(A, B)  ->  phase = -psi / m
+        phase = (-math.atan2(a, b) / m) % (2 * math.pi / m)
+        hs[m] = DriftHarmonic(m, amp, phase, (lo, amp + reach))
+    half = t * math.sqrt(max(float(cov[0, 0]), 0.0))
+    return DriftHarmonics(float(p[0]), (float(p[0]) - half, float(p[0]) + half), hs, math.sqrt(float(r @ r) / th.size),
+                          int(th.size))
