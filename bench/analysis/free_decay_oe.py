@@ -1,0 +1,282 @@
+"""Output-error (maximum-likelihood) identification of a free decay: fit the slow-variable model's
+trajectory q(t; q0, z) to the samples (docs/free_decay_identification.md).
+
+Under white pickoff noise of one std s on each slow variable the likelihood is maximised by the
+least squares of the samples minus the trajectory, over the initial state q0 and the parameters z
+(gamma, nu, b_c, b_s, c_m, n, h_c, h_s[, xi[, kappa]]).  The linear model has the closed form
+q(t) = expm(A t) q0 (A = linear_matrix(z), which holds the 1/2 of 2 dq/dt); its Jacobian comes
+exactly from the augmented system d/dt (q, dq/dz_j) = [[A, 0], [B_j, A]] (q, dq/dz_j), whose
+exponential carries the Frechet derivative of expm, stepped exactly with powers of its expm at the
+sample step (uniform samples).  The nonlinear models integrate the same sensitivity equations with
+J(q) = d(dq/dt)/dq.  Levenberg-Marquardt from the equation-error estimate, bounded iterations;
+intervals from the Fisher information at the optimum (or a Newey-West sandwich for coloured noise).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.linalg import expm
+
+from bench.analysis.maslov_result import Identification, derived_quantities, intervals, t_quantile
+from bench.analysis.maslov_terms import check_model, free_param_names, nonlinear_columns
+from bench.analysis.slow_model import linear_matrix
+
+Q0_NAMES = ("q1_0", "p1_0", "q2_0", "p2_0")
+COVARIANCES = ("fisher", "sandwich")
+_POWERS_BLOCK = 512  # samples per block of the exact linear propagation
+_B = np.stack([linear_matrix(np.eye(8)[j]) for j in range(8)])  # dA/dz_j, (8, 4, 4)
+
+
+class FreeDecayFitError(ValueError):
+    """The output-error fit did not converge (or its model could not be integrated)."""
+
+
+def _powers(phi: np.ndarray, n: int) -> np.ndarray:
+    """phi^1 .. phi^n, shape (n, m, m), by doubling."""
+    out = np.empty((n,) + phi.shape)
+    out[0] = phi
+    have = 1
+    while have < n:
+        take = min(have, n - have)
+        out[have : have + take] = out[:take] @ out[have - 1]
+        have += take
+    return out
+
+
+def linear_sensitivities(z: np.ndarray, q0: np.ndarray, n: int, dt_s: float,
+                         params: tuple[int, ...] = tuple(range(8))) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact trajectory of dq/dt = A(z) q at t = k dt, k = 0..n-1, and its sensitivities.
+
+    Returns (q (n, 4), dq/dq0 = Phi(t) (n, 4, 4), dq/dz_j (n, 4, len(params))) for the linear
+    coefficients indexed by `params`, from powers of expm(big dt), big = [[A, 0], [B_j, A]]."""
+    a = linear_matrix(np.asarray(z, dtype=float)[:8])
+    p = len(params)
+    dim = 4 * (p + 1)
+    big = np.zeros((dim, dim))
+    for b in range(p + 1):
+        big[4 * b : 4 * b + 4, 4 * b : 4 * b + 4] = a
+    for j, idx in enumerate(params):
+        big[4 * (j + 1) : 4 * (j + 2), 0:4] = _B[idx]
+    step = expm(big * dt_s)
+    blk = max(1, min(_POWERS_BLOCK, n - 1))
+    pw = np.concatenate([np.eye(dim)[None], _powers(step, blk)])  # P^0 .. P^blk
+    x = np.zeros(dim)
+    x[:4] = q0
+    phi = np.eye(4)
+    out_x = np.empty((n, dim))
+    out_phi = np.empty((n, 4, 4))
+    flat = pw[:blk].reshape(blk * dim, dim)
+    top = np.ascontiguousarray(pw[:blk, :4, :4]).reshape(blk * 4, 4)
+    for start in range(0, n, blk):
+        take = min(blk, n - start)
+        out_x[start : start + take] = (flat[: take * dim] @ x).reshape(take, dim)
+        out_phi[start : start + take] = (top[: take * 4] @ phi).reshape(take, 4, 4)
+        x = pw[take] @ x
+        phi = pw[take, :4, :4] @ phi
+    sens = out_x[:, 4:].reshape(n, p, 4).transpose(0, 2, 1)
+    return out_x[:, :4], out_phi, sens
+
+
+def _jacobian(q: np.ndarray, a: np.ndarray, model: str, z_nl: np.ndarray) -> np.ndarray:
+    """d(dq/dt)/dq at states q (n, 4) for dq/dt = A q + N(q) z_nl / 2, shape (n, 4, 4)."""
+    from bench.analysis.maslov_decay import _jacobian_t  # the equation-error fit's closed form
+
+    return np.swapaxes(_jacobian_t(q, a, model, z_nl), -1, -2)
+
+
+def nonlinear_sensitivities(z: np.ndarray, q0: np.ndarray, t_s: np.ndarray, model: str, *,
+                            jac: bool = True, rtol: float = 1e-10) -> tuple[np.ndarray, np.ndarray | None]:
+    """Integrated trajectory of dq/dt = A q + N(q) z_nl / 2 at t_s (t_s[0] = start) and, with
+    jac, its sensitivities (n, 4, 4 + k) to (q0, z) by the sensitivity equations
+    dS/dt = J(q) S + df/dtheta, S(0) = [I | 0] (DOP853)."""
+    z = np.asarray(z, dtype=float)
+    a = linear_matrix(z[:8])
+    z_nl = z[8:]
+    k = z.size
+    p = 4 + k
+
+    def rhs_q(_t: float, q: np.ndarray) -> np.ndarray:
+        return a @ q + 0.5 * (nonlinear_columns(q, model) @ z_nl)
+
+    def rhs_full(_t: float, y: np.ndarray) -> np.ndarray:
+        q = y[:4]
+        s = y[4:].reshape(4, p)
+        cols = nonlinear_columns(q, model)
+        dq = a @ q + 0.5 * (cols @ z_nl)
+        forcing = np.zeros((4, p))
+        forcing[:, 4:12] = _B.transpose(1, 0, 2) @ q  # (4, 8): column j is B_j q
+        forcing[:, 12:] = 0.5 * cols
+        ds = _jacobian(q[None], a, model, z_nl)[0] @ s + forcing
+        return np.concatenate([dq, ds.ravel()])
+
+    t = np.asarray(t_s, dtype=float)
+    scale = float(np.max(np.abs(q0))) or 1.0
+    if jac:
+        y0 = np.concatenate([q0, np.hstack([np.eye(4), np.zeros((4, k))]).ravel()])
+        fun = rhs_full
+    else:
+        y0 = np.asarray(q0, dtype=float)
+        fun = rhs_q
+    sol = solve_ivp(fun, (t[0], t[-1]), y0, t_eval=t, method="DOP853", rtol=rtol, atol=1e-13 * scale,
+                    first_step=float(t[1] - t[0]) if t.size > 1 else None)
+    if not sol.success or sol.y.shape[1] != t.size or not np.all(np.isfinite(sol.y)):
+        raise FreeDecayFitError(f"model={model!r} could not be integrated over the record: {sol.message}")
+    y = sol.y.T
+    return y[:, :4].copy(), (y[:, 4:].reshape(-1, 4, p) if jac else None)
+
+
+def trajectory(t_s: np.ndarray, q0: np.ndarray, z: np.ndarray, model: str, *,
+               jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """Model trajectory at uniform t_s (from t_s[0]) and its Jacobian (n, 4, 4 + k) to (q0, z)."""
+    t = np.asarray(t_s, dtype=float)
+    if model == "linear":
+        dt = float(t[1] - t[0])
+        q, phi, sens = linear_sensitivities(z, q0, t.size, dt)
+        return q, (np.concatenate([phi, sens], axis=-1) if jac else None)
+    return nonlinear_sensitivities(z, q0, t, model, jac=jac)
+
+
+def _newey_west(scores: np.ndarray, lags: int) -> np.ndarray:
+    """sum of Bartlett-weighted autocovariances of the per-sample scores (n, p)."""
+    meat = scores.T @ scores
+    for lag in range(1, lags + 1):
+        g = scores[lag:].T @ scores[:-lag]
+        meat += (1.0 - lag / (lags + 1.0)) * (g + g.T)
+    return meat
+
+
+def output_error_fit(t_s: np.ndarray, q: np.ndarray, start: np.ndarray, *, model: str = "linear",
+                     covariance: str = "fisher", max_iter: int = 50, sandwich_lags: int | None = None,
+                     q0_start: np.ndarray | None = None) -> dict:
+    """Levenberg-Marquardt least squares of the samples q (n, 4) minus the model trajectory.
+
+    start: z from the equation-error fit; q0 starts at the least squares of the samples for that z
+    (linear in q0 for the linear model) or at q0_start / the first sample.  Stops when the step is
+    below 1e-6 standard errors (in chi^2) or raises FreeDecayFitError after max_iter iterations."""
+    check_model(model)
+    if covariance not in COVARIANCES:
+        raise ValueError(f"covariance={covariance!r} is not one of {COVARIANCES}")
+    if int(max_iter) < 1:
+        raise ValueError(f"max_iter={max_iter!r} must be at least 1")
+    t = np.asarray(t_s, dtype=float)
+    t = t - t[0]
+    y = np.asarray(q, dtype=float)
+    n = y.shape[0]
+    z = np.asarray(start, dtype=float).copy()
+    k = z.size
+    p = 4 + k
+    dof = 4 * n - p
+    if dof <= 0:
+        raise ValueError(f"{n} samples give {4 * n} values; need more than the {p} unknowns of {model!r}")
+    if q0_start is not None:
+        q0 = np.asarray(q0_start, dtype=float).copy()
+    elif model == "linear":
+        _, phi, _ = linear_sensitivities(z, np.zeros(4), n, float(t[1]), params=())
+        q0 = np.linalg.lstsq(phi.reshape(4 * n, 4), y.reshape(-1), rcond=None)[0]
+    else:
+        q0 = y[0].copy()
+    theta = np.concatenate([q0, z])
+
+    def evaluate(th: np.ndarray, with_jac: bool):
+        traj, jac = trajectory(t, th[:4], th[4:], model, jac=with_jac)
+        r = y - traj
+        return r, float(np.einsum("ia,ia->", r, r)), jac
+
+    r, ss, jac = evaluate(theta, True)
+    lam = 1e-3
+    converged = False
+    iterations = 0
+    for iterations in range(1, int(max_iter) + 1):  # noqa: B007 - the count is reported
+        jf = jac.reshape(4 * n, p)
+        jtj = jf.T @ jf
+        g = jf.T @ r.reshape(-1)
+        scale = np.sqrt(np.diag(jtj))
+        scale[scale == 0] = 1.0
+        ns = jtj / np.outer(scale, scale)
+        gs = g / scale
+        accepted = False
+        for _ in range(30):
+            try:
+                step = np.linalg.solve(ns + lam * np.eye(p), gs) / scale
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            try:
+                r_new, ss_new, _ = evaluate(theta + step, False)
+            except FreeDecayFitError:
+                ss_new = math.inf
+            if ss_new <= ss:
+                accepted = True
+                break
+            lam *= 10.0
+        if not accepted:
+            # no step lowers chi^2: at the optimum to rounding if the Gauss-Newton step is tiny there
+            gn = np.linalg.lstsq(ns, gs, rcond=None)[0]
+            if float(gs @ gn) < 1e-6 * max(ss / dof, 1e-300):
+                converged = True
+                break
+            raise FreeDecayFitError(f"output-error fit of model={model!r} stalled after {iterations} iterations "
+                                    f"(no step lowers the residual sum of squares {ss:.6g})")
+        theta = theta + step
+        decrease = ss - ss_new
+        lam = max(lam / 10.0, 1e-12)
+        r, ss, jac = evaluate(theta, True)
+        if decrease < 1e-6 * ss / dof and float(step @ g) < 1e-5 * ss / dof:
+            converged = True
+            break
+    if not converged:
+        raise FreeDecayFitError(f"output-error fit of model={model!r} did not converge in max_iter={max_iter} "
+                                f"iterations (residual sum of squares {ss:.6g})")
+    jf = jac.reshape(4 * n, p)
+    jtj = jf.T @ jf
+    try:
+        inv = np.linalg.inv(jtj)
+    except np.linalg.LinAlgError as exc:
+        raise FreeDecayFitError(f"output-error fit of model={model!r}: singular Fisher information ({exc})") from exc
+    s2 = ss / dof
+    cov_fisher = s2 * inv
+    if covariance == "sandwich":
+        lags = int(sandwich_lags) if sandwich_lags is not None else int(math.floor(4.0 * (n / 100.0) ** (2.0 / 9.0)))
+        scores = np.einsum("iap,ia->ip", jac, r)
+        cov = inv @ _newey_west(scores, max(lags, 0)) @ inv * (4 * n / dof)
+    else:
+        cov = cov_fisher
+    return {"theta": theta, "cov": cov, "cov_fisher": cov_fisher, "resid": r, "ss": ss, "dof": dof,
+            "iterations": iterations, "lambda": lam}
+
+
+def identification_from_oe(fit: dict, model: str, *, detuning_hz: float, level: float,
+                           natural_freq_hz: float | None, bryan_factor: float | None,
+                           start: Mapping[str, float], dt_s: float, covariance: str) -> Identification:
+    """The OE fit as the same `Identification` as the equation-error fit (ci95 from the chosen
+    covariance, ci95_textbook from the Fisher information)."""
+    names = free_param_names(model)
+    theta, cov_full = fit["theta"], fit["cov"]
+    z_rep = theta[4:].copy()
+    z_rep[4] += 2.0 * (2.0 * math.pi * detuning_hz)
+    cov = cov_full[4:, 4:]
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    se_f = np.sqrt(np.maximum(np.diag(fit["cov_fisher"][4:, 4:]), 0.0))
+    s_p = t_quantile(fit["dof"], level)
+    params = {nm: float(v) for nm, v in zip(names, z_rep, strict=True)}
+    sigma = math.sqrt(fit["ss"] / fit["dof"])
+    return Identification(
+        model=model,
+        method="free_decay_output_error",
+        params=params,
+        sigma=sigma,
+        ci95=intervals(names, z_rep, se, s_p),
+        ci95_textbook=intervals(names, z_rep, se_f, s_p),
+        sigma_params={nm: float(s) for nm, s in zip(names, se, strict=True)},
+        derived=derived_quantities(params, natural_freq_hz=natural_freq_hz, bryan_factor=bryan_factor),
+        residuals=fit["resid"],
+        n_equations=int(fit["resid"].size),
+        covariance=cov,
+        noise_sigma=sigma,
+        extras={"dt_s": dt_s, "level": level, "q0": theta[:4].copy(), "covariance_full": cov_full,
+                "covariance_kind": covariance, "iterations": fit["iterations"], "start": dict(start)},
+    )
