@@ -14,12 +14,15 @@ Pure maths: numpy, scipy and the averaged model; no simulator.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.linalg import expm
 
 from .damping import MODELS, DampingFitError, decay_regressors, fit_free_decay
+from .free_decay_oe import Q0_NAMES, linear_sensitivities, trajectory
+from .maslov_terms import check_model, free_param_names
 from .slow_model import linear_matrix, state_from_elements
 
 TWO_PI = 2.0 * math.pi
@@ -162,28 +165,74 @@ def four_channel_bound(sc: DecayScenario, *, unknown: tuple[str, ...] = FOUR_CHA
     dt, m = sc.grid_step()
     n = int(sc.duration_s / dt)
     zg = sc.zg()
-    a = linear_matrix(zg)
-    p = len(names)
-    big = np.zeros((4 * (p + 1), 4 * (p + 1)))
-    x0 = np.zeros(4 * (p + 1))
-    q0 = sc.initial_state()
-    x0[:4] = q0
-    for b in range(p + 1):
-        big[4 * b : 4 * b + 4, 4 * b : 4 * b + 4] = a
-    for j, nm in enumerate(names):
-        rows = slice(4 * (j + 1), 4 * (j + 2))
-        if nm.endswith("_0"):
-            x0[4 * (j + 1) + FOUR_CHANNEL_NAMES.index(nm)] = 1.0
-        else:
-            unit = np.zeros(8)
-            unit[FOUR_CHANNEL_NAMES.index(nm) - 4] = 1.0
-            big[rows, 0:4] = linear_matrix(unit)
-    traj = np.vstack([x0, _propagate(big, x0, n, dt)])
-    sens = traj[:, 4:].reshape(-1, p, 4)  # (n, param, channel)
-    info = np.einsum("npc,nqc->pq", sens, sens) * (m / sc.noise_sigma**2)
+    info = _fisher_information(zg, sc.initial_state(), n + 1, dt, names, "linear") * (m / sc.noise_sigma**2)
     cov = np.linalg.inv(info)
     sd = _std_from_cov(cov, names.index("gamma"), names.index("b_c"), zg)
     return DampingBound("four-channel", *sd, covariance=cov, names=names)
+
+
+def _fisher_information(z: np.ndarray, q0: np.ndarray, n: int, dt: float, names: tuple[str, ...],
+                        model: str) -> np.ndarray:
+    """sum over n samples (t = k dt) of S^T S, S = d q / d(names) (unit noise): exact sensitivities
+    of the linear model (powers of expm of the augmented system), integrated ones otherwise."""
+    all_names = Q0_NAMES + free_param_names(model)
+    bad = set(names) - set(all_names)
+    if bad:
+        raise ValueError(f"unknown parameter(s) {sorted(bad)} for model={model!r}: names from {all_names}")
+    if model == "linear":
+        zidx = tuple(all_names.index(nm) - 4 for nm in names if nm not in Q0_NAMES)
+        _, phi, sens = linear_sensitivities(z, q0, n, dt, params=zidx)
+        cols, zi = [], 0
+        for nm in names:
+            if nm in Q0_NAMES:
+                cols.append(phi[:, :, Q0_NAMES.index(nm)])
+            else:
+                cols.append(sens[:, :, zi])
+                zi += 1
+        jac = np.stack(cols, axis=-1)
+    else:
+        _, full = trajectory(dt * np.arange(n), q0, z, model)
+        jac = full[:, :, [all_names.index(nm) for nm in names]]
+    return np.einsum("nap,naq->pq", jac, jac)
+
+
+@dataclass(frozen=True)
+class FreeDecayBound:
+    """Cramer-Rao bound of a free-decay identification: 1-sigma std of every parameter (initial
+    state q1_0..p2_0 and the model's coefficients) and of D, theta_tau and tau, with the covariance."""
+
+    names: tuple[str, ...]
+    std: Mapping[str, float]
+    std_delta_inv_tau_per_s: float
+    std_theta_tau_deg: float
+    std_tau_s: float
+    covariance: np.ndarray = field(repr=False)
+
+
+def crlb_free_decay(*, duration_s: float, stream_hz: float, noise_sigma: float, q0: np.ndarray,
+                    params: Mapping[str, float], model: str = "linear") -> FreeDecayBound:
+    """Cramer-Rao bound of all parameters of a free decay (samples at t = k / stream_hz from 0 to
+    duration_s, white noise noise_sigma on each slow variable, initial state q0, true params by
+    the names of maslov_terms.free_param_names(model)); the output-error fit attains it."""
+    check_model(model)
+    for name, value in (("duration_s", duration_s), ("stream_hz", stream_hz), ("noise_sigma", noise_sigma)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name}={value!r} must be finite and > 0")
+    z_names = free_param_names(model)
+    missing = set(z_names) - set(params)
+    if missing:
+        raise ValueError(f"params lacks {sorted(missing)} of model={model!r}")
+    z = np.array([float(params[nm]) for nm in z_names])
+    q0 = np.asarray(q0, dtype=float)
+    if q0.shape != (4,) or not np.all(np.isfinite(q0)) or not np.any(q0):
+        raise ValueError(f"q0={q0!r} must be 4 finite slow variables, not all zero")
+    n = int(round(duration_s * stream_hz)) + 1
+    names = Q0_NAMES + z_names
+    info = _fisher_information(z, q0, n, 1.0 / stream_hz, names, model) / noise_sigma**2
+    cov = np.linalg.inv(info)
+    sd_th, sd_d, sd_tau, _ = _std_from_cov(cov, 4, 6, z)
+    std = {nm: math.sqrt(max(float(cov[i, i]), 0.0)) for i, nm in enumerate(names)}
+    return FreeDecayBound(names, std, sd_d, sd_th, sd_tau, covariance=cov)
 
 
 def model_bias(sc: DecayScenario, *, model: str = "patent") -> tuple[float, float, float]:
