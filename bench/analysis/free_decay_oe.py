@@ -28,6 +28,8 @@ from bench.analysis.slow_model import linear_matrix
 Q0_NAMES = ("q1_0", "p1_0", "q2_0", "p2_0")
 COVARIANCES = ("fisher", "sandwich")
 _POWERS_BLOCK = 512  # samples per block of the exact linear propagation
+_ROT_INDEX = np.array([2, 3, 0, 1])  # G q = (-q2, -p2, q1, p1): d/dpsi of simulators' rotate_wave at 0
+_ROT_SIGN = np.array([-1.0, -1.0, 1.0, 1.0])
 _B = np.stack([linear_matrix(np.eye(8)[j]) for j in range(8)])  # dA/dz_j, (8, 4, 4)
 
 
@@ -176,8 +178,12 @@ def _newey_west(scores: np.ndarray, lags: int) -> np.ndarray:
 
 def output_error_fit(t_s: np.ndarray, q: np.ndarray, start: np.ndarray, *, model: str = "linear",
                      covariance: str = "fisher", max_iter: int = 50, sandwich_lags: int | None = None,
-                     q0_start: np.ndarray | None = None) -> dict:
+                     q0_start: np.ndarray | None = None, rotation_basis: np.ndarray | None = None) -> dict:
     """Levenberg-Marquardt least squares of the samples q (n, 4) minus the model trajectory.
+
+    rotation_basis (n, m): known functions h_j(t) of an output rotation psi(t) = sum_j c_j h_j(t)
+    (electrical angle, as a table's angle ripple turns the measured wave), the c_j fitted too:
+    the measurement is q(t) + psi(t) G q(t) with G q = (-q2, -p2, q1, p1), psi small.
 
     start: z from the equation-error fit; q0 starts at the least squares of the samples for that z
     (linear in q0 for the linear model) or at q0_start / the first sample.  Stops when the step is
@@ -193,7 +199,11 @@ def output_error_fit(t_s: np.ndarray, q: np.ndarray, start: np.ndarray, *, model
     n = y.shape[0]
     z = np.asarray(start, dtype=float).copy()
     k = z.size
-    p = 4 + k
+    h = None if rotation_basis is None else np.asarray(rotation_basis, dtype=float).reshape(n, -1)
+    if h is not None and not np.all(np.isfinite(h)):
+        raise ValueError("rotation_basis contains non-finite values")
+    m_rot = 0 if h is None else h.shape[1]
+    p = 4 + k + m_rot
     dof = 4 * n - p
     if dof <= 0:
         raise ValueError(f"{n} samples give {4 * n} values; need more than the {p} unknowns of {model!r}")
@@ -204,10 +214,17 @@ def output_error_fit(t_s: np.ndarray, q: np.ndarray, start: np.ndarray, *, model
         q0 = np.linalg.lstsq(phi.reshape(4 * n, 4), y.reshape(-1), rcond=None)[0]
     else:
         q0 = y[0].copy()
-    theta = np.concatenate([q0, z])
+    theta = np.concatenate([q0, z, np.zeros(m_rot)])
 
     def evaluate(th: np.ndarray, with_jac: bool):
-        traj, jac = trajectory(t, th[:4], th[4:], model, jac=with_jac)
+        traj, jac = trajectory(t, th[:4], th[4 : 4 + k], model, jac=with_jac)
+        if h is not None:
+            psi = h @ th[4 + k :]
+            gq = traj[:, _ROT_INDEX] * _ROT_SIGN
+            if with_jac:
+                gjac = jac[:, _ROT_INDEX, :] * _ROT_SIGN[:, None]
+                jac = np.concatenate([jac + psi[:, None, None] * gjac, gq[:, :, None] * h[:, None, :]], axis=-1)
+            traj = traj + psi[:, None] * gq
         r = y - traj
         return r, float(np.einsum("ia,ia->", r, r)), jac
 
@@ -285,12 +302,13 @@ def identification_from_oe(fit: dict, model: str, *, detuning_hz: float, level: 
     """The OE fit as the same `Identification` as the equation-error fit (ci95 from the chosen
     covariance, ci95_textbook from the Fisher information)."""
     names = free_param_names(model)
+    k = len(names)
     theta, cov_full = fit["theta"], fit["cov"]
-    z_rep = theta[4:].copy()
+    z_rep = theta[4 : 4 + k].copy()
     z_rep[4] += 2.0 * (2.0 * math.pi * detuning_hz)
-    cov = cov_full[4:, 4:]
+    cov = cov_full[4 : 4 + k, 4 : 4 + k]
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    se_f = np.sqrt(np.maximum(np.diag(fit["cov_fisher"][4:, 4:]), 0.0))
+    se_f = np.sqrt(np.maximum(np.diag(fit["cov_fisher"][4 : 4 + k, 4 : 4 + k]), 0.0))
     s_p = t_quantile(fit["dof"], level)
     params = {nm: float(v) for nm, v in zip(names, z_rep, strict=True)}
     sigma = math.sqrt(fit["ss"] / fit["dof"])
@@ -308,5 +326,6 @@ def identification_from_oe(fit: dict, model: str, *, detuning_hz: float, level: 
         covariance=cov,
         noise_sigma=sigma,
         extras={"dt_s": dt_s, "level": level, "q0": theta[:4].copy(), "covariance_full": cov_full,
+                "rotation_coefficients": theta[4 + k :].copy(),
                 "covariance_kind": covariance, "iterations": fit["iterations"], "start": dict(start)},
     )

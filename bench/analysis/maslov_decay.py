@@ -345,6 +345,7 @@ def identify_free_decay(
     method: str = "equation-error",
     covariance: str = "fisher",
     max_iter: int = 50,
+    rotation_basis: np.ndarray | None = None,
 ) -> Identification:
     """Identify (gamma, nu, b_c, b_s, c_m, n, h_c, h_s[, xi[, kappa]]) from a free decay sampled
     uniformly.  detuning_hz: demodulation reference minus natural frequency (the fit sees
@@ -355,7 +356,9 @@ def identify_free_decay(
     method="output-error": maximum likelihood under white noise (`free_decay_oe`), started from the
     equation-error estimate, which `recursive` and n_init_blocks select as above (the optimum does
     not depend on the start); covariance="fisher" or "sandwich" (Newey-West, coloured noise) and
-    max_iter (FreeDecayFitError beyond it) apply to it only; extras["start"] holds the start."""
+    max_iter (FreeDecayFitError beyond it) and rotation_basis (known harmonics of an output rotation,
+    e.g. a rate table's angle ripple, fitted as nuisance) apply to it only; extras["start"] holds
+    the start."""
     if method not in FREE_DECAY_METHODS:
         raise ValueError(f"method={method!r} is not one of {FREE_DECAY_METHODS}")
     if method == "output-error":
@@ -367,7 +370,7 @@ def identify_free_decay(
                                  level=level)
         q = np.stack([q1, p1, q2, p2], axis=-1).astype(float)
         fit = output_error_fit(np.asarray(t_s, dtype=float), q, ee.vector(), model=model, covariance=covariance,
-                               max_iter=max_iter)
+                               max_iter=max_iter, rotation_basis=rotation_basis)
         return identification_from_oe(fit, model, detuning_hz=detuning_hz, level=level,
                                       natural_freq_hz=natural_freq_hz, bryan_factor=bryan_factor,
                                       start=ee.params, dt_s=float(ee.extras["dt_s"]), covariance=covariance)
