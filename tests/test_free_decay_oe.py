@@ -187,4 +187,4 @@ def test_rotation_basis_removes_table_ripple_bias():
                                                  5e-4 * math.sin(a2), 5e-4 * math.cos(a2)])  # psi = -2 K dev
     se = np.sqrt(np.diag(oe.extras["covariance_full"])[-4:])
     assert np.all(np.abs(oe.extras["rotation_coefficients"] - c_true) < 3.3 * se), (oe.extras, c_true, se)
-    assert np.all(np.abs(c_true[[1, 3]]) > 5 * se[[1, 3]])  # the ripple is well above the noise
+    assert abs(c_true[1]) > 3.5 * se[1]  # the once-per-rev ripple is well above the noise
