@@ -66,8 +66,8 @@ def test_nonlinear_path_equals_linear_at_zero_xi():
     t = np.arange(3001) / 10.0
     ql, jl = trajectory(t, Q0, z[:8], "linear")
     qc, jc = trajectory(t, Q0, z, "cubic")
-    assert np.max(np.abs(ql - qc)) < 1e-9
-    assert np.max(np.abs(jl - jc[:, :, :12])) < 1e-9 * np.max(np.abs(jl))
+    assert np.max(np.abs(ql - qc)) < 1e-8  # DOP853 at rtol 1e-9
+    assert np.max(np.abs(jl - jc[:, :, :12])) < 1e-8 * np.max(np.abs(jl))
 
 
 @pytest.mark.parametrize("model", ["linear", "cubic"])
