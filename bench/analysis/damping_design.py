@@ -173,17 +173,19 @@ def four_channel_bound(sc: DecayScenario, *, unknown: tuple[str, ...] = FOUR_CHA
 
 
 def _fisher_information(z: np.ndarray, q0: np.ndarray, n: int, dt: float, names: tuple[str, ...],
-                        model: str, cuts: tuple[int, ...] | None = None) -> np.ndarray:
+                        model: str, cuts: tuple[int, ...] | None = None, ripple_rad_s: float = 0.0) -> np.ndarray:
     """sum over n samples (t = k dt) of S^T S, S = d q / d(names) (unit noise): exact sensitivities
     of the linear model (powers of expm of the augmented system), integrated ones otherwise.
-    With cuts: the sums over the first c samples for each c in cuts, stacked."""
+    With cuts: the sums over the first c samples for each c in cuts, stacked.  ripple_rad_s != 0
+    appends the four nuisance columns of an output rotation at one and two table turns (what
+    hrg-free-decay fits, free_decay_oe.output_error_fit's rotation_basis), last."""
     all_names = Q0_NAMES + free_param_names(model)
     bad = set(names) - set(all_names)
     if bad:
         raise ValueError(f"unknown parameter(s) {sorted(bad)} for model={model!r}: names from {all_names}")
     if model == "linear":
         zidx = tuple(all_names.index(nm) - 4 for nm in names if nm not in Q0_NAMES)
-        _, phi, sens = linear_sensitivities(z, q0, n, dt, params=zidx)
+        traj, phi, sens = linear_sensitivities(z, q0, n, dt, params=zidx)
         cols, zi = [], 0
         for nm in names:
             if nm in Q0_NAMES:
@@ -193,8 +195,13 @@ def _fisher_information(z: np.ndarray, q0: np.ndarray, n: int, dt: float, names:
                 zi += 1
         jac = np.stack(cols, axis=-1)
     else:
-        _, full = trajectory(dt * np.arange(n), q0, z, model)
+        traj, full = trajectory(dt * np.arange(n), q0, z, model)
         jac = full[:, :, [all_names.index(nm) for nm in names]]
+    if ripple_rad_s:
+        w = ripple_rad_s * dt * np.arange(n)
+        basis = np.stack([np.cos(w), np.sin(w), np.cos(2 * w), np.sin(2 * w)], axis=1)
+        gq = traj[:, [2, 3, 0, 1]] * np.array([-1.0, -1.0, 1.0, 1.0])  # d/dpsi of the rotated output
+        jac = np.concatenate([jac, gq[:, :, None] * basis[:, None, :]], axis=-1)
     if cuts is None:
         return np.einsum("nap,naq->pq", jac, jac)
     edges = (0,) + tuple(int(c) for c in cuts)
@@ -469,13 +476,15 @@ class FreeDecayDesign:
 
 
 def _free_decay_points(sc: DecayScenario, lengths_s: tuple[float, ...]) -> list[FreeDecayDesignPoint]:
-    """CRLB of the full linear model (q0 and all eight coefficients) at each length, one trajectory."""
+    """CRLB of the full linear model (q0, all eight coefficients and the table-ripple nuisance that
+    hrg-free-decay fits) at each length, one trajectory."""
     long = replace(sc, duration_s=max(lengths_s))
     dt, m = long.grid_step()
     n = int(long.duration_s / dt) + 1
     cuts = tuple(min(n, int(round(length / dt)) + 1) for length in lengths_s)
     zg = sc.zg()
-    infos = _fisher_information(zg, sc.initial_state(), n, dt, FOUR_CHANNEL_NAMES, "linear", cuts)
+    infos = _fisher_information(zg, sc.initial_state(), n, dt, FOUR_CHANNEL_NAMES, "linear", cuts,
+                                ripple_rad_s=math.radians(sc.rate_dps))
     infos = infos * (m / sc.noise_sigma**2)
     omega = math.radians(sc.rate_dps)
     out = []
