@@ -161,6 +161,8 @@ def test_bad_input_is_named():
         bad = q.copy()
         bad[3, 1] = np.nan
         identify_free_decay(t, *bad.T, method="output-error")
+    with pytest.raises(ValueError, match="rotation_basis has shape"):
+        identify_free_decay(t, *q.T, method="output-error", rotation_basis=np.ones((5, 2)))
     _, phi, sens = linear_sensitivities(z_of(p, "linear"), Q0, 5, 0.1, params=())
     assert sens.shape == (5, 4, 0) and np.allclose(phi[0], np.eye(4))
 

@@ -229,9 +229,13 @@ def output_error_fit(t_s: np.ndarray, q: np.ndarray, start: np.ndarray, *, model
     n = y.shape[0]
     z = np.asarray(start, dtype=float).copy()
     k = z.size
-    h = None if rotation_basis is None else np.asarray(rotation_basis, dtype=float).reshape(n, -1)
-    if h is not None and not np.all(np.isfinite(h)):
-        raise ValueError("rotation_basis contains non-finite values")
+    h = None if rotation_basis is None else np.asarray(rotation_basis, dtype=float)
+    if h is not None:
+        h = h[:, None] if h.ndim == 1 else h
+        if h.ndim != 2 or h.shape[0] != n:
+            raise ValueError(f"rotation_basis has shape {np.shape(rotation_basis)}; expected ({n}, m)")
+        if not np.all(np.isfinite(h)):
+            raise ValueError("rotation_basis contains non-finite values")
     m_rot = 0 if h is None else h.shape[1]
     p = 4 + k + m_rot
     dof = 4 * n - p
