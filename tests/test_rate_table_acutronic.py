@@ -165,3 +165,16 @@ def test_limits_are_written_into_the_controller(bench_tcp):
     assert c.limit_acc["O"] == LIMITS.max_accel_dps2
     assert c.limit_vtrip["R"] == pytest.approx(1.1 * LIMITS.max_rate_dps)
     assert float(table._query(":LIM:RATE? R,1")) == LIMITS.max_rate_dps
+
+
+def test_station_sim_hrg_acutronic_builds_the_acutrol_driver():
+    from bench.station import SimStation
+
+    with SimStation("sim-hrg-acutronic").open() as station:
+        table = station.devices["table"]
+        assert isinstance(table, AcutrolRateTable) and table.idn.startswith("Acutronic")
+        table.enable()
+        table.set_rate(100.0, 500.0)
+        assert abs(table.wait_at_rate(0.1, 0.1, 5.0).rate_dps - 100.0) <= 0.1
+        assert station.world.case_rate_dps == pytest.approx(100.0, abs=1e-6)
+        assert station.safe_state().confirmed
