@@ -820,4 +820,5 @@ def parse_fault(text: str) -> tuple[str, float]:
 
 
 # --- instrument models that declare their own station entry next to their driver (issue 22) --
+from drivers.frontend import sr865_spec  # noqa: E402,F401
 from drivers.rate_table import acutronic_spec  # noqa: E402,F401
