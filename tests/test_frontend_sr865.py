@@ -13,7 +13,6 @@ from drivers.errors import DeviceError, LimitError, LinkLostError
 from drivers.frontend.sr865_pair import Sr865PairFrontEnd
 from simulators.frontend.sr865_server import Sr865Model
 
-
 F_HZ = 13_646.6  # near the MEMS preset's resonance
 
 

@@ -14,7 +14,7 @@ T = TypeVar("T")
 
 
 def load_class(path: str) -> type:
-    """"pymeasure.instruments.srs.SR860" -> the class; DeviceError names a missing package."""
+    """ "pymeasure.instruments.srs.SR860" -> the class; DeviceError names a missing package."""
     module, _, name = path.rpartition(".")
     try:
         return getattr(importlib.import_module(module), name)

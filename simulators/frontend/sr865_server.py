@@ -270,7 +270,7 @@ class Sr865PairServer:
         return self.servers[0].resource_name, self.servers[1].resource_name
 
     def inject(self, fault: str | None) -> None:
-        """"hang": both stop answering (the station's frontend-hang); "none"/None: clear."""
+        """ "hang": both stop answering (the station's frontend-hang); "none"/None: clear."""
         fault = "none" if fault is None else fault
         if fault not in ("none", "hang"):
             raise ValueError(f"unknown SR865 fault {fault!r}; known: none, hang")
