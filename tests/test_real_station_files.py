@@ -69,3 +69,18 @@ def test_a_table_without_an_address_is_one_clear_message(tmp_path, instruments):
     path.write_text(LAB_FILE.format(table_address="", master=master, slave=slave))
     with pytest.raises(StationError, match="needs host"):
         Station.load(path).open()
+
+
+def test_the_example_in_docs_real_instruments_is_a_valid_station_file(tmp_path):
+    from pathlib import Path
+
+    from bench.station import load_config
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "real_instruments.md").read_text()
+    example = text.split("```toml\n", 1)[1].split("```", 1)[0]
+    path = tmp_path / "lab.toml"
+    path.write_text(example)
+    cfg = load_config(path)
+    assert cfg.simulation is None
+    assert cfg.devices["table"]["host"] == "192.168.53.1" and cfg.devices["table"]["port"] == 9878
+    assert cfg.devices["frontend"]["resource2"].startswith("TCPIP::")
