@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from bench.station import SimStation
-from drivers.errors import DeviceError, LimitError, LinkLostError
+from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
 from drivers.frontend.sr865_pair import Sr865PairFrontEnd
 from simulators.frontend.sr865_server import Sr865Model
 
@@ -119,3 +119,76 @@ def test_model_conventions():
     assert m.execute("PHAS 270;PHAS?") == "-90.0000000"
     assert m.execute("SNAP? X, Y") == m.execute("OUTP? 0") + "," + m.execute("OUTP? 1")
     assert m.execute("FLY 1;*ESR?") == "32"
+
+
+def test_garbled_answers_are_protocol_errors_and_the_link_stays_in_step(station):
+    fe = station.devices["frontend"]
+    station.handles["frontend"].inject("garble")
+    for read in (fe.lockin_all, lambda: fe.lockin_xy(2), lambda: fe.lockin_tc_s):
+        with pytest.raises(ProtocolError):
+            read()
+    station.handles["frontend"].inject("none")
+    assert len(fe.lockin_all()) == 4 and "SR865" in fe.idn
+
+
+def test_drive_forces_the_resonator_as_the_scpi_front_end_does(station):
+    """Truth: drive gain 50 per peak volt; phase 0 puts the force on u2, phase 90 on u3 (the
+    SCPI front end's test_safe_state_cuts_the_force_on_the_resonator, same numbers)."""
+    world, clock, fe = station.world, station.clock, station.devices["frontend"]
+    fe.set_drive(1, amplitude_v=0.3, frequency_hz=F_HZ, output_on=True)
+    fe.set_drive(2, amplitude_v=0.2, frequency_hz=F_HZ, phase_deg=90.0, output_on=True)
+    clock.sleep(0.01)
+    np.testing.assert_allclose(world.total_force, [0.0, 15.0, 10.0, 0.0], atol=1e-9)
+    assert world.ref_freq_hz == F_HZ
+    assert fe.safe_state() is True
+    clock.sleep(0.01)
+    assert not world.total_force.any()
+
+
+def test_lockin_settles_with_its_time_constant_in_virtual_time():
+    """Truth: a first-order low pass of a held input, 1 - exp(-t/tc) (OFSL 0, tc 0.1 s), on an
+    ideal isotropic resonator with tau 3000 s (a free state holds to 2e-4 over the test)."""
+    from bench.clock import SimClock
+    from simulators.frontend.sr865_server import serve_sr865_pair
+    from simulators.physics.params import ResonatorParams
+    from simulators.world import World
+
+    world = World(ResonatorParams(f0_hz=5500.0, tau_s=3000.0), seed=3)
+    clock = SimClock(world)
+    server = serve_sr865_pair(world)
+    fe = Sr865PairFrontEnd(*server.resources, clock=clock).connect()
+    try:
+        fe.set_frequency_hz(world.ref_freq_hz)
+        q = np.array([0.8, -0.4, 0.3, 0.2])
+        with world.lock:
+            world.resonator.set_state(q)
+            for m in server.models:
+                m._zi, m.cs = np.zeros((1, 2)), np.zeros(2)
+        fe.lockin_tc_s = 0.1
+        clock.sleep(0.1)
+        np.testing.assert_allclose(fe.lockin_all(), q * (1 - math.exp(-1.0)), rtol=3e-3)
+        clock.sleep(0.4)
+        np.testing.assert_allclose(fe.lockin_all(), q * (1 - math.exp(-5.0)), rtol=3e-3)
+    finally:
+        fe.close()
+        server.stop()
+        clock.close()
+
+
+def test_mems_sweep_on_the_sr865_station_finds_the_truth(tmp_path):
+    """mems-sweep unmodified on sim-mems-sr865 (17 points): the same truth checks as on sim-mems."""
+    from bench.engine import Runner
+    from procedures.mems_sweep import MemsSweep
+
+    station = SimStation("sim-mems-sr865", seed=0).open()
+    try:
+        record = Runner(station, runs_dir=tmp_path / "runs").run(MemsSweep, {"n_points": 17})
+        truth = station.truth()
+    finally:
+        station.close()
+    assert record.outcome == "COMPLETE", record.traceback
+    m = {r.name: r for r in record.measurements}
+    assert m["chosen_model_order"].value == 3.0
+    for name, value in {"Q": truth["q_factor"], "split_hz": truth["split_hz"], "gamma": 43.029}.items():
+        lo, hi = m[name].ci95
+        assert abs(value - 0.5 * (lo + hi)) <= 0.75 * (hi - lo), (name, m[name].value, value, (lo, hi))

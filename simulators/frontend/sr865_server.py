@@ -221,6 +221,7 @@ class _LineServer:
     def __init__(self, world: Any, model: Sr865Model, host: str) -> None:
         self.world, self.model = world, model
         self.hang = False
+        self.garble = False
         self._stop = threading.Event()
         outer = self
 
@@ -234,7 +235,9 @@ class _LineServer:
                     with outer.world.lock:
                         answer = outer.model.execute(raw.decode("ascii", "replace"))
                     if answer is not None and not outer.hang:
-                        self.wfile.write((answer + "\n").encode("ascii"))
+                        if outer.garble:  # two noise bytes, then the first half of the answer
+                            answer = "\x7f#" + answer[: len(answer) // 2]
+                        self.wfile.write((answer + "\n").encode("ascii", "replace"))
 
         self._tcp = socketserver.ThreadingTCPServer((host, 0), Handler, bind_and_activate=False)
         self._tcp.daemon_threads = True
@@ -270,12 +273,13 @@ class Sr865PairServer:
         return self.servers[0].resource_name, self.servers[1].resource_name
 
     def inject(self, fault: str | None) -> None:
-        """ "hang": both stop answering (the station's frontend-hang); "none"/None: clear."""
+        """ "hang": both stop answering (the station's frontend-hang); "garble": both spoil every
+        answer; "none"/None: clear."""
         fault = "none" if fault is None else fault
-        if fault not in ("none", "hang"):
-            raise ValueError(f"unknown SR865 fault {fault!r}; known: none, hang")
+        if fault not in ("none", "hang", "garble"):
+            raise ValueError(f"unknown SR865 fault {fault!r}; known: none, hang, garble")
         for s in self.servers:
-            s.hang = fault == "hang"
+            s.hang, s.garble = fault == "hang", fault == "garble"
 
     def stop(self) -> None:
         for s in self.servers:
