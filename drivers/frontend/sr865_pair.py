@@ -101,6 +101,13 @@ class Sr865PairFrontEnd:
 
     # --- connection --------------------------------------------------------------------------------
     def connect(self) -> Sr865PairFrontEnd:
+        try:
+            return self._connect()
+        except Exception:
+            self.close()
+            raise
+
+    def _connect(self) -> Sr865PairFrontEnd:
         for dev in self.devices.values():
             dev.connect()
             idn = dev.idn
@@ -183,6 +190,7 @@ class Sr865PairFrontEnd:
         # PyMeasure's `frequency` setter writes "%0.6e": 7 digits, 1.6 mHz steps at 13.6 kHz, enough
         # to spoil a resonance fit (sigma 6x, docs/frontend_sr865.md); the same command, full precision
         self.devices[1].write(f"FREQ {float(frequency_hz):.12g}")
+        self._check(self.devices[1])
         self.frequency_hz = float(frequency_hz)
 
     def _write_phase(self, ch: int) -> None:

@@ -153,13 +153,18 @@ class AcutrolRateTable(RateTable):
         except Exception as exc:  # pyvisa raises its own errors for a bad resource name
             raise LinkLostError(f"rate table: cannot open {self.where}: {exc}") from exc
         self._connected = True
-        self.idn = self._query("*IDN?")
-        if "ACUTROL" not in self.idn.upper():
-            raise ProtocolError(f"rate table at {self.where}: *IDN? answered {self.idn!r}, not an Acutrol")
-        self._send("*CLS", idempotent=True)
-        if self.lockout:
-            self._send(ap.lockout(True), idempotent=True)
-        self.write_limits()
+        try:
+            self.idn = self._query("*IDN?")
+            if "ACUTROL" not in self.idn.upper():
+                raise ProtocolError(f"rate table at {self.where}: *IDN? answered {self.idn!r}, not an Acutrol")
+            self._send("*CLS", idempotent=True)
+            if self.lockout:
+                self._send(ap.lockout(True), idempotent=True)
+            self.write_limits()
+        except Exception:
+            self._connected = False
+            self._link.close()
+            raise
 
     def write_limits(self) -> None:
         """The station's rate and acceleration limits into every mode the driver uses, and the
