@@ -4,6 +4,8 @@ pinned to TM-8004's own examples, and the ACL parser's short forms and tree rule
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from bench.clock import SimClock
@@ -178,3 +180,21 @@ def test_station_sim_hrg_acutronic_builds_the_acutrol_driver():
         assert abs(table.wait_at_rate(0.1, 0.1, 5.0).rate_dps - 100.0) <= 0.1
         assert station.world.case_rate_dps == pytest.approx(100.0, abs=0.01)
         assert station.safe_state().confirmed
+
+
+@pytest.mark.parametrize("model", ["acutrol-tcp", "acutrol-visa"])
+def test_a_late_reply_is_not_taken_for_the_next_answer(model):
+    """*IDN? answered 0.5 s late (timeout 0.3 s): the next request gets its own answer."""
+    from drivers.errors import LinkLostError
+
+    world, clock, server, table = make_acutrol(model)
+    try:
+        server.delay_next_reply(0.5)
+        with pytest.raises(LinkLostError):
+            table._transact("*IDN?")
+        time.sleep(0.3)  # the late answer is now waiting in the input
+        assert ap.parse_status(table._transact(ap.status_query(1)))[2] == "Open"
+    finally:
+        table.close()
+        server.stop()
+        clock.close()

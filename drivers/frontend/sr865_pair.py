@@ -12,6 +12,7 @@ is here.  The two channels are read one after the other: the skew is measured on
 from __future__ import annotations
 
 import cmath
+import logging
 import math
 import time
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
 
 from .pymeasure_adapter import PyMeasureDevice
 
+log = logging.getLogger(__name__)
 SR860_CLASS = "pymeasure.instruments.srs.SR860"
 SQRT2 = math.sqrt(2.0)
 #: the sine output's range (rms 1 nV .. 2 V) as peak volts
@@ -125,6 +127,13 @@ class Sr865PairFrontEnd:
         return self
 
     def close(self) -> None:
+        if self.skew.count:
+            log.info(
+                "SR865 pair: %d paired reads, skew between the two lock-ins mean %.3g ms, max %.3g ms (wall)",
+                self.skew.count,
+                1e3 * self.skew.mean_s,
+                1e3 * self.skew.max_s,
+            )
         for dev in self.devices.values():
             dev.close()
 

@@ -82,6 +82,7 @@ class _VisaLink:
     def __init__(self, resource: str, timeout_s: float) -> None:
         self.resource, self.timeout_s = resource, float(timeout_s)
         self._inst = None
+        self._stale = False  # a reply timed out: it may still arrive, drain it before the next request
 
     def open(self) -> None:
         import pyvisa
@@ -104,12 +105,31 @@ class _VisaLink:
         if self._inst is None:
             raise OSError("not connected")
         try:
+            if self._stale:
+                self._drain()
             self._inst.write(line)
             return self._inst.read_raw()
         except pyvisa.errors.VisaIOError as exc:
             if exc.error_code == pyvisa.constants.StatusCode.error_timeout:
+                self._stale = True
                 return b""
             raise OSError(str(exc)) from exc
+
+    def _drain(self) -> None:
+        """Read and drop whatever a late reply left, with a short timeout, so it is not taken for
+        the answer to the next request."""
+        import pyvisa
+
+        inst, keep = self._inst, self._inst.timeout
+        inst.timeout = 50
+        try:
+            while True:
+                inst.read_raw()
+        except pyvisa.errors.VisaIOError:
+            pass
+        finally:
+            inst.timeout = keep
+            self._stale = False
 
 
 class AcutrolRateTable(RateTable):

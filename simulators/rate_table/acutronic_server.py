@@ -14,6 +14,7 @@ import math
 import socket
 import socketserver
 import threading
+import time
 
 from drivers.rate_table import acutronic_protocol as ap
 from drivers.rate_table import modbus_protocol as mp
@@ -271,6 +272,7 @@ class AcutrolTableServer(TableFaultControls):
         self.world, self.mechanics = world, mechanics
         self.controller = AcutrolController(world, mechanics)
         self.link_faults = _LinkFaults()
+        self._late_s = 0.0
         self._stop = threading.Event()
         outer = self
 
@@ -301,10 +303,18 @@ class AcutrolTableServer(TableFaultControls):
         """The same socket as a VISA resource (pyvisa-py), for the GPIB-style path."""
         return f"TCPIP::{self.host}::{self.port}::SOCKET"
 
+    def delay_next_reply(self, wall_s: float) -> None:
+        """The next answer goes out `wall_s` late (a late reply the driver must not mistake for
+        the answer to its next request)."""
+        self._late_s = float(wall_s)
+
     def _reply(self, line: str) -> bytes | None:
         answer = self.controller.handle_line(line)
         if answer is None:
             return None
+        late, self._late_s = self._late_s, 0.0
+        if late > 0:
+            time.sleep(late)
         answer = self.link_faults.apply(answer)
         return None if answer is None else (answer + ap.TERMINATOR).encode("ascii", "replace")
 
