@@ -817,3 +817,8 @@ def parse_fault(text: str) -> tuple[str, float]:
     except ValidationError as exc:
         raise StationError(f"--fault {text!r}: {exc}") from None
     return kind, at_s
+
+
+# --- instrument models that declare their own station entry next to their driver (issue 22) --
+from drivers.frontend import sr865_spec  # noqa: E402,F401
+from drivers.rate_table import acutronic_spec  # noqa: E402,F401

@@ -151,7 +151,7 @@ def test_ctrl_c_in_the_first_second_is_one_line(tmp_path, when):
         ),
         (["--set", "novalue"], None, "gyrobench: --set 'novalue': expected NAME=VALUE"),
         ([], STATION.replace('driver = "modbus-table"\n', ""),
-         "[devices.table] driver: missing key (one of ascii-table, modbus-table)"),
+         "[devices.table] driver: missing key (one of acutrol-table, ascii-table, modbus-table)"),
         ([], STATION.replace("1000.0", '"fast"'), "[devices.table] max_rate_dps='fast' is not a number"),
         ([], STATION.replace("1000.0", "99999.0"),
          "[devices.table] max_rate_dps=99999 deg/s is above the limit 20000 deg/s"),
