@@ -49,7 +49,7 @@ def _store(url: str | None):
 
 # --- run -----------------------------------------------------------------------------------------
 def _cmd_run(args: argparse.Namespace) -> int:
-    from bench.engine import ParamError, Runner
+    from bench.engine import ParamError, Runner, check_station
     from bench.station import SimStation, Station, StationError, parse_fault
     from procedures import ProcedureNotFound, find_procedure
 
@@ -69,6 +69,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 f"procedure {proc_cls.name!r} needs device role(s) {missing}; station "
                 f"{station.id!r} has {sorted(station.config.devices)}"
             )
+        check_station(proc, station)  # the kind of gyro and the station's limits, before anything opens
         faults = [parse_fault(f) for f in args.fault]
         if faults and not isinstance(station, SimStation):
             raise StationError(f"--fault needs a simulated station; {args.station!r} is real")

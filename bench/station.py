@@ -352,7 +352,10 @@ STATION_KEYS = {
     "results": Key(str, "runs/results.sqlite", doc="SQLite file or database URL"),
     "runs_dir": Key(str, "runs"),
     "description": Key(str, ""),
+    "kind": Key(str, "", choices=("", "hrg", "mems-ring"), doc="gyro held: hrg, mems-ring ('' = not said)"),
 }
+#: the kind of gyro a simulated station holds when its file does not say
+PRESET_KINDS = {"hrg": "hrg", "mems": "mems-ring"}
 SIM_KEYS = {
     "preset": Key(str, "hrg", choices=("hrg", "mems")),
     "seed": Key(int, 0, 0, 2**63 - 1),
@@ -468,6 +471,17 @@ class Station:
     @property
     def seed(self) -> int | None:
         return None
+
+    @property
+    def kind(self) -> str:
+        """The kind of gyro held (`[station] kind`; a simulated one's preset when not given; '' = unknown)."""
+        sim = self.config.simulation
+        return self.config.station["kind"] or (PRESET_KINDS.get(sim["preset"], "") if sim else "")
+
+    def limit(self, role: str, key: str) -> float | None:
+        """A device's limit from the station file (`max_rate_dps` of the table), None if it has none."""
+        value = self.config.devices.get(role, {}).get(key)
+        return None if value is None or isinstance(value, (bool, str)) else float(value)
 
     @property
     def results_url(self) -> str:

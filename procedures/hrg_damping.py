@@ -78,6 +78,7 @@ class HrgDamping(HrgExcitation, Procedure):
 
     name = "hrg-damping"
     requires = ("table", "frontend", "fpga")
+    kinds = ("hrg",)
 
     rate_dps = Param(500.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate during the decay (patent: 500)")
     accel_dps2 = Param(200.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")

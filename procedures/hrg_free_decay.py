@@ -63,6 +63,7 @@ class HrgFreeDecay(HrgExcitation, Procedure):
 
     name = "hrg-free-decay"
     requires = ("table", "fpga")
+    kinds = ("hrg",)
 
     rate_dps = Param(50.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate during the decay")
     accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")

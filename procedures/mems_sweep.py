@@ -28,7 +28,7 @@ from bench.analysis.maslov import (
     derived_ci95,
     identify_forced,
 )
-from bench.engine import Param, Procedure, Result, step
+from bench.engine import Demand, Param, Procedure, Result, step
 
 SWEEP_COLUMNS = ("t_s", "freq_hz", "direction", "q1", "p1", "q2", "p2", "amplitude", "phase_deg",
                  "amplitude_y", "phase_y_deg", "settled")
@@ -120,6 +120,7 @@ class MemsSweep(Procedure):
 
     name = "mems-sweep"
     requires = ("frontend",)
+    kinds = ("mems-ring",)
     start_hz = Param(PAPER_NATURAL_FREQ_HZ + 1.94 - 12.0, unit="Hz", low=1.0, high=200_000.0, doc="sweep start")
     stop_hz = Param(PAPER_NATURAL_FREQ_HZ + 1.94 + 12.0, unit="Hz", low=1.0, high=200_000.0, doc="sweep end")
     n_points = Param(61, low=5, high=2001, doc="frequencies per direction")
@@ -146,6 +147,13 @@ class MemsSweep(Procedure):
 
             raise ParamError("stop_hz", self.stop_hz, f"> start_hz = {self.start_hz}")
         self.rows: list[list[float]] = []
+
+    def demands(self) -> list[Demand]:
+        """Both drive amplitudes, against the front end's `max_amplitude_v`."""
+        return [
+            Demand("frontend", "max_amplitude_v", "drive1_v", self.drive1_v, "V"),
+            Demand("frontend", "max_amplitude_v", "drive2_v", self.drive2_v, "V"),
+        ]
 
     # --- steps ---------------------------------------------------------------------------------
     @step("Set up the drive")

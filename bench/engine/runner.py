@@ -28,6 +28,7 @@ from drivers.errors import LinkLostError, SafetyTripError
 
 from . import events as ev
 from .context import GuardedClock, RunAborted, RunContext
+from .demands import check_station
 from .measurement import ABORTED, COMPLETE, ERROR, Result, combine_outcomes
 from .procedure import Procedure
 from .safety import SafeStateReport
@@ -164,6 +165,7 @@ class Runner:
     def run(self, procedure: type[Procedure] | Procedure, params: dict[str, Any] | None = None) -> RunRecord:
         """Run a procedure; ParamError (before anything moves) if a parameter is bad."""
         proc = procedure if isinstance(procedure, Procedure) else procedure(params)
+        check_station(proc, self.station)  # kind and limits: StationMismatch before anything moves
         missing = [r for r in proc.requires if r not in self.station.devices]
         if missing:
             raise ValueError(
