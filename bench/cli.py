@@ -152,7 +152,9 @@ def _print_record(js: dict[str, Any]) -> None:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())
     print(
         f"  safe state {'confirmed' if js['safe_state'] else 'NOT CONFIRMED'}; "
-        f"{js['simulated_s']:.3f} s bench time, {js['wall_s']:.2f} s wall; raw {js['raw_file']}"
+        f"{js['simulated_s']:.3f} s bench time, {js['wall_s']:.2f} s wall"
+        + (f" ({js['speed_achieved']:.3g}x real time)" if js.get("speed_achieved") else "")
+        + f"; raw {js['raw_file']}"
     )
 
 

@@ -550,6 +550,32 @@ class Station:
             if role == "table" and rows is not None and self._ctx is not None:
                 self._ctx.record("table", ("t_s", "rate_dps", "angle_deg"), np.column_stack([[now_sim], rows]))
 
+    def ensure_ready(self) -> None:
+        """Before a run: ask every device for a sign of life; a device whose link was lost since
+        the last run is reconnected once, and one that still does not answer is reported down
+        (LinkLostError naming it), so a run never starts on a link that is already gone."""
+        for role in ordered_roles(self.devices):
+            spec = DRIVERS[self.config.devices[role]["driver"]]
+            if spec.health is None:
+                continue
+            if getattr(self.devices[role], "_gyrobench_stats0", None) is not None:
+                self.devices[role]._gyrobench_stats0 = None  # the last run's frame counts are not this one's
+            try:
+                spec.health(self.devices[role])
+                continue
+            except SafetyTripError:
+                raise
+            except (LinkLostError, DeviceError, OSError) as exc:
+                first = exc
+            try:
+                self._reconnect(role)
+                spec.health(self.devices[role])
+            except SafetyTripError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - any failure to reconnect means the device is down
+                raise LinkLostError(f"{role} is down: {first}; reconnecting failed: {exc}") from exc
+        self._last_health = (-math.inf, -math.inf)
+
     def start_streams(self, ctx: Any) -> Callable[[], None]:
         """Record the FPGA's stream (if any) into the run; returns the function that stops it."""
         self._ctx = ctx

@@ -84,6 +84,7 @@ class RunRecord:
     seed: int | None = None
     failed_step: str | None = None
     traceback: str | None = None
+    speed_achieved: float | None = None  # simulated s per wall s, on a real-time simulated station
 
     def as_json(self) -> dict[str, Any]:
         """The shape of `gyrobench run --json`."""
@@ -102,6 +103,7 @@ class RunRecord:
             "safe_state": bool(self.safe_state),
             "end_reason": self.end_reason,
             "raw_file": self.raw_file,
+            "speed_achieved": self.speed_achieved,
         }
 
 
@@ -235,6 +237,8 @@ class Runner:
         current = ""
         try:
             clock.guard = self.checkpoint
+            if hasattr(st, "ensure_ready"):  # a link lost since the last run: reconnected, or named down
+                st.ensure_ready()
             stop_streams = st.start_streams(ctx) if hasattr(st, "start_streams") else None
             for index, (name, title) in enumerate(steps):
                 current = name
@@ -286,6 +290,7 @@ class Runner:
             rec.outcome = outcome
             rec.simulated_s = clock.now() - t0_sim
             rec.wall_s = time.monotonic() - t0_wall
+            self._report_speed(ctx, rec, clock)
             rec.finished_at = _dt.datetime.now(_dt.UTC).isoformat()
             ctx.publish(
                 ev.RunFinished,
@@ -308,6 +313,21 @@ class Runner:
                 except Exception as exc:  # noqa: BLE001 - the raw file is still there
                     rec.end_reason += f" (results store failed: {exc})"
         return rec
+
+    def _report_speed(self, ctx: RunContext, rec: RunRecord, clock: Any) -> None:
+        """Real time at a speed factor: say the speed achieved (the clock falls behind, rather
+        than a link timing out, when the machine cannot keep up)."""
+        asked = getattr(clock, "speed", None)
+        if getattr(clock, "lockstep", True) or not asked or rec.wall_s <= 0:
+            return
+        rec.speed_achieved = rec.simulated_s / rec.wall_s
+        slow = rec.speed_achieved < 0.9 * asked
+        ctx.publish(
+            ev.Log,
+            level="WARNING" if slow else "INFO",
+            message=f"real time: {rec.speed_achieved:.3g}x achieved of the {asked:g}x asked"
+            + (" (this machine could not keep up; the simulated clock fell behind)" if slow else ""),
+        )
 
     def _step_failed(self, ctx: RunContext, steps: list, current: str, status: str) -> None:
         names = [s for s, _ in steps]
