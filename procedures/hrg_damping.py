@@ -179,7 +179,8 @@ class HrgDamping(HrgExcitation, Procedure):
     @step("Fit the free-decay model")
     def fit(self, ctx):
         d = self._decay
-        fit = fit_free_decay(d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4], method=self.fit_method, model=self.fit_model)
+        fit = ctx.compute(fit_free_decay, d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4],  # abortable at once
+                          method=self.fit_method, model=self.fit_model)
         self._fit = fit
         t, e, ef, r = _thin(fit.t_s, fit.energy, fit.energy_fit, fit.residuals_ln_e)
         ctx.fit("hrg-damping energy", t_s=t, energy=e, energy_fit=ef)

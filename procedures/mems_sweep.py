@@ -185,7 +185,7 @@ class MemsSweep(Procedure):
     @step("Identify")
     def identify(self, ctx):
         rows = np.array(self.rows)
-        results, curves, _ = self._analyse(rows)
+        results, curves, _ = self._analyse(rows, compute=ctx.compute)  # abortable at once
         for res in results:
             ctx.report(res)
         for name, c in curves.items():
@@ -234,9 +234,11 @@ class MemsSweep(Procedure):
             ctx.record("sweep", SWEEP_COLUMNS, np.array(row))
             ctx.progress((j + 1) / len(freqs), f"{'up' if direction > 0 else 'down'} {f:.3f} Hz  A={amp_x:.4f}")
 
-    def _analyse(self, rows: np.ndarray):
-        return sweep_analysis(
-            rows[:, 1], rows[:, 3:7], rows[:, 2], natural_freq_hz=self.natural_freq_hz,
+    def _analyse(self, rows: np.ndarray, compute=None):
+        """Identify the sweep rows; with `compute` (a run's `ctx.compute`) in a worker the engine can end."""
+        run = compute or (lambda fn, *a, **kw: fn(*a, **kw))
+        return run(
+            sweep_analysis, rows[:, 1], rows[:, 3:7], rows[:, 2], natural_freq_hz=self.natural_freq_hz,
             bryan_factor=self.bryan_factor, improvement=self.improvement,
         )
 

@@ -82,7 +82,7 @@ class ForcedIdentification(Identification):
 
 #: bounds on the settling integrations of one `steady_states` call: a model identified from data it
 #: does not describe fails Newton almost everywhere (mems-sweep on an HRG ran for 15 minutes)
-MAX_SETTLES = 40
+MAX_SETTLES = 20
 MAX_SETTLE_EVALUATIONS = 20_000
 
 

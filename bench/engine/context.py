@@ -164,6 +164,14 @@ class RunContext:
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
         return self.clock.wait_until(condition, timeout_s, poll_s)
 
+    def compute(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        """fn(*args, **kwargs) for a long computation (a fit, an identification): it runs in a
+        worker process that an abort ends at once, so the safe state never waits for an estimator.
+        fn must be a module-level function; its arguments and result must pickle."""
+        from .compute import run_in_worker
+
+        return run_in_worker(fn, args, kwargs, self.checkpoint)
+
     def progress(self, fraction: float, message: str = "") -> None:
         self.checkpoint()
         self.publish(ev.Progress, fraction=float(min(max(fraction, 0.0), 1.0)), message=message)
