@@ -133,3 +133,20 @@ def test_cli_refuses_a_procedure_for_another_kind(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "'mems-sweep' cannot run on station 'sim-hrg'" in err and "Traceback" not in err
     assert main(["run", "hrg-damping", "--station", "sim-mems", "--runs-dir", str(tmp_path)]) == 2
+
+
+def test_the_window_does_not_offer_a_procedure_for_another_kind(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    from bench.gui.engine_backend import EngineBackend
+
+    backend = EngineBackend("sim-hrg", seed=0, record=False)
+    try:
+        offered = backend.procedures()
+        assert "hrg-damping" in offered and "table-spin" in offered
+        assert "mems-sweep" not in offered
+        assert backend.unavailable()["mems-sweep"].startswith("it is for mems-ring gyros and the station's gyro is hrg")
+        with pytest.raises(StationMismatch):  # asked for by name anyway: refused before the run starts
+            backend.start("mems-sweep", {})
+        assert not backend.running()
+    finally:
+        backend.close()
