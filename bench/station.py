@@ -476,7 +476,7 @@ class Station:
     def kind(self) -> str:
         """The kind of gyro held (`[station] kind`; a simulated one's preset when not given; '' = unknown)."""
         sim = self.config.simulation
-        return self.config.station["kind"] or (PRESET_KINDS.get(sim["preset"], "") if sim else "")
+        return self.config.station.get("kind", "") or (PRESET_KINDS.get(sim["preset"], "") if sim else "")
 
     def limit(self, role: str, key: str) -> float | None:
         """A device's limit from the station file (`max_rate_dps` of the table), None if it has none."""

@@ -150,3 +150,17 @@ def test_the_window_does_not_offer_a_procedure_for_another_kind(tmp_path, monkey
         assert not backend.running()
     finally:
         backend.close()
+
+
+def test_an_existing_real_station_file_without_kind_takes_any_procedure(tmp_path):
+    from bench.engine import check_station
+    from bench.station import Station
+
+    path = tmp_path / "lab.toml"
+    path.write_text('[station]\nid = "lab-1"\n\n[devices.frontend]\ndriver = "scpi-frontend"\n'
+                    'resource = "TCPIP::10.0.0.5::5025::SOCKET"\nmax_amplitude_v = 2.0\n')
+    station = Station.load(path)
+    assert station.kind == ""  # not said: nothing refused for its kind
+    check_station(find_procedure("mems-sweep")({}), station)
+    with pytest.raises(StationMismatch, match="drive1_v=2.5 V is above the station's limit 2 V"):
+        check_station(find_procedure("mems-sweep")({"drive1_v": 2.5}), station)
