@@ -70,8 +70,12 @@ class SimClock(_PollingWait):
     that advances the world at speed x real time.  The speed can change while running (the GUI's
     speed control)."""
 
-    #: the most simulated time the real-time thread owes the wall clock, in ticks at the asked speed
-    MAX_OWED_TICKS = 2.0
+    #: the most simulated time one advance of the real-time thread covers, in ticks at the asked
+    #: speed (the world lock is held for that advance only)
+    MAX_ADVANCE_TICKS = 2.0
+    #: the most the real-time thread catches up after a stall, in wall seconds at the asked speed;
+    #: beyond it the simulated clock falls behind
+    MAX_OWED_WALL_S = 0.25
     #: the least wall time the real-time thread leaves the world lock free between advances
     MIN_PAUSE_S = 0.002
 
@@ -161,11 +165,12 @@ class SimClock(_PollingWait):
             self._thread = None
 
     def _advance_in_real_time(self) -> None:
-        """Advance the world by what the wall clock owes, one tick's worth at a time, releasing
-        the world lock in between: device servers (and so the drivers' wall-clock timeouts and
-        the table's watchdog feed) never wait more than about a tick.  Debt beyond MAX_OWED_TICKS
-        is dropped, not caught up in a burst: on a machine too slow for the asked speed the
-        simulated clock falls behind (`achieved_speed` says by how much) instead of a link timing out."""
+        """Advance the world by what the wall clock owes, two ticks' worth at most at a time,
+        releasing the world lock in between: device servers (and so the drivers' wall-clock
+        timeouts and the table's watchdog feed) never wait more than about that.  Debt beyond
+        MAX_OWED_WALL_S is dropped, not caught up in a burst: on a machine too slow for the asked
+        speed the simulated clock falls behind (`achieved_speed` says by how much) instead of a
+        link timing out."""
         last = time.monotonic()
         owed_s = 0.0
         pause_s = self._tick_s
@@ -178,11 +183,12 @@ class SimClock(_PollingWait):
                 owed_s = 0.0
                 continue
             owed_s += wall * self._speed
-            cap_s = max(self.MAX_OWED_TICKS * self._tick_s * self._speed, self.world.sample_period_s)
+            cap_s = self.MAX_OWED_WALL_S * self._speed
             if owed_s > cap_s:
                 self._dropped_s += owed_s - cap_s
                 owed_s = cap_s
-            step = math.floor(owed_s / self.world.sample_period_s) * self.world.sample_period_s
+            chunk_s = max(self.MAX_ADVANCE_TICKS * self._tick_s * self._speed, self.world.sample_period_s)
+            step = math.floor(min(owed_s, chunk_s) / self.world.sample_period_s) * self.world.sample_period_s
             if step > 0:
                 self.world.advance(step)
                 owed_s -= step
