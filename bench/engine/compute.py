@@ -10,8 +10,11 @@ once, and the thread is left to finish on its own.
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import copyreg
 import multiprocessing
+import signal
 import threading
 import traceback
 import types
@@ -34,6 +37,18 @@ _context_lock = threading.Lock()
 _context: Any = None
 
 
+#: starters of workers abandoned by an abort while still starting (see `_finish_starts`)
+_starting: set[threading.Thread] = set()
+
+
+@atexit.register
+def _finish_starts() -> None:
+    """Let an abandoned start finish (and kill its worker) before the process exits: a worker
+    cut off half-way through receiving its task would print a traceback."""
+    for th in list(_starting):
+        th.join(timeout=10.0)
+
+
 class WorkerDied(RuntimeError):
     """The worker process ended without an answer (killed by the system, out of memory)."""
 
@@ -49,16 +64,24 @@ def _mp_context() -> Any:
 
 
 def _worker(conn: Any, fn: Callable, args: tuple, kwargs: dict) -> None:
-    """In the worker: run fn and send (True, value) or (False, exception, traceback text)."""
+    """In the worker: run fn and send (True, value) or (False, exception, traceback text).  Ctrl-C
+    at a terminal reaches the whole process group: the engine handles it and ends this process, so
+    the worker ignores it; an engine that no longer listens (it aborted) is not an error here."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        value = fn(*args, **kwargs)
-        conn.send((True, value, ""))
-    except BaseException as exc:  # noqa: BLE001 - everything goes back to the engine
-        text = traceback.format_exc()
         try:
-            conn.send((False, exc, text))
-        except Exception:  # noqa: BLE001 - an exception that does not pickle
-            conn.send((False, RuntimeError(f"{type(exc).__name__}: {exc}"), text))
+            reply = (True, fn(*args, **kwargs), "")
+        except Exception as exc:  # noqa: BLE001 - everything goes back to the engine
+            reply = (False, exc, traceback.format_exc())
+        try:
+            conn.send(reply)
+        except (OSError, EOFError):
+            return  # the engine has gone on (abort): nobody to answer
+        except Exception:  # noqa: BLE001 - a value or an exception that does not pickle
+            err = reply[1] if not reply[0] else None
+            what = f"{type(err).__name__}: {err}" if err is not None else "the result does not pickle"
+            with contextlib.suppress(OSError, EOFError):
+                conn.send((False, RuntimeError(what), reply[2]))
     finally:
         conn.close()
 
@@ -98,6 +121,8 @@ def run_in_worker(fn: Callable, args: tuple, kwargs: dict, checkpoint: Callable[
         cancelled.set()
         if proc.pid is not None and proc.is_alive():
             proc.kill()
+        else:  # still starting: the starter kills it once started, before this process exits
+            _starting.add(starter)
         receiver.close()
         raise
     if proc.pid is None:
