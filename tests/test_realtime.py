@@ -95,7 +95,7 @@ def test_short_hrg_damping_at_100x_records_the_asked_window(tmp_path):
     with open_run(rec.raw_file) as data:
         win = data.array("damping_windows")
     lengths = win[:, 2] - win[:, 1]
-    assert 60.0 <= lengths[0] < 80.0  # the decay record: 60 s (and the reads around it), not 600 s
+    assert 60.0 <= lengths[0] < 200.0  # 60 s, plus the reads around it at 100x on a loaded machine; not 600 s
     tau = {m.name: m.value for m in rec.measurements}["tau_s"]
     assert tau == pytest.approx(rec.truth["tau_s"], rel=0.01)
 

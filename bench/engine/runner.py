@@ -92,6 +92,7 @@ class RunRecord:
         for r in self.measurements:
             key = r.name if r.dut is None else f"{r.dut}:{r.name}"
             meas[key] = r.as_json()
+        speed = {} if self.speed_achieved is None else {"speed_achieved": float(self.speed_achieved)}  # real time only
         return {
             "run_id": self.run_id,
             "procedure": self.procedure,
@@ -103,7 +104,7 @@ class RunRecord:
             "safe_state": bool(self.safe_state),
             "end_reason": self.end_reason,
             "raw_file": self.raw_file,
-            "speed_achieved": self.speed_achieved,
+            **speed,
         }
 
 
