@@ -40,12 +40,12 @@ FAULT_RUNS = [
 ]
 #: (procedure, station, --set values) long enough to be signalled while running
 SIGNAL_RUNS = [
-    ("table-spin", "sim-hrg", ["hold_s=120"]),
+    ("table-spin", "sim-hrg", ["hold_s=600"]),
     ("hrg-damping", "sim-hrg", ["record_s=300", "verify_s=30"]),
     ("hrg-free-decay", "sim-hrg", ["record_s=200"]),
-    ("mems-sweep", "sim-mems", ["n_points=41"]),
+    ("mems-sweep", "sim-mems", ["n_points=61"]),
 ]
-SIGNAL_OFFSETS_S = [0.05, 0.3, 1.0, 2.5]  # wall s after the raw file appeared
+SIGNAL_OFFSETS_S = [0.05, 0.3, 0.6, 1.0, 2.5]  # wall s after the raw file appeared
 EARLY_OFFSETS_S = [0.3, 1.5]  # wall s after the process started (before the run begins)
 
 
