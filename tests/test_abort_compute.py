@@ -85,3 +85,38 @@ def test_compute_returns_the_value_of_the_function():
     from bench.engine.compute import run_in_worker
 
     assert run_in_worker(math.hypot, (3.0, 4.0), {}, lambda: None) == 5.0
+
+
+def test_abort_takes_no_lock_a_signal_handler_could_find_held():
+    """SIGTERM's handler calls abort() in the main thread, which may be inside the checkpoint's
+    Event.wait holding that Event's lock at that moment: abort must not wait for it (a hang in
+    1 of 40 signalled runs of benchmarks/reliability_faults.py)."""
+    runner = Runner(SimStation("sim-hrg"))  # not opened: only the control flags are used
+    returned = threading.Event()
+
+    def handler_inside_wait():
+        with runner._running._cond:  # what Event.wait holds between its bytecodes
+            runner.abort("SIGTERM")
+            returned.set()
+
+    th = threading.Thread(target=handler_inside_wait, daemon=True)
+    th.start()
+    assert returned.wait(2.0)
+    assert runner._abort_reason == "SIGTERM"
+
+
+def test_abort_while_paused_is_honoured(station):
+    runner = Runner(station)
+    proc = SpinThenThink()
+
+    def pause_then_abort():
+        while not hasattr(proc, "started"):
+            time.sleep(0.01)
+        runner.pause()
+        time.sleep(0.3)
+        runner.abort("operator")
+
+    threading.Thread(target=pause_then_abort, daemon=True).start()
+    t0 = time.monotonic()
+    rec = runner.run(proc)
+    assert rec.outcome == "ABORTED" and rec.safe_state and time.monotonic() - t0 < 30.0

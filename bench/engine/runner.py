@@ -135,9 +135,11 @@ class Runner:
 
     # --- control, from any thread ------------------------------------------------------------
     def abort(self, reason: str = "abort requested") -> None:
+        """Takes no lock: a signal handler runs it in the main thread, which may be inside the
+        checkpoint's Event.wait holding that Event's (non-reentrant) lock; a paused checkpoint
+        polls the reason every 0.05 s instead of being woken."""
         if self._abort_reason is None:
             self._abort_reason = reason
-        self._running.set()
 
     def pause(self) -> None:
         self._running.clear()
