@@ -105,7 +105,7 @@ def _warn_unfired_faults(station: Any, faults: list[tuple[str, float]]) -> None:
 
 # --- run -----------------------------------------------------------------------------------------
 def _cmd_run(args: argparse.Namespace) -> int:
-    from bench.engine import ParamError, Runner
+    from bench.engine import ParamError, Runner, check_station
     from bench.station import SimStation, Station, StationError, parse_fault
     from procedures import ProcedureNotFound, find_procedure
 
@@ -126,6 +126,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 f"procedure {proc_cls.name!r} needs device role(s) {missing}; station "
                 f"{station.id!r} has {sorted(station.config.devices)}"
             )
+        check_station(proc, station)  # the kind of gyro and the station's limits, before anything opens
         if faults and not isinstance(station, SimStation):
             raise StationError(f"--fault needs a simulated station; {args.station!r} is real")
     except (ProcedureNotFound, ParamError, StationError, ValueError) as exc:
@@ -214,7 +215,9 @@ def _print_record(js: dict[str, Any]) -> None:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())
     print(
         f"  safe state {'confirmed' if js['safe_state'] else 'NOT CONFIRMED'}; "
-        f"{js['simulated_s']:.3f} s bench time, {js['wall_s']:.2f} s wall; raw {js['raw_file']}"
+        f"{js['simulated_s']:.3f} s bench time, {js['wall_s']:.2f} s wall"
+        + (f" ({js['speed_achieved']:.3g}x real time)" if js.get("speed_achieved") else "")
+        + f"; raw {js['raw_file']}"
     )
 
 

@@ -78,6 +78,7 @@ class HrgDamping(HrgExcitation, Procedure):
 
     name = "hrg-damping"
     requires = ("table", "frontend", "fpga")
+    kinds = ("hrg",)
 
     rate_dps = Param(500.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate during the decay (patent: 500)")
     accel_dps2 = Param(200.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
@@ -178,7 +179,8 @@ class HrgDamping(HrgExcitation, Procedure):
     @step("Fit the free-decay model")
     def fit(self, ctx):
         d = self._decay
-        fit = fit_free_decay(d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4], method=self.fit_method, model=self.fit_model)
+        fit = ctx.compute(fit_free_decay, d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4],  # abortable at once
+                          method=self.fit_method, model=self.fit_model)
         self._fit = fit
         t, e, ef, r = _thin(fit.t_s, fit.energy, fit.energy_fit, fit.residuals_ln_e)
         ctx.fit("hrg-damping energy", t_s=t, energy=e, energy_fit=ef)

@@ -107,6 +107,7 @@ class HrgFreeDecay(HrgExcitation, Procedure):
 
     name = "hrg-free-decay"
     requires = ("table", "fpga")
+    kinds = ("hrg",)
 
     rate_dps = Param(50.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate during the decay")
     accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
@@ -152,7 +153,7 @@ class HrgFreeDecay(HrgExcitation, Procedure):
 
     @step("Identify")
     def identify(self, ctx):
-        results, fit, t, q = self._analyse(ctx.data())
+        results, fit, t, q = self._analyse(ctx.data(), compute=ctx.compute)  # abortable at once
         for res in results:
             ctx.report(res)
         el = orbit_elements(q)
@@ -162,7 +163,9 @@ class HrgFreeDecay(HrgExcitation, Procedure):
         ctx.log.info("identified %s: sigma %.3g, noise %.3g per channel", fit.model, fit.sigma, fit.noise_sigma)
 
     # --- helpers -------------------------------------------------------------------------------
-    def _analyse(self, data):
+    def _analyse(self, data, compute=None):
+        """Identify the recorded window; `compute(fn, *args, **kw)` runs the identification
+        (a run's `ctx.compute`, in a worker the engine can end), else it runs here."""
         win = data.array(WINDOW)[-1]
         fpga = data.array("fpga")
         t = fpga[:, _FPGA["t_s"]]
@@ -173,9 +176,10 @@ class HrgFreeDecay(HrgExcitation, Procedure):
         rows = boxcar(rows, dec)
         t_s = rows[:, _FPGA["t_s"]]
         q = rows[:, 2:6]
-        results, fit = decay_results(t_s, q, rate_dps=float(win[3]), ref_freq_hz=float(win[2]),
-                                     natural_freq_hz=self.natural_freq_hz, model=self.model, method=self.method,
-                                     table_ripple=self.table_ripple)
+        run = compute or (lambda fn, *a, **kw: fn(*a, **kw))
+        results, fit = run(decay_results, t_s, q, rate_dps=float(win[3]), ref_freq_hz=float(win[2]),
+                           natural_freq_hz=self.natural_freq_hz, model=self.model, method=self.method,
+                           table_ripple=self.table_ripple)
         return results, fit, t_s, q
 
     def analysis(self, data) -> list[Result]:

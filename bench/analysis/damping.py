@@ -473,6 +473,9 @@ def _fit_gauss_newton(
         it += 1
         dp, normal, chi2 = _gauss_newton_step(reg.xt, energy, p, weighted)
         p = p + dp
+        if not np.all(np.isfinite(p)):  # bounded iterations, and a named error for data it cannot fit
+            raise DampingFitError(f"Gauss-Newton diverged at iteration {it} of {max_iter}: the data do not follow a "
+                                  "free decay")
         if _gn_converged(dp, normal, chi2):
             if floor_removed:
                 converged = True

@@ -1,6 +1,6 @@
 """Spin the table at a rate, hold it there, and check the rate the table reports."""
 
-from bench.engine import Param, Procedure, Result, step
+from bench.engine import Demand, Param, Procedure, Result, step
 
 
 class TableSpin(Procedure):
@@ -11,6 +11,10 @@ class TableSpin(Procedure):
     rate_dps = Param(100.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate")
     hold_s = Param(2.0, unit="s", low=0.1, high=600.0, doc="time held at rate")
     tolerance_dps = Param(0.5, unit="deg/s", low=0.01, high=10.0, doc="allowed rate error")
+
+    def demands(self):
+        """Checked against the station's limits before the table is enabled."""
+        return [Demand("table", "max_rate_dps", "rate_dps", self.rate_dps, "deg/s")]
 
     @step("Spin up")
     def spin_up(self, ctx):
