@@ -19,7 +19,7 @@ import numpy as np
 
 from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_drift_harmonics, fit_free_decay
 from bench.analysis.slow_model import orbit_elements
-from bench.engine import Param, Procedure, Result, step
+from bench.engine import Measurement, Param, Procedure, Result, step
 
 from .hrg_excitation import HrgExcitation
 
@@ -58,6 +58,34 @@ def _thin(*arrays: np.ndarray) -> list[np.ndarray]:
     return [np.asarray(a)[::k] for a in arrays]
 
 
+def _compensating(proc: Any) -> bool:
+    return bool(proc.compensate)
+
+
+def _drift_declarations() -> tuple[Measurement, ...]:
+    """The verification's drift measurements (only with `compensate` on), output-referred."""
+    when, when_doc = _compensating, "compensate"
+    out = []
+    for name, words in (("before", "compensation off"), ("after", "compensation on")):
+        out.append(Measurement(f"drift_{name}_dph", "deg/h", f"4 theta drift amplitude, {words} (fit of mean + 4 theta)",
+                               truth="drift_before_dph" if name == "before" else None, when=when, when_doc=when_doc))
+        out.append(Measurement(f"drift_{name}_mean_dph", "deg/h", f"mean drift, {words} (fit of mean + 4, 8, 12 theta)",
+                               truth=f"drift_{name}_mean_dph", when=when, when_doc=when_doc))
+        for m in (4, 8, 12):
+            truth = f"drift_{name}_{m}theta_dph" if (name, m) != ("after", 4) else None
+            out.append(Measurement(f"drift_{name}_{m}theta_dph", "deg/h",
+                                   f"{m} theta drift amplitude, {words} (fit of mean + 4, 8, 12 theta)",
+                                   truth=truth, when=when, when_doc=when_doc))
+        out.append(Measurement(f"drift_{name}_rest_rms_dph", "deg/h",
+                               f"rms of the drift the harmonic fit leaves, {words} (noise)", when=when, when_doc=when_doc))
+    out.append(Measurement("drift_reduction_ratio", "", "drift_before_dph / drift_after_dph", when=when,
+                           when_doc=when_doc))
+    out.append(Measurement("drift_after_4theta_expected_dph", "deg/h",
+                           "4 theta drift the decay fit's own error leaves after compensation (rms; ci95 0 to its "
+                           "95 % bound)", when=when, when_doc=when_doc))
+    return tuple(out)
+
+
 def block_drift(t_s: np.ndarray, theta_rad: np.ndarray, block_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Wave angle rate by least-squares slopes over blocks of block_s: (theta mid-block, rate)."""
     theta = np.unwrap(4.0 * theta_rad) / 4.0
@@ -92,6 +120,18 @@ class HrgDamping(HrgExcitation, Procedure):
     verify_settle_s = Param(5.0, unit="s", low=0.0, high=600.0, doc="settling before each verification record")
     drift_block_s = Param(1.0, unit="s", low=0.01, high=100.0, doc="block over which the drift rate is measured")
     bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: refers the wave's drift to the gyro output")
+
+    measurements = (
+        Measurement("quadrature_rel_max", "", "largest |quadrature| / amplitude over the decay record"),
+        Measurement("theta_tau_deg", "deg", "damping axis theta_tau in [0, 90)", truth="theta_tau_deg"),
+        Measurement("delta_inv_tau_per_s", "1/s", "damping anisotropy Delta(1/tau)", truth="delta_inv_tau_per_s"),
+        Measurement("tau_s", "s", "mean amplitude decay time tau", truth="tau_s"),
+        Measurement("q_factor", "", "quality factor pi f0 tau (f0: the reference frequency held during the decay)",
+                    truth="q_factor"),
+        Measurement("drift_predicted_dph", "deg/h", "damping drift amplitude Delta(1/tau) / 4K predicted by the fit",
+                    truth="drift_predicted_dph"),
+        *_drift_declarations(),
+    )
 
     def __init__(self, params: dict[str, Any] | None = None) -> None:
         super().__init__(params)
@@ -174,7 +214,7 @@ class HrgDamping(HrgExcitation, Procedure):
         t, th, k = _thin(d[:, 0], np.unwrap(4 * el["theta_rad"]) / 4, el["k"] / np.maximum(el["a"], 1e-300))
         ctx.fit("hrg-damping theta", t_s=t, theta_deg=np.degrees(th))
         ctx.fit("hrg-damping quadrature", t_s=t, quadrature_rel=k)
-        ctx.measure("quadrature_rel_max", float(np.max(np.abs(el["k"] / np.maximum(el["a"], 1e-300)))), "")
+        ctx.measure("quadrature_rel_max", float(np.max(np.abs(el["k"] / np.maximum(el["a"], 1e-300)))))
 
     @step("Fit the free-decay model")
     def fit(self, ctx):
@@ -233,15 +273,15 @@ class HrgDamping(HrgExcitation, Procedure):
     def _decay_results(self, fit, f0_hz: float | None) -> list[Result]:
         ci = fit.ci95
         out = [
-            Result("theta_tau_deg", fit.theta_tau_deg, "deg", ci95=ci["theta_tau_deg"]),
-            Result("delta_inv_tau_per_s", fit.delta_inv_tau_per_s, "1/s", ci95=ci["delta_inv_tau_per_s"]),
-            Result("tau_s", fit.tau_s, "s", ci95=ci["tau_s"]),
+            Result("theta_tau_deg", fit.theta_tau_deg, ci95=ci["theta_tau_deg"]),
+            Result("delta_inv_tau_per_s", fit.delta_inv_tau_per_s, ci95=ci["delta_inv_tau_per_s"]),
+            Result("tau_s", fit.tau_s, ci95=ci["tau_s"]),
         ]
         if f0_hz:
-            out.append(Result("q_factor", fit.q_factor(f0_hz), "", ci95=fit.q_factor_ci95(f0_hz)))
+            out.append(Result("q_factor", fit.q_factor(f0_hz), ci95=fit.q_factor_ci95(f0_hz)))
         lo, hi = ci["delta_inv_tau_per_s"]
         k = self.bryan_factor
-        out.append(Result("drift_predicted_dph", fit.drift_amplitude_dph(k), "deg/h",
+        out.append(Result("drift_predicted_dph", fit.drift_amplitude_dph(k),
                           ci95=(math.degrees(lo / 4 / k) * 3600, math.degrees(hi / 4 / k) * 3600)))
         return out
 
@@ -262,21 +302,21 @@ class HrgDamping(HrgExcitation, Procedure):
             fit = fit_angle_drift(mids, drift)
             amps[name] = fit.amplitude_rad_s * to_dph
             lo, hi = fit.amplitude_ci95
-            results.append(Result(f"drift_{name}_dph", amps[name], "deg/h", ci95=(lo * to_dph, hi * to_dph)))
+            results.append(Result(f"drift_{name}_dph", amps[name], ci95=(lo * to_dph, hi * to_dph)))
             full = fit_drift_harmonics(mids, drift).scaled(to_dph)
-            results.append(Result(f"drift_{name}_mean_dph", full.mean, "deg/h", ci95=full.mean_ci95))
+            results.append(Result(f"drift_{name}_mean_dph", full.mean, ci95=full.mean_ci95))
             for m, h in full.harmonics.items():
-                results.append(Result(f"drift_{name}_{m}theta_dph", h.amplitude, "deg/h", ci95=h.ci95))
-            results.append(Result(f"drift_{name}_rest_rms_dph", full.rest_rms, "deg/h"))
+                results.append(Result(f"drift_{name}_{m}theta_dph", h.amplitude, ci95=h.ci95))
+            results.append(Result(f"drift_{name}_rest_rms_dph", full.rest_rms))
             curves[name] = (mids, drift * to_dph)
         ratio = amps["before"] / amps["after"] if amps["after"] > 0 else math.inf
-        results.append(Result("drift_reduction_ratio", ratio, ""))
+        results.append(Result("drift_reduction_ratio", ratio))
         if decay_fit is not None:
             cov_b = np.asarray(decay_fit.covariance, dtype=float)[2:4, 2:4]
             if np.all(np.isfinite(cov_b)):
                 rms = math.sqrt(max(float(np.trace(cov_b)), 0.0)) / 4.0 * to_dph
                 bound = math.sqrt(5.991 * max(float(np.linalg.eigvalsh(cov_b)[-1]), 0.0)) / 4.0 * to_dph
-                results.append(Result("drift_after_4theta_expected_dph", rms, "deg/h", ci95=(0.0, bound)))
+                results.append(Result("drift_after_4theta_expected_dph", rms, ci95=(0.0, bound)))
         return results, curves
 
     def analysis(self, data) -> list[Result]:

@@ -3,7 +3,21 @@ the safe state.  See `bench.engine.procedure` for an example procedure."""
 
 from .context import Devices, GuardedClock, RunAborted, RunContext
 from .demands import KINDS, Demand, StationMismatch, check_station
-from .measurement import ABORTED, COMPLETE, ERROR, FAIL, MARGINAL, OUTCOMES, PASS, Limits, Result, combine_outcomes
+from .measurement import (
+    ABORTED,
+    COMPLETE,
+    ERROR,
+    FAIL,
+    MARGINAL,
+    NOT_MEASURED,
+    OUTCOMES,
+    PASS,
+    Limits,
+    Measurement,
+    MeasurementError,
+    Result,
+    combine_outcomes,
+)
 from .params import Param, ParamError
 from .procedure import Procedure, step
 from .runner import Runner, RunRecord, software_version
@@ -25,6 +39,9 @@ __all__ = [
     "Devices",
     "GuardedClock",
     "Limits",
+    "Measurement",
+    "MeasurementError",
+    "NOT_MEASURED",
     "Param",
     "ParamError",
     "Procedure",

@@ -130,8 +130,10 @@ class RunContext:
         recorder: Any = None,
         checkpoint: Callable[[], None] | None = None,
         station: Any = None,
+        procedure: Any = None,
     ) -> None:
         self.run_id = run_id
+        self.procedure = procedure  # its declared measurements check and complete what is reported
         self.params = params
         self.devices = devices if isinstance(devices, Devices) else Devices(devices)
         self.clock = clock
@@ -199,13 +201,14 @@ class RunContext:
         self,
         name: str,
         value: float,
-        unit: str = "",
+        unit: str | None = None,
         *,
         ci95: tuple[float, float] | None = None,
         limits: Limits | tuple | dict | None = None,
         dut: str | None = None,
     ) -> Result:
-        """Report a measurement; its outcome comes from the limits (PASS / FAIL / MARGINAL)."""
+        """Report a declared measurement (unit None: the declared one); its outcome comes from the
+        limits, by default the declared ones (PASS / FAIL / MARGINAL)."""
         res = Result(
             name=name,
             value=float(value),
@@ -217,14 +220,17 @@ class RunContext:
         return self.report(res)
 
     def report(self, res: Result) -> Result:
-        """Record a Result made elsewhere (e.g. by the procedure's analysis hook)."""
+        """Record a Result made elsewhere (e.g. by the procedure's analysis hook).  With a procedure,
+        a name it did not declare or another unit raises MeasurementError (the run ends ERROR)."""
+        if self.procedure is not None:
+            res = self.procedure.resolve_result(res)
         self.results.append(res)
         lim = res.limits
         self.publish(
             ev.Measurement,
             name=res.name,
             value=res.value,
-            unit=res.unit,
+            unit=res.unit or "",
             ci95=res.ci95,
             low=None if lim is None else lim.low,
             high=None if lim is None else lim.high,

@@ -29,7 +29,15 @@ Example (procedures/examples/table_spin.py is the full file):
         def hold(self, ctx):
             ctx.sleep(self.hold_s)
             rate = ctx.devices.table.status().rate_dps
-            ctx.measure("table_rate_dps", rate, "deg/s", limits=(self.rate_dps - 0.5, self.rate_dps + 0.5))
+            ctx.measure("table_rate_dps", rate)  # unit, doc and limits from the declaration
+
+with its measurements declared up front (a reported name not declared, or in another unit, ends
+the run ERROR; one declared and never reported is recorded NOT_MEASURED, when its condition holds):
+
+        measurements = (
+            Measurement("table_rate_dps", "deg/s", "mean rate the table reports while held",
+                        truth=None, limits=lambda p: (p.rate_dps - 0.5, p.rate_dps + 0.5)),
+        )
 
 An optional analysis hook `analysis(self, data) -> list[Result]` works on recorded data (a
 `bench.recorder.RunData`, the same during a run via `ctx.data()` and afterwards from the HDF5
@@ -43,7 +51,7 @@ from collections.abc import Callable
 from typing import Any, ClassVar
 
 from .demands import Demand
-from .measurement import Result
+from .measurement import Measurement, MeasurementError, Result
 from .params import Param, declared_params, resolve_params
 
 _STEP_ATTR = "_gyrobench_step_title"
@@ -74,6 +82,8 @@ class Procedure:
     requires: ClassVar[tuple[str, ...]] = ()
     #: kinds of gyro the procedure is written for (`bench.engine.demands.KINDS`); () = any
     kinds: ClassVar[tuple[str, ...]] = ()
+    #: the measurements the procedure reports (their names are its results' stable public names)
+    measurements: ClassVar[tuple[Measurement, ...]] = ()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -118,7 +128,46 @@ class Procedure:
             "kinds": list(cls.kinds),
             "steps": [s for s, _ in cls.step_specs()],
             "params": [p.describe() for p in cls.param_specs().values()],
+            "measurements": [m.describe() for m in cls.measurements],
         }
+
+    # --- declared measurements -------------------------------------------------------------
+    @classmethod
+    def measurement_specs(cls) -> dict[str, Measurement]:
+        """The declared measurements by name."""
+        return {m.name: m for m in cls.measurements}
+
+    def resolve_result(self, res: Result) -> Result:
+        """A reported Result checked against its declaration (MeasurementError if the name is not
+        declared or the unit differs) and completed with the declared unit, doc and default limits."""
+        spec = self.measurement_specs().get(res.name)
+        if spec is None:
+            declared = ", ".join(self.measurement_specs()) or "(none)"
+            raise MeasurementError(
+                f"measurement {res.name!r} is not declared by procedure {self.name!r} (declared: {declared})"
+            )
+        return spec.resolve(res, self, self.name)
+
+    def not_measured(self, results: list[Result]) -> list[Result]:
+        """A NOT_MEASURED Result for every declared measurement whose condition holds and that
+        `results` lacks (for each DUT that reported anything, else for the run)."""
+        duts = sorted({r.dut for r in results if r.dut is not None}) or [None]
+        have = {(r.dut, r.name) for r in results}
+        out = []
+        for spec in self.measurements:
+            if spec.applies(self):
+                out += [spec.not_measured(self, d) for d in duts if (d, spec.name) not in have]
+        return out
+
+    @classmethod
+    def truth_for(cls, truth: dict[str, float] | None) -> dict[str, float]:
+        """The simulator's true value of each declared measurement that has one, by measurement name."""
+        out = {}
+        for spec in cls.measurements:
+            value = spec.truth_of(truth)
+            if value is not None:
+                out[spec.name] = value
+        return out
 
     # --- analysis hook ---------------------------------------------------------------------
     def analysis(self, data: Any) -> list[Result]:

@@ -29,7 +29,7 @@ from drivers.errors import LinkLostError, SafetyTripError
 from . import events as ev
 from .context import GuardedClock, RunAborted, RunContext
 from .demands import check_station
-from .measurement import ABORTED, COMPLETE, ERROR, Result, combine_outcomes
+from .measurement import ABORTED, COMPLETE, ERROR, FAIL, Result, combine_outcomes
 from .procedure import Procedure
 from .safety import SafeStateReport
 
@@ -247,6 +247,7 @@ class Runner:
             recorder=recorder,
             checkpoint=self.checkpoint,
             station=st,
+            procedure=proc,
         )
         spool_dir = None if self.runs_dir is None else self.runs_dir / "spool"  # records the store refused
         if self.store is not None:  # the run's RUNNING row (and heartbeat); never raises
@@ -304,13 +305,14 @@ class Runner:
                     ctx.log.warning(f"stopping the streams failed: {exc}")
             rec.safe_state = report.confirmed
             rec.safe_detail = {"devices": report.devices, "errors": report.errors, "order": report.order}
-            rec.measurements = list(ctx.results)
+            rec.measurements = list(ctx.results) + proc.not_measured(ctx.results)  # declared, never reported
             fatal = self._fatal
             if fatal is not None and fatal.reason not in rec.end_reason:  # failed after the last checkpoint
                 rec.end_reason = fatal.reason if outcome is None else f"{rec.end_reason}; {fatal.reason}"
                 outcome = ERROR
             if outcome is None:
-                outcome = combine_outcomes(r.outcome for r in rec.measurements)
+                # a declared measurement with limits that was never measured cannot pass
+                outcome = combine_outcomes(FAIL if not r.measured and r.limits else r.outcome for r in rec.measurements)
                 if not report.confirmed:
                     outcome = ERROR
                     rec.end_reason = "completed, but the safe state was not confirmed"

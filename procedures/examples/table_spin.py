@@ -1,6 +1,6 @@
 """Spin the table at a rate, hold it there, and check the rate the table reports."""
 
-from bench.engine import Demand, Param, Procedure, Result, step
+from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 
 
 class TableSpin(Procedure):
@@ -11,6 +11,11 @@ class TableSpin(Procedure):
     rate_dps = Param(100.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate")
     hold_s = Param(2.0, unit="s", low=0.1, high=600.0, doc="time held at rate")
     tolerance_dps = Param(0.5, unit="deg/s", low=0.01, high=10.0, doc="allowed rate error")
+
+    measurements = (
+        Measurement("table_rate_dps", "deg/s", "mean of the rates the table reports while held at the command",
+                    truth=None, limits=lambda p: (p.rate_dps - p.tolerance_dps, p.rate_dps + p.tolerance_dps)),
+    )
 
     def demands(self):
         """Checked against the station's limits before the table is enabled."""
@@ -37,6 +42,4 @@ class TableSpin(Procedure):
         """The measurement from the recorded readings: the same code live and in
         `gyrobench analyze RUN`."""
         rate = data.table("hold")["rate_dps"]
-        tol = self.tolerance_dps
-        limits = (self.rate_dps - tol, self.rate_dps + tol)
-        return [Result("table_rate_dps", float(rate.mean()), "deg/s", limits=limits)]
+        return [Result("table_rate_dps", float(rate.mean()))]  # unit and limits: the declaration
