@@ -67,7 +67,8 @@ def _drift_declarations() -> tuple[Measurement, ...]:
     when, when_doc = _compensating, "compensate"
     out = []
     for name, words in (("before", "compensation off"), ("after", "compensation on")):
-        out.append(Measurement(f"drift_{name}_dph", "deg/h", f"4 theta drift amplitude, {words} (fit of mean + 4 theta)",
+        out.append(Measurement(f"drift_{name}_dph", "deg/h",
+                               f"4 theta drift amplitude, {words} (fit of mean + 4 theta)",
                                truth="drift_before_dph" if name == "before" else None, when=when, when_doc=when_doc))
         out.append(Measurement(f"drift_{name}_mean_dph", "deg/h", f"mean drift, {words} (fit of mean + 4, 8, 12 theta)",
                                truth=f"drift_{name}_mean_dph", when=when, when_doc=when_doc))
@@ -77,7 +78,8 @@ def _drift_declarations() -> tuple[Measurement, ...]:
                                    f"{m} theta drift amplitude, {words} (fit of mean + 4, 8, 12 theta)",
                                    truth=truth, when=when, when_doc=when_doc))
         out.append(Measurement(f"drift_{name}_rest_rms_dph", "deg/h",
-                               f"rms of the drift the harmonic fit leaves, {words} (noise)", when=when, when_doc=when_doc))
+                               f"rms of the drift the harmonic fit leaves, {words} (noise)",
+                               when=when, when_doc=when_doc))
     out.append(Measurement("drift_reduction_ratio", "", "drift_before_dph / drift_after_dph", when=when,
                            when_doc=when_doc))
     out.append(Measurement("drift_after_4theta_expected_dph", "deg/h",

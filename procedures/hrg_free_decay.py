@@ -17,9 +17,9 @@ import math
 
 import numpy as np
 
-from bench.analysis.maslov import derived_ci95, identify_free_decay
+from bench.analysis.maslov import derived_ci95, free_param_names, identify_free_decay
 from bench.analysis.slow_model import orbit_elements
-from bench.engine import Param, Procedure, Result, step
+from bench.engine import Measurement, Param, Procedure, Result, step
 
 from .hrg_excitation import HrgExcitation
 
@@ -49,7 +49,7 @@ def decay_results(
     if method == "output-error":
         ee, _ = _method_results(t_s, q, rate_dps=rate_dps, ref_freq_hz=ref_freq_hz,
                                 natural_freq_hz=natural_freq_hz, model=model, method="equation-error")
-        out += [Result(r.name + EE_SUFFIX, r.value, r.unit, ci95=r.ci95) for r in ee]
+        out += [Result(r.name + EE_SUFFIX, r.value, ci95=r.ci95) for r in ee]
     return out, fit
 
 
@@ -78,28 +78,79 @@ def _method_results(t_s: np.ndarray, q: np.ndarray, *, rate_dps: float, ref_freq
         method=method, **extra,
     )
     d, p, ci = fit.derived, fit.params, fit.ci95
-    out = [Result(f"maslov_{n}", v, "1/s", ci95=ci[n]) for n, v in p.items()]
+    out = [Result(f"maslov_{n}", v, ci95=ci[n]) for n, v in p.items()]
     gamma_lo, gamma_hi = ci["gamma"]
-    out.append(Result("tau_s", 2.0 / p["gamma"], "s", ci95=(2.0 / gamma_hi, 2.0 / gamma_lo)))
-    out.append(Result("q_factor", d["Q"], "", ci95=(2 * math.pi * natural_freq_hz / gamma_hi,
+    out.append(Result("tau_s", 2.0 / p["gamma"], ci95=(2.0 / gamma_hi, 2.0 / gamma_lo)))
+    out.append(Result("q_factor", d["Q"], ci95=(2 * math.pi * natural_freq_hz / gamma_hi,
                                                     2 * math.pi * natural_freq_hz / gamma_lo)))
     dci = derived_ci95(fit, natural_freq_hz=natural_freq_hz)
-    for name, key, unit in (("split_hz", "split_hz", "Hz"), ("delta_inv_tau_per_s", "delta_inv_tau_per_s", "1/s"),
-                            ("damping_anisotropy_per_s", "damping_anisotropy_per_s", "1/s"),
-                            ("freq_offset_hz", "freq_offset_hz", "Hz")):
-        out.append(Result(name, d[key], unit, ci95=dci[key]))
+    for name in ("split_hz", "delta_inv_tau_per_s", "damping_anisotropy_per_s", "freq_offset_hz"):
+        out.append(Result(name, d[name], ci95=dci[name]))
     for name, key in (("theta_w_deg", "alpha_rad"), ("theta_tau_deg", "beta_rad")):
         value = math.degrees(d[key])
         shift = value % 90.0 - value  # report the axis in [0, 90) like the simulator's truth
         lo, hi = (math.degrees(v) + shift for v in dci[key])
-        out.append(Result(name, value + shift, "deg", ci95=(lo, hi)))
+        out.append(Result(name, value + shift, ci95=(lo, hi)))
     if rate_dps:
         omega = math.radians(rate_dps)
         nu_lo, nu_hi = sorted(ci["nu"])
         k_ci = tuple(sorted((nu_lo / (4 * omega), nu_hi / (4 * omega))))
-        out.append(Result("bryan_factor", p["nu"] / (4.0 * omega), "", ci95=k_ci))
-    out.append(Result("residual_sigma", fit.sigma, ""))
+        out.append(Result("bryan_factor", p["nu"] / (4.0 * omega), ci95=k_ci))
+    out.append(Result("residual_sigma", fit.sigma))
     return out, fit
+
+
+_ALL_PARAMS = free_param_names("quintic")
+#: the model parameter's truth key on the simulated station (nu depends on the table rate: none)
+_PARAM_TRUTH = {n: n for n in _ALL_PARAMS if n != "nu"}
+
+
+def _fitted(param: str):
+    """The condition that the parameter belongs to the model the procedure fits."""
+    if param in free_param_names("linear"):
+        return None, ""
+    orders = [m for m in ("cubic", "quintic") if param in free_param_names(m)]
+    return (lambda proc: proc.model in orders), "model in (" + ", ".join(orders) + ")"
+
+
+def _with_output_error(when):
+    """The condition of an equation-error twin: the output-error method (and the base's condition)."""
+    def both(proc) -> bool:
+        return proc.method == "output-error" and (when is None or bool(when(proc)))
+    return both
+
+
+def _decay_declarations() -> tuple[Measurement, ...]:
+    """The identification's measurements, and their equation-error twins (suffix EE_SUFFIX) with the
+    output-error method."""
+    base = []
+    for n in _ALL_PARAMS:
+        when, when_doc = _fitted(n)
+        base.append(Measurement(f"maslov_{n}", "1/s", f"slow-variable model coefficient {n}",
+                                truth=_PARAM_TRUTH.get(n), when=when, when_doc=when_doc))
+    rate_on, rate_doc = (lambda proc: proc.rate_dps != 0), "rate_dps != 0"
+    base += [
+        Measurement("tau_s", "s", "amplitude decay time 2 / gamma", truth="tau_s"),
+        Measurement("q_factor", "", "quality factor w0 / gamma", truth="q_factor"),
+        Measurement("split_hz", "Hz", "frequency split", truth="split_hz"),
+        Measurement("delta_inv_tau_per_s", "1/s", "damping anisotropy Delta(1/tau)", truth="delta_inv_tau_per_s"),
+        Measurement("damping_anisotropy_per_s", "1/s", "damping anisotropy 2 Delta(1/tau)",
+                    truth="damping_anisotropy_per_s"),
+        Measurement("freq_offset_hz", "Hz", "mean frequency minus the nominal natural frequency",
+                    truth="freq_offset_hz"),
+        Measurement("theta_w_deg", "deg", "stiffness (frequency) axis in [0, 90)", truth="theta_w_deg"),
+        Measurement("theta_tau_deg", "deg", "damping axis in [0, 90)", truth="theta_tau_deg"),
+        Measurement("bryan_factor", "", "Bryan factor K = nu / (4 Omega) from the table rate", truth="bryan_factor",
+                    when=rate_on, when_doc=rate_doc),
+        Measurement("residual_sigma", "", "rms residual of the fit (model units)"),
+    ]
+    out = list(base)
+    for m in base:
+        both = _with_output_error(m.when)
+        words = "method = output-error" + (f" and {m.when_doc}" if m.when_doc else "")
+        out.append(Measurement(m.name + EE_SUFFIX, m.unit, m.doc + " (the paper's equation-error fit)",
+                               truth=m.truth, when=both, when_doc=words))
+    return tuple(out)
 
 
 class HrgFreeDecay(HrgExcitation, Procedure):
@@ -119,6 +170,8 @@ class HrgFreeDecay(HrgExcitation, Procedure):
                    doc="output-error: maximum likelihood (the Cramer-Rao bound), the paper's fit reported beside "
                        "it with names ending _ee; equation-error: the paper's Simpson least squares only")
     table_ripple = Param(True, doc="output-error: also fit the wave's turn by the table's angle ripple (1x, 2x/rev)")
+
+    measurements = _decay_declarations()
 
     @step("Excite and hold the amplitude")
     def excite(self, ctx):

@@ -26,22 +26,53 @@ import numpy as np
 from bench.analysis.maslov import (
     PAPER_NATURAL_FREQ_HZ,
     derived_ci95,
+    forced_param_names,
     identify_forced,
 )
-from bench.engine import Demand, Param, Procedure, Result, step
+from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 
 SWEEP_COLUMNS = ("t_s", "freq_hz", "direction", "q1", "p1", "q2", "p2", "amplitude", "phase_deg",
                  "amplitude_y", "phase_y_deg", "settled")
 MODEL_ORDER = {"linear": 1, "cubic": 3, "quintic": 5}
-DERIVED_UNITS = {
-    "Q": "",
-    "split_hz": "Hz",
-    "damping_anisotropy_per_s": "1/s",
-    "alpha_deg": "deg",
-    "beta_deg": "deg",
-    "freq_offset_hz": "Hz",
-    "zero_rate_dps": "deg/s",
+#: the derived quantities of the chosen model: unit, what it is
+DERIVED = {
+    "Q": ("", "quality factor w0 / gamma"),
+    "split_hz": ("Hz", "frequency split"),
+    "damping_anisotropy_per_s": ("1/s", "damping anisotropy"),
+    "alpha_deg": ("deg", "stiffness axis (Maslov's alpha), in (-45, 45]"),
+    "beta_deg": ("deg", "damping axis (Maslov's beta), in (-45, 45]"),
+    "freq_offset_hz": ("Hz", "mean frequency minus the model's characteristic frequency"),
+    "zero_rate_dps": ("deg/s", "zero-rate output nu_offset / 4K"),
 }
+#: the chosen model's parameters that the simulated station knows (nu and the drives u1..u4 it does not)
+_PARAM_TRUTH = ("gamma", "b_c", "b_s", "c_m", "n", "h_c", "h_s", "xi", "kappa")
+
+
+def _chosen_in(orders: tuple[str, ...]):
+    """The condition that the chosen model is one of `orders`."""
+    def when(proc) -> bool:
+        return proc.chosen_model in orders
+    return when
+
+
+def _declarations() -> tuple[Measurement, ...]:
+    """sigma of each model, the chosen model, its parameters (xi from cubic up, kappa quintic only),
+    the derived quantities and the hysteresis."""
+    out = [Measurement(f"sigma_{m}", "", f"residual sigma of the {m} model (model units)") for m in MODEL_ORDER]
+    out.append(Measurement("chosen_model_order", "", "order of the model chosen: 1 linear, 3 cubic, 5 quintic"))
+    for name in forced_param_names("quintic"):
+        orders = tuple(m for m in MODEL_ORDER if name in forced_param_names(m))
+        conditional = "linear" not in orders
+        out.append(Measurement(name, "1/s", f"chosen model's coefficient {name}",
+                               truth=name if name in _PARAM_TRUTH else None,
+                               when=_chosen_in(orders) if conditional else None,
+                               when_doc="chosen model in (" + ", ".join(orders) + ")" if conditional else ""))
+    for name, (unit, doc) in DERIVED.items():
+        out.append(Measurement(name, unit, doc, truth=name))
+    out.append(Measurement("hysteresis_max_amplitude", "", "largest amplitude difference between the up and down "
+                           "sweeps at one frequency (model units)", when=lambda proc: proc.both_directions,
+                           when_doc="both_directions"))
+    return tuple(out)
 
 
 def choose_model(sigmas: dict[str, float], improvement: float) -> str:
@@ -76,14 +107,14 @@ def sweep_analysis(
     results = [Result(f"sigma_{m}", s) for m, s in sigmas.items()]
     results.append(Result("chosen_model_order", float(MODEL_ORDER[chosen])))
     for name, value in best.params.items():
-        results.append(Result(name, value, "1/s", ci95=best.ci95[name]))
+        results.append(Result(name, value, ci95=best.ci95[name]))
     dci = derived_ci95(best, natural_freq_hz=natural_freq_hz, bryan_factor=bryan_factor)
     rad_ci = {"alpha_deg": "alpha_rad", "beta_deg": "beta_rad"}
-    for name, unit in DERIVED_UNITS.items():
+    for name in DERIVED:
         lo_hi = dci[rad_ci[name]] if name in rad_ci else dci[name]
         if name in rad_ci:
             lo_hi = (math.degrees(lo_hi[0]), math.degrees(lo_hi[1]))
-        results.append(Result(name, best.derived[name], unit, ci95=lo_hi))
+        results.append(Result(name, best.derived[name], ci95=lo_hi))
     # hysteresis: largest amplitude difference between the up and down sweeps at one frequency
     amp = np.hypot(q[:, 0], q[:, 1])
     up, down = direction > 0, direction < 0
@@ -140,6 +171,8 @@ class MemsSweep(Procedure):
     bryan_factor = Param(0.4, low=0.01, high=1.0, doc="K, for the zero-rate output")
     improvement = Param(0.05, low=0.0, high=0.9, doc="sigma reduction that justifies the richer model")
 
+    measurements = _declarations()
+
     def __init__(self, params=None) -> None:
         super().__init__(params)
         if self.stop_hz <= self.start_hz:
@@ -149,6 +182,7 @@ class MemsSweep(Procedure):
             message = not_above("stop_hz", self.stop_hz, self.start_hz, "Hz") + " (start_hz)"
             raise ParamError("stop_hz", self.stop_hz, f"above start_hz = {self.start_hz}", message)
         self.rows: list[list[float]] = []
+        self.chosen_model = "linear"  # set by the identification; the declared parameters follow it
 
     def demands(self) -> list[Demand]:
         """Both drive amplitudes, against the front end's `max_amplitude_v`."""
@@ -239,10 +273,12 @@ class MemsSweep(Procedure):
     def _analyse(self, rows: np.ndarray, compute=None):
         """Identify the sweep rows; with `compute` (a run's `ctx.compute`) in a worker the engine can end."""
         run = compute or (lambda fn, *a, **kw: fn(*a, **kw))
-        return run(
+        results, curves, info = run(
             sweep_analysis, rows[:, 1], rows[:, 3:7], rows[:, 2], natural_freq_hz=self.natural_freq_hz,
             bryan_factor=self.bryan_factor, improvement=self.improvement,
         )
+        self.chosen_model = info["chosen"]  # the declared parameters follow it
+        return results, curves, info
 
     def analysis(self, data) -> list[Result]:
         """Re-fit a recorded run from its `sweep` stream."""
