@@ -199,8 +199,10 @@ def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None 
 
 
 def _print_record(js: dict[str, Any]) -> None:
+    from procedures import measurement_truth
+
     print(f"run {js['run_id']}  {js['procedure']}  {js['outcome']}  ({js['end_reason']})")
-    truth = js.get("truth") or {}
+    truth = measurement_truth(js.get("procedure"), js.get("truth"))  # by declaration
     def num(x: Any) -> str:  # as_json gives None for NaN/inf and for an open side of the limits
         return "-" if x is None else f"{x:.6g}"
 
@@ -236,6 +238,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
     print("procedures:")
     for name, d in procs.items():
         print(f"  {name}: {d['title']}  (steps: {', '.join(d['steps'])})")
+        print("    parameters:")
         for p in d["params"]:
             if p["choices"] is not None:
                 rng = f"one of {p['choices']}"
@@ -244,6 +247,10 @@ def _cmd_list(args: argparse.Namespace) -> int:
             else:
                 rng = f"[{p['low']}, {p['high']}]"
             print(f"      {p['name']} = {p['default']!r} {p['unit']}  {rng}  {p['doc']}")
+        print("    measurements:")
+        for m in d["measurements"]:
+            when = f"  (when {m['condition']})" if m["condition"] else ""
+            print(f"      {m['name']} [{m['unit'] or '-'}]  {m['doc']}{when}")
     print("stations:")
     for name, path in stations.items():
         print(f"  {name}: {path}")
@@ -321,9 +328,12 @@ def _cmd_show(args: argparse.Namespace) -> int:
     print(f"{'params':>17}: {run['params']}")
     if run["duts"]:
         print(f"{'duts':>17}: {', '.join(run['duts'])}")
+    from procedures import measurement_truth
+
+    truth = measurement_truth(run["procedure"], run["truth"])  # by declaration
     for m in run["measurements"]:
         lim = "" if m["low"] is None and m["high"] is None else f" [{m['low']}, {m['high']}]"
-        t = f"  truth {run['truth'][m['name']]:.6g}" if m["name"] in run["truth"] else ""
+        t = f"  truth {truth[m['name']]:.6g}" if m["name"] in truth else ""
         dut = f"{m['dut']}:" if m["dut"] else ""
         print(f"  {m['source']:<7} {dut}{m['name']} = {m['value']} {m['unit']}{lim} {m['outcome']}{t}")
     return EXIT_OK
@@ -369,7 +379,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
             return EXIT_USAGE
         incomplete = data.incomplete
         try:
-            results = proc.analysis(data)
+            results = [proc.resolve_result(r) for r in proc.analysis(data)]  # declared names, units
         except Exception as exc:  # noqa: BLE001 - a hook on data it cannot use: one message, no traceback
             why = f"{exc}" if isinstance(exc, (KeyError, ValueError)) else f"{type(exc).__name__}: {exc}"
             if incomplete and incomplete not in why:
@@ -390,8 +400,9 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
             print(f"  from an INCOMPLETE run: {incomplete}")
         for note in notes:
             print(f"  note: {note}")
+        declared_truth = cls.truth_for(truth)
         for name, m in out.items():
-            t = f"  truth {truth[name]:.6g}" if name in truth else ""
+            t = f"  truth {declared_truth[name]:.6g}" if name in declared_truth else ""
             print(f"  {name} = {m['value']} {m['unit']}  ci95 {m['ci95']}  {m['outcome']}{t}")
     return EXIT_OK
 

@@ -418,15 +418,6 @@ class Recorder:
                     a["wall_s"] = float(record.wall_s)
                     a["finished_at"] = record.finished_at
                     a["result"] = _json(record.as_json())
-                    for r in record.measurements:  # declared, never reported: NOT_MEASURED rows
-                        if not r.measured:
-                            lim = r.limits
-                            self._append_text(self._meas, _json({
-                                "name": r.name, "value": None, "unit": r.unit, "ci95": None,
-                                "low": None if lim is None else lim.low, "high": None if lim is None else lim.high,
-                                "marginal_low": None if lim is None else lim.marginal_low,
-                                "marginal_high": None if lim is None else lim.marginal_high,
-                                "outcome": r.outcome, "dut": r.dut, "t_sim_s": None}))
                     if self.failure is not None:
                         a["incomplete"] = self.failure
             except (OSError, RuntimeError) as exc:

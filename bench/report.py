@@ -102,7 +102,9 @@ def render_report(data: Any, run_row: dict[str, Any] | None = None) -> str:
     """HTML for one run from its raw file (a RunData) and, when known, its results-store row."""
     a = data.attrs
     result = a.get("result") or {}
-    truth = data.truth or {}
+    from procedures import measurement_truth
+
+    truth = measurement_truth(a.get("procedure"), data.truth)  # by declaration, not by matching names
     parts = [
         "<!doctype html><html><head><meta charset='utf-8'>",
         f"<title>gyrobench run {html.escape(str(a.get('run_id', '')))}</title>",

@@ -75,3 +75,12 @@ def find_procedure(text: str) -> type:
     if text in procs:
         return procs[text]
     raise ProcedureNotFound(f"no procedure {text!r}; known: {', '.join(procs) or '(none)'}; or give a .py file")
+
+
+def measurement_truth(procedure: str | None, truth: dict[str, float] | None) -> dict[str, float]:
+    """The simulator's true value of each measurement of a registered procedure, by measurement name,
+    as its declarations say (not by matching names); {} without truth or for an unknown procedure."""
+    if not truth or not procedure:
+        return {}
+    cls = all_procedures().get(procedure)
+    return {} if cls is None else cls.truth_for(truth)

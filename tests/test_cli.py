@@ -31,16 +31,17 @@ JSON_KEYS = {
     "end_reason",
     "raw_file",
 }
-MEAS_KEYS = {"value", "unit", "ci95", "limits", "outcome"}
+MEAS_KEYS = {"value", "unit", "ci95", "limits", "marginal", "outcome"}
 
 FAILING = '''
-from bench.engine import Param, Procedure, step
+from bench.engine import Measurement, Param, Procedure, step
 
 
 class AlwaysHigh(Procedure):
     """Measures the table's rate at rest against limits it cannot meet."""
 
     offset_dps = Param(1.0, unit="deg/s", low=0.0, high=10.0)
+    measurements = (Measurement("rest_rate_dps", "deg/s", "rate the table reports at rest"),)
 
     @step
     def measure_rest(self, ctx):

@@ -11,6 +11,7 @@ from bench.clock import SimClock
 from bench.engine import (
     GuardedClock,
     Limits,
+    Measurement,
     Param,
     ParamError,
     Procedure,
@@ -77,6 +78,7 @@ class ThreeSteps(Procedure):
     value = Param(5.0, unit="deg", low=-10.0, high=10.0)
     mode = Param("a", choices=("a", "b"))
     n = Param(3, low=1, high=10)
+    measurements = (Measurement("x_deg", "deg", "the parameter `value`, measured"),)
 
     @step("First")
     def first(self, ctx):
@@ -141,6 +143,7 @@ def test_normal_run_orders_events_and_safe_state():
         "unit": "deg",
         "ci95": None,
         "limits": [-6.0, 6.0],
+        "marginal": [-5.5, 5.5],  # the marginal band, no longer dropped
         "outcome": "PASS",
     }
     assert js["truth"] == {"tau_s": 1.0}
@@ -168,7 +171,7 @@ def test_abort_at_each_step_reaches_safe_state(abort_at):
     assert rec.outcome == "ABORTED" and rec.end_reason == "aborted: operator"
     assert rec.failed_step == abort_at
     assert rec.safe_state and station.calls == ["fpga", "table", "frontend"]
-    assert rec.measurements == []
+    assert [(r.name, r.outcome) for r in rec.measurements] == [("x_deg", "NOT_MEASURED")]  # declared, not reached
     fin = [e for e in seen if isinstance(e, events.StepFinished)]
     assert fin[-1].name == abort_at and fin[-1].status == "aborted"
     assert isinstance(seen[-1], events.RunFinished) and seen[-1].safe_state

@@ -225,6 +225,24 @@ class RunContext:
         if self.procedure is not None:
             res = self.procedure.resolve_result(res)
         self.results.append(res)
+        self._publish_result(res)
+        return res
+
+    def not_measured(self) -> list[Result]:
+        """The declared measurements (condition holding) never reported, published as NOT_MEASURED
+        (the recorder and the window show them); called by the runner at the run's end, never raises."""
+        if self.procedure is None:
+            return []
+        try:
+            missing = self.procedure.not_measured(self.results)
+        except Exception as exc:  # noqa: BLE001 - a declaration's condition failed: say so, keep the run's end
+            self.log.warning(f"the declared measurements' conditions could not be evaluated: {exc}")
+            return []
+        for res in missing:
+            self._publish_result(res)
+        return missing
+
+    def _publish_result(self, res: Result) -> None:
         lim = res.limits
         self.publish(
             ev.Measurement,
@@ -239,4 +257,3 @@ class RunContext:
             marginal_low=None if lim is None else lim.marginal_low,
             marginal_high=None if lim is None else lim.marginal_high,
         )
-        return res

@@ -305,7 +305,7 @@ class Runner:
                     ctx.log.warning(f"stopping the streams failed: {exc}")
             rec.safe_state = report.confirmed
             rec.safe_detail = {"devices": report.devices, "errors": report.errors, "order": report.order}
-            rec.measurements = list(ctx.results) + proc.not_measured(ctx.results)  # declared, never reported
+            rec.measurements = list(ctx.results) + ctx.not_measured()  # and the declared ones never reported
             fatal = self._fatal
             if fatal is not None and fatal.reason not in rec.end_reason:  # failed after the last checkpoint
                 rec.end_reason = fatal.reason if outcome is None else f"{rec.end_reason}; {fatal.reason}"
