@@ -17,6 +17,7 @@ import h5py
 import pytest
 
 from bench.cli import main
+from procedures.examples.table_spin import TableSpin
 
 GYROBENCH = [sys.executable, "-m", "bench.cli"]
 JSON_KEYS = {
@@ -80,6 +81,7 @@ def test_run_json_shape_then_runs_show_analyze_report(tmp_path):
     m = out["measurements"]["table_rate_dps"]
     assert set(m) == MEAS_KEYS and m["unit"] == "deg/s" and m["limits"] == [119.5, 120.5] and m["outcome"] == "PASS"
     assert out["truth"]["tau_s"] == 300.0 and out["simulated_s"] > 0.5 and out["wall_s"] > 0
+    assert set(out["measurements"]) == {m.name for m in TableSpin.measurements}  # exactly the declared set
     raw = Path(out["raw_file"])
     assert raw.is_file() and raw.parent == tmp_path / "runs"
 

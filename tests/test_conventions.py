@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import math
 import pkgutil
 import re
 from types import SimpleNamespace
@@ -103,6 +104,53 @@ def test_procedure_conventions(name):
         problems += _unit_problems(pname, p.unit, numeric)
     assert not problems, f"{name}: " + "; ".join(problems)
     assert set(cls({}).params) == set(params)  # every default passes its own check
+
+
+#: a gyro kind's simulated station preset (its truth is `ResonatorParams.truth()`, as the station's)
+KIND_PRESETS = {"hrg": "hrg", "mems-ring": "mems"}
+#: the slow-variable model's coefficients under the paper's names (their `_s` means sine, not seconds)
+PAPER_COEFFICIENTS = {"b_s", "h_s"}
+
+
+@pytest.mark.parametrize("name", sorted(all_procedures()))
+def test_declared_measurements_are_consistent(name):
+    """Every declared measurement: a unique name, a unit string ('' = dimensionless) agreeing with
+    its name's unit suffix (an `_ee` twin named as its base), a doc, a condition that evaluates on
+    the default parameters, and a truth rule that resolves to a finite number on a simulated station
+    of each kind the procedure is written for."""
+    from bench.engine import Measurement
+    from simulators.physics.params import preset
+
+    cls = all_procedures()[name]
+    decls = cls.measurements
+    assert decls, f"{name}: declares no measurements"
+    names = [m.name for m in decls]
+    assert len(names) == len(set(names)), f"{name}: a measurement declared twice"
+    proc = cls({})
+    problems: list[str] = []
+    for m in decls:
+        assert isinstance(m, Measurement)
+        if not isinstance(m.unit, str):
+            problems.append(f"{m.name}: unit {m.unit!r} is not a string")
+        if not m.doc.strip():
+            problems.append(f"{m.name}: no doc")
+        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", m.name):
+            problems.append(f"{m.name}: not a plain identifier")
+        base = m.name.removesuffix("_ee")
+        expected = None if base.removeprefix("maslov_") in PAPER_COEFFICIENTS else _suffix_unit(base)
+        if expected is not None and m.unit != expected:
+            problems.append(f"{m.name}: its name says {expected!r}, its unit is {m.unit!r}")
+        if m.when is not None and not m.when_doc:
+            problems.append(f"{m.name}: a condition without when_doc (what `gyrobench list` shows)")
+        m.applies(proc)  # raises if the condition cannot be evaluated
+        m.limits_for(proc)
+        for kind in cls.kinds or tuple(KIND_PRESETS):
+            if m.truth is None:
+                continue
+            value = m.truth_of(preset(KIND_PRESETS[kind]).truth())
+            if value is None or not math.isfinite(value):
+                problems.append(f"{m.name}: truth rule {m.truth!r} does not resolve on a simulated {kind}")
+    assert not problems, f"{name}: " + "; ".join(problems)
 
 
 # --- station files -------------------------------------------------------------------------------
@@ -238,3 +286,20 @@ def test_rate_table_models_implement_only_the_transport():
     assert len(models) >= 2
     for model in models:
         assert not [name for name in checked if name in vars(model)], model.__name__
+
+
+def test_readme_lists_the_declared_measurements():
+    """The README's measurement tables are docs/measurement_tables.py's output (regenerate: run it)."""
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "docs"))
+    try:
+        from measurement_tables import tables
+    finally:
+        sys.path.remove(str(root / "docs"))
+    text = (root / "README.md").read_text()
+    begin, end = "<!-- measurement tables: begin -->\n", "<!-- measurement tables: end -->"
+    shown = text[text.index(begin) + len(begin): text.index(end)]
+    assert shown == tables(), "README.md's measurement tables are stale: paste docs/measurement_tables.py's output"

@@ -151,3 +151,16 @@ def test_drift_reported_in_full_and_the_loops_add_none(run):
     assert _within(m["drift_before_4theta_dph"], expected_dph)
     assert m["drift_after_4theta_dph"].ci95[0] <= m["drift_after_4theta_expected_dph"].ci95[1]
     assert m["drift_after_4theta_dph"].value == pytest.approx(m["drift_after_dph"].value, abs=0.5)
+
+
+def test_reports_exactly_its_declared_measurements(run):
+    """With `compensate` on: every declared measurement (the drift ones included), nothing else,
+    nothing NOT_MEASURED; with it off the drift ones are not expected."""
+    record, _, _ = run
+    assert PARAMS.get("compensate", True)
+    declared = {m.name for m in HrgDamping.measurements}
+    assert {r.name for r in record.measurements} == declared
+    assert all(r.measured for r in record.measurements)
+    off = HrgDamping({**PARAMS, "compensate": False})
+    expected_off = {m.name for m in HrgDamping.measurements if m.applies(off)}
+    assert not any(n.startswith("drift_") and n != "drift_predicted_dph" for n in expected_off)

@@ -119,3 +119,22 @@ def test_recorded_decay_refits_to_the_same_answer(decay_run):
     refit = {r.name: r.value for r in HrgFreeDecay(record.params).analysis(data)}
     for r in record.measurements:
         assert refit[r.name] == pytest.approx(r.value, rel=1e-9, abs=1e-15), r.name
+
+
+def _declared_set(cls, record, **state) -> set[str]:
+    """The declared measurements whose condition holds for the run's parameters (and state)."""
+    proc = cls(record.params)
+    vars(proc).update(state)
+    return {m.name for m in cls.measurements if m.applies(proc)}
+
+
+def test_each_run_reports_exactly_its_declared_measurements(sweep_run, decay_run):
+    """mems-sweep (cubic chosen: xi, no kappa) and hrg-free-decay (linear, output-error: the `_ee`
+    twins, no xi or kappa) report their declared set, nothing NOT_MEASURED, nothing else."""
+    for cls, (record, _), state in ((MemsSweep, sweep_run, {"chosen_model": "cubic"}), (HrgFreeDecay, decay_run, {})):
+        assert "NOT_MEASURED" not in {r.outcome for r in record.measurements}, cls.name
+        got = {r.name for r in record.measurements}
+        assert got == _declared_set(cls, record, **state), (cls.name, got ^ _declared_set(cls, record, **state))
+    assert {"xi", "kappa"} & {r.name for r in sweep_run[0].measurements} == {"xi"}
+    decay_names = {r.name for r in decay_run[0].measurements}
+    assert "tau_s_ee" in decay_names and "maslov_xi" not in decay_names and "maslov_xi_ee" not in decay_names
