@@ -7,12 +7,33 @@ import json
 import math
 import signal
 import sys
+import threading
 import time
 from typing import Any
 
 EXIT_OK, EXIT_BAD_OUTCOME, EXIT_USAGE = 0, 1, 2
 EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 70, 130, 141
 BAD_OUTCOMES = ("ERROR", "ABORTED", "FAIL")
+
+
+def _interrupted_early(signum: int, _frame: Any) -> None:
+    """SIGINT/SIGTERM while the CLI is still importing (before main()'s error boundary): one line and
+    the conventional exit code, no traceback; nothing has been opened yet, so nothing to make safe."""
+    import os
+
+    os.write(2, f"gyrobench: interrupted ({signal.Signals(signum).name}) before anything started\n".encode())
+    os._exit(128 + signum)
+
+
+def _interrupt(signum: int, _frame: Any) -> None:
+    """Inside main(): SIGTERM is handled like Ctrl-C (the boundary prints one line); a run installs
+    its own handlers that abort it into the safe state, and puts these back afterwards."""
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+if __name__ == "__main__" or sys.argv[0].endswith("gyrobench"):  # the CLI's own process, not an importer
+    for _sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(_sig, _interrupted_early)
 
 
 class CliError(Exception):
@@ -573,6 +594,9 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or bool(os.environ.get("GYROBENCH_DEBUG"))  # anywhere on the line
     argv = [a for a in argv if a != "--debug"]
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, _interrupt)
     try:
         args = build_parser().parse_args(argv)
         code = int(args.func(args))
@@ -581,8 +605,8 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # `gyrobench runs | head`: the reader left; say nothing more
         _silence_stdout()
         return EXIT_BROKEN_PIPE
-    except KeyboardInterrupt:
-        _err("interrupted (Ctrl-C)")
+    except KeyboardInterrupt as exc:
+        _err("interrupted (SIGTERM)" if str(exc) == "SIGTERM" else "interrupted (Ctrl-C)")
         return EXIT_INTERRUPTED
     except CliError as exc:
         _err(str(exc))
