@@ -199,7 +199,10 @@ def table_figure(data: Any) -> list[ReportFigure]:
     cols = [c for c in ("rate_dps", "angle_deg") if c in tab]
     fig, ax = new_figure(len(cols), 1, height_in=1.6 + 1.2 * len(cols), sharex=True)
     for i, c in enumerate(cols):
-        plot_record(ax[i, 0], t, tab[c], color=f"C{i}", marker="." if len(t) < 400 else None, markersize=2)
+        if c == "angle_deg":  # wraps at 360 deg: points, not a line across the wrap
+            ax[i, 0].plot(t, tab[c], ".", color=f"C{i}", markersize=1.5)
+        else:
+            plot_record(ax[i, 0], t, tab[c], color=f"C{i}")
         ax[i, 0].set_ylabel(label(c))
     ax[-1, 0].set_xlabel(label("t_s"))
     return [ReportFigure("table", "Rate table: rate and angle", fig, f"{len(t)} readings of the table's status.")]
