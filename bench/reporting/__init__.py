@@ -90,7 +90,7 @@ def _identity(data: Any, proc: Any) -> list[tuple[str, str]]:
         ("DUT", ", ".join(map(str, duts)) if duts else DASH),
         ("operator", str(a.get("operator") or DASH)),
         ("software version", str(a.get("software_version") or DASH)),
-        ("seed", sig(a.get("seed"), 12) if a.get("seed") is not None else DASH),
+        ("seed", str(a["seed"]) if a.get("seed") is not None else DASH),
         ("started", str(a.get("started_at") or DASH)),
         ("finished", str(a.get("finished_at") or DASH)),
         ("bench time", f"{sig(a.get('simulated_s'))} s" if a.get("simulated_s") is not None else DASH),
