@@ -131,12 +131,27 @@ EXPECTED_FIGURES = {
 }
 
 
+@pytest.fixture(scope="module")
+def pages(runs, tmp_path_factory):
+    """Each run's report page, rendered once: {name: (html file, figures, notes, measurements)}."""
+    from bench.reporting import context
+
+    tmp = tmp_path_factory.mktemp("report_pages")
+    out = {}
+    for name, raw in runs.items():
+        with open_run(raw) as data:
+            figs, notes = figures_for(data)
+            ctx = context(data, figures=(figs, notes))
+            page = tmp / f"{name}.html"
+            page.write_text(render_html(data, ctx=ctx), encoding="utf-8")
+            out[name] = (page, figs, notes, {m["name"]: m for m in data.measurements()})
+    return out
+
+
 @pytest.mark.parametrize("name", list(RUNS))
-def test_each_procedure_names_its_figures_and_the_page_shows_them(runs, name):
-    with open_run(runs[name]) as data:
-        figs, notes = figures_for(data)
-        html = render_html(data)
-        meas = {m["name"]: m for m in data.measurements()}
+def test_each_procedure_names_its_figures_and_the_page_shows_them(pages, name):
+    page, figs, notes, meas = pages[name]
+    html = page.read_text(encoding="utf-8")
     assert [f.key for f in figs] == EXPECTED_FIGURES[name] and notes == []
     for f in figs:  # every axis names its quantity and unit
         for ax in f.figure.axes:
@@ -217,17 +232,15 @@ def test_the_console_check_sees_an_error(tmp_path):
 
 
 @pytest.mark.parametrize("name", list(RUNS))
-def test_report_loads_in_headless_chromium_with_every_figure(runs, name, tmp_path):
+def test_report_loads_in_headless_chromium_with_every_figure(pages, name, tmp_path):
     """No console message at all (the page has no script) and one <svg> a figure in the DOM.  With
-    GYROBENCH_DOCS_SCREENSHOTS=1 the screenshot replaces docs/report_<name>.png."""
+    GYROBENCH_DOCS_SCREENSHOTS=1 a screenshot replaces docs/report_<name>.png."""
     need(_chromium() is not None, "Debian's chromium is not installed (apt-get install chromium)")
-    page = tmp_path / f"{name}.html"
-    with open_run(runs[name]) as data:
-        page.write_text(render_html(data), encoding="utf-8")
+    update_docs = os.environ.get("GYROBENCH_DOCS_SCREENSHOTS") == "1"
     shot = tmp_path / f"report_{name}.png"
-    dom, console = browse(page, tmp_path / "profile", shot)
+    dom, console = browse(pages[name][0], tmp_path / "profile", shot if update_docs else None)
     assert console == []
     assert dom.count("<svg") == len(EXPECTED_FIGURES[name])
     assert dom.count("<figcaption>") == len(EXPECTED_FIGURES[name])
-    if os.environ.get("GYROBENCH_DOCS_SCREENSHOTS") == "1":
+    if update_docs:
         shutil.copy(shot, DOCS / f"report_{name}.png")

@@ -104,10 +104,12 @@ def _log_rows(data: Any, limit: int = 200) -> list[tuple[str, str, str]]:
             for r in rows[-limit:]]
 
 
-def context(data: Any, row: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Everything the template shows, as text (numbers already formatted)."""
+def context(data: Any, row: dict[str, Any] | None = None,
+            figures: tuple[list[ReportFigure], list[str]] | None = None) -> dict[str, Any]:
+    """Everything the template shows, as text (numbers already formatted); figures: the result
+    of `figures_for(data)` when the caller already has it."""
     proc = procedure_of(data)
-    figs, notes = figures_for(data, proc)
+    figs, notes = figures if figures is not None else figures_for(data, proc)
     a = data.attrs
     truth_shown = bool(a.get("simulated") and data.truth)
     return {

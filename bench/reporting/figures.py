@@ -112,8 +112,13 @@ class ReportFigure:
 def new_figure(nrows: int = 1, ncols: int = 1, *, height_in: float = 3.0, width_in: float = WIDTH_IN,
                **kwargs: Any) -> tuple[Figure, Any]:
     """A constrained-layout figure (labels never clipped) and its axes array."""
+    from matplotlib.ticker import MaxNLocator
+
     fig = Figure(figsize=(width_in, height_in), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False, **kwargs)
+    if ncols > 1:  # narrow panels: fewer x ticks, so their labels do not run into each other
+        for ax in axes.flat:
+            ax.xaxis.set_major_locator(MaxNLocator(nbins=4 if ncols > 2 else 5))
     return fig, axes
 
 

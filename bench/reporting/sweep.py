@@ -14,7 +14,7 @@ from .numbers import sig
 MODELS = ("linear", "cubic", "quintic")
 _COLOR = {"linear": "C2", "cubic": "C3", "quintic": "C4"}
 _STYLE = {"linear": ":", "cubic": "-", "quintic": "--"}
-GRID_POINTS = 101
+GRID_POINTS = 61
 
 
 def _branches(fit: Any, freqs_up: np.ndarray) -> dict[str, np.ndarray]:
@@ -33,21 +33,21 @@ def _amp_phase(q: np.ndarray, ch: int) -> tuple[np.ndarray, np.ndarray]:
 
 def sweep_models(proc: Any, data: Any) -> dict[str, Any]:
     """The sweep's steady states and the three identified models evaluated on it and on a grid."""
-    from procedures.mems_sweep import SWEEP_COLUMNS
+    from bench.analysis.maslov import identify_forced
+    from procedures.mems_sweep import choose_model
 
     tab = data.table("sweep")
-    rows = np.column_stack([tab[c] for c in SWEEP_COLUMNS])
-    _, _, extra = proc._analyse(rows)
-    fits, chosen = extra["fits"], extra["chosen"]
-    f, d, q = rows[:, 1], rows[:, 2], rows[:, 3:7]
-    grid = np.linspace(f.min(), f.max(), GRID_POINTS)
+    f, d, q = tab["freq_hz"], tab["direction"], np.column_stack([tab[c] for c in ("q1", "p1", "q2", "p2")])
+    fits = {m: identify_forced(f, *q.T, natural_freq_hz=proc.natural_freq_hz, model=m,
+                               bryan_factor=proc.bryan_factor) for m in MODELS}  # as the procedure's analysis
+    chosen = choose_model({m: fit.sigma for m, fit in fits.items()}, proc.improvement)
+    # the measured frequencies are on the grid, so each model is solved once per branch
+    grid = np.union1d(np.linspace(f.min(), f.max(), GRID_POINTS), f)
     out = {"f": f, "dir": d, "q": q, "grid": grid, "chosen": chosen, "sigma": {m: fits[m].sigma for m in MODELS},
            "curves": {}, "at_points": {}}
-    fu = np.unique(f)
+    idx = np.searchsorted(grid, f)
     for m in MODELS:
-        out["curves"][m] = _branches(fits[m], grid)
-        br = _branches(fits[m], fu)
-        idx = np.searchsorted(fu, f)
+        br = out["curves"][m] = _branches(fits[m], grid)
         out["at_points"][m] = np.where((d < 0)[:, None], br["down"][idx], br["up"][idx])
     return out
 
@@ -70,7 +70,7 @@ def _sweep_figure(s: dict[str, Any], ch: int) -> ReportFigure:
     amp_ax.set_ylabel(label("amplitude" if ch == 0 else "amplitude_y", short=False))
     ph_ax.set_ylabel(label("phase_deg" if ch == 0 else "phase_y_deg"))
     ph_ax.set_xlabel(label("freq_hz"))
-    amp_ax.legend(loc="best", ncols=2)
+    fig.legend(loc="outside upper center", ncols=5)  # above the axes: never over the resonance
     n = "1 (q1, p1)" if ch == 0 else "2 (q2, p2)"
     return ReportFigure(f"mems-sweep_channel{ch + 1}", f"Channel {n}: amplitude and phase against frequency", fig,
                         "Steady states measured on the up and down sweeps (markers) and the steady states of each "
@@ -95,7 +95,7 @@ def _polar_figure(s: dict[str, Any]) -> ReportFigure:
         a.set_xlabel(label(qn))
         a.set_ylabel(label(pn))
         a.set_title(f"channel {ch + 1}")
-    ax[0, 0].legend(loc="best")
+    fig.legend(*ax[0, 0].get_legend_handles_labels(), loc="outside upper center", ncols=5)
     return ReportFigure("mems-sweep_polar", "Polar plots (1:1): in-phase against quadrature response", fig,
                         "Equal scales on both axes, so a circle stays a circle.")
 
