@@ -123,7 +123,7 @@ def context(data: Any, row: dict[str, Any] | None = None,
         "params": _param_rows(data, proc),
         "measurements": _measurement_rows(data, row),
         "truth_shown": truth_shown,
-        "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key} for f in figs],
+        "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key, "table": f.table} for f in figs],
         "notes": notes + list(getattr(data, "notes", [])),
         "log": _log_rows(data),
     }

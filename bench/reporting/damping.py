@@ -94,7 +94,7 @@ def drift_figure(data: Any) -> list[ReportFigure]:
         return []
     fig, ax = new_figure(2, len(curves), height_in=3.8, sharex=True, sharey="row",
                          gridspec_kw={"height_ratios": [3, 1.3]})
-    notes = []
+    rows = []
     grid = np.linspace(-45.0, 45.0, 361)
     for j, (name, c) in enumerate(curves.items()):
         # the harmonics repeat every 90 deg: the unwrapped angle folded into [-45, 45)
@@ -112,22 +112,18 @@ def drift_figure(data: Any) -> list[ReportFigure]:
         if j == 0:
             top.set_ylabel(label("drift_dph"))
             bottom.set_ylabel("residual (deg/h)")
-        top.legend(loc="best")
-        m = measurement(data, f"drift_{name}_dph")
-        parts = []
         for term, (v, ci) in full["terms"].items():
-            vt, cit = with_interval(v, ci)
-            parts.append(f"{term} {vt} {cit}")
-        rep = ""
+            rows.append([name, term, *with_interval(v, ci), "deg/h"])
+        m = measurement(data, f"drift_{name}_dph")
         if m:
-            vt, cit = with_interval(m["value"], m.get("ci95"))
-            rep = f" (reported drift_{name}_dph: 4θ amplitude {vt} {cit} deg/h)"
-        notes.append(f"{name}: " + "; ".join(parts) + " deg/h" + rep)
-    note = ("Drift rate per block against the wave angle, referred to the gyro output (÷ K). The raw file holds "
-            "the 4θ amplitude only, so the mean and the 4θ, 8θ and 12θ harmonics are fitted here for the figure "
-            "(95 % intervals): " + ". ".join(notes) + ".")
+            rows.append([name, f"4θ alone: drift_{name}_dph (reported)", *with_interval(m["value"], m.get("ci95")),
+                         "deg/h"])
+    fig.legend(*ax[0, 0].get_legend_handles_labels(), loc="outside upper center", ncols=3)
+    note = ("Drift rate per block against the wave angle (folded into one 90° period), referred to the gyro output "
+            "(÷ K), with the residual of the mean + 4θ, 8θ, 12θ model beneath. The raw file holds the 4θ amplitude "
+            "only, so the mean and the harmonics are fitted here for the figure; amplitudes with 95 % intervals below.")
     return [ReportFigure("hrg-damping_drift", "Drift against the wave angle, before and after compensation", fig,
-                         note)]
+                         note, (["record", "term", "amplitude", "95 % interval", "unit"], rows))]
 
 
 def figures(proc: Any, data: Any) -> list[ReportFigure]:

@@ -6,13 +6,15 @@ from __future__ import annotations
 
 import io
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import matplotlib
 
-matplotlib.use("Agg")  # before anything imports pyplot: figures are drawn off screen
+if "matplotlib.pyplot" not in sys.modules:  # off screen; figures here never touch pyplot's state
+    matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
@@ -95,6 +97,8 @@ class ReportFigure:
     title: str
     figure: Figure
     note: str = ""
+    #: numbers the figure supports, shown beneath it: (header, rows of text)
+    table: tuple[list[str], list[list[str]]] | None = None
 
     def svg(self) -> str:
         """The figure as an inline <svg> element (no XML prologue)."""

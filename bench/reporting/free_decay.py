@@ -62,7 +62,6 @@ def _record(proc: Any, data: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def figures(proc: Any, data: Any) -> list[ReportFigure]:
     """Every figure an hrg-free-decay run's results need, in the report's order."""
     from bench.analysis.slow_model import orbit_elements
-
     from procedures.hrg_free_decay import WINDOW
 
     out: list[ReportFigure] = []
