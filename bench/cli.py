@@ -197,9 +197,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None = None, pdf: bool = False) -> Any:
     """Render the HTML report (and with pdf the PDF) of a recorded run beside its raw file (or
     to output); their paths."""
-    from bench.reporting import write_report
+    from bench.reporting import PdfUnavailable, write_report
 
-    return write_report(raw_file, row, output, pdf=pdf)
+    try:
+        return write_report(raw_file, row, output, pdf=pdf)
+    except PdfUnavailable as exc:  # checked before anything is written: the HTML alone, and why
+        _err(str(exc))
+        return write_report(raw_file, row, output)
 
 
 def _print_record(js: dict[str, Any]) -> None:
@@ -427,15 +431,9 @@ def _cmd_report(args: argparse.Namespace) -> int:
     with data:
         row = store.get_run(run_id) if store is not None else None
         raw_file = str(data.path)
-    from bench.reporting import PdfUnavailable
-
-    try:
-        paths = _write_report(raw_file, row, args.output, pdf=args.pdf)
-    except PdfUnavailable as exc:
-        _err(str(exc))
-        return EXIT_USAGE
+    paths = _write_report(raw_file, row, args.output, pdf=args.pdf)
     print("\n".join(str(p) for p in paths))
-    return EXIT_OK
+    return EXIT_USAGE if args.pdf and len(paths) < 2 else EXIT_OK
 
 
 def _cmd_design(args: argparse.Namespace) -> int:

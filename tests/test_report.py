@@ -244,3 +244,14 @@ def test_report_loads_in_headless_chromium_with_every_figure(pages, name, tmp_pa
     assert dom.count("<figcaption>") == len(EXPECTED_FIGURES[name])
     if update_docs:
         shutil.copy(shot, DOCS / f"report_{name}.png")
+
+
+def test_report_pdf_without_weasyprint_writes_the_html_and_says_why(runs, tmp_path, monkeypatch, capsys):
+    """One clear message naming the missing library and the extra, no traceback; exit code 2."""
+    from bench.cli import main
+
+    monkeypatch.setitem(sys.modules, "weasyprint", None)  # import fails as if not installed
+    code = main(["report", str(runs["table-spin"]), "--pdf", "-o", str(tmp_path / "r.html")])
+    out, err = capsys.readouterr()
+    assert code == 2 and "WeasyPrint" in err and "gyrobench[pdf]" in err and "Traceback" not in err
+    assert (tmp_path / "r.html").is_file() and not (tmp_path / "r.pdf").exists()

@@ -142,12 +142,17 @@ class PdfUnavailable(RuntimeError):
     """WeasyPrint (the `pdf` extra) is not installed."""
 
 
-def write_pdf(html: str, path: str | Path) -> Path:
-    """The report page as a PDF (WeasyPrint renders the inline SVG figures as vectors)."""
+def _weasyprint() -> Any:
     try:
         import weasyprint
-    except ImportError as exc:
+    except (ImportError, OSError) as exc:  # not installed, or its system libraries (Pango) missing
         raise PdfUnavailable(f"a PDF report needs WeasyPrint: pip install 'gyrobench[pdf]' ({exc})") from None
+    return weasyprint
+
+
+def write_pdf(html: str, path: str | Path) -> Path:
+    """The report page as a PDF (WeasyPrint renders the inline SVG figures as vectors)."""
+    weasyprint = _weasyprint()
     import logging
 
     logging.getLogger("fontTools").setLevel(logging.WARNING)
@@ -160,6 +165,8 @@ def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output
     """Write the HTML report beside the raw file (or to output) and, with pdf, the PDF beside it."""
     from bench.recorder import open_run
 
+    if pdf:
+        _weasyprint()  # a missing PDF library is said before anything is written
     with open_run(raw_file) as data:
         html = render_html(data, row)
         out = Path(output or data.path.with_suffix(".html"))
