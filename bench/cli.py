@@ -189,14 +189,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
             signal.signal(sig, handler)
     js = rec.as_json()
     report = None
-    if args.report and js.get("raw_file"):  # beside the raw file, same name with .html
-        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if not rec.store_error else None)
+    if args.report and js.get("raw_file"):  # beside the raw file, same name with .html (and .pdf)
+        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if not rec.store_error else None,
+                               pdf=args.pdf)
     if args.json:
         print(json.dumps(js))
     else:
         _print_record(js)
-        if report is not None:
-            print(f"  report {report}")
+        for path in report or []:
+            print(f"  report {path}")
     sys.stdout.flush()
     _warn_unfired_faults(station, faults)
     if rec.store_error:  # the run's record is not in the store (it is in the spool): not a clean exit
@@ -205,18 +206,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_BAD_OUTCOME if rec.outcome in BAD_OUTCOMES else EXIT_OK
 
 
-def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None = None) -> Any:
-    """Render the HTML report of a recorded run beside its raw file (or to output); its path."""
-    from pathlib import Path
+def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None = None, pdf: bool = False) -> Any:
+    """Render the HTML report (and with pdf the PDF) of a recorded run beside its raw file (or
+    to output); their paths."""
+    from bench.reporting import PdfUnavailable, write_report
 
-    from bench.recorder import open_run
-    from bench.report import render_report
-
-    with open_run(raw_file) as data:
-        html = render_report(data, row)
-        out = Path(output or data.path.with_suffix(".html"))
-    out.write_text(html)
-    return out
+    try:
+        return write_report(raw_file, row, output, pdf=pdf)
+    except PdfUnavailable as exc:  # checked before anything is written: the HTML alone, and why
+        _err(str(exc))
+        return write_report(raw_file, row, output)
 
 
 def _print_record(js: dict[str, Any]) -> None:
@@ -397,6 +396,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
                 why += f" (incomplete run: {incomplete})"
             _err(f"cannot analyse run {run_id} with {cls.name!r}: {why}")
             return EXIT_BAD_OUTCOME
+        figures = _write_figures(data, proc, args.figures) if args.figures else []
         notes = list(data.notes)
         truth = data.truth or {}
     if store is not None:
@@ -404,7 +404,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     out = {r.name if r.dut is None else f"{r.dut}:{r.name}": r.as_json() for r in results}
     if args.json:
         print(json.dumps({"run_id": run_id, "measurements": out, "truth": truth or None, "incomplete": incomplete,
-                          "notes": notes}))
+                          "notes": notes, "figures": [str(p) for p in figures]}))
     else:
         print(f"re-analysis of run {run_id} ({cls.name})")
         if incomplete:
@@ -414,7 +414,21 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
         for name, m in out.items():
             t = f"  truth {truth[name]:.6g}" if name in truth else ""
             print(f"  {name} = {m['value']} {m['unit']}  ci95 {m['ci95']}  {m['outcome']}{t}")
+        for path in figures:
+            print(f"  figure {path}")
     return EXIT_OK
+
+
+def _write_figures(data, proc, directory: str) -> list:
+    """The figures the report draws for this run, as SVG files in directory; their paths."""
+    from pathlib import Path
+
+    from bench.reporting import figures_for
+
+    Path(directory).mkdir(parents=True, exist_ok=True)
+    figs, notes = figures_for(data, proc)
+    data.notes.extend(notes)
+    return [f.save(directory) for f in figs]
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
@@ -431,8 +445,9 @@ def _cmd_report(args: argparse.Namespace) -> int:
     with data:
         row = store.get_run(run_id) if store is not None else None
         raw_file = str(data.path)
-    print(_write_report(raw_file, row, args.output))
-    return EXIT_OK
+    paths = _write_report(raw_file, row, args.output, pdf=args.pdf)
+    print("\n".join(str(p) for p in paths))
+    return EXIT_USAGE if args.pdf and len(paths) < 2 else EXIT_OK
 
 
 def _cmd_design(args: argparse.Namespace) -> int:
@@ -530,6 +545,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--operator", default="")
     run.add_argument("--dut", action="append", default=[], metavar="SERIAL", help="serial of a gyro under test")
     run.add_argument("--report", action="store_true", help="also write the run's HTML report and print its path")
+    run.add_argument("--pdf", action="store_true", help="with --report: the report as a PDF too")
     run.set_defaults(func=_cmd_run)
 
     design = sub.add_parser("design", help="experiment design: table rate and record length for a procedure")
@@ -573,6 +589,9 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--procedure", default=None, help="analyse with another procedure (name or file)")
         if name == "report":
             p.add_argument("-o", "--output", default=None)
+            p.add_argument("--pdf", action="store_true", help="the report as a PDF too, beside the HTML")
+        if name == "analyze":
+            p.add_argument("--figures", default=None, metavar="DIR", help="also write the report's figures (SVG)")
         p.set_defaults(func=func)
 
     sim = sub.add_parser("sim", help="serve the simulated devices standalone in real time; print their addresses")
