@@ -101,8 +101,8 @@ def main() -> None:
     for model in ("linear", "cubic"):
         seeds = n_seeds if model == "linear" else n_cubic
         lo, hi = band(seeds)
-        print(f"\n=== {model}: {seeds} seeds per case, {DURATION_S:g} s records; noise seeds from {seed0}; coverage target {lo:.3f}..{hi:.3f} "
-              "(99 % binomial band around 0.95)")
+        print(f"\n=== {model}: {seeds} seeds per case, {DURATION_S:g} s records; noise seeds from {seed0}; "
+              f"coverage target {lo:.3f}..{hi:.3f} (99 % binomial band around 0.95)")
         for fs in (10.0, 100.0):
             for name in RESONATORS:
                 label = f"{name} {fs:g} Hz {model}"
