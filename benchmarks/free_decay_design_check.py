@@ -29,6 +29,7 @@ from bench.station import SimStation
 from procedures.hrg_free_decay import HrgFreeDecay
 from simulators.physics.params import preset
 
+Z_NAMES = ("gamma", "b_c", "b_s", "h_c", "h_s")
 SAMPLE_HZ = 1000.0  # the simulated FPGA's sample rate (station sample_period_s = 1 ms)
 
 
@@ -50,6 +51,7 @@ def main() -> None:
     vals: dict[str, list[float]] = {k: [] for k in names}
     ses: dict[str, list[float]] = {k: [] for k in names}
     cover = dict.fromkeys(names, 0)
+    zs: dict[str, list[float]] = {k: [] for k in Z_NAMES}
     truth = None
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -69,8 +71,12 @@ def main() -> None:
                 vals[k].append(m[k].value)
                 ses[k].append((m[k].ci95[1] - m[k].ci95[0]) / (2.0 * 1.959964))
                 cover[k] += m[k].ci95[0] <= truth[k] <= m[k].ci95[1]
+            for k in Z_NAMES:  # (estimate - truth) / standard error of the coefficients the fit reports
+                lo_k, hi_k = m["maslov_" + k].ci95
+                zs[k].append((m["maslov_" + k].value - truth[k]) / ((hi_k - lo_k) / (2.0 * 1.959964)))
             print(f"  seed {seed}: D {m['delta_inv_tau_per_s'].value:.6e}  th_tau {m['theta_tau_deg'].value:.4f}  "
-                  f"tau {m['tau_s'].value:.4f}  ({time.perf_counter() - t0:.0f} s)", flush=True)
+                  f"tau {m['tau_s'].value:.4f}  z " + " ".join(f"{k} {zs[k][-1]:+.2f}" for k in Z_NAMES)
+                  + f"  ({time.perf_counter() - t0:.0f} s)", flush=True)
     n = len(vals["tau_s"])
     print(f"\n{n} runs at {rec.rate_dps:.4g} deg/s, {rec.duration_s:.0f} s, {stream_hz:g} Hz:")
     lo, hi = (math.sqrt(chi2.ppf(a, n - 1) / (n - 1)) for a in (0.95, 0.05))
@@ -83,6 +89,11 @@ def main() -> None:
         r = sd / pred
         print(f"  {k:22s} {pred:13.4e}   {sd:12.4e}   {r:5.2f} ({r / lo:4.2f}-{r / hi:4.2f})   "
               f"{np.mean(ses[k]) / pred:13.2f}   {rms:15.4e}   {cover[k] / n:.2f}")
+    print("  coefficient z = (estimate - truth) / se: std (1 if the intervals are right), largest |z|")
+    for k in Z_NAMES:
+        z = np.asarray(zs[k])
+        print(f"  {k:6s} std {z.std(ddof=1):5.2f}  mean {z.mean():+5.2f}  max |z| {np.max(np.abs(z)):4.2f} "
+              f"(seed {seed0 + int(np.argmax(np.abs(z)))})")
     print(f"total {time.perf_counter() - t0:.0f} s")
 
 
