@@ -43,3 +43,10 @@ class TableSpin(Procedure):
         `gyrobench analyze RUN`."""
         rate = data.table("hold")["rate_dps"]
         return [Result("table_rate_dps", float(rate.mean()))]  # unit and limits: the declaration
+
+    def figures(self, data) -> list:
+        """The figures this run's results need (bench.reporting.table_spin): the report and
+        `gyrobench analyze --figures` draw these."""
+        from bench.reporting.table_spin import figures
+
+        return figures(self, data)
