@@ -102,6 +102,8 @@ def truth_text(truth: Any, ci95: Any) -> str:
     t = _finite(truth)
     if t is None:
         return DASH
+    if t == 0:  # an exact zero (a coefficient the simulator leaves out), not 0.00000000000
+        return "0"
     d = last_digit(ci95)
     return _minus(_fixed_or_sci(t, d)) if d is not None else sig(t)
 
