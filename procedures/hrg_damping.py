@@ -45,6 +45,12 @@ class _StreamTap:
             with self._lock:
                 self._rows.append(block[:, 1:6].copy())
 
+    def stop(self) -> None:
+        """Keep nothing more and drop what is kept (the run has ended)."""
+        self.on = False
+        with self._lock:
+            self._rows.clear()
+
     def take(self, t_start_s: float, t_end_s: float) -> np.ndarray:
         with self._lock:
             rows = np.vstack(self._rows) if self._rows else np.empty((0, 5))
@@ -95,7 +101,6 @@ class HrgDamping(HrgExcitation, Procedure):
     def __init__(self, params: dict[str, Any] | None = None) -> None:
         super().__init__(params)
         self._tap = _StreamTap()
-        self._unsubscribe = None
         self._decay: np.ndarray | None = None
         self._fit = None
 
@@ -128,9 +133,9 @@ class HrgDamping(HrgExcitation, Procedure):
     @step("Excite and hold the amplitude")
     def excite(self, ctx):
         fpga = ctx.devices.fpga
-        unsubscribe_tap = fpga.subscribe(self._tap)
-        unsubscribe_latest = fpga.subscribe(self._keep_latest)
-        self._unsubscribe = lambda: (unsubscribe_tap(), unsubscribe_latest())
+        ctx.subscribe(fpga, self._tap)
+        ctx.subscribe(fpga, self._keep_latest)
+        ctx.defer(self._tap.stop)
         self._start_loops(ctx)
         a = self._hold_amplitude(ctx)
         ctx.log.info(f"amplitude {a:.4f} held (setpoint {self.amplitude:g})")
@@ -191,12 +196,7 @@ class HrgDamping(HrgExcitation, Procedure):
 
     @step("Compensate and verify")
     def compensate_step(self, ctx):
-        try:
-            self._compensate(ctx)
-        finally:
-            if self._unsubscribe is not None:
-                self._unsubscribe()
-                self._unsubscribe = None
+        self._compensate(ctx)
 
     def _compensate(self, ctx):
         if not self.compensate:

@@ -73,12 +73,9 @@ class HrgFreeDecay(HrgExcitation, Procedure):
 
     @step("Excite and hold the amplitude")
     def excite(self, ctx):
-        unsubscribe = ctx.devices.fpga.subscribe(self._keep_latest)
-        try:
-            self._start_loops(ctx)
-            self._hold_amplitude(ctx)
-        finally:
-            unsubscribe()
+        ctx.subscribe(ctx.devices.fpga, self._keep_latest)
+        self._start_loops(ctx)
+        self._hold_amplitude(ctx)
 
     @step("Spin the table")
     def spin(self, ctx):

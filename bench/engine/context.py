@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -137,6 +138,8 @@ class RunContext:
         self.log.propagate = False
         self._handler = _BusLogHandler(self)
         self.log.addHandler(self._handler)
+        self._finalizers: list[tuple[str, Callable[[], Any]]] = []
+        self._finalizers_lock = threading.Lock()
 
     # --- events --------------------------------------------------------------------------
     def publish(self, cls: type[ev.Event], **fields: Any) -> None:
@@ -144,6 +147,46 @@ class RunContext:
 
     def close(self) -> None:
         self.log.removeHandler(self._handler)
+
+    # --- resources that live as long as the run --------------------------------------------
+    def defer(self, fn: Callable[[], Any], what: str = "") -> None:
+        """Run `fn` when the run ends, whatever happens (last deferred, first run), before the
+        safe state: the runner calls `close_resources`."""
+        with self._finalizers_lock:
+            self._finalizers.append((what or getattr(fn, "__qualname__", repr(fn)), fn))
+
+    def subscribe(self, device: Any, callback: Callable[[Any], None]) -> None:
+        """Subscribe `callback` to a device's stream for the rest of the run; the runner
+        unsubscribes it when the run ends (nothing for the procedure to undo)."""
+        unsubscribe = device.subscribe(callback)
+        name = getattr(callback, "__qualname__", type(callback).__name__)
+        self.defer(unsubscribe, f"unsubscribe {name}")
+
+    def close_resources(self, timeout_s: float = 5.0) -> list[str]:
+        """Run the deferred teardowns, last first, each on a helper thread given `timeout_s` (wall):
+        one that fails or hangs is logged and the next still runs.  Returns the failures."""
+        with self._finalizers_lock:
+            todo, self._finalizers = self._finalizers[::-1], []
+        failures: list[str] = []
+        for what, fn in todo:
+            error: list[BaseException] = []
+
+            def call(fn=fn, error=error) -> None:
+                try:
+                    fn()
+                except BaseException as exc:  # noqa: BLE001 - reported below, the next teardown runs
+                    error.append(exc)
+
+            worker = threading.Thread(target=call, name=f"run-teardown {what}", daemon=True)
+            worker.start()
+            worker.join(timeout_s)
+            if worker.is_alive():
+                failures.append(f"{what}: still running after {timeout_s:g} s")
+            elif error:
+                failures.append(f"{what}: {type(error[0]).__name__}: {error[0]}")
+        for text in failures:
+            self.log.error(f"run teardown failed: {text}")
+        return failures
 
     # --- engine checkpoints ----------------------------------------------------------------
     def checkpoint(self) -> None:

@@ -287,6 +287,8 @@ class Runner:
             clock.guard = None
             if outcome is not None:
                 rec.failed_step = current
+            with _sigint_deferred(ctx):  # what the procedure acquired, before the safe state; never raises
+                ctx.close_resources()
             report = self._safe_state(ctx)
             if stop_streams is not None:
                 try:
