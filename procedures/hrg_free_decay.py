@@ -18,12 +18,13 @@ import numpy as np
 from bench.analysis.maslov import derived_ci95, identify_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Param, Procedure, Result, step
+from bench.engine.streams import Column, StreamSchema, declare
 
 from .hrg_excitation import HrgExcitation
 
 WINDOW = "decay_window"
-WINDOW_COLUMNS = ("t_start_s", "t_end_s", "ref_freq_hz", "rate_dps")
-_FPGA = {"t_s": 1, "cx": 2, "sx": 3, "cy": 4, "sy": 5}
+WINDOW_COLUMNS = declare(StreamSchema(WINDOW, "hrg-free-decay", (
+    Column("t_start_s", "s"), Column("t_end_s", "s"), Column("ref_freq_hz", "Hz"), Column("rate_dps", "deg/s")))).names
 
 
 def decay_results(
@@ -112,17 +113,14 @@ class HrgFreeDecay(HrgExcitation, Procedure):
 
     # --- helpers -------------------------------------------------------------------------------
     def _analyse(self, data):
-        win = data.array(WINDOW)[-1]
-        fpga = data.array("fpga")
-        t = fpga[:, _FPGA["t_s"]]
-        sel = (t >= win[0]) & (t <= win[1])
-        rows = fpga[sel]
-        period = float(np.median(np.diff(rows[:, 1])))
+        win = {c: v[-1] for c, v in data.table(WINDOW).items()}
+        fpga = data.table("fpga")
+        sel = (fpga["t_s"] >= win["t_start_s"]) & (fpga["t_s"] <= win["t_end_s"])
+        period = float(np.median(np.diff(fpga["t_s"][sel])))
         dec = max(1, int(round(1.0 / (self.stream_hz * period))))
-        rows = rows[::dec]
-        t_s = rows[:, _FPGA["t_s"]]
-        q = rows[:, 2:6]
-        results, fit = decay_results(t_s, q, rate_dps=float(win[3]), ref_freq_hz=float(win[2]),
+        t_s = fpga["t_s"][sel][::dec]
+        q = np.column_stack([fpga[c][sel][::dec] for c in ("cx", "sx", "cy", "sy")])
+        results, fit = decay_results(t_s, q, rate_dps=float(win["rate_dps"]), ref_freq_hz=float(win["ref_freq_hz"]),
                                      natural_freq_hz=self.natural_freq_hz, model=self.model)
         return results, fit, t_s, q
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from . import events as ev
 from .measurement import Limits, Result
+from .streams import StreamSchema, schema_of
 
 
 class RunAborted(Exception):
@@ -140,6 +141,8 @@ class RunContext:
         self.log.addHandler(self._handler)
         self._finalizers: list[tuple[str, Callable[[], Any]]] = []
         self._finalizers_lock = threading.Lock()
+        self._streams: dict[str, StreamSchema] = {}  # declared in this run (StreamDeclared sent)
+        self._streams_lock = threading.Lock()
 
     # --- events --------------------------------------------------------------------------
     def publish(self, cls: type[ev.Event], **fields: Any) -> None:
@@ -204,14 +207,33 @@ class RunContext:
         self.publish(ev.Progress, fraction=float(min(max(fraction, 0.0), 1.0)), message=message)
 
     # --- data ------------------------------------------------------------------------------
-    def record(self, stream: str, columns: tuple[str, ...] | list[str], data: np.ndarray) -> None:
-        """Rows of a named stream to the recorder (and every other subscriber)."""
+    def declare_stream(self, stream: str | StreamSchema) -> StreamSchema:
+        """Announce a stream's schema (once a run, before its first block); a name is looked up
+        among the declared streams (bench.engine.streams.declare)."""
+        schema = stream if isinstance(stream, StreamSchema) else schema_of(stream)
+        with self._streams_lock:
+            known = self._streams.get(schema.name)
+            if known is not None:
+                if known != schema:
+                    raise ValueError(f"stream {schema.name!r} was declared differently earlier in this run")
+                return known
+            self._streams[schema.name] = schema
+            self.publish(ev.StreamDeclared, schema=schema)  # under the lock: before any block of it
+        return schema
+
+    def record(self, stream: str | StreamSchema, columns: tuple[str, ...] | list[str], data: np.ndarray) -> None:
+        """Rows of a declared stream to the recorder (and every other subscriber); `columns` are
+        the schema's names, in its order."""
+        name = stream.name if isinstance(stream, StreamSchema) else stream
+        schema = self._streams.get(name) or self.declare_stream(stream)
+        if tuple(columns) != schema.names:
+            raise ValueError(f"record({name!r}): columns {tuple(columns)} are not the declared {schema.names}")
         arr = np.asarray(data, dtype=float)
         if arr.ndim == 1:
             arr = arr.reshape(1, -1)
         if arr.shape[1] != len(columns):
-            raise ValueError(f"record({stream!r}): data has {arr.shape[1]} columns, names give {len(columns)}")
-        self.publish(ev.SampleBlock, stream=stream, columns=tuple(columns), data=arr)
+            raise ValueError(f"record({name!r}): data has {arr.shape[1]} columns, names give {len(columns)}")
+        self.publish(ev.SampleBlock, stream=name, columns=schema.names, data=arr)
 
     def fit(self, name: str, **curves: np.ndarray) -> None:
         self.publish(ev.FitUpdate, name=name, curves={k: np.asarray(v) for k, v in curves.items()})

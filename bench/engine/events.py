@@ -55,6 +55,14 @@ class Progress(Event):
 
 
 @dataclass(frozen=True)
+class StreamDeclared(Event):
+    """A stream's schema (bench.engine.streams.StreamSchema), announced once a run before the
+    stream's first block: its source and each column's name, unit, type and legend."""
+
+    schema: Any = None
+
+
+@dataclass(frozen=True)
 class SampleBlock(Event):
     """A block of rows of one named stream, e.g. stream "fpga" with columns
     (t_s, cx, sx, cy, sy, ...), "table" with (t_s, rate_dps, angle_deg), "sweep" with

@@ -224,7 +224,8 @@ class Runner:
             from bench.recorder import RawDataError, Recorder
 
             try:
-                recorder = Recorder.for_run(self.runs_dir, rec, station=st.describe())
+                recorder = Recorder.for_run(self.runs_dir, rec, station=st.describe(),
+                                            param_units={k: v.unit for k, v in proc.param_specs().items()})
             except RawDataError as exc:  # ends the run at its first checkpoint, before anything moves
                 self._fatal = exc
             else:
