@@ -268,15 +268,16 @@ class Recorder:
         """A stream's declaration in its dataset's attributes: `columns`, `units`, `dtypes` (each
         column's own type; the table is stored as float64), `source` and a `legend_<column>`
         (JSON, code -> meaning) for each coded column.  A stream announced by no StreamDeclared
-        event takes its declared schema by name, or else units from its column names."""
+        event takes the schema declared under its name if the columns agree, or else units from
+        its column names (a file written outside a run)."""
         schema = self._schemas.get(stream)
-        if schema is None:
-            try:
-                schema = schema_of(stream)
-            except KeyError:
-                schema = None
         if schema is not None and schema.names != columns:
             raise ValueError(f"stream {stream!r}: columns {columns} are not the declared {schema.names}")
+        if schema is None:
+            with contextlib.suppress(KeyError):
+                schema = schema_of(stream)
+            if schema is not None and schema.names != columns:
+                schema = None
         ds.attrs["columns"] = _json(list(columns))
         if schema is None:
             ds.attrs["units"] = np.array([unit_from_name(c) for c in columns], dtype=_STR)
@@ -459,6 +460,7 @@ class Recorder:
                     a["wall_s"] = float(record.wall_s)
                     a["finished_at"] = record.finished_at
                     a["result"] = _json(record.as_json())
+                    a["stream_overflow_blocks"] = int(getattr(record, "stream_overflow_blocks", 0))
                     if self.failure is not None:
                         a["incomplete"] = self.failure
             except (OSError, RuntimeError) as exc:

@@ -84,6 +84,7 @@ class RunRecord:
     failed_step: str | None = None
     traceback: str | None = None
     store_error: str | None = None  # the results store did not take the record (it is in the spool)
+    stream_overflow_blocks: int = 0  # stream blocks real time dropped because the writer fell behind
 
     def as_json(self) -> dict[str, Any]:
         """The shape of `gyrobench run --json`."""
@@ -218,10 +219,11 @@ class Runner:
         steps = proc.step_specs()
         t0_sim, t0_wall = clock.now(), time.monotonic()
 
-        recorder = None
+        recorder = writer = None
         unsubscribe_rec = None
         if self.runs_dir is not None:
             from bench.recorder import RawDataError, Recorder
+            from bench.writer import WriterThread
 
             try:
                 recorder = Recorder.for_run(self.runs_dir, rec, station=st.describe(),
@@ -230,15 +232,17 @@ class Runner:
                 self._fatal = exc
             else:
                 rec.raw_file = str(recorder.path)
-                self.bus.on_essential_error = self._essential_failed
-                unsubscribe_rec = self.bus.subscribe(recorder.on_event, essential=True)
+                # the recorder writes on its own thread, fed by a bounded queue (bench.writer)
+                writer = WriterThread(recorder, lockstep=lambda: bool(getattr(clock, "lockstep", False)),
+                                      on_error=lambda exc: self._essential_failed(recorder, exc))
+                unsubscribe_rec = self.bus.subscribe(writer.put)
         ctx = RunContext(
             run_id=run_id,
             params=proc.params,
             devices=st.devices,
             clock=clock,
             bus=self.bus,
-            recorder=recorder,
+            recorder=writer,
             checkpoint=self.checkpoint,
             station=st,
         )
@@ -312,6 +316,9 @@ class Runner:
             rec.simulated_s = clock.now() - t0_sim
             rec.wall_s = time.monotonic() - t0_wall
             rec.finished_at = _dt.datetime.now(_dt.UTC).isoformat()
+            if writer is not None and writer.overflow_blocks:  # real time only: counted, never silent
+                rec.stream_overflow_blocks = writer.overflow_blocks
+                ctx.log.warning(writer.overflow_text())
             ctx.publish(
                 ev.RunFinished,
                 outcome=rec.outcome,
@@ -322,7 +329,7 @@ class Runner:
             if recorder is not None:
                 if unsubscribe_rec is not None:
                     unsubscribe_rec()
-                    self.bus.on_essential_error = None
+                writer.close()
                 try:
                     recorder.close(rec)
                 except Exception as exc:  # noqa: BLE001 - the record and the store must still be written
