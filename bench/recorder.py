@@ -591,6 +591,20 @@ class RunData:
     def columns(self, stream: str) -> list[str]:
         return json.loads(self._stream(stream).attrs["columns"])
 
+    def units(self, stream: str) -> dict[str, str]:
+        """Each column's unit, from the stream's declaration ("" where a file predates them)."""
+        units = self._stream(stream).attrs.get("units")
+        names = self.columns(stream)
+        if units is None:
+            return dict.fromkeys(names, "")
+        return {c: u.decode() if isinstance(u, bytes) else str(u) for c, u in zip(names, units, strict=True)}
+
+    def legends(self, stream: str) -> dict[str, dict[int, str]]:
+        """The coded columns' legends (code -> meaning), from the stream's declaration."""
+        attrs = self._stream(stream).attrs
+        return {c: {int(k): v for k, v in json.loads(attrs[f"legend_{c}"]).items()}
+                for c in self.columns(stream) if f"legend_{c}" in attrs}
+
     def array(self, stream: str) -> np.ndarray:
         return self._stream(stream)[...]
 

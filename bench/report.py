@@ -20,6 +20,13 @@ def _decimate(x: np.ndarray, ys: list[np.ndarray]) -> tuple[np.ndarray, list[np.
     return x[::step], [y[::step] for y in ys]
 
 
+def _cell(value: float, legend: dict[int, str] | None) -> str:
+    """A table cell: a coded value by its meaning (the stream's legend), else the number."""
+    if legend and value.is_integer() and int(value) in legend:
+        return legend[int(value)]
+    return f"{value:.6g}"
+
+
 def svg_plot(
     x: np.ndarray,
     series: dict[str, np.ndarray],
@@ -177,9 +184,11 @@ def render_report(data: Any, run_row: dict[str, Any] | None = None) -> str:
         tab = data.table(stream)
         cols = [c for c in tab if c not in ("t_s", "index")]
         x = tab.get("t_s", np.arange(len(next(iter(tab.values())))) if tab else np.array([]))
+        units, legends = data.units(stream), data.legends(stream)
         if len(x) < 10:  # bookkeeping streams (windows, settings): a table says more than a plot
-            rows = [[f"{float(tab[c][i]):.6g}" for c in tab] for i in range(len(x))]
-            parts.append(f"<h3>{html.escape(stream)}</h3>" + _table(rows, list(tab)))
+            rows = [[_cell(float(tab[c][i]), legends.get(c)) for c in tab] for i in range(len(x))]
+            heads = [f"{c} ({units[c]})" if units.get(c) not in ("", "1") else c for c in tab]
+            parts.append(f"<h3>{html.escape(stream)}</h3>" + _table(rows, heads))
             continue
         parts.append(svg_plot(x, {c: tab[c] for c in cols[:6]}, title=f"{stream} ({len(x)} rows)", xlabel="t (s)"))
         if stream == "fpga" and all(c in tab for c in ("cx", "sx", "cy", "sy")):
