@@ -97,6 +97,27 @@ class StreamSchema:
         return {c.name: dict(c.legend) for c in self.columns if c.legend}
 
 
+def schema_from_attrs(name: str, columns: tuple[str, ...], attrs: Mapping) -> StreamSchema | None:
+    """The declaration a raw file stored with a stream (its dataset's `units`, `dtypes`,
+    `source`, `legend_<column>` attributes); None for a file written before declarations."""
+    import json
+
+    def text(v) -> str:
+        return v.decode() if isinstance(v, bytes) else str(v)
+
+    units = attrs.get("units")
+    if units is None or len(units) != len(columns):
+        return None
+    dtypes = attrs.get("dtypes")
+    dtypes = [text(d) for d in dtypes] if dtypes is not None and len(dtypes) == len(columns) else ["f8"] * len(columns)
+    cols = []
+    for c, u, d in zip(columns, units, dtypes, strict=True):
+        legend = attrs.get(f"legend_{c}")
+        legend = {int(k): v for k, v in json.loads(text(legend)).items()} if legend is not None else None
+        cols.append(Column(c, text(u), d, legend=legend))
+    return StreamSchema(name, text(attrs.get("source", name)), tuple(cols))
+
+
 _REGISTRY: dict[str, StreamSchema] = {}
 _LOCK = threading.Lock()
 
