@@ -126,7 +126,7 @@ class Runner:
         self.operator = operator
         self.duts = list(duts)
         self._abort_reason: str | None = None
-        self._fatal: RunAborted | None = None  # an essential subscriber (the recorder) failed
+        self._fatal: RunAborted | None = None  # the recorder failed (reported by the writer thread)
         self._running = threading.Event()
         self._running.set()
         self._in_run = False
@@ -167,7 +167,7 @@ class Runner:
         if check is not None:
             check()
 
-    def _essential_failed(self, _subscriber: Any, exc: BaseException) -> None:
+    def _recorder_failed(self, exc: BaseException) -> None:
         """The recorder could not write: the run ends at the next checkpoint (outcome ERROR)."""
         if self._fatal is None:
             if not isinstance(exc, RunAborted):
@@ -234,7 +234,7 @@ class Runner:
                 rec.raw_file = str(recorder.path)
                 # the recorder writes on its own thread, fed by a bounded queue (bench.writer)
                 writer = WriterThread(recorder, lockstep=lambda: bool(getattr(clock, "lockstep", False)),
-                                      on_error=lambda exc: self._essential_failed(recorder, exc))
+                                      on_error=self._recorder_failed)
                 unsubscribe_rec = self.bus.subscribe(writer.put)
         ctx = RunContext(
             run_id=run_id,
