@@ -112,3 +112,16 @@ def test_teardowns_run_last_first_and_a_failing_or_hanging_one_does_not_stop_the
     assert done == ["last", "first"]
     assert failures == ["hangs: still running after 0.2 s", "fails: OSError: port gone"]
     assert ctx.close_resources() == []  # each teardown runs once
+
+
+def test_no_procedure_subscribes_to_a_device_itself():
+    """Subscriptions go through `ctx.subscribe` (released by the runner), never `device.subscribe`."""
+    import inspect
+    import re
+
+    for name, cls in all_procedures().items():
+        for klass in cls.__mro__:
+            if klass.__module__.startswith("procedures"):
+                src = inspect.getsource(klass)
+                calls = re.findall(r"([\w.\]\[\"']+)\.subscribe\(", src)
+                assert all(c == "ctx" for c in calls), f"{name} ({klass.__name__}) calls {calls} .subscribe itself"
