@@ -36,6 +36,10 @@ class WriterThread:
         self.overflow_blocks = 0
         self.overflow_rows = 0
         self._q: queue.Queue = queue.Queue(maxsize=maxsize or QUEUE_EVENTS)
+        self._queued = 0  # events accepted so far, and events written (or discarded) so far
+        self._written = 0
+        self._count_lock = threading.Lock()
+        self._progress = threading.Condition()
         self._failed = False
         self._closed = False
         self._thread = threading.Thread(target=self._loop, name="raw-data-writer", daemon=True)
@@ -47,14 +51,18 @@ class WriterThread:
         which is then dropped and counted)."""
         if self._closed:
             return
-        if not isinstance(event, ev.SampleBlock) or self._lockstep():
-            self._q.put(event)
-            return
-        try:
-            self._q.put_nowait(event)
-        except queue.Full:
-            self.overflow_blocks += 1
-            self.overflow_rows += len(event.data)
+        with self._count_lock:  # numbered in the order queued (several producers)
+            if not isinstance(event, ev.SampleBlock) or self._lockstep():
+                self._q.put(event)
+                self._queued += 1
+                return
+            try:
+                self._q.put_nowait(event)
+                self._queued += 1
+                return
+            except queue.Full:
+                self.overflow_blocks += 1
+                self.overflow_rows += len(event.data)
             if self.overflow_blocks == 1:
                 log.warning("raw data: the writer cannot keep up; stream %r block at t = %.3f s dropped (and counted)",
                             event.stream, event.t_sim_s)
@@ -77,20 +85,23 @@ class WriterThread:
                         self._failed = True
                         self.on_error(exc)
             finally:
-                self._q.task_done()
+                with self._progress:
+                    self._written += 1
+                    self._progress.notify_all()
 
     def drain(self, timeout_s: float = 60.0) -> None:
-        """Wait (wall time) until every event queued so far is written; RunAborted if the writer
-        does not catch up within timeout_s (a disk that hangs)."""
+        """Wait (wall time) until every event queued before this call is written (events queued
+        meanwhile need not be: a stream in real time never stops); RunAborted if the writer does
+        not get there within timeout_s (a disk that hangs)."""
         deadline = time.monotonic() + timeout_s
-        q = self._q
-        with q.all_tasks_done:
-            while q.unfinished_tasks:
+        target = self._queued
+        with self._progress:
+            while self._written < target:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     raise RunAborted(f"raw data: the writer has not caught up within {timeout_s:g} s "
-                                     f"({q.unfinished_tasks} events queued)")
-                q.all_tasks_done.wait(min(left, 0.1))
+                                     f"({target - self._written} events still queued)")
+                self._progress.wait(min(left, 0.1))
 
     def close(self, timeout_s: float = 60.0) -> None:
         """Write what is queued, then end the thread."""

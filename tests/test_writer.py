@@ -105,3 +105,30 @@ def test_real_time_overflow_is_counted_in_the_record_and_the_file(tmp_path, monk
         assert d.attrs["stream_overflow_blocks"] == rec.stream_overflow_blocks
         warn = [r for r in d.log() if r["level"] == "WARNING" and "dropped in real time" in r["msg"]]
         assert len(warn) == 1 and f"{rec.stream_overflow_blocks} stream block(s)" in warn[0]["msg"]
+
+
+def test_drain_waits_for_what_was_queued_before_it_even_while_real_time_keeps_coming():
+    import threading
+
+    sink = SlowSink(0.005)
+    w = bw.WriterThread(sink, lockstep=False, on_error=pytest.fail, maxsize=8)
+    stop = threading.Event()
+
+    def produce() -> None:
+        k = 0
+        while not stop.is_set():
+            w.put(_block(k))
+            k += 1
+            time.sleep(0)
+
+    w.put(ev.Log(run_id="r", t_sim_s=0.0, message="marker"))
+    producer = threading.Thread(target=produce)
+    producer.start()
+    try:
+        w.drain(timeout_s=5.0)  # returns although the queue never empties
+        assert any(isinstance(e, ev.Log) for e in sink.seen)
+    finally:
+        stop.set()
+        producer.join()
+        w.close()
+    assert w.overflow_blocks > 0
