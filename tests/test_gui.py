@@ -253,6 +253,7 @@ def test_window_on_the_engine_station_runs_and_reports(qtbot, tmp_path, monkeypa
         assert win.plots.p_rate.getAxis("left").labelText == "rate_dps (deg/s)"  # the stream's declared unit
         from bench.gui.replay import replay_events
 
+        assert backend.join(60)  # the runner closes the raw file after it announced the end
         declared = {e.schema.name: e.schema for e in replay_events(win.last_finished.raw_file)
                     if isinstance(e, ev.StreamDeclared)}
         assert declared["table"].units == ("s", "deg/s", "deg") and declared["fpga"].source == "fpga"
