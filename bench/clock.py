@@ -70,6 +70,15 @@ class SimClock(_PollingWait):
     that advances the world at speed x real time.  The speed can change while running (the GUI's
     speed control)."""
 
+    #: the most simulated time one advance of the real-time thread covers, in ticks at the asked
+    #: speed (the world lock is held for that advance only)
+    MAX_ADVANCE_TICKS = 2.0
+    #: the most the real-time thread catches up after a stall, in wall seconds at the asked speed;
+    #: beyond it the simulated clock falls behind
+    MAX_OWED_WALL_S = 0.25
+    #: the least wall time the real-time thread leaves the world lock free between advances
+    MIN_PAUSE_S = 0.002
+
     def __init__(self, world, *, speed: float = math.inf, tick_s: float = 0.01) -> None:
         self.world = world
         self._tick_s = tick_s
@@ -78,6 +87,7 @@ class SimClock(_PollingWait):
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._thread_error: BaseException | None = None
+        self._dropped_s = 0.0
         world.add_listener(self._on_world_advanced)
         self.set_speed(speed)
 
@@ -155,10 +165,17 @@ class SimClock(_PollingWait):
             self._thread = None
 
     def _advance_in_real_time(self) -> None:
+        """Advance the world by what the wall clock owes, two ticks' worth at most at a time,
+        releasing the world lock in between: device servers (and so the drivers' wall-clock
+        timeouts and the table's watchdog feed) never wait more than about that.  Debt beyond
+        MAX_OWED_WALL_S is dropped, not caught up in a burst: on a machine too slow for the asked
+        speed the simulated clock falls behind (`achieved_speed` says by how much) instead of a
+        link timing out."""
         last = time.monotonic()
         owed_s = 0.0
+        pause_s = self._tick_s
         while not self._stop.is_set():
-            time.sleep(self._tick_s)
+            time.sleep(pause_s)  # a tick less the time the last advance took (the lock is free meanwhile)
             now = time.monotonic()
             wall = now - last
             last = now
@@ -166,9 +183,27 @@ class SimClock(_PollingWait):
                 owed_s = 0.0
                 continue
             owed_s += wall * self._speed
-            # cap the debt so a stall (a breakpoint, a slow CPU) does not cause a burst
-            owed_s = min(owed_s, max(1.0, 0.5 * self._speed))
-            step = math.floor(owed_s / self.world.sample_period_s) * self.world.sample_period_s
+            cap_s = self.MAX_OWED_WALL_S * self._speed
+            if owed_s > cap_s:
+                self._dropped_s += owed_s - cap_s
+                owed_s = cap_s
+            chunk_s = max(self.MAX_ADVANCE_TICKS * self._tick_s * self._speed, self.world.sample_period_s)
+            step = math.floor(min(owed_s, chunk_s) / self.world.sample_period_s) * self.world.sample_period_s
             if step > 0:
                 self.world.advance(step)
                 owed_s -= step
+            pause_s = max(self.MIN_PAUSE_S, self._tick_s - (time.monotonic() - now))
+
+    @property
+    def dropped_s(self) -> float:
+        """Simulated seconds the real-time thread could not keep up with (0 when it kept pace)."""
+        return self._dropped_s
+
+    def mark(self) -> tuple[float, float]:
+        """(simulated s, wall s) now: give it to `achieved_speed` to measure a stretch of a run."""
+        return (self.world.t_s, time.monotonic())
+
+    def achieved_speed(self, since: tuple[float, float]) -> float:
+        """Simulated seconds per wall second since a `mark()` (nan before any wall time passed)."""
+        sim_s, wall_s = self.world.t_s - since[0], time.monotonic() - since[1]
+        return sim_s / wall_s if wall_s > 0 else math.nan

@@ -349,7 +349,10 @@ STATION_KEYS = {
     "results": Key(str, "runs/results.sqlite", doc="SQLite file or database URL"),
     "runs_dir": Key(str, "runs", doc="folder of the raw files"),
     "description": Key(str, "", doc="one line for people"),
+    "kind": Key(str, "", choices=("", "hrg", "mems-ring"), doc="gyro held: hrg, mems-ring ('' = not said)"),
 }
+#: the kind of gyro a simulated station holds when its file does not say
+PRESET_KINDS = {"hrg": "hrg", "mems": "mems-ring"}
 SIM_KEYS = {
     "preset": Key(str, "hrg", choices=("hrg", "mems"), doc="simulated resonator"),
     "seed": Key(int, 0, 0, 2**63 - 1, doc="random seed of the simulation"),
@@ -481,6 +484,17 @@ class Station:
         return None
 
     @property
+    def kind(self) -> str:
+        """The kind of gyro held (`[station] kind`; a simulated one's preset when not given; '' = unknown)."""
+        sim = self.config.simulation
+        return self.config.station.get("kind", "") or (PRESET_KINDS.get(sim["preset"], "") if sim else "")
+
+    def limit(self, role: str, key: str) -> float | None:
+        """A device's limit from the station file (`max_rate_dps` of the table), None if it has none."""
+        value = self.config.devices.get(role, {}).get(key)
+        return None if value is None or isinstance(value, (bool, str)) else float(value)
+
+    @property
     def results_url(self) -> str:
         return self.config.station["results"]
 
@@ -546,6 +560,32 @@ class Station:
             rows = spec.health(self.devices[role])
             if role == "table" and rows is not None and self._ctx is not None:
                 self._ctx.record("table", ("t_s", "rate_dps", "angle_deg"), np.column_stack([[now_sim], rows]))
+
+    def ensure_ready(self) -> None:
+        """Before a run: ask every device for a sign of life; a device whose link was lost since
+        the last run is reconnected once, and one that still does not answer is reported down
+        (LinkLostError naming it), so a run never starts on a link that is already gone."""
+        for role in ordered_roles(self.devices):
+            spec = DRIVERS[self.config.devices[role]["driver"]]
+            if spec.health is None:
+                continue
+            if getattr(self.devices[role], "_gyrobench_stats0", None) is not None:
+                self.devices[role]._gyrobench_stats0 = None  # the last run's frame counts are not this one's
+            try:
+                spec.health(self.devices[role])
+                continue
+            except SafetyTripError:
+                raise
+            except (LinkLostError, DeviceError, OSError) as exc:
+                first = exc
+            try:
+                self._reconnect(role)
+                spec.health(self.devices[role])
+            except SafetyTripError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - any failure to reconnect means the device is down
+                raise LinkLostError(f"{role} is down: {first}; reconnecting failed: {exc}") from exc
+        self._last_health = (-math.inf, -math.inf)
 
     def start_streams(self, ctx: Any) -> Callable[[], None]:
         """Record the FPGA's stream (if any) into the run; returns the function that stops it."""
@@ -817,3 +857,8 @@ def parse_fault(text: str) -> tuple[str, float]:
     except ValidationError as exc:
         raise StationError(f"--fault {text!r}: {exc}") from None
     return kind, at_s
+
+
+# --- instrument models that declare their own station entry next to their driver (issue 22) --
+from drivers.frontend import sr865_spec  # noqa: E402,F401
+from drivers.rate_table import acutronic_spec  # noqa: E402,F401

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_free_decay
+from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_drift_harmonics, fit_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Param, Procedure, Result, step
 from bench.engine.streams import Column, StreamSchema, declare
@@ -89,6 +89,7 @@ class HrgDamping(HrgExcitation, Procedure):
 
     name = "hrg-damping"
     requires = ("table", "frontend", "fpga")
+    kinds = ("hrg",)
 
     rate_dps = Param(500.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate during the decay (patent: 500)")
     accel_dps2 = Param(200.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
@@ -188,7 +189,8 @@ class HrgDamping(HrgExcitation, Procedure):
     @step("Fit the free-decay model")
     def fit(self, ctx):
         d = self._decay
-        fit = fit_free_decay(d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4], method=self.fit_method, model=self.fit_model)
+        fit = ctx.compute(fit_free_decay, d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4],  # abortable at once
+                          method=self.fit_method, model=self.fit_model)
         self._fit = fit
         t, e, ef, r = _thin(fit.t_s, fit.energy, fit.energy_fit, fit.residuals_ln_e)
         ctx.fit("hrg-damping energy", t_s=t, energy=e, energy_fit=ef)
@@ -223,7 +225,7 @@ class HrgDamping(HrgExcitation, Procedure):
         on = self._record(ctx, VERIFY_ON, self.verify_s, "drift, compensation on")
         fpga.set_drift_compensation(False, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
         fpga.set_drive_enabled(False)
-        results, curves = self._verify_results(off, on)
+        results, curves = self._verify_results(off, on, fit)
         for name, (th, rate) in curves.items():
             ctx.fit(f"hrg-damping drift {name}", theta_deg=np.degrees(th), drift_dph=rate)
         for res in results:
@@ -248,21 +250,38 @@ class HrgDamping(HrgExcitation, Procedure):
                           ci95=(math.degrees(lo / 4 / k) * 3600, math.degrees(hi / 4 / k) * 3600)))
         return out
 
-    def _verify_results(self, off: np.ndarray, on: np.ndarray) -> tuple[list[Result], dict]:
+    def _verify_results(self, off: np.ndarray, on: np.ndarray, decay_fit=None) -> tuple[list[Result], dict]:
+        """The drift against the wave angle, compensation off (`before`) and on (`after`), output-referred:
+        drift_<name>_dph is the 4 theta part alone (a fit of mean + 4 theta; drift_reduction_ratio is
+        their ratio), drift_<name>_{mean,4theta,8theta,12theta}_dph the drift in full (one fit of the
+        mean and the three harmonics) and drift_<name>_rest_rms_dph the rms of what that fit leaves
+        (noise).  With the decay's fit, drift_after_4theta_expected_dph: the 4 theta term that the fit's
+        own error leaves after compensation (rms of |b - b_fit| / 4K; interval 0 to its 95 % bound)."""
         k = self.bryan_factor
+        to_dph = math.degrees(1.0 / k) * 3600
         results, curves, amps = [], {}, {}
         for name, rows in (("before", off), ("after", on)):
             th = orbit_elements(rows[:, 1:5])["theta_rad"]
             mids, rate = block_drift(rows[:, 0], th, self.drift_block_s)
             drift = rate - math.radians(self.verify_rate_dps)
             fit = fit_angle_drift(mids, drift)
-            to_dph = math.degrees(1.0 / k) * 3600
             amps[name] = fit.amplitude_rad_s * to_dph
             lo, hi = fit.amplitude_ci95
             results.append(Result(f"drift_{name}_dph", amps[name], "deg/h", ci95=(lo * to_dph, hi * to_dph)))
+            full = fit_drift_harmonics(mids, drift).scaled(to_dph)
+            results.append(Result(f"drift_{name}_mean_dph", full.mean, "deg/h", ci95=full.mean_ci95))
+            for m, h in full.harmonics.items():
+                results.append(Result(f"drift_{name}_{m}theta_dph", h.amplitude, "deg/h", ci95=h.ci95))
+            results.append(Result(f"drift_{name}_rest_rms_dph", full.rest_rms, "deg/h"))
             curves[name] = (mids, drift * to_dph)
         ratio = amps["before"] / amps["after"] if amps["after"] > 0 else math.inf
         results.append(Result("drift_reduction_ratio", ratio, ""))
+        if decay_fit is not None:
+            cov_b = np.asarray(decay_fit.covariance, dtype=float)[2:4, 2:4]
+            if np.all(np.isfinite(cov_b)):
+                rms = math.sqrt(max(float(np.trace(cov_b)), 0.0)) / 4.0 * to_dph
+                bound = math.sqrt(5.991 * max(float(np.linalg.eigvalsh(cov_b)[-1]), 0.0)) / 4.0 * to_dph
+                results.append(Result("drift_after_4theta_expected_dph", rms, "deg/h", ci95=(0.0, bound)))
         return results, curves
 
     def analysis(self, data) -> list[Result]:
@@ -299,7 +318,14 @@ class HrgDamping(HrgExcitation, Procedure):
         out = self._decay_results(fit, f0_hz)
         off, on = window(VERIFY_OFF), window(VERIFY_ON)
         if off is not None and on is not None:
-            out += self._verify_results(off, on)[0]
+            out += self._verify_results(off, on, fit)[0]
         elif self.compensate:
             data.notes.append("no verification windows: the drift before and after compensation was not measured")
         return out
+
+    def figures(self, data) -> list:
+        """The figures this run's results need (bench.reporting.damping): the report and
+        `gyrobench analyze --figures` draw these."""
+        from bench.reporting.damping import figures
+
+        return figures(self, data)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from bench.analysis.slow_model import orbit_elements
-from bench.engine import Param
+from bench.engine import Demand, Param
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
 
@@ -24,6 +24,13 @@ class HrgExcitation:
     rate_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to become stable at rate")
 
     _latest_row: np.ndarray | None = None
+
+    def demands(self) -> list[Demand]:
+        """The table's rate and acceleration (the procedure's `rate_dps`, `accel_dps2`)."""
+        return [
+            Demand("table", "max_rate_dps", "rate_dps", self.rate_dps, "deg/s"),
+            Demand("table", "max_accel_dps2", "accel_dps2", self.accel_dps2, "deg/s^2"),
+        ]
 
     def _keep_latest(self, block: np.ndarray) -> None:
         """Stream subscriber (the link's reader thread): keep the newest row only."""

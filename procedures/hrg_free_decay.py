@@ -4,9 +4,11 @@ and the Bryan factor from the known table rate (nu = 4 K Omega).
 
 Steps: excite and hold the amplitude (FPGA AGC, PLL, quadrature loop); spin the table; wait for
 a stable rate; cut the drive and freeze the reference (PLL off, so the detuning stays constant
-through the record); record the FPGA stream; identify with `identify_free_decay` (Simpson
-regressors, least squares, sandwich intervals).  The record window goes to the `decay_window`
-stream, so `analysis(data)` re-fits a recorded run with the same code.
+through the record); record the FPGA stream; identify with `identify_free_decay`: by default the
+output-error (maximum-likelihood) fit, with the paper's equation-error fit (Simpson regressors,
+least squares, sandwich intervals) reported beside it under names ending `_ee`; the output-error fit
+also fits the wave's turn by the table's angle ripple (once and twice per revolution).  The record
+window goes to the `decay_window` stream, so `analysis(data)` re-fits a recorded run with the same code.
 """
 
 from __future__ import annotations
@@ -27,12 +29,54 @@ WINDOW_COLUMNS = declare(StreamSchema(WINDOW, "hrg-free-decay", (
     Column("t_start_s", "s"), Column("t_end_s", "s"), Column("ref_freq_hz", "Hz"), Column("rate_dps", "deg/s")))).names
 
 
+METHODS = ("output-error", "equation-error")
+#: suffix of the paper's (equation-error) measurements reported beside the output-error ones
+EE_SUFFIX = "_ee"
+
+
 def decay_results(
-    t_s: np.ndarray, q: np.ndarray, *, rate_dps: float, ref_freq_hz: float, natural_freq_hz: float, model: str
+    t_s: np.ndarray, q: np.ndarray, *, rate_dps: float, ref_freq_hz: float, natural_freq_hz: float, model: str,
+    method: str = "output-error", table_ripple: bool = True,
 ) -> tuple[list[Result], object]:
-    """Identify the decay; measurements under the simulator's truth names where they exist."""
+    """Identify the decay with `method`; measurements under the simulator's truth names where they
+    exist.  With the output-error fit the paper's equation-error fit is reported beside it, each
+    name with the suffix EE_SUFFIX.  table_ripple: the output-error fit also fits the wave's turn by
+    the table's angle ripple once and twice per revolution (when the record covers two turns)."""
+    if method not in METHODS:
+        raise ValueError(f"method={method!r} is not one of {METHODS}")
+    basis = ripple_basis(t_s - t_s[0], rate_dps) if table_ripple and method == "output-error" else None
+    out, fit = _method_results(t_s, q, rate_dps=rate_dps, ref_freq_hz=ref_freq_hz,
+                               natural_freq_hz=natural_freq_hz, model=model, method=method, rotation_basis=basis)
+    if method == "output-error":
+        ee, _ = _method_results(t_s, q, rate_dps=rate_dps, ref_freq_hz=ref_freq_hz,
+                                natural_freq_hz=natural_freq_hz, model=model, method="equation-error")
+        out += [Result(r.name + EE_SUFFIX, r.value, r.unit, ci95=r.ci95) for r in ee]
+    return out, fit
+
+
+def boxcar(rows: np.ndarray, dec: int) -> np.ndarray:
+    """Means of consecutive blocks of dec rows (time stamps become block mid-times): the noise per
+    fitted sample falls by sqrt(dec), and for the linear model the block mean of the trajectory is
+    again a trajectory (each eigenmode scaled by a constant), so only q0 changes, not the parameters."""
+    n = rows.shape[0] // dec
+    return rows[: n * dec].reshape(n, dec, rows.shape[1]).mean(axis=1)
+
+
+def ripple_basis(t_rel_s: np.ndarray, rate_dps: float) -> np.ndarray | None:
+    """cos/sin of one and two table revolutions over the record (the table's angle ripple turns the
+    measured wave at these harmonics), or None below two revolutions (too collinear with nu)."""
+    if abs(rate_dps) * float(t_rel_s[-1] - t_rel_s[0]) < 720.0:
+        return None
+    w = np.radians(rate_dps) * np.asarray(t_rel_s, dtype=float)
+    return np.stack([np.cos(w), np.sin(w), np.cos(2.0 * w), np.sin(2.0 * w)], axis=1)
+
+
+def _method_results(t_s: np.ndarray, q: np.ndarray, *, rate_dps: float, ref_freq_hz: float, natural_freq_hz: float,
+                    model: str, method: str, rotation_basis: np.ndarray | None = None) -> tuple[list[Result], object]:
+    extra = {} if method == "equation-error" else {"rotation_basis": rotation_basis}
     fit = identify_free_decay(
-        t_s - t_s[0], *q.T, model=model, natural_freq_hz=natural_freq_hz, detuning_hz=ref_freq_hz - natural_freq_hz
+        t_s - t_s[0], *q.T, model=model, natural_freq_hz=natural_freq_hz, detuning_hz=ref_freq_hz - natural_freq_hz,
+        method=method, **extra,
     )
     d, p, ci = fit.derived, fit.params, fit.ci95
     out = [Result(f"maslov_{n}", v, "1/s", ci95=ci[n]) for n, v in p.items()]
@@ -64,13 +108,18 @@ class HrgFreeDecay(HrgExcitation, Procedure):
 
     name = "hrg-free-decay"
     requires = ("table", "fpga")
+    kinds = ("hrg",)
 
     rate_dps = Param(50.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate during the decay")
     accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
     record_s = Param(300.0, unit="s", low=1.0, high=100000.0, doc="record duration")
-    stream_hz = Param(100.0, unit="Hz", low=0.1, high=1e6, doc="rate of the samples fitted (decimated stream)")
+    stream_hz = Param(100.0, unit="Hz", low=0.1, high=1e6, doc="rate of the samples fitted (boxcar-decimated stream)")
     natural_freq_hz = Param(5500.0, unit="Hz", low=1.0, high=1e6, doc="nominal natural frequency w/2pi")
     model = Param("linear", choices=("linear", "cubic", "quintic"), doc="slow-variable model")
+    method = Param("output-error", choices=METHODS,
+                   doc="output-error: maximum likelihood (the Cramer-Rao bound), the paper's fit reported beside "
+                       "it with names ending _ee; equation-error: the paper's Simpson least squares only")
+    table_ripple = Param(True, doc="output-error: also fit the wave's turn by the table's angle ripple (1x, 2x/rev)")
 
     @step("Excite and hold the amplitude")
     def excite(self, ctx):
@@ -102,7 +151,7 @@ class HrgFreeDecay(HrgExcitation, Procedure):
 
     @step("Identify")
     def identify(self, ctx):
-        results, fit, t, q = self._analyse(ctx.data())
+        results, fit, t, q = self._analyse(ctx.data(), compute=ctx.compute)  # abortable at once
         for res in results:
             ctx.report(res)
         el = orbit_elements(q)
@@ -112,18 +161,29 @@ class HrgFreeDecay(HrgExcitation, Procedure):
         ctx.log.info("identified %s: sigma %.3g, noise %.3g per channel", fit.model, fit.sigma, fit.noise_sigma)
 
     # --- helpers -------------------------------------------------------------------------------
-    def _analyse(self, data):
+    def _analyse(self, data, compute=None):
+        """Identify the recorded window; `compute(fn, *args, **kw)` runs the identification
+        (a run's `ctx.compute`, in a worker the engine can end), else it runs here."""
         win = {c: v[-1] for c, v in data.table(WINDOW).items()}
         fpga = data.table("fpga")
         sel = (fpga["t_s"] >= win["t_start_s"]) & (fpga["t_s"] <= win["t_end_s"])
         period = float(np.median(np.diff(fpga["t_s"][sel])))
         dec = max(1, int(round(1.0 / (self.stream_hz * period))))
-        t_s = fpga["t_s"][sel][::dec]
-        q = np.column_stack([fpga[c][sel][::dec] for c in ("cx", "sx", "cy", "sy")])
-        results, fit = decay_results(t_s, q, rate_dps=float(win["rate_dps"]), ref_freq_hz=float(win["ref_freq_hz"]),
-                                     natural_freq_hz=self.natural_freq_hz, model=self.model)
+        rows = boxcar(np.column_stack([fpga[c][sel] for c in ("t_s", "cx", "sx", "cy", "sy")]), dec)
+        t_s, q = rows[:, 0], rows[:, 1:5]
+        run = compute or (lambda fn, *a, **kw: fn(*a, **kw))
+        results, fit = run(decay_results, t_s, q, rate_dps=float(win["rate_dps"]),
+                           ref_freq_hz=float(win["ref_freq_hz"]), natural_freq_hz=self.natural_freq_hz,
+                           model=self.model, method=self.method, table_ripple=self.table_ripple)
         return results, fit, t_s, q
 
     def analysis(self, data) -> list[Result]:
         """Re-fit a recorded run from its `decay_window` and `fpga` streams."""
         return self._analyse(data)[0]
+
+    def figures(self, data) -> list:
+        """The figures this run's results need (bench.reporting.free_decay): the report and
+        `gyrobench analyze --figures` draw these."""
+        from bench.reporting.free_decay import figures
+
+        return figures(self, data)

@@ -28,7 +28,7 @@ from bench.analysis.maslov import (
     derived_ci95,
     identify_forced,
 )
-from bench.engine import Param, Procedure, Result, step
+from bench.engine import Demand, Param, Procedure, Result, step
 from bench.engine.streams import Column, StreamSchema, declare
 
 SWEEP = declare(StreamSchema("sweep", "mems-sweep", (
@@ -125,6 +125,7 @@ class MemsSweep(Procedure):
 
     name = "mems-sweep"
     requires = ("frontend",)
+    kinds = ("mems-ring",)
     start_hz = Param(PAPER_NATURAL_FREQ_HZ + 1.94 - 12.0, unit="Hz", low=1.0, high=200_000.0, doc="sweep start")
     stop_hz = Param(PAPER_NATURAL_FREQ_HZ + 1.94 + 12.0, unit="Hz", low=1.0, high=200_000.0, doc="sweep end")
     n_points = Param(61, low=5, high=2001, doc="frequencies per direction")
@@ -153,6 +154,13 @@ class MemsSweep(Procedure):
             message = not_above("stop_hz", self.stop_hz, self.start_hz, "Hz") + " (start_hz)"
             raise ParamError("stop_hz", self.stop_hz, f"above start_hz = {self.start_hz}", message)
         self.rows: list[list[float]] = []
+
+    def demands(self) -> list[Demand]:
+        """Both drive amplitudes, against the front end's `max_amplitude_v`."""
+        return [
+            Demand("frontend", "max_amplitude_v", "drive1_v", self.drive1_v, "V"),
+            Demand("frontend", "max_amplitude_v", "drive2_v", self.drive2_v, "V"),
+        ]
 
     # --- steps ---------------------------------------------------------------------------------
     @step("Set up the drive")
@@ -184,7 +192,7 @@ class MemsSweep(Procedure):
     @step("Identify")
     def identify(self, ctx):
         rows = np.array(self.rows)
-        results, curves, _ = self._analyse(rows)
+        results, curves, _ = self._analyse(rows, compute=ctx.compute)  # abortable at once
         for res in results:
             ctx.report(res)
         for name, c in curves.items():
@@ -233,9 +241,11 @@ class MemsSweep(Procedure):
             ctx.record("sweep", SWEEP_COLUMNS, np.array(row))
             ctx.progress((j + 1) / len(freqs), f"{'up' if direction > 0 else 'down'} {f:.3f} Hz  A={amp_x:.4f}")
 
-    def _analyse(self, rows: np.ndarray):
-        return sweep_analysis(
-            SWEEP.column(rows, "freq_hz"), SWEEP.columns_of(rows, "q1", "p1", "q2", "p2"),
+    def _analyse(self, rows: np.ndarray, compute=None):
+        """Identify the sweep rows; with `compute` (a run's `ctx.compute`) in a worker the engine can end."""
+        run = compute or (lambda fn, *a, **kw: fn(*a, **kw))
+        return run(
+            sweep_analysis, SWEEP.column(rows, "freq_hz"), SWEEP.columns_of(rows, "q1", "p1", "q2", "p2"),
             SWEEP.column(rows, "direction"), natural_freq_hz=self.natural_freq_hz,
             bryan_factor=self.bryan_factor, improvement=self.improvement,
         )
@@ -246,3 +256,10 @@ class MemsSweep(Procedure):
         rows = np.column_stack([tab[c] for c in SWEEP_COLUMNS])
         results, _, _ = self._analyse(rows)
         return results
+
+    def figures(self, data) -> list:
+        """The figures this run's results need (bench.reporting.sweep): the report and
+        `gyrobench analyze --figures` draw these."""
+        from bench.reporting.sweep import figures
+
+        return figures(self, data)

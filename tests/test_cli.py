@@ -128,7 +128,7 @@ def test_run_with_report_prints_truth_and_the_report_path(tmp_path):
 
 
 def test_design_recommends_a_slower_table_than_the_patent(capsys):
-    """PHYSICS.md section 3: the scatter of D falls in proportion to the rate, so for the HRG
+    """docs/free_decay_identification.md: the scatter of D falls in proportion to the rate, so for the HRG
     preset the recommended rate is far below 500 deg/s and the predicted gain is large."""
     assert main(["design", "hrg-damping", "--stream-hz", "100"]) == 0
     out = capsys.readouterr().out
@@ -139,6 +139,27 @@ def test_design_recommends_a_slower_table_than_the_patent(capsys):
     assert gain > 10.0
     assert main(["design", "hrg-damping", "--tau-s", "-3"]) == 2
     assert "tau" in capsys.readouterr().err
+
+
+def test_design_matches_what_the_procedures_run(capsys):
+    """Both designs use the procedure's stream rate (100 Hz, boxcar from the 1 kHz FPGA samples, so
+    the noise per fitted sample is 1e-4 / sqrt(10)), cite docs/ only, and print the run command
+    with the chosen rate and record length."""
+    assert main(["design", "hrg-free-decay"]) == 0
+    out = capsys.readouterr().out
+    assert "stream 100 Hz" in out and "noise 3.16e-05 per fitted sample" in out
+    assert "docs/free_decay_identification.md" in out and "PHYSICS" not in out
+    run = next(x for x in out.splitlines() if "run it:" in x)
+    rate = float(run.split("rate_dps=")[1].split()[0])
+    record = float(run.split("record_s=")[1].split()[0])
+    assert rate * record >= 720.0 and "stream_hz=100" in run
+    rec = next(x for x in out.splitlines() if x.strip().startswith("recommended:"))
+    assert f"record {record:.0f} s" in rec
+    assert main(["design", "hrg-damping", "--split-hz", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "stream 100 Hz" in out and "PHYSICS" not in out and "--set stream_hz=100" in out
+    assert main(["design", "hrg-free-decay", "--stream-hz", "5000"]) == 2
+    assert "--sample-hz" in capsys.readouterr().err
 
 
 def test_list_json(capsys):

@@ -117,7 +117,9 @@ def test_analysis_refits_the_recorded_run(run):
     with RunData(record.raw_file) as data:
         again = {r.name: r.value for r in HrgDamping(record.params).analysis(data)}
     live = {r.name: r.value for r in record.measurements}
-    for name in ("theta_tau_deg", "delta_inv_tau_per_s", "tau_s", "drift_before_dph", "drift_after_dph"):
+    for name in ("theta_tau_deg", "delta_inv_tau_per_s", "tau_s", "drift_before_dph", "drift_after_dph",
+                 "drift_after_mean_dph", "drift_after_8theta_dph", "drift_after_rest_rms_dph",
+                 "drift_after_4theta_expected_dph"):
         assert again[name] == pytest.approx(live[name], rel=1e-6), name
 
 
@@ -128,3 +130,24 @@ def test_bad_parameters_are_refused_before_anything_moves():
         HrgDamping({"rate_dps": 2000.0})
     with pytest.raises(ParamError, match="fit_method='newton'"):
         HrgDamping({"fit_method": "newton"})
+
+
+def test_drift_reported_in_full_and_the_loops_add_none(run):
+    """The drift against the wave angle in full (issue 19): after compensation the mean and the 8 and
+    12 theta terms are consistent with zero and the 4 theta term is no larger than the decay fit's
+    own error predicts (its interval reaches below that 95 % bound); before, the 4 theta term is
+    the damping drift (D/4)/K and nothing else is there either.  "Consistent with zero" as for the
+    other checks here: within 2x the interval's half-width (an amplitude: within 2x its reach).
+    (The loops used to add a -40 deg/h mean and a 25 deg/h 8 theta term of their own here.)"""
+    record, _, truth = run
+    m = {r.name: r for r in record.measurements}
+    expected_dph = math.degrees(truth["delta_inv_tau_per_s"] / 4 / truth["bryan_factor"]) * 3600
+    for name in ("before", "after"):
+        assert _within(m[f"drift_{name}_mean_dph"], 0.0), m[f"drift_{name}_mean_dph"]
+        for order in (8, 12):
+            res = m[f"drift_{name}_{order}theta_dph"]
+            assert res.value <= 2.0 * (res.ci95[1] - res.value), (name, order, res)
+        assert m[f"drift_{name}_rest_rms_dph"].value > 0
+    assert _within(m["drift_before_4theta_dph"], expected_dph)
+    assert m["drift_after_4theta_dph"].ci95[0] <= m["drift_after_4theta_expected_dph"].ci95[1]
+    assert m["drift_after_4theta_dph"].value == pytest.approx(m["drift_after_dph"].value, abs=0.5)

@@ -159,7 +159,7 @@ def test_whole_angle_precession_and_frequency_modulation():
 
 
 def _drift_rate_dps(comp: bool) -> float:
-    params = preset("hrg", split_hz=0.0)
+    params = preset("hrg")
     theta0 = math.radians(params.theta_tau_deg + 22.5)  # where the drift is largest
     world, clock, server, link, blocks = _bench(params, state=state_from_elements(1.0, 0.0, theta0))
     try:
@@ -181,8 +181,9 @@ def test_drift_compensation_cancels_the_damping_drift():
     """In whole-angle mode with no command, the wave drifts at (D/4) sin 4(theta - theta_tau)
     (PHYSICS.md section 2): at 22.5 deg off the damping axis that is D/4 = 0.00229 deg/s (10 %
     tolerance: noise of the 60 s slope ~1e-5 deg/s).  With the identified (D, theta_tau) written
-    to the FPGA the drift falls under 5 % of that.  The split is zeroed to isolate the damping
-    drift (a split adds a phase-lag drift of the quadrature force, PLL off)."""
+    to the FPGA the drift falls under 5 % of that.  The 5 mHz split stays: the quadrature loop
+    cancels its pumping along the wave's predicted phase, so it adds no drift of its own (it used
+    to, through the phase lag of the quadrature force, and had to be zeroed here)."""
     d_dps = math.degrees(preset("hrg").delta_inv_tau_per_s / 4)
     assert _drift_rate_dps(False) == pytest.approx(d_dps, rel=0.1)
     assert abs(_drift_rate_dps(True)) < 0.05 * d_dps

@@ -42,7 +42,10 @@ def test_real_station_file_is_checked_not_connected(tmp_path):
         (("max_rate_dps = 800.0", "max_rate_dps = 50000.0"), ["max_rate_dps=50000 deg/s is above the limit 20000"]),
         (("max_accel_dps2 = 200.0", "max_accel_dps2 = -1.0"), ["max_accel_dps2=-1 deg/s^2 is below the limit 0.001"]),
         (("max_rate_dps = 800.0", 'max_rate_dps = "fast"'), ["max_rate_dps='fast' is not a number"]),
-        (('driver = "modbus-table"', 'driver = "telnet-table"'), ["driver='telnet-table' is not one of ascii-table,"]),
+        (
+            ('driver = "modbus-table"', 'driver = "telnet-table"'),
+            ["driver='telnet-table' is not one of", "ascii-table, modbus-table"],
+        ),
         (('driver = "modbus-table"', 'driver = "fpga-link"'), ["(it is a fpga driver)"]),
         (('host = "10.0.0.5"', 'hots = "10.0.0.5"'), ["hots: unknown key (allowed: device_id, driver, host,"]),
         (("[devices.table]", "[devices.turntable]"), ["unknown role 'turntable'"]),
@@ -69,7 +72,7 @@ def test_real_devices_need_an_address(tmp_path):
 
 
 def test_unknown_station_and_faults():
-    with pytest.raises(StationError, match="built-in: sim-hrg, sim-mems"):
+    with pytest.raises(StationError, match=r"built-in: .*\bsim-hrg, .*\bsim-mems\)"):
         load_config("no-such-station")
     assert parse_fault("link-drop@2.5") == ("link-drop", 2.5)
     for bad, part in (

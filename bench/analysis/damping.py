@@ -23,10 +23,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from types import MappingProxyType
 
 import numpy as np
-from scipy import special  # stdtrit: Student t quantiles without importing scipy.stats (~1 s)
+from scipy import optimize, special  # stdtrit: Student t quantiles without importing scipy.stats (~1 s)
 
 #: Parameter vector of every fit, in this order: ln E at t0, gamma = 2/tau, b_c, b_s.
 PARAM_NAMES = ("ln_e0", "gamma_per_s", "b_c_per_s", "b_s_per_s")
@@ -222,6 +223,79 @@ class DampingFit:
         )
 
 
+_PHI_GRID = np.linspace(0.0, 2.0 * math.pi, 512, endpoint=False)
+_UNIT = np.stack([np.cos(_PHI_GRID), np.sin(_PHI_GRID)])  # (2, m) directions of the damping vector
+_FAR_SIGMAS = 40.0  # the belt is tabulated to |b|/sigma = 40 (s = 1.9596 there; 1.95996 is the normal's)
+_GAUSS_SIGMAS = 20.0  # beyond |b| = 20 sigma the delta-method interval (s(20) = 1.9593, bias sigma/40)
+
+
+@lru_cache(maxsize=4)
+def _belt_table(level: float) -> tuple[np.ndarray, np.ndarray]:
+    """(r, s(r)): for a damping vector of length r (in standard errors) measured with isotropic
+    Gaussian noise, |b_hat| is Rice-distributed and P(|  |b_hat| - r | <= s) = level (noncentral
+    chi^2 with 2 dof); s(0) = sqrt(chi2_2 quantile) = 2.45 at 95 %, s -> normal quantile as r grows."""
+    r = np.linspace(0.0, _FAR_SIGMAS, 801)
+    s = np.empty_like(r)
+    for i, ri in enumerate(r):
+        def cover(x: float, ri: float = ri) -> float:
+            low = special.chndtr((ri - x) ** 2, 2, ri * ri) if x < ri else 0.0
+            return float(special.chndtr((ri + x) ** 2, 2, ri * ri) - low) - level
+
+        s[i] = optimize.brentq(cover, 0.0, 20.0, xtol=1e-10)
+    return r, s
+
+
+def _profile_chi2(b: np.ndarray, w: np.ndarray, d0: np.ndarray) -> np.ndarray:
+    """min over the axis of (b_hat - D0 u)^T W (b_hat - D0 u) for each D0 (the profile likelihood
+    ratio statistic of D0 with the axis a nuisance): a 512-point grid refined by a parabola."""
+    d0 = np.atleast_1d(np.asarray(d0, dtype=float))
+    diff = b[:, None, None] - d0[None, :, None] * _UNIT[:, None, :]  # (2, nD, m)
+    chi2 = np.einsum("ij,ikm,jkm->km", w, diff, diff)
+    i = np.argmin(chi2, axis=1)
+    rows = np.arange(d0.size)
+    m = _PHI_GRID.size
+    lo, mid, hi = chi2[rows, (i - 1) % m], chi2[rows, i], chi2[rows, (i + 1) % m]
+    curv = lo - 2.0 * mid + hi
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shift = np.where(curv > 0, 0.5 * (lo - hi) / curv, 0.0)
+    return np.maximum(mid - 0.25 * (lo - hi) * shift, 0.0)
+
+
+def delta_interval(b: np.ndarray, cov_b: np.ndarray, level: float = 0.95) -> tuple[float, float]:
+    """Interval of D = |(b_c, b_s)| >= 0 that keeps its coverage as D -> 0: the Neyman belt of the
+    profile likelihood ratio (Feldman-Cousins ordering; the axis is a nuisance), calibrated by the
+    Rice distribution of |b_hat| for the isotropic noise sqrt(det cov)^(1/2) (docs/free_decay_identification.md).
+    The naive |b| +- 1.96 sigma covers only P(chi2_2 <= 3.84) = 85 % at D = 0."""
+    b = np.asarray(b, dtype=float)
+    cov_b = 0.5 * (np.asarray(cov_b, dtype=float) + np.asarray(cov_b, dtype=float).T)
+    d = float(math.hypot(b[0], b[1]))
+    det = float(np.linalg.det(cov_b))
+    sig_max = math.sqrt(max(float(np.linalg.eigvalsh(cov_b)[-1]), 0.0))
+    if not (det > 0 and sig_max > 0 and math.isfinite(d)):
+        return (d, d) if sig_max == 0 else (0.0, math.inf)
+    sig = det**0.25
+    r_tab, s_tab = _belt_table(float(level))
+    if d > _GAUSS_SIGMAS * sig_max:  # far from zero: the Gaussian (delta-method) interval
+        g = b / d
+        sd = math.sqrt(max(float(g @ cov_b @ g), 0.0))
+        k = float(special.ndtri(0.5 * (1.0 + level)))
+        return d - k * sd, d + k * sd
+    w = np.linalg.inv(cov_b)
+
+    def excess(d0: np.ndarray) -> np.ndarray:
+        s = np.interp(np.asarray(d0) / sig, r_tab, s_tab, right=s_tab[-1])
+        return _profile_chi2(b, w, d0) - s * s
+
+    def f(d0: float) -> float:
+        return float(excess(np.array([d0]))[0])
+
+    # the accepted set is an interval around |b_hat| (excess < 0 there): its ends by Brent's method
+    tol = 1e-6 * sig
+    low = 0.0 if f(0.0) <= 0.0 else optimize.brentq(f, 0.0, d, xtol=tol)
+    high = optimize.brentq(f, d, d + 10.0 * sig_max, xtol=tol)
+    return float(low), float(high)
+
+
 def _physical(params: np.ndarray, cov: np.ndarray, dof: int) -> tuple[dict, dict, dict]:
     """(ln_e0, gamma, b_c, b_s) and their covariance -> theta_tau, D, tau with delta-method std."""
     gamma, b_c, b_s = (float(v) for v in params[1:])
@@ -248,7 +322,7 @@ def _physical(params: np.ndarray, cov: np.ndarray, dof: int) -> tuple[dict, dict
     value = {"theta_tau_deg": theta_deg, "delta_inv_tau_per_s": d, "tau_s": tau}
     ci = {
         "theta_tau_deg": (theta_deg - k * std["theta_tau_deg"], theta_deg + k * std["theta_tau_deg"]),
-        "delta_inv_tau_per_s": (max(0.0, d - k * std["delta_inv_tau_per_s"]), d + k * std["delta_inv_tau_per_s"]),
+        "delta_inv_tau_per_s": delta_interval(np.array([b_c, b_s]), cov[2:4, 2:4]),
         "tau_s": (tau - k * std["tau_s"], tau + k * std["tau_s"]),
     }
     return value, std, ci
@@ -399,6 +473,9 @@ def _fit_gauss_newton(
         it += 1
         dp, normal, chi2 = _gauss_newton_step(reg.xt, energy, p, weighted)
         p = p + dp
+        if not np.all(np.isfinite(p)):  # bounded iterations, and a named error for data it cannot fit
+            raise DampingFitError(f"Gauss-Newton diverged at iteration {it} of {max_iter}: the data do not follow a "
+                                  "free decay")
         if _gn_converged(dp, normal, chi2):
             if floor_removed:
                 converged = True
@@ -682,3 +759,84 @@ def fit_angle_drift(theta_rad, rate_rad_s) -> AngleDriftFit:
         residual_rms_rad_s=math.sqrt(s2),
         n_samples=int(th.size),
     )
+
+
+@dataclass(frozen=True)
+class DriftHarmonic:
+    """One harmonic m of a drift against the wave angle: amplitude sin m(theta - phase)."""
+
+    order: int
+    amplitude: float
+    phase_rad: float
+    ci95: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class DriftHarmonics:
+    """A drift against the wave angle in full: its mean, each harmonic fitted (with 95 % intervals)
+    and the rms of what is left.  Units are those of the rate given (rad/s, deg/h...)."""
+
+    mean: float
+    mean_ci95: tuple[float, float]
+    harmonics: Mapping[int, DriftHarmonic]
+    rest_rms: float
+    n_samples: int
+
+    def scaled(self, factor: float) -> DriftHarmonics:
+        """The same fit in other units (factor > 0, e.g. rad/s -> output-referred deg/h)."""
+        if not factor > 0:
+            raise ValueError(f"factor={factor!r} must be > 0")
+        hs = {m: DriftHarmonic(m, h.amplitude * factor, h.phase_rad, (h.ci95[0] * factor, h.ci95[1] * factor))
+              for m, h in self.harmonics.items()}
+        lo, hi = self.mean_ci95
+        return DriftHarmonics(self.mean * factor, (lo * factor, hi * factor), hs, self.rest_rms * factor,
+                              self.n_samples)
+
+
+def fit_drift_harmonics(theta_rad, rate, orders: tuple[int, ...] = (4, 8, 12)) -> DriftHarmonics:
+    """Least-squares fit of mean + sum_m (A_m cos m theta + B_m sin m theta) to a drift rate against
+    the wave angle: the damping drift is the 4 theta term, a loop or split defect shows in the mean
+    and the other harmonics.  Intervals (95 %): the mean's from Student t on the residual scatter;
+    an amplitude's from the joint confidence ellipse of its (A, B) (radius^2 = 2 F(2, dof)), i.e.
+    the distances of its nearest and farthest points from 0, so the interval holds 0 exactly when
+    (0, 0) is a plausible (A, B) (a Rayleigh-biased amplitude alone would exclude 0 15 % of the
+    time for an absent term).  The record should cover a whole period of the lowest order."""
+    th = np.asarray(theta_rad, dtype=float).reshape(-1)
+    y = np.asarray(rate, dtype=float).reshape(-1)
+    n_par = 1 + 2 * len(orders)
+    if th.size != y.size:
+        raise ValueError(f"theta_rad has {th.size} samples but rate has {y.size}")
+    if th.size <= n_par:
+        raise ValueError(f"fit_drift_harmonics needs more than {n_par} samples for orders {orders}, got {th.size}")
+    if not (np.all(np.isfinite(th)) and np.all(np.isfinite(y))):
+        raise ValueError("theta_rad and rate must be finite")
+    cols = [np.ones_like(th)]
+    for m in orders:
+        cols += [np.cos(m * th), np.sin(m * th)]
+    x = np.column_stack(cols)
+    p, *_ = np.linalg.lstsq(x, y, rcond=None)
+    r = y - x @ p
+    dof = th.size - n_par
+    s2 = float(r @ r) / dof
+    cov = s2 * np.linalg.pinv(x.T @ x)
+    t = float(special.stdtrit(dof, 0.975))
+    radius = math.sqrt(2.0 * float(special.fdtri(2, dof, 0.95)))
+    hs = {}
+    for i, m in enumerate(orders):
+        j = 1 + 2 * i
+        ab = p[j : j + 2]
+        a, b = float(ab[0]), float(ab[1])
+        amp = math.hypot(a, b)
+        c = cov[j : j + 2, j : j + 2]
+        reach = radius * math.sqrt(max(float(np.linalg.eigvalsh(c)[-1]), 0.0))  # farthest ellipse point from (A, B)
+        try:
+            holds_zero = float(ab @ np.linalg.solve(c, ab)) <= radius * radius
+        except np.linalg.LinAlgError:
+            holds_zero = amp <= reach
+        lo = 0.0 if holds_zero else max(0.0, amp - reach)
+        # A cos + B sin = amp sin(m th + psi), psi = atan2(A, B)  ->  phase = -psi / m
+        phase = (-math.atan2(a, b) / m) % (2 * math.pi / m)
+        hs[m] = DriftHarmonic(m, amp, phase, (lo, amp + reach))
+    half = t * math.sqrt(max(float(cov[0, 0]), 0.0))
+    return DriftHarmonics(float(p[0]), (float(p[0]) - half, float(p[0]) + half), hs, math.sqrt(float(r @ r) / th.size),
+                          int(th.size))

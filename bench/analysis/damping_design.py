@@ -1,4 +1,5 @@
-"""Cramer-Rao bounds and the experiment design of the HRG free-decay damping test (PHYSICS.md 3).
+"""Cramer-Rao bounds and the experiment design of the HRG free-decay tests
+(docs/free_decay_identification.md).
 
 Two bounds for the damping vector (b_c, b_s) = D (cos 4 th_tau, sin 4 th_tau):
 * energy-only: the information E(t) carries under var(E) = 4 s^2 E with the wave angle known
@@ -14,12 +15,15 @@ Pure maths: numpy, scipy and the averaged model; no simulator.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.linalg import expm
 
 from .damping import MODELS, DampingFitError, decay_regressors, fit_free_decay
+from .free_decay_oe import Q0_NAMES, linear_sensitivities, trajectory
+from .maslov_terms import check_model, free_param_names
 from .slow_model import linear_matrix, state_from_elements
 
 TWO_PI = 2.0 * math.pi
@@ -162,28 +166,86 @@ def four_channel_bound(sc: DecayScenario, *, unknown: tuple[str, ...] = FOUR_CHA
     dt, m = sc.grid_step()
     n = int(sc.duration_s / dt)
     zg = sc.zg()
-    a = linear_matrix(zg)
-    p = len(names)
-    big = np.zeros((4 * (p + 1), 4 * (p + 1)))
-    x0 = np.zeros(4 * (p + 1))
-    q0 = sc.initial_state()
-    x0[:4] = q0
-    for b in range(p + 1):
-        big[4 * b : 4 * b + 4, 4 * b : 4 * b + 4] = a
-    for j, nm in enumerate(names):
-        rows = slice(4 * (j + 1), 4 * (j + 2))
-        if nm.endswith("_0"):
-            x0[4 * (j + 1) + FOUR_CHANNEL_NAMES.index(nm)] = 1.0
-        else:
-            unit = np.zeros(8)
-            unit[FOUR_CHANNEL_NAMES.index(nm) - 4] = 1.0
-            big[rows, 0:4] = linear_matrix(unit)
-    traj = np.vstack([x0, _propagate(big, x0, n, dt)])
-    sens = traj[:, 4:].reshape(-1, p, 4)  # (n, param, channel)
-    info = np.einsum("npc,nqc->pq", sens, sens) * (m / sc.noise_sigma**2)
+    info = _fisher_information(zg, sc.initial_state(), n + 1, dt, names, "linear") * (m / sc.noise_sigma**2)
     cov = np.linalg.inv(info)
     sd = _std_from_cov(cov, names.index("gamma"), names.index("b_c"), zg)
     return DampingBound("four-channel", *sd, covariance=cov, names=names)
+
+
+def _fisher_information(z: np.ndarray, q0: np.ndarray, n: int, dt: float, names: tuple[str, ...],
+                        model: str, cuts: tuple[int, ...] | None = None, ripple_rad_s: float = 0.0) -> np.ndarray:
+    """sum over n samples (t = k dt) of S^T S, S = d q / d(names) (unit noise): exact sensitivities
+    of the linear model (powers of expm of the augmented system), integrated ones otherwise.
+    With cuts: the sums over the first c samples for each c in cuts, stacked.  ripple_rad_s != 0
+    appends the four nuisance columns of an output rotation at one and two table turns (what
+    hrg-free-decay fits, free_decay_oe.output_error_fit's rotation_basis), last."""
+    all_names = Q0_NAMES + free_param_names(model)
+    bad = set(names) - set(all_names)
+    if bad:
+        raise ValueError(f"unknown parameter(s) {sorted(bad)} for model={model!r}: names from {all_names}")
+    if model == "linear":
+        zidx = tuple(all_names.index(nm) - 4 for nm in names if nm not in Q0_NAMES)
+        traj, phi, sens = linear_sensitivities(z, q0, n, dt, params=zidx)
+        cols, zi = [], 0
+        for nm in names:
+            if nm in Q0_NAMES:
+                cols.append(phi[:, :, Q0_NAMES.index(nm)])
+            else:
+                cols.append(sens[:, :, zi])
+                zi += 1
+        jac = np.stack(cols, axis=-1)
+    else:
+        traj, full = trajectory(dt * np.arange(n), q0, z, model)
+        jac = full[:, :, [all_names.index(nm) for nm in names]]
+    if ripple_rad_s:
+        w = ripple_rad_s * dt * np.arange(n)
+        basis = np.stack([np.cos(w), np.sin(w), np.cos(2 * w), np.sin(2 * w)], axis=1)
+        gq = traj[:, [2, 3, 0, 1]] * np.array([-1.0, -1.0, 1.0, 1.0])  # d/dpsi of the rotated output
+        jac = np.concatenate([jac, gq[:, :, None] * basis[:, None, :]], axis=-1)
+    if cuts is None:
+        return np.einsum("nap,naq->pq", jac, jac)
+    edges = (0,) + tuple(int(c) for c in cuts)
+    parts = [np.einsum("nap,naq->pq", jac[a:b], jac[a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    return np.cumsum(np.stack(parts), axis=0)
+
+
+@dataclass(frozen=True)
+class FreeDecayBound:
+    """Cramer-Rao bound of a free-decay identification: 1-sigma std of every parameter (initial
+    state q1_0..p2_0 and the model's coefficients) and of D, theta_tau and tau, with the covariance."""
+
+    names: tuple[str, ...]
+    std: Mapping[str, float]
+    std_delta_inv_tau_per_s: float
+    std_theta_tau_deg: float
+    std_tau_s: float
+    covariance: np.ndarray = field(repr=False)
+
+
+def crlb_free_decay(*, duration_s: float, stream_hz: float, noise_sigma: float, q0: np.ndarray,
+                    params: Mapping[str, float], model: str = "linear") -> FreeDecayBound:
+    """Cramer-Rao bound of all parameters of a free decay (samples at t = k / stream_hz from 0 to
+    duration_s, white noise noise_sigma on each slow variable, initial state q0, true params by
+    the names of maslov_terms.free_param_names(model)); the output-error fit attains it."""
+    check_model(model)
+    for name, value in (("duration_s", duration_s), ("stream_hz", stream_hz), ("noise_sigma", noise_sigma)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name}={value!r} must be finite and > 0")
+    z_names = free_param_names(model)
+    missing = set(z_names) - set(params)
+    if missing:
+        raise ValueError(f"params lacks {sorted(missing)} of model={model!r}")
+    z = np.array([float(params[nm]) for nm in z_names])
+    q0 = np.asarray(q0, dtype=float)
+    if q0.shape != (4,) or not np.all(np.isfinite(q0)) or not np.any(q0):
+        raise ValueError(f"q0={q0!r} must be 4 finite slow variables, not all zero")
+    n = int(round(duration_s * stream_hz)) + 1
+    names = Q0_NAMES + z_names
+    info = _fisher_information(z, q0, n, 1.0 / stream_hz, names, model) / noise_sigma**2
+    cov = np.linalg.inv(info)
+    sd_th, sd_d, sd_tau, _ = _std_from_cov(cov, 4, 6, z)
+    std = {nm: math.sqrt(max(float(cov[i, i]), 0.0)) for i, nm in enumerate(names)}
+    return FreeDecayBound(names, std, sd_d, sd_th, sd_tau, covariance=cov)
 
 
 def model_bias(sc: DecayScenario, *, model: str = "patent") -> tuple[float, float, float]:
@@ -234,7 +296,7 @@ class DampingDesign:
     def summary(self) -> str:
         sc = self.scenario
         lines = [
-            "HRG damping experiment design (free decay on a rate table, PHYSICS.md section 3)",
+            "HRG damping experiment design (free decay on a rate table, docs/free_decay_identification.md)",
             f"  resonator: tau {sc.tau_s:g} s, Delta(1/tau) {sc.delta_inv_tau_per_s:.3g} 1/s, K {sc.bryan_factor:g}, "
             f"split {sc.split_hz:g} Hz, quadrature {sc.quadrature:g}, noise {sc.noise_sigma:g} at amplitude "
             f"{sc.amplitude:g}, stream {sc.stream_hz:g} Hz; fit model '{self.model}'",
@@ -353,3 +415,139 @@ def design_hrg_damping(
     patent = _points_for_rate(replace(base, rate_dps=patent_rate_dps), (length,), model)[0]
     fc = four_channel_bound(replace(base, rate_dps=rec.rate_dps, duration_s=length))
     return DampingDesign(base, model, tuple(points), rec, patent, fc, lock_dps)
+
+
+# ----------------------------------------------------------------------------------------------
+# Design of hrg-free-decay (the output-error fit of the full linear model)
+
+
+@dataclass(frozen=True)
+class FreeDecayDesignPoint:
+    """CRLB (1 sigma) of the quantities hrg-free-decay reports, at one (rate, length)."""
+
+    rate_dps: float
+    duration_s: float
+    std_delta_inv_tau_per_s: float
+    std_theta_tau_deg: float
+    std_tau_s: float
+    std_split_hz: float
+    std_bryan_factor: float
+
+    @property
+    def rel_delta(self) -> float:
+        return math.inf if not self.std_delta_inv_tau_per_s else self.std_delta_inv_tau_per_s
+
+
+@dataclass(frozen=True)
+class FreeDecayDesign:
+    """Table rate and record length for hrg-free-decay and the precision they give at the bound."""
+
+    scenario: DecayScenario
+    points: tuple[FreeDecayDesignPoint, ...]
+    recommended: FreeDecayDesignPoint
+    lock_rate_dps: float
+
+    def summary(self) -> str:
+        sc, r = self.scenario, self.recommended
+        d = sc.delta_inv_tau_per_s
+        lines = [
+            "hrg-free-decay experiment design (output-error fit of the slow-variable model, "
+            "docs/free_decay_identification.md)",
+            f"  resonator: tau {sc.tau_s:g} s, Delta(1/tau) {d:.3g} 1/s, K {sc.bryan_factor:g}, "
+            f"split {sc.split_hz:g} Hz, quadrature {sc.quadrature:g}, noise {sc.noise_sigma:.3g} per fitted sample "
+            f"at amplitude {sc.amplitude:g}, stream {sc.stream_hz:g} Hz",
+            f"  the wave locks onto the damping axis below {self.lock_rate_dps:.3g} deg/s (K Omega < D/4)",
+            "  rate_dps  length_s   std D/D      std th_tau (deg)  std tau (s)  std split (Hz)  std K",
+        ]
+        for p in self.points:
+            if p.duration_s == r.duration_s:
+                lines.append(f"  {p.rate_dps:8.3g}  {p.duration_s:8.0f}  {p.std_delta_inv_tau_per_s / d:10.3e}  "
+                             f"{p.std_theta_tau_deg:16.3e}  {p.std_tau_s:11.3e}  {p.std_split_hz:14.3e}  "
+                             f"{p.std_bryan_factor:9.3e}")
+        lines += [
+            f"  recommended: table rate {r.rate_dps:.3g} deg/s, record {r.duration_s:.0f} s, "
+            f"stream {sc.stream_hz:g} Hz: std D {r.std_delta_inv_tau_per_s:.3e} 1/s "
+            f"({r.std_delta_inv_tau_per_s / d:.3%} of D), "
+            f"std th_tau {r.std_theta_tau_deg:.3e} deg, std tau {r.std_tau_s:.3e} s",
+            f"  run it: gyrobench run hrg-free-decay --set rate_dps={r.rate_dps:.4g} --set record_s={r.duration_s:.0f} "
+            f"--set stream_hz={sc.stream_hz:g}",
+        ]
+        return "\n".join(lines)
+
+
+def _free_decay_points(sc: DecayScenario, lengths_s: tuple[float, ...]) -> list[FreeDecayDesignPoint]:
+    """CRLB of the full linear model (q0, all eight coefficients and the table-ripple nuisance that
+    hrg-free-decay fits) at each length, one trajectory."""
+    long = replace(sc, duration_s=max(lengths_s))
+    dt, m = long.grid_step()
+    n = int(long.duration_s / dt) + 1
+    cuts = tuple(min(n, int(round(length / dt)) + 1) for length in lengths_s)
+    zg = sc.zg()
+    infos = _fisher_information(zg, sc.initial_state(), n, dt, FOUR_CHANNEL_NAMES, "linear", cuts,
+                                ripple_rad_s=math.radians(sc.rate_dps))
+    infos = infos * (m / sc.noise_sigma**2)
+    omega = math.radians(sc.rate_dps)
+    out = []
+    for length, info in zip(lengths_s, infos, strict=True):
+        cov = np.linalg.inv(info)
+        sd_th, sd_d, sd_tau, _ = _std_from_cov(cov, 4, 6, zg)
+        split = math.hypot(zg[6], zg[7])
+        if split > 0:
+            g = np.array([zg[6], zg[7]]) / split
+            sd_split = math.sqrt(max(float(g @ cov[10:12, 10:12] @ g), 0.0)) / TWO_PI
+        else:
+            sd_split = math.sqrt(max(0.5 * float(np.trace(cov[10:12, 10:12])), 0.0)) / TWO_PI
+        sd_k = math.sqrt(max(float(cov[5, 5]), 0.0)) / (4.0 * abs(omega)) if omega else math.inf
+        out.append(FreeDecayDesignPoint(sc.rate_dps, float(length), sd_d, sd_th, sd_tau, sd_split, sd_k))
+    return out
+
+
+def design_hrg_free_decay(
+    *,
+    tau_s: float,
+    delta_inv_tau_per_s: float,
+    noise_sigma: float,
+    stream_hz: float = 100.0,
+    bryan_factor: float = 0.277,
+    split_hz: float = 0.0,
+    quadrature: float = 0.0,
+    amplitude: float = 1.0,
+    theta_tau_deg: float = 0.0,
+    theta_w_deg: float = 0.0,
+    rates_dps: tuple[float, ...] | None = None,
+    lengths_tau: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 3.0),
+    length_tolerance: float = 0.1,
+    min_turns: float = 2.0,
+) -> FreeDecayDesign:
+    """Table rate and record length for hrg-free-decay: the rate with the least CRLB of D at the
+    shortest record whose CRLB is within `length_tolerance` of the grid's best (the output-error
+    fit carries split, quadrature and rate, so there is no model bias to weigh); noise_sigma is
+    per fitted (stream_hz) sample.  The table must turn min_turns times in the record: the
+    procedure fits the table's angle ripple (once and twice per turn) only then, and the CRLB
+    alone would pick the slowest rate (the damping drift is observable without a sweep)."""
+    if delta_inv_tau_per_s <= 0:
+        raise ValueError(f"delta_inv_tau_per_s={delta_inv_tau_per_s!r} must be > 0 to design for it")
+    if not lengths_tau or min(lengths_tau) <= 0:
+        raise ValueError(f"lengths_tau={lengths_tau!r} must be positive multiples of tau")
+    base = DecayScenario(
+        tau_s=tau_s, delta_inv_tau_per_s=delta_inv_tau_per_s, noise_sigma=noise_sigma, stream_hz=stream_hz,
+        bryan_factor=bryan_factor, split_hz=split_hz, quadrature=quadrature, amplitude=amplitude,
+        theta_tau_deg=theta_tau_deg, theta_w_deg=theta_w_deg, duration_s=max(lengths_tau) * tau_s,
+    )
+    lock_dps = math.degrees(delta_inv_tau_per_s / 4.0 / bryan_factor)
+    if rates_dps is None:
+        rates_dps = tuple(float(r) for r in np.geomspace(max(4.0 * lock_dps, 1e-3), 1000.0, 16))
+    if min(rates_dps) <= lock_dps:
+        raise ValueError(f"rates_dps must stay above the locking rate {lock_dps:.3g} deg/s "
+                         f"(min given {min(rates_dps)})")
+    lengths_s = tuple(float(f * tau_s) for f in sorted(lengths_tau))
+    points: list[FreeDecayDesignPoint] = []
+    for rate in sorted(set(rates_dps)):
+        points += [p for p in _free_decay_points(replace(base, rate_dps=rate), lengths_s)
+                   if abs(p.rate_dps) * p.duration_s >= 360.0 * min_turns]
+    if not points:
+        raise ValueError(f"no (rate, length) in the grid turns the table {min_turns:g} times in the record")
+    best = min(p.std_delta_inv_tau_per_s for p in points)
+    length = min(p.duration_s for p in points if p.std_delta_inv_tau_per_s <= (1.0 + length_tolerance) * best)
+    rec = min((p for p in points if p.duration_s == length), key=lambda p: p.std_delta_inv_tau_per_s)
+    return FreeDecayDesign(base, tuple(points), rec, lock_dps)

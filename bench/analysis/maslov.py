@@ -4,7 +4,8 @@
   states of a MEMS ring (paper sections 3-4), see `maslov_forced`.
 - `identify_free_decay(t_s, q1, p1, q2, p2, *, model=..., recursive=False)`: free decay of a
   high-Q shell (section 2), Simpson regressors, batch or the paper's 4x4-block recursive LS,
-  see `maslov_decay`.
+  see `maslov_decay`; method="output-error" for the maximum-likelihood fit at the Cramer-Rao
+  bound, see `free_decay_oe`.
 - The regressor terms and what was found against the printed formulas: `maslov_terms`.
 Pure functions: arrays in, a frozen `Identification` out.
 """

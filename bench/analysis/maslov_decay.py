@@ -114,6 +114,7 @@ def _linear_fit(q: np.ndarray, dt_s: float) -> dict[str, np.ndarray | float]:
     return {"z": z, "c": c, "resid": resid, "meat": meat, "lnorm": _error_map_norm(a, h3, qs.shape[0])}
 
 
+FREE_DECAY_METHODS = ("equation-error", "output-error")
 _CHUNK = 8192  # samples per chunk: keeps the (chunk, 4, k) temporaries in cache
 _RLS_CHUNK = 4096  # 4x4 blocks per chunk of the recursive form (its update equals their 4x4 updates in turn)
 
@@ -341,11 +342,38 @@ def identify_free_decay(
     bryan_factor: float | None = None,
     n_init_blocks: int | None = None,
     level: float = 0.95,
+    method: str = "equation-error",
+    covariance: str = "fisher",
+    max_iter: int = 50,
+    rotation_basis: np.ndarray | None = None,
 ) -> Identification:
     """Identify (gamma, nu, b_c, b_s, c_m, n, h_c, h_s[, xi[, kappa]]) from a free decay sampled
     uniformly.  detuning_hz: demodulation reference minus natural frequency (the fit sees
     c_m - 2 lam; c_m is reported with 2 lam added back).  natural_freq_hz enables Q, bryan_factor
-    the zero-rate output in `derived`.  ci95 is the sandwich interval of the module docstring."""
+    the zero-rate output in `derived`.  ci95 is the sandwich interval of the module docstring.
+
+    method="equation-error" (default): the paper's Simpson least squares (batch, or recursive=True).
+    method="output-error": maximum likelihood under white noise (`free_decay_oe`), started from the
+    equation-error estimate, which `recursive` and n_init_blocks select as above (the optimum does
+    not depend on the start); covariance="fisher" or "sandwich" (Newey-West, coloured noise) and
+    max_iter (FreeDecayFitError beyond it) and rotation_basis (known harmonics of an output rotation,
+    e.g. a rate table's angle ripple, fitted as nuisance) apply to it only; extras["start"] holds
+    the start."""
+    if method not in FREE_DECAY_METHODS:
+        raise ValueError(f"method={method!r} is not one of {FREE_DECAY_METHODS}")
+    if method == "output-error":
+        from bench.analysis.free_decay_oe import COVARIANCES, identification_from_oe, output_error_fit
+
+        if covariance not in COVARIANCES:
+            raise ValueError(f"covariance={covariance!r} is not one of {COVARIANCES}")
+        ee = identify_free_decay(t_s, q1, p1, q2, p2, model=model, recursive=recursive, n_init_blocks=n_init_blocks,
+                                 level=level)
+        q = np.stack([q1, p1, q2, p2], axis=-1).astype(float)
+        fit = output_error_fit(np.asarray(t_s, dtype=float), q, ee.vector(), model=model, covariance=covariance,
+                               max_iter=max_iter, rotation_basis=rotation_basis)
+        return identification_from_oe(fit, model, detuning_hz=detuning_hz, level=level,
+                                      natural_freq_hz=natural_freq_hz, bryan_factor=bryan_factor,
+                                      start=ee.params, dt_s=float(ee.extras["dt_s"]), covariance=covariance)
     check_model(model)
     n = check_finite_arrays(t_s=t_s, q1=q1, p1=p1, q2=q2, p2=p2)
     names = free_param_names(model)

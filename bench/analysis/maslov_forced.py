@@ -80,6 +80,30 @@ class ForcedIdentification(Identification):
         )
 
 
+#: bounds on the settling integrations of one `steady_states` call: a model identified from data it
+#: does not describe fails Newton almost everywhere (mems-sweep on an HRG ran for 15 minutes)
+MAX_SETTLES = 20
+MAX_SETTLE_EVALUATIONS = 20_000
+
+
+class ForcedFitError(ValueError):
+    """The identified forced model has no steady state the data support (data it cannot fit)."""
+
+
+class _Budget:
+    """Counts right-hand-side evaluations of one settling integration; raises past the bound."""
+
+    def __init__(self, fun, limit: int, where: str) -> None:
+        self.fun, self.left, self.where = fun, limit, where
+
+    def __call__(self, _t: float, x: np.ndarray) -> np.ndarray:
+        self.left -= 1
+        if self.left < 0:
+            raise ForcedFitError(f"{self.where}: the slow dynamics did not settle within {MAX_SETTLE_EVALUATIONS} "
+                                 "model evaluations; the data do not fit the forced model")
+        return 0.5 * self.fun(x)
+
+
 def detuning_rad_s(freq_hz: np.ndarray, natural_freq_hz: float) -> np.ndarray:
     """lam = 2 pi (drive - natural) in rad/s (the paper's lam = w0 - w)."""
     return TWO_PI * (np.asarray(freq_hz, dtype=float) - natural_freq_hz)
@@ -106,6 +130,7 @@ def steady_states(
     out = np.empty((freqs.size, 4))
     ok = np.zeros(freqs.size, dtype=bool)
     q = None if q_start is None else np.asarray(q_start, dtype=float)
+    settles = 0
     for j, lam in enumerate(lams):
 
         def fun(x: np.ndarray, lam: float = lam) -> np.ndarray:
@@ -119,7 +144,15 @@ def steady_states(
             q = np.linalg.solve(a2, -z[8:12])
         sol = root(fun, q, jac=jac, method="hybr", tol=tol)
         if not sol.success or np.max(np.abs(fun(sol.x))) > 1e-9 * max(1.0, np.max(np.abs(z[8:12]))):
-            settle = solve_ivp(lambda _t, x, fun=fun: 0.5 * fun(x), (0.0, 30.0 / gamma), q, method="LSODA", rtol=1e-8)
+            settles += 1
+            if settles > MAX_SETTLES or not (math.isfinite(z[0]) and z[0] > 0):
+                raise ForcedFitError(
+                    f"the identified model (gamma = {z[0]:.4g} 1/s) has no steady state Newton finds at "
+                    f"{settles} of {freqs.size} frequencies (bound {MAX_SETTLES}); the data do not fit the "
+                    f"{model} forced model (another kind of gyro, or a sweep that misses the resonance?)"
+                )
+            rhs = _Budget(fun, MAX_SETTLE_EVALUATIONS, f"{freqs[j]:.6g} Hz")
+            settle = solve_ivp(rhs, (0.0, 30.0 / gamma), q, method="LSODA", rtol=1e-8)
             sol = root(fun, settle.y[:, -1], jac=jac, method="hybr", tol=tol)
         q = sol.x
         out[j] = q

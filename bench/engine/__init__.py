@@ -2,6 +2,7 @@
 the safe state.  See `bench.engine.procedure` for an example procedure."""
 
 from .context import Devices, GuardedClock, RunAborted, RunContext
+from .demands import KINDS, Demand, StationMismatch, check_station
 from .measurement import ABORTED, COMPLETE, ERROR, FAIL, MARGINAL, OUTCOMES, PASS, Limits, Result, combine_outcomes
 from .params import Param, ParamError
 from .procedure import Procedure, step
@@ -10,6 +11,10 @@ from .safety import SAFE_ORDER, SafeStateReport, bring_to_safe_state
 
 __all__ = [
     "ABORTED",
+    "KINDS",
+    "Demand",
+    "StationMismatch",
+    "check_station",
     "COMPLETE",
     "ERROR",
     "FAIL",

@@ -50,6 +50,14 @@ class GuardedClock:
         if not dt_s >= 0:
             raise ValueError(f"clock wait dt_s={dt_s!r} must be finite and >= 0")
         self._check()
+        if not getattr(self.base, "lockstep", True):
+            # real time: the world moves on while the checks between slices run, so the slices
+            # aim at one deadline (summing them would stretch a 10 s wait to 100 s at 100x)
+            deadline = self.base.now() + float(dt_s)
+            while (left := deadline - self.base.now()) > 1e-12:
+                self.base.sleep(min(left, self.MAX_SLICE_S))
+                self._check()
+            return
         remaining = float(dt_s)
         while remaining > 1e-12:
             piece = min(remaining, self.MAX_SLICE_S)
@@ -201,6 +209,14 @@ class RunContext:
 
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
         return self.clock.wait_until(condition, timeout_s, poll_s)
+
+    def compute(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        """fn(*args, **kwargs) for a long computation (a fit, an identification): it runs in a
+        worker process that an abort ends at once, so the safe state never waits for an estimator.
+        fn must be a module-level function; its arguments and result must pickle."""
+        from .compute import run_in_worker
+
+        return run_in_worker(fn, args, kwargs, self.checkpoint)
 
     def progress(self, fraction: float, message: str = "") -> None:
         self.checkpoint()

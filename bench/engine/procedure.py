@@ -42,6 +42,7 @@ import re
 from collections.abc import Callable
 from typing import Any, ClassVar
 
+from .demands import Demand
 from .measurement import Result
 from .params import Param, declared_params, resolve_params
 
@@ -71,6 +72,8 @@ class Procedure:
     name: ClassVar[str] = ""
     #: device roles the procedure needs on its station ("table", "frontend", "fpga")
     requires: ClassVar[tuple[str, ...]] = ()
+    #: kinds of gyro the procedure is written for (`bench.engine.demands.KINDS`); () = any
+    kinds: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -79,6 +82,11 @@ class Procedure:
 
     def __init__(self, params: dict[str, Any] | None = None) -> None:
         self.params: dict[str, Any] = resolve_params(type(self), params)
+
+    def demands(self) -> list[Demand]:
+        """What this run will ask of each device (rates, accelerations, amplitudes), from the
+        parameters; the engine checks them against the station's limits before the first step."""
+        return []
 
     # --- introspection -------------------------------------------------------------------
     @classmethod
@@ -107,6 +115,7 @@ class Procedure:
             "name": cls.name,
             "title": cls.title(),
             "requires": list(cls.requires),
+            "kinds": list(cls.kinds),
             "steps": [s for s, _ in cls.step_specs()],
             "params": [p.describe() for p in cls.param_specs().values()],
         }

@@ -28,6 +28,7 @@ from drivers.errors import LinkLostError, SafetyTripError
 
 from . import events as ev
 from .context import GuardedClock, RunAborted, RunContext
+from .demands import check_station
 from .measurement import ABORTED, COMPLETE, ERROR, Result, combine_outcomes
 from .procedure import Procedure
 from .safety import SafeStateReport
@@ -85,6 +86,7 @@ class RunRecord:
     traceback: str | None = None
     store_error: str | None = None  # the results store did not take the record (it is in the spool)
     stream_overflow_blocks: int = 0  # stream blocks real time dropped because the writer fell behind
+    speed_achieved: float | None = None  # simulated s per wall s, on a real-time simulated station
 
     def as_json(self) -> dict[str, Any]:
         """The shape of `gyrobench run --json`."""
@@ -92,6 +94,7 @@ class RunRecord:
         for r in self.measurements:
             key = r.name if r.dut is None else f"{r.dut}:{r.name}"
             meas[key] = r.as_json()
+        speed = {} if self.speed_achieved is None else {"speed_achieved": float(self.speed_achieved)}  # real time only
         return {
             "run_id": self.run_id,
             "procedure": self.procedure,
@@ -103,6 +106,7 @@ class RunRecord:
             "safe_state": bool(self.safe_state),
             "end_reason": self.end_reason,
             "raw_file": self.raw_file,
+            **speed,
         }
 
 
@@ -134,9 +138,11 @@ class Runner:
 
     # --- control, from any thread ------------------------------------------------------------
     def abort(self, reason: str = "abort requested") -> None:
+        """Takes no lock: a signal handler runs it in the main thread, which may be inside the
+        checkpoint's Event.wait holding that Event's (non-reentrant) lock; a paused checkpoint
+        polls the reason every 0.05 s instead of being woken."""
         if self._abort_reason is None:
             self._abort_reason = reason
-        self._running.set()
 
     def pause(self) -> None:
         self._running.clear()
@@ -180,6 +186,7 @@ class Runner:
     def run(self, procedure: type[Procedure] | Procedure, params: dict[str, Any] | None = None) -> RunRecord:
         """Run a procedure; ParamError (before anything moves) if a parameter is bad."""
         proc = procedure if isinstance(procedure, Procedure) else procedure(params)
+        check_station(proc, self.station)  # kind and limits: StationMismatch before anything moves
         missing = [r for r in proc.requires if r not in self.station.devices]
         if missing:
             raise ValueError(
@@ -263,6 +270,8 @@ class Runner:
         current = ""
         try:
             clock.guard = self.checkpoint
+            if hasattr(st, "ensure_ready"):  # a link lost since the last run: reconnected, or named down
+                st.ensure_ready()
             stop_streams = st.start_streams(ctx) if hasattr(st, "start_streams") else None
             for index, (name, title) in enumerate(steps):
                 current = name
@@ -315,6 +324,7 @@ class Runner:
             rec.outcome = outcome
             rec.simulated_s = clock.now() - t0_sim
             rec.wall_s = time.monotonic() - t0_wall
+            self._report_speed(ctx, rec, clock)
             rec.finished_at = _dt.datetime.now(_dt.UTC).isoformat()
             if writer is not None and writer.overflow_blocks:  # real time only: counted, never silent
                 rec.stream_overflow_blocks = writer.overflow_blocks
@@ -341,6 +351,21 @@ class Runner:
                 if rec.store_error:
                     ctx.publish(ev.Log, level="ERROR", message=rec.store_error)
         return rec
+
+    def _report_speed(self, ctx: RunContext, rec: RunRecord, clock: Any) -> None:
+        """Real time at a speed factor: say the speed achieved (the clock falls behind, rather
+        than a link timing out, when the machine cannot keep up)."""
+        asked = getattr(clock, "speed", None)
+        if getattr(clock, "lockstep", True) or not asked or rec.wall_s <= 0:
+            return
+        rec.speed_achieved = rec.simulated_s / rec.wall_s
+        slow = rec.speed_achieved < 0.9 * asked
+        ctx.publish(
+            ev.Log,
+            level="WARNING" if slow else "INFO",
+            message=f"real time: {rec.speed_achieved:.3g}x achieved of the {asked:g}x asked"
+            + (" (this machine could not keep up; the simulated clock fell behind)" if slow else ""),
+        )
 
     def _step_failed(self, ctx: RunContext, steps: list, current: str, status: str) -> None:
         names = [s for s, _ in steps]

@@ -58,16 +58,41 @@ class EngineBackend:
 
     # --- GuiBackend ------------------------------------------------------------------------
     def procedures(self) -> dict[str, tuple[Param, ...]]:
+        """The procedures this station can run, with their parameters (the picker omits the others;
+        `unavailable()` says why)."""
         from procedures import all_procedures
 
-        return {name: tuple(cls.param_specs().values()) for name, cls in all_procedures().items()}
+        refused = self.unavailable()
+        return {
+            name: tuple(cls.param_specs().values())
+            for name, cls in all_procedures().items()
+            if name not in refused
+        }
+
+    def unavailable(self) -> dict[str, str]:
+        """Procedures not offered on this station, with the reason: another kind of gyro, or a
+        device role the station lacks."""
+        from bench.engine.demands import kind_refusal
+        from procedures import all_procedures
+
+        out: dict[str, str] = {}
+        for name, cls in all_procedures().items():
+            missing = [r for r in cls.requires if r not in self.station.config.devices]
+            why = kind_refusal(cls.kinds, self.station.kind)
+            if why is None and missing:
+                why = f"it needs device role(s) {missing}"
+            if why is not None:
+                out[name] = why
+        return out
 
     def start(self, procedure: str, values: dict[str, Any]) -> None:
+        from bench.engine import check_station
         from procedures import find_procedure
 
         if self.running():
             raise RuntimeError("a run is already going on")
         proc = find_procedure(procedure)(values)  # ParamError (a ValueError) before anything moves
+        check_station(proc, self.station)  # StationMismatch (a ValueError): another kind, or above a limit
         self._thread = threading.Thread(target=self._run, args=(proc,), name=f"run-{procedure}", daemon=True)
         self._thread.start()
 

@@ -60,7 +60,11 @@ class MainWindow(QMainWindow):
         self.station.speed_changed.connect(self._on_speed)
         self.procedure = QComboBox()
         self.procedure.setObjectName("procedure")
-        self.procedure.addItems(list(backend.procedures()))
+        self.procedure.addItems(list(backend.procedures()))  # only what this station can run
+        hidden = backend.unavailable() if hasattr(backend, "unavailable") else {}
+        if hidden:
+            why = "; ".join(f"{n} ({w})" for n, w in hidden.items())
+            self.procedure.setToolTip(f"not offered on this station: {why}")
         self.form = ParameterForm()
         self.start_button = QPushButton("Start")
         self.pause_button = QPushButton("Pause")

@@ -1,6 +1,6 @@
 """Spin the table at a rate, hold it there, and check the rate the table reports."""
 
-from bench.engine import Param, Procedure, Result, step
+from bench.engine import Demand, Param, Procedure, Result, step
 from bench.engine.streams import Column, StreamSchema, declare
 
 HOLD = declare(StreamSchema("hold", "table-spin", (Column("t_s", "s"), Column("rate_dps", "deg/s"))))
@@ -14,6 +14,10 @@ class TableSpin(Procedure):
     rate_dps = Param(100.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate")
     hold_s = Param(2.0, unit="s", low=0.1, high=600.0, doc="time held at rate")
     tolerance_dps = Param(0.5, unit="deg/s", low=0.01, high=10.0, doc="allowed rate error")
+
+    def demands(self):
+        """Checked against the station's limits before the table is enabled."""
+        return [Demand("table", "max_rate_dps", "rate_dps", self.rate_dps, "deg/s")]
 
     @step("Spin up")
     def spin_up(self, ctx):
@@ -39,3 +43,10 @@ class TableSpin(Procedure):
         tol = self.tolerance_dps
         limits = (self.rate_dps - tol, self.rate_dps + tol)
         return [Result("table_rate_dps", float(rate.mean()), "deg/s", limits=limits)]
+
+    def figures(self, data) -> list:
+        """The figures this run's results need (bench.reporting.table_spin): the report and
+        `gyrobench analyze --figures` draw these."""
+        from bench.reporting.table_spin import figures
+
+        return figures(self, data)

@@ -2,10 +2,13 @@
 
 The World's averaged model already gives the pickoffs demodulated at the reference (cx, sx, cy,
 sy); the firmware reads them once per block, computes the wave's elements (amplitude a,
-quadrature k, angle theta, phase chi) and updates its loops, whose outputs it holds over the
-next block:
+quadrature k, angle theta, phase chi, and the rates of theta and chi) and updates its loops; just
+before the next block it turns their wave-frame forces onto the electrodes at the wave's angle and
+phase predicted for that block's middle, and holds them over it (kernels.py says why: a force held
+along the wave of the block before moves the wave itself):
   * AGC (PI on setpoint - a): a force along the wave (d q / d a), so da/dt gains F_a / 2;
-  * quadrature loop (PI on k): a force along d q / d k, dk/dt gains F_q / 2;
+  * quadrature loop (PI on k): a force along d q / d k, dk/dt gains F_q / 2, plus the frequency
+    split's quadrature pumping, learnt in the case frame by an observer, cancelled feed-forward;
   * PLL (PI on the phase chi, modulo pi): moves the reference frequency (world.ref_freq_hz);
   * whole-angle mode: a precession force along d q / d theta, F_p = 4 a Omega_cmd turns the wave
     at Omega_cmd; with drift compensation it adds -a D sin 4(theta - theta_tau), the force that
@@ -89,8 +92,9 @@ class FpgaFirmware:
             st[k.S_PLL_INT_HZ] = float(self.regs["PLL_FREQ_HZ"])
         if rising & p.AGC_EN:
             st[k.S_AGC_INT] = 0.0
-        if rising & p.QUAD_EN:
+        if rising & p.QUAD_EN:  # the split observer starts afresh (kept over a drive cut: the split stays)
             st[k.S_QUAD_INT] = 0.0
+            st[k.S_M_CC : k.S_H_S + 1] = 0.0
         if not new & p.DRIVE_EN:
             st[k.S_AGC_INT] = st[k.S_QUAD_INT] = 0.0
         self.regs["CTRL"] = new
@@ -145,16 +149,18 @@ class FpgaFirmware:
             # (one more block after going idle, so the reference ends at the NCO's final value)
             active = bool(ctrl & (p.DRIVE_EN | p.PLL_EN) or fm_on)
             if active or self._owns_ref:
-                world.ref_freq_hz = regs["PLL_FREQ_HZ"] + fm
+                world.ref_freq_hz = regs["PLL_FREQ_HZ"] + fm  # held over the block (its forces need it)
             self._owns_ref = active
             st = self._st
             st[k.S_OUT + 1] = regs["PLL_FREQ_HZ"] + fm - regs["REF_FREQ_HZ"]
             if ctrl & p.DRIVE_EN:
                 self._u_on = True
+                k.wave_force(t_s, n, dt_s, world.ref_freq_hz, ctrl, self._params(), st)
                 world.set_force("fpga", st[k.S_U : k.S_U + 4].copy())
             elif self._u_on:
                 self._u_on = False
                 st[k.S_U : k.S_U + 4] = 0.0
+                st[k.S_F_A] = st[k.S_F_Q_P] = st[k.S_F_P] = 0.0  # no force until the loops update again
                 st[k.S_OUT] = st[k.S_OUT + 2] = st[k.S_OUT + 3] = 0.0
                 world.set_force("fpga", None)
 
@@ -166,7 +172,9 @@ class FpgaFirmware:
             if ctrl & (p.DRIVE_EN | p.PLL_EN):  # nothing to update with the drive and PLL off
                 st = self._st
                 st[k.S_PLL_FREQ_HZ] = regs["PLL_FREQ_HZ"]
-                k.update_loops(block.q_meas, block.n * world.sample_period_s, ctrl, self._params(), st)
+                dt = world.sample_period_s
+                t_end = (block.first_index + block.n - 1) * dt
+                k.update_loops(block.q_meas, t_end, dt, world.ref_freq_hz, ctrl, self._params(), st)
                 regs["PLL_FREQ_HZ"] = float(st[k.S_PLL_FREQ_HZ])
             if ctrl & p.STREAM_EN:
                 self._emit(block)

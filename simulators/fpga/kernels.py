@@ -1,8 +1,26 @@
 """Compiled (numba) per-block work of the simulated FPGA: demodulate a block, update the loops,
-boxcar-decimate and encode the stream.  The same arithmetic as the Python it replaced (orbit elements of the
-block mean, PI loops with anti-windup, forces along d q / d a, d q / d k, d q / d theta), in one
-call per block instead of ~40 small numpy operations.  Arrays of named slots carry the registers
-(P_*) and the loop state (S_*) in and out.
+rotate their forces onto the electrodes, boxcar-decimate and encode the stream.  Arrays of named
+slots carry the registers (P_*) and the loop state (S_*) in and out.
+
+The loops act in the wave's frame (forces f_a along d q / d a, f_q along d q / d k, f_p along
+d q / d theta); `update_loops` estimates the wave (amplitude a, quadrature k, angle theta, phase
+chi and the rates of theta and chi) from the mean of a block's samples, which is the wave at the
+block's mean sample time, and updates the PI loops; `wave_force` then turns the wave-frame forces
+into electrode forces at the angle and phase the wave is predicted to have at the middle of the
+block they are held over.  Without that prediction a force held over a block acts along the
+wave's direction one block period ago: while the wave turns at Omega, the amplitude force f_a then
+leaks -f_a Omega T / (2 a) into dtheta/dt, a precession scale error of -gamma T / 2 (0.017 % at
+50 ms blocks).  The quadrature loop is a PI on k plus the split's pattern fed forward: a frequency
+split pumps quadrature at a rate (d/a) = h_c cos 4 theta + h_s sin 4 theta fixed in the case frame,
+which a PI in the wave's frame must follow as the wave turns and cannot (at 2 deg/s the 4 theta
+pattern turns at 0.14 rad/s, under the PI's 1 rad/s): the k it leaves lags the pattern, and the
+split turns that k into a drift -(Dw/2) (k/a) cos 4 (theta - theta_w) with a mean and an 8 theta
+part (25 deg/h each, output-referred, for a 5 mHz split).  The observer measures the pumping
+(dk/dt - f_q/2 between block estimates), fits (h_c, h_s) by exponentially weighted least squares
+on the angle it was seen at, and `wave_force` cancels it at the predicted angle; the PI is left
+with the rest.  At a fixed angle only one combination is seen; the other is learnt once the
+wave turns (about 10 s at 2 deg/s).  The observer keeps its estimate over a drive cut (the
+split is the resonator's) and starts afresh when the quadrature loop is switched on.
 """
 
 from __future__ import annotations
@@ -23,9 +41,19 @@ PARAM_REGS = (
 )  # fmt: skip
 # loop state
 S_AGC_INT, S_QUAD_INT, S_PLL_INT_HZ, S_A, S_PHASE_ERR, S_PLL_FREQ_HZ = range(6)
-S_U = 6  # 6..9: the force held over the next block
+S_U = 6  # 6..9: the force held over the block (set by wave_force)
 S_OUT = 10  # 10..13: amp, freq, quad, prec outputs (freq is set per block by before_block)
-N_STATE = 14
+# the wave estimate: valid flag (0 none, 1 angle and phase, 2 with rates), time of the estimate,
+# theta and chi there, their rates (chi's relative to the reference of the block), the reference
+# of the block, the block's end time, and the wave-frame forces without the compensation term
+S_EST, S_T_EST, S_THETA, S_CHI, S_THETA_RATE, S_CHI_RATE, S_REF_HZ, S_T_END = range(14, 22)
+S_WEAK, S_F_A, S_F_Q_P, S_F_P = range(22, 26)
+# the split observer (case frame): the last block's k, applied f_q and length, whether it learned,
+# the information matrix (m_cc, m_cs, m_ss), its right-hand side (v_c, v_s) and the estimate (h_c, h_s)
+S_OBS_K, S_OBS_FQ, S_OBS_N, S_OBS_OK, S_M_CC, S_M_CS, S_M_SS, S_V_C, S_V_S, S_H_C, S_H_S = range(26, 37)
+N_STATE = 37
+OBS_MEMORY_S = 100.0  # the observer forgets data older than this (exponential weight)
+OBS_RIDGE = 0.05**3  # prior weight of a zero pattern: one 50 ms block's (weights are span^3: 1/variance)
 
 # control bits (drivers.fpga.protocol), repeated here as compile-time constants
 _DRIVE_EN, _AGC_EN, _PLL_EN, _QUAD_EN, _WHOLE_ANGLE, _DRIFT_COMP_EN = 0x01, 0x02, 0x04, 0x08, 0x10, 0x40
@@ -37,9 +65,46 @@ def _clamp(x: float, limit: float) -> float:
 
 
 @njit(cache=True)
-def update_loops(q_meas: np.ndarray, t_block_s: float, ctrl: int, prm: np.ndarray, st: np.ndarray) -> None:
-    """The loops' update at the end of a block from the mean of its measured samples (n, 4)."""
+def _wrap(x: float, period: float) -> float:
+    """x modulo period, in [-period/2, period/2)."""
+    return (x + 0.5 * period) % period - 0.5 * period
+
+
+@njit(cache=True)
+def _observe_split(
+    st: np.ndarray, k_rel: float, a: float, theta: float, span: float, n: int, dt_s: float, a_rel: float
+) -> None:
+    """One step of the split observer: the quadrature pumping d/a = (dk/dt - f_q/2) / a between the
+    last block's estimate and this one's, regressed (exponentially weighted least squares) on
+    cos 4 theta, sin 4 theta at the midpoint angle: the case-frame pattern h_c cos 4 theta + h_s sin 4 theta."""
+    # f_q held over the last block from its mean sample time to its end, then this block's up to now
+    n_prev = st[S_OBS_N]
+    f_int = st[S_OBS_FQ] * 0.5 * (n_prev - 1) * dt_s + (st[S_OUT + 2] / a) * 0.5 * (n + 1) * dt_s
+    y = (k_rel - st[S_OBS_K] - 0.5 * f_int) / span
+    th_m = st[S_THETA] + 0.5 * _wrap(theta - st[S_THETA], 0.5 * math.pi)
+    c4, s4 = math.cos(4.0 * th_m), math.sin(4.0 * th_m)
+    lam = math.exp(-span / OBS_MEMORY_S)
+    w = span * span * span * min(a_rel * a_rel, 1.0)  # 1/variance: k/a's noise goes as 1/a, its slope's as span^-3/2
+    st[S_M_CC] = lam * st[S_M_CC] + w * c4 * c4
+    st[S_M_CS] = lam * st[S_M_CS] + w * c4 * s4
+    st[S_M_SS] = lam * st[S_M_SS] + w * s4 * s4
+    st[S_V_C] = lam * st[S_V_C] + w * c4 * y
+    st[S_V_S] = lam * st[S_V_S] + w * s4 * y
+    m_cc, m_cs, m_ss = st[S_M_CC] + OBS_RIDGE, st[S_M_CS], st[S_M_SS] + OBS_RIDGE
+    det = m_cc * m_ss - m_cs * m_cs
+    st[S_H_C] = (m_ss * st[S_V_C] - m_cs * st[S_V_S]) / det
+    st[S_H_S] = (m_cc * st[S_V_S] - m_cs * st[S_V_C]) / det
+
+
+@njit(cache=True)
+def update_loops(
+    q_meas: np.ndarray, t_end_s: float, dt_s: float, ref_hz: float, ctrl: int, prm: np.ndarray, st: np.ndarray
+) -> None:
+    """The loops' update at the end of a block of measured samples (n, 4) whose last sample is at
+    t_end_s, taken with the reference at ref_hz: the wave estimate from the block mean (the wave
+    at the mean sample time), the PLL and the wave-frame forces for the next block."""
     n = q_meas.shape[0]
+    t_block_s = n * dt_s
     cx = sx = cy = sy = 0.0
     for i in range(n):
         cx += q_meas[i, 0]
@@ -64,17 +129,42 @@ def update_loops(q_meas: np.ndarray, t_block_s: float, ctrl: int, prm: np.ndarra
     phase_err = (chi + 0.5 * math.pi) % math.pi - 0.5 * math.pi
     st[S_PHASE_ERR] = phase_err
     setpoint = prm[P_AGC_SETPOINT]
+    weak = a < 0.01 * max(setpoint, 1e-12)
+    # the wave estimate and its rates (from the last block's, when that block came just before)
+    t_est = t_end_s - 0.5 * (n - 1) * dt_s
+    t_start = t_end_s - t_block_s
+    quad_on = ctrl & _QUAD_EN and ctrl & _DRIVE_EN and not weak
+    if weak:
+        st[S_EST] = 0.0
+    else:
+        if st[S_EST] > 0 and abs(st[S_T_END] - t_start) < 0.5 * dt_s and t_est > st[S_T_EST]:
+            span = t_est - st[S_T_EST]
+            if quad_on and st[S_OBS_OK] > 0:
+                _observe_split(st, k / a, a, theta, span, n, dt_s, a / max(setpoint, 1e-12))
+            st[S_THETA_RATE] = _wrap(theta - st[S_THETA], 0.5 * math.pi) / span
+            # chi is relative to the reference: add back the reference's change since the last estimate
+            d_chi = _wrap(chi - st[S_CHI], math.pi) + 2.0 * math.pi * (st[S_REF_HZ] - ref_hz) * (t_start - st[S_T_EST])
+            st[S_CHI_RATE] = d_chi / span
+            st[S_EST] = 2.0
+        else:
+            st[S_THETA_RATE] = st[S_CHI_RATE] = 0.0
+            st[S_EST] = 1.0
+        st[S_THETA] = theta
+        st[S_CHI] = chi
+        st[S_T_EST] = t_est
+        st[S_REF_HZ] = ref_hz
+    st[S_T_END] = t_end_s
+    st[S_OBS_OK] = 1.0 if quad_on else 0.0
+    st[S_OBS_K] = k / a if a > 0 else 0.0
+    st[S_OBS_FQ] = st[S_OUT + 2] / a if a > 0 else 0.0  # the quadrature force held over this block
+    st[S_OBS_N] = n
     if ctrl & _PLL_EN and a > 0.01 * max(setpoint, 1e-12):
         st[S_PLL_INT_HZ] += prm[P_PLL_KI] * phase_err * t_block_s
         st[S_PLL_FREQ_HZ] = st[S_PLL_INT_HZ] + prm[P_PLL_KP] * phase_err
     if not ctrl & _DRIVE_EN:
         return
     limit = prm[P_FORCE_LIMIT]
-    weak = a < 0.01 * max(setpoint, 1e-12)
-    if weak:  # no wave to lock onto yet: excite along the x pickoff axis, in phase
-        theta, chi, k = 0.0, 0.0, 0.0
-        c2, s2 = 1.0, 0.0
-    cc, sc = math.cos(chi), math.sin(chi)
+    st[S_WEAK] = 1.0 if weak else 0.0
     if ctrl & _AGC_EN:
         err = setpoint - a
         f_a = prm[P_AGC_KP] * err + st[S_AGC_INT]
@@ -92,10 +182,50 @@ def update_loops(q_meas: np.ndarray, t_block_s: float, ctrl: int, prm: np.ndarra
     f_p = 0.0
     if ctrl & _WHOLE_ANGLE and not weak:
         f_p = 4.0 * a * math.radians(prm[P_PRECESSION_RATE_DPS])
-        if ctrl & _DRIFT_COMP_EN:
+    st[S_F_A] = f_a
+    st[S_F_Q_P] = f_q
+    st[S_F_P] = f_p
+
+
+@njit(cache=True)
+def wave_force(
+    t_start_s: float, n: int, dt_s: float, ref_hz: float, ctrl: int, prm: np.ndarray, st: np.ndarray
+) -> None:
+    """The electrode force u (S_U) held over the block of n samples from t_start_s, with the
+    reference at ref_hz: the wave-frame forces of the last update along the wave as predicted at
+    the block's middle (angle and phase extrapolated at their measured rates), the drift
+    compensation evaluated there too; the outputs amp, quad, prec (S_OUT) are these forces."""
+    limit = prm[P_FORCE_LIMIT]
+    f_a, f_q, f_p = st[S_F_A], st[S_F_Q_P], st[S_F_P]
+    if abs(st[S_T_END] - t_start_s) >= 0.5 * dt_s:  # no update from the block just before (a drive cut)
+        st[S_U : S_U + 4] = 0.0
+        st[S_OUT + 0] = st[S_OUT + 2] = st[S_OUT + 3] = 0.0
+        return
+    if st[S_WEAK] > 0 or st[S_EST] <= 0:  # no wave to lock onto yet: excite along the x pickoff axis, in phase
+        theta, chi, f_q, f_p = 0.0, 0.0, 0.0, 0.0
+    else:
+        t_mid = t_start_s + 0.5 * n * dt_s
+        theta = st[S_THETA] + st[S_THETA_RATE] * (t_mid - st[S_T_EST])
+        # chi turns at its measured rate relative to the reference of the estimate's block, and
+        # the reference of this block differs by (ref_hz - S_REF_HZ) from t_start on
+        chi = st[S_CHI] + st[S_CHI_RATE] * (t_mid - st[S_T_EST]) + 2.0 * math.pi * (st[S_REF_HZ] - ref_hz) * (
+            t_mid - t_start_s
+        )
+        if ctrl & _WHOLE_ANGLE and ctrl & _DRIFT_COMP_EN:
             th_tau = math.radians(prm[P_DRIFT_THETA_TAU_DEG])
-            f_p -= a * prm[P_DRIFT_D_PER_S] * math.sin(4.0 * (theta - th_tau))
-        f_p = _clamp(f_p, limit)
+            f_p -= st[S_A] * prm[P_DRIFT_D_PER_S] * math.sin(4.0 * (theta - th_tau))
+        # a turning wave: the block mean shrinks the amplitude estimate by s1 and a force held in
+        # one direction pushes along the turning wave by s2 on average (both 1 - (Omega T)^2 / 6)
+        x = st[S_THETA_RATE] * dt_s
+        n_est = st[S_OBS_N]
+        s1 = math.sin(n_est * x) / (n_est * math.sin(x)) if x != 0.0 and n_est > 0 else 1.0
+        s2 = math.sin(n * x) / (n * x) if x != 0.0 else 1.0
+        f_p = _clamp(f_p / (s1 * s2), limit)
+        if ctrl & _QUAD_EN:  # cancel the split's quadrature pumping at the predicted angle
+            c4, s4 = math.cos(4.0 * theta), math.sin(4.0 * theta)
+            f_q = _clamp(f_q - 2.0 * st[S_A] * (st[S_H_C] * c4 + st[S_H_S] * s4), limit)
+    c2, s2 = math.cos(2 * theta), math.sin(2 * theta)
+    cc, sc = math.cos(chi), math.sin(chi)
     # u = f_a e_a + f_q e_k + f_p e_p with the unit forces along a, k and theta
     st[S_U + 0] = f_a * (c2 * cc) + f_q * (-s2 * sc) + f_p * (-s2 * cc)
     st[S_U + 1] = f_a * (-c2 * sc) + f_q * (-s2 * cc) + f_p * (s2 * sc)

@@ -1,0 +1,59 @@
+"""The station entry of the Acutrol table (`driver = "acutrol-table"`): its keys, how to build the
+driver from them and how to serve its simulator.  bench/station.py imports this module."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from bench.station import DriverSpec, Key, StationError, _table_health, _table_keys, register_driver
+
+
+def _build(cfg: dict[str, Any], clock: Any) -> Any:
+    from .acutronic_driver import AcutrolRateTable
+    from .base import TableLimits
+
+    if not (cfg["host"] or cfg["visa_resource"]):
+        raise StationError("[devices.table] acutrol-table needs host (TCP) or visa_resource (GPIB through VISA)")
+    limits = TableLimits(max_rate_dps=cfg["max_rate_dps"], max_accel_dps2=cfg["max_accel_dps2"])
+    table = AcutrolRateTable(
+        cfg["host"],
+        cfg["port"],
+        resource=cfg["visa_resource"],
+        axis=cfg["axis"],
+        limits=limits,
+        clock=clock,
+        vtrip_dps=cfg["vtrip_dps"] or None,
+        lockout=cfg["lockout"],
+        timeout_s=cfg["timeout_s"],
+    )
+    table.connect()
+    return table
+
+
+def _serve(world: Any, cfg: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    from simulators.rate_table.acutronic_server import serve_acutrol_table
+
+    handle = serve_acutrol_table(world, max_rate_dps=cfg["max_rate_dps"], max_accel_dps2=cfg["max_accel_dps2"])
+    return handle, {"host": handle.host, "port": handle.port, "visa_resource": ""}
+
+
+SPEC = register_driver(
+    DriverSpec(
+        name="acutrol-table",
+        role="table",
+        keys=_table_keys(
+            {
+                "host": Key(str, "", doc="controller address (TCP); its real-time computer is 192.168.53.1"),
+                "port": Key(int, 9878, 1, 65535),
+                "visa_resource": Key(str, "", doc="VISA resource instead of TCP, e.g. GPIB0::1::INSTR"),
+                "axis": Key(int, 1, 1, 6),
+                "vtrip_dps": Key(float, 0.0, 0.0, 40000.0, doc="velocity trip; 0: 1.1 x max_rate_dps", unit="deg/s"),
+                "lockout": Key(bool, True, doc="lock the other interfaces out while connected"),
+            }
+        ),
+        build=_build,
+        serve=_serve,
+        health=_table_health,
+        doc="Acutronic ACUTROL3000 table controller, ACL over TCP or GPIB (VISA)",
+    )
+)

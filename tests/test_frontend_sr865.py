@@ -1,0 +1,194 @@
+"""The two-SR865 front end (PyMeasure's SR860 driver) against its simulator: the same readings as
+the SCPI front end on the same world, limits, lost links, the safe state and the measured skew."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bench.station import SimStation
+from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
+from drivers.frontend.sr865_pair import Sr865PairFrontEnd
+from simulators.frontend.sr865_server import Sr865Model
+
+F_HZ = 13_646.6  # near the MEMS preset's resonance
+
+
+def _settled_reading(station, drives) -> np.ndarray:
+    fe = station.devices["frontend"]
+    fe.lockin_tc_s = 0.01
+    for ch, (amp, phase) in drives.items():
+        fe.set_drive(ch, amplitude_v=amp, frequency_hz=F_HZ, phase_deg=phase, output_on=True)
+    station.clock.sleep(0.6)
+    return np.mean([fe.lockin_all() for _ in range(5)], axis=0)
+
+
+def test_readings_agree_with_the_scpi_front_end_on_the_same_world():
+    """Truth: the SCPI front end's lock-in on the same preset and seed.  Drive and read
+    conventions (peak volts, cos/sin parts, drive phase) must come out the same through the
+    SR865's rms volts and sin(wt + PHAS) reference: agreement to 1e-3 of the amplitude."""
+    drives = {1: (0.888, 46.43), 2: (0.0308, 113.15)}
+    with SimStation("sim-mems").open() as ref_station:
+        ref = _settled_reading(ref_station, drives)
+    with SimStation("sim-mems-sr865").open() as station:
+        got = _settled_reading(station, drives)
+        assert isinstance(station.devices["frontend"], Sr865PairFrontEnd)
+    scale = np.max(np.abs(ref))
+    assert scale > 0.05
+    np.testing.assert_allclose(got, ref, atol=1e-3 * scale)
+
+
+@pytest.fixture
+def station():
+    with SimStation("sim-mems-sr865").open() as st:
+        yield st
+
+
+def test_slave_follows_the_master_reference(station):
+    fe = station.devices["frontend"]
+    fe.set_frequency_hz(12_345.678)
+    master, slave = fe.devices[1], fe.devices[2]
+    assert float(master.ask("FREQ?")) == pytest.approx(12_345.678, abs=1e-6)
+    assert float(slave.ask("FREQ?")) == pytest.approx(12_345.678, abs=1e-6)
+    assert slave.ask("RSRC?") == "1" and master.ask("RSRC?") == "0"
+
+
+def test_limits_are_checked_before_anything_is_sent(station):
+    fe = station.devices["frontend"]
+    model = station.handles["frontend"].models[0]
+    before = model.slvl_v
+    with pytest.raises(LimitError, match="amplitude_v"):
+        fe.set_drive(1, amplitude_v=2.5, output_on=True)  # the station's max_amplitude_v = 2.0
+    with pytest.raises(LimitError, match="frequency_hz"):
+        fe.set_drive(1, amplitude_v=0.1, frequency_hz=600_000.0)
+    with pytest.raises(LimitError, match="channel"):
+        fe.set_drive(3, amplitude_v=0.1)
+    assert model.slvl_v == before
+
+
+def test_tc_is_the_next_step_up_and_amplitudes_are_rms(station):
+    fe = station.devices["frontend"]
+    fe.lockin_tc_s = 0.005
+    assert fe.lockin_tc_s == pytest.approx(0.01)
+    fe.set_drive(1, amplitude_v=1.0, phase_deg=0.0, output_on=True)
+    model = station.handles["frontend"].models[0]
+    assert model.slvl_v == pytest.approx(1.0 / math.sqrt(2.0))
+    assert model.phas_deg == pytest.approx(90.0)  # sin(wt + 90) = cos(wt)
+
+
+def test_refused_setting_is_a_device_error(station):
+    fe = station.devices["frontend"]
+    fe.devices[2].write("RSRC 3")  # chop reference: not simulated, the instrument refuses
+    with pytest.raises(DeviceError, match="refused"):
+        fe._check(fe.devices[2])
+
+
+def test_hang_is_a_lost_link_and_safe_state_reports_it(station):
+    fe = station.devices["frontend"]
+    fe.set_drive(1, amplitude_v=0.5, output_on=True)
+    for dev in fe.devices.values():
+        dev.instrument.adapter.connection.timeout = 300  # ms: keep the test short
+    station.handles["frontend"].inject("hang")
+    with pytest.raises(LinkLostError):
+        fe.lockin_all()
+    assert fe.safe_state() is False
+    station.handles["frontend"].inject("none")
+    assert fe.safe_state() is True
+    assert all(m.slvl_v <= 1e-9 for m in station.handles["frontend"].models)
+
+
+def test_skew_between_the_two_instruments_is_measured(station):
+    fe = station.devices["frontend"]
+    for _ in range(5):
+        fe.lockin_all()
+    assert fe.skew.count == 5 and 0.0 < fe.skew.mean_s <= fe.skew.max_s < 1.0
+    assert fe.skew.virtual_last_s == 0.0  # lockstep: the world waits for both
+
+
+def test_model_conventions():
+    """X + iY = (s + i c)/sqrt(2) exp(-i PHAS): a pure cos(wt) pickoff of 1 V peak reads X = 0,
+    Y = 1/sqrt(2) at PHAS 0, and X = 1/sqrt(2) at PHAS 90."""
+    m = Sr865Model(1, serial="T")
+    m.cs = np.array([1.0, 0.0])
+    x, y = m.xy_rms()
+    assert (x, y) == pytest.approx((0.0, 1 / math.sqrt(2)))
+    m.phas_deg = 90.0
+    assert m.xy_rms() == pytest.approx((1 / math.sqrt(2), 0.0), abs=1e-12)
+    assert m.execute("PHAS 270;PHAS?") == "-90.0000000"
+    assert m.execute("SNAP? X, Y") == m.execute("OUTP? 0") + "," + m.execute("OUTP? 1")
+    assert m.execute("FLY 1;*ESR?") == "32"
+
+
+def test_garbled_answers_are_protocol_errors_and_the_link_stays_in_step(station):
+    fe = station.devices["frontend"]
+    station.handles["frontend"].inject("garble")
+    for read in (fe.lockin_all, lambda: fe.lockin_xy(2), lambda: fe.lockin_tc_s):
+        with pytest.raises(ProtocolError):
+            read()
+    station.handles["frontend"].inject("none")
+    assert len(fe.lockin_all()) == 4 and "SR865" in fe.idn
+
+
+def test_drive_forces_the_resonator_as_the_scpi_front_end_does(station):
+    """Truth: drive gain 50 per peak volt; phase 0 puts the force on u2, phase 90 on u3 (the
+    SCPI front end's test_safe_state_cuts_the_force_on_the_resonator, same numbers)."""
+    world, clock, fe = station.world, station.clock, station.devices["frontend"]
+    fe.set_drive(1, amplitude_v=0.3, frequency_hz=F_HZ, output_on=True)
+    fe.set_drive(2, amplitude_v=0.2, frequency_hz=F_HZ, phase_deg=90.0, output_on=True)
+    clock.sleep(0.01)
+    np.testing.assert_allclose(world.total_force, [0.0, 15.0, 10.0, 0.0], atol=1e-9)
+    assert world.ref_freq_hz == F_HZ
+    assert fe.safe_state() is True
+    clock.sleep(0.01)
+    assert not world.total_force.any()
+
+
+def test_lockin_settles_with_its_time_constant_in_virtual_time():
+    """Truth: a first-order low pass of a held input, 1 - exp(-t/tc) (OFSL 0, tc 0.1 s), on an
+    ideal isotropic resonator with tau 3000 s (a free state holds to 2e-4 over the test)."""
+    from bench.clock import SimClock
+    from simulators.frontend.sr865_server import serve_sr865_pair
+    from simulators.physics.params import ResonatorParams
+    from simulators.world import World
+
+    world = World(ResonatorParams(f0_hz=5500.0, tau_s=3000.0), seed=3)
+    clock = SimClock(world)
+    server = serve_sr865_pair(world)
+    fe = Sr865PairFrontEnd(*server.resources, clock=clock).connect()
+    try:
+        fe.set_frequency_hz(world.ref_freq_hz)
+        q = np.array([0.8, -0.4, 0.3, 0.2])
+        with world.lock:
+            world.resonator.set_state(q)
+            for m in server.models:
+                m._zi, m.cs = np.zeros((1, 2)), np.zeros(2)
+        fe.lockin_tc_s = 0.1
+        clock.sleep(0.1)
+        np.testing.assert_allclose(fe.lockin_all(), q * (1 - math.exp(-1.0)), rtol=3e-3)
+        clock.sleep(0.4)
+        np.testing.assert_allclose(fe.lockin_all(), q * (1 - math.exp(-5.0)), rtol=3e-3)
+    finally:
+        fe.close()
+        server.stop()
+        clock.close()
+
+
+def test_mems_sweep_on_the_sr865_station_finds_the_truth(tmp_path):
+    """mems-sweep unmodified on sim-mems-sr865 (17 points): the same truth checks as on sim-mems."""
+    from bench.engine import Runner
+    from procedures.mems_sweep import MemsSweep
+
+    station = SimStation("sim-mems-sr865", seed=0).open()
+    try:
+        record = Runner(station, runs_dir=tmp_path / "runs").run(MemsSweep, {"n_points": 17})
+        truth = station.truth()
+    finally:
+        station.close()
+    assert record.outcome == "COMPLETE", record.traceback
+    m = {r.name: r for r in record.measurements}
+    assert m["chosen_model_order"].value == 3.0
+    for name, value in {"Q": truth["q_factor"], "split_hz": truth["split_hz"], "gamma": 43.029}.items():
+        lo, hi = m[name].ci95
+        assert abs(value - 0.5 * (lo + hi)) <= 0.75 * (hi - lo), (name, m[name].value, value, (lo, hi))
