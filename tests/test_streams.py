@@ -17,7 +17,7 @@ from bench.engine import events as ev
 from bench.engine.streams import Column, StreamSchema, declare, schema_of, unit_from_name
 
 SHORT_DAMPING = {"rate_dps": 20.0, "record_s": 2.0, "stream_hz": 200.0, "verify_rate_dps": 4.0,
-                 "verify_s": 4.0, "verify_settle_s": 0.5, "drift_block_s": 0.5}
+                 "verify_s": 8.0, "verify_settle_s": 0.5, "drift_block_s": 0.5}
 
 
 @pytest.fixture(scope="module")
