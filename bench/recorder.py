@@ -1,7 +1,10 @@
 """Raw data of a run: one HDF5 file, written as the events arrive, readable after a crash.
 
-Layout: `/streams/<name>` (rows x columns float64, chunked, attr `columns`), `/log` and
-`/measurements` (one JSON string a row, appended as they happen), `/fits/<name>/<curve>`, and the
+Layout: `/streams/<name>` (rows x columns float64, chunked; attributes `columns`, `units`,
+`dtypes`, `source` and `legend_<column>` from the stream's declaration, bench.engine.streams),
+`/parameters/<name>` (scalars with `units`), `/log` and
+`/measurements` (one JSON string a row, appended as they happen), `/fits/<name>/<curve>` (with
+`units`, from the curve's name), and the
 run's attributes on the root (params, station, software_version, truth when simulated,
 procedure, run_id, ...; outcome, end_reason and safe_state once the run ends).  The file is
 flushed whenever a second of data (bench-clock time) or a second of wall time has passed since
@@ -37,6 +40,7 @@ import numpy as np
 
 from bench.engine import events as ev
 from bench.engine.context import RunAborted
+from bench.engine.streams import StreamSchema, schema_of, unit_from_name
 
 CHUNK_ROWS = 4096
 FLUSH_EVERY_S = 1.0
@@ -94,7 +98,8 @@ def _pid_alive(pid: int) -> bool:
 class Recorder:
     """Subscribes to the run's event bus and writes its raw streams and log to HDF5."""
 
-    def __init__(self, path: str | Path, attrs: dict[str, Any] | None = None) -> None:
+    def __init__(self, path: str | Path, attrs: dict[str, Any] | None = None,
+                 param_units: dict[str, str] | None = None) -> None:
         self.path = Path(path).resolve()
         self.failure: str | None = None  # the message, once a write has failed
         self._lock = threading.RLock()
@@ -110,6 +115,7 @@ class Recorder:
             self._meas = self._text_dataset("measurements")
             for key, value in (attrs or {}).items():
                 self._f.attrs[key] = value if isinstance(value, (str, int, float, bool)) else _json(value)
+            self._write_parameters(dict((attrs or {}).get("params") or {}), param_units or {})
             self._f.flush()
         except (OSError, RuntimeError) as exc:
             self._drop_reserve()
@@ -126,6 +132,7 @@ class Recorder:
                 why += f" ({st.f_bavail * st.f_frsize / 1e6:.2f} MB free, a run needs {RESERVE_BYTES / 1e6:.2f} MB)"
             raise RawDataError(f"raw data: cannot create {where}: {why}") from exc
         self._datasets: dict[str, h5py.Dataset] = {}
+        self._schemas: dict[str, StreamSchema] = {}  # announced by StreamDeclared events
         self._pending: dict[str, list[np.ndarray]] = {}
         self._ncols: dict[str, int] = {}
         self._pending_rows: dict[str, int] = {}
@@ -168,8 +175,10 @@ class Recorder:
             self._reserve = None
 
     @classmethod
-    def for_run(cls, runs_dir: str | Path, record: Any, station: dict[str, Any] | None = None) -> Recorder:
-        """The file `<runs_dir>/<run_id>.h5` with the run's identity as attributes."""
+    def for_run(cls, runs_dir: str | Path, record: Any, station: dict[str, Any] | None = None,
+                param_units: dict[str, str] | None = None) -> Recorder:
+        """The file `<runs_dir>/<run_id>.h5` with the run's identity as attributes and its
+        parameters (with their units) as `/parameters`."""
         attrs: dict[str, Any] = {
             "run_id": record.run_id,
             "procedure": record.procedure,
@@ -186,7 +195,7 @@ class Recorder:
             attrs["seed"] = int(record.seed)
         if record.truth is not None:
             attrs["truth"] = record.truth
-        return cls(Path(runs_dir) / f"{record.run_id}.h5", attrs)
+        return cls(Path(runs_dir) / f"{record.run_id}.h5", attrs, param_units)
 
     def _text_dataset(self, name: str) -> h5py.Dataset:
         return self._f.create_dataset(name, shape=(0,), maxshape=(None,), dtype=_STR, chunks=(256,))
@@ -207,6 +216,8 @@ class Recorder:
     def _write_event(self, event: ev.Event) -> None:
         if isinstance(event, ev.SampleBlock):
             self.append(event.stream, event.columns, event.data)
+        elif isinstance(event, ev.StreamDeclared):
+            self._schemas[event.schema.name] = event.schema
         elif isinstance(event, ev.Measurement):
             keys = ("name", "value", "unit", "ci95", "low", "high", "marginal_low", "marginal_high", "outcome", "dut")
             row = {k: getattr(event, k) for k in keys}
@@ -222,7 +233,7 @@ class Recorder:
             for key, arr in event.curves.items():
                 if key in grp:
                     del grp[key]
-                grp.create_dataset(key, data=np.asarray(arr))
+                grp.create_dataset(key, data=np.asarray(arr)).attrs["units"] = unit_from_name(key)
 
     def append(self, stream: str, columns: tuple[str, ...], data: np.ndarray) -> None:
         """Append rows to a stream; the first block fixes its columns.  Rows are buffered and
@@ -240,7 +251,7 @@ class Recorder:
                     dtype=np.float64,
                     chunks=(CHUNK_ROWS, arr.shape[1]),
                 )
-                ds.attrs["columns"] = _json(list(columns))
+                self._describe(ds, stream, tuple(columns))
                 self._datasets[stream] = ds
                 self._pending[stream] = []
                 self._ncols[stream] = arr.shape[1]
@@ -253,6 +264,38 @@ class Recorder:
             self._pending_rows[stream] = self._pending_rows.get(stream, 0) + len(arr)
             if self._pending_rows[stream] >= CHUNK_ROWS:
                 self._write_pending(stream)
+
+    def _describe(self, ds: h5py.Dataset, stream: str, columns: tuple[str, ...]) -> None:
+        """A stream's declaration in its dataset's attributes: `columns`, `units`, `dtypes` (each
+        column's own type; the table is stored as float64), `source` and a `legend_<column>`
+        (JSON, code -> meaning) for each coded column.  A stream announced by no StreamDeclared
+        event takes the schema declared under its name if the columns agree, or else units from
+        its column names (a file written outside a run)."""
+        schema = self._schemas.get(stream)
+        if schema is not None and schema.names != columns:
+            raise ValueError(f"stream {stream!r}: columns {columns} are not the declared {schema.names}")
+        if schema is None:
+            with contextlib.suppress(KeyError):
+                schema = schema_of(stream)
+            if schema is not None and schema.names != columns:
+                schema = None
+        ds.attrs["columns"] = _json(list(columns))
+        if schema is None:
+            ds.attrs["units"] = np.array([unit_from_name(c) for c in columns], dtype=_STR)
+            ds.attrs["dtypes"] = np.array(["f8"] * len(columns), dtype=_STR)
+            return
+        ds.attrs["source"] = schema.source
+        ds.attrs["units"] = np.array(schema.units, dtype=_STR)
+        ds.attrs["dtypes"] = np.array([c.dtype for c in schema.columns], dtype=_STR)
+        for col, legend in schema.legends().items():
+            ds.attrs[f"legend_{col}"] = _json({str(k): v for k, v in legend.items()})
+
+    def _write_parameters(self, params: dict[str, Any], units: dict[str, str]) -> None:
+        """The run's parameters as `/parameters/<name>` scalars, each with its `units`."""
+        grp = self._f.create_group("parameters")
+        for name, value in params.items():
+            data = value if isinstance(value, (bool, int, float, np.number)) else str(value)
+            grp.create_dataset(name, data=data).attrs["units"] = units.get(name) or "1"
 
     def _write_pending(self, stream: str) -> None:
         pend = self._pending[stream]
@@ -418,6 +461,7 @@ class Recorder:
                     a["wall_s"] = float(record.wall_s)
                     a["finished_at"] = record.finished_at
                     a["result"] = _json(record.as_json())
+                    a["stream_overflow_blocks"] = int(getattr(record, "stream_overflow_blocks", 0))
                     if self.failure is not None:
                         a["incomplete"] = self.failure
             except (OSError, RuntimeError) as exc:
@@ -547,6 +591,20 @@ class RunData:
 
     def columns(self, stream: str) -> list[str]:
         return json.loads(self._stream(stream).attrs["columns"])
+
+    def units(self, stream: str) -> dict[str, str]:
+        """Each column's unit, from the stream's declaration ("" where a file predates them)."""
+        units = self._stream(stream).attrs.get("units")
+        names = self.columns(stream)
+        if units is None:
+            return dict.fromkeys(names, "")
+        return {c: u.decode() if isinstance(u, bytes) else str(u) for c, u in zip(names, units, strict=True)}
+
+    def legends(self, stream: str) -> dict[str, dict[int, str]]:
+        """The coded columns' legends (code -> meaning), from the stream's declaration."""
+        attrs = self._stream(stream).attrs
+        return {c: {int(k): v for k, v in json.loads(attrs[f"legend_{c}"]).items()}
+                for c in self.columns(stream) if f"legend_{c}" in attrs}
 
     def array(self, stream: str) -> np.ndarray:
         return self._stream(stream)[...]

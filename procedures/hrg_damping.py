@@ -20,14 +20,19 @@ import numpy as np
 from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_drift_harmonics, fit_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, step
+from bench.engine.streams import Column, StreamSchema, declare
+from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
 from .hrg_excitation import HrgExcitation
 
 WINDOWS = "damping_windows"
-WINDOW_COLUMNS = ("kind", "t_start_s", "t_end_s")
-REF = "damping_reference"  # the reference frequency held during the decay, for Q = pi f0 tau
 DECAY, VERIFY_OFF, VERIFY_ON = 0.0, 1.0, 2.0
-_COLS = {"index": 0, "t_s": 1, "cx": 2, "sx": 3, "cy": 4, "sy": 5}
+WINDOW_COLUMNS = declare(StreamSchema(WINDOWS, "hrg-damping", (
+    Column("kind", "1", "i8", legend={0: "decay", 1: "verify_off", 2: "verify_on"}),
+    Column("t_start_s", "s"), Column("t_end_s", "s")))).names
+REF = "damping_reference"  # the reference frequency held during the decay, for Q = pi f0 tau
+declare(StreamSchema(REF, "hrg-damping", (Column("t_s", "s"), Column("f0_hz", "Hz"))))
+_TAP = ("t_s", "cx", "sx", "cy", "sy")  # the FPGA stream's columns a tap keeps, in this order
 _MAX_CURVE_POINTS = 2000
 
 
@@ -43,7 +48,13 @@ class _StreamTap:
     def __call__(self, block: np.ndarray) -> None:
         if self.on:
             with self._lock:
-                self._rows.append(block[:, 1:6].copy())
+                self._rows.append(FPGA.columns_of(block, *_TAP))
+
+    def stop(self) -> None:
+        """Keep nothing more and drop what is kept (the run has ended)."""
+        self.on = False
+        with self._lock:
+            self._rows.clear()
 
     def take(self, t_start_s: float, t_end_s: float) -> np.ndarray:
         with self._lock:
@@ -138,7 +149,6 @@ class HrgDamping(HrgExcitation, Procedure):
     def __init__(self, params: dict[str, Any] | None = None) -> None:
         super().__init__(params)
         self._tap = _StreamTap()
-        self._unsubscribe = None
         self._decay: np.ndarray | None = None
         self._fit = None
 
@@ -171,9 +181,9 @@ class HrgDamping(HrgExcitation, Procedure):
     @step("Excite and hold the amplitude")
     def excite(self, ctx):
         fpga = ctx.devices.fpga
-        unsubscribe_tap = fpga.subscribe(self._tap)
-        unsubscribe_latest = fpga.subscribe(self._keep_latest)
-        self._unsubscribe = lambda: (unsubscribe_tap(), unsubscribe_latest())
+        ctx.subscribe(fpga, self._tap)
+        ctx.subscribe(fpga, self._keep_latest)
+        ctx.defer(self._tap.stop)
         self._start_loops(ctx)
         a = self._hold_amplitude(ctx)
         ctx.log.info(f"amplitude {a:.4f} held (setpoint {self.amplitude:g})")
@@ -235,12 +245,7 @@ class HrgDamping(HrgExcitation, Procedure):
 
     @step("Compensate and verify")
     def compensate_step(self, ctx):
-        try:
-            self._compensate(ctx)
-        finally:
-            if self._unsubscribe is not None:
-                self._unsubscribe()
-                self._unsubscribe = None
+        self._compensate(ctx)
 
     def _compensate(self, ctx):
         if not self.compensate:
@@ -325,31 +330,31 @@ class HrgDamping(HrgExcitation, Procedure):
         """Re-fit a recorded run: the decay and verification windows of `damping_windows`.  A run
         that ended during the record (killed, aborted, disk full) has no window yet: the decay
         recorded so far is fitted, from the start of the record step to the last sample."""
-        fpga = data.array("fpga")
+        fpga = data.table("fpga")
         if WINDOWS in data:
-            win = data.array(WINDOWS)
+            win = data.table(WINDOWS)
         else:
             t0, t1 = data.step_span("record")
-            t1 = min(fpga[-1, 1], math.inf if t1 is None else t1)
+            t1 = min(fpga["t_s"][-1], math.inf if t1 is None else t1)
             if t0 is None or t1 <= t0:
                 raise ValueError(f"{data.path.name} holds no decay: the run ended before the record step "
                                  f"({data.incomplete or 'no damping_windows stream'})")
-            win = np.array([[DECAY, t0, t1]])
+            win = {"kind": np.array([DECAY]), "t_start_s": np.array([t0]), "t_end_s": np.array([t1])}
             data.notes.append(f"no {WINDOWS} stream: the decay fitted is the {t1 - t0:.1f} s recorded from the "
                               f"start of the record step (t = {t0:.1f} s) on, of the {self.record_s:g} s asked")
-        rows = fpga[:, [_COLS["t_s"], _COLS["cx"], _COLS["sx"], _COLS["cy"], _COLS["sy"]]]
-        period = float(np.median(np.diff(fpga[:, 1]) / np.maximum(np.diff(fpga[:, 0]), 1)))
+        rows = np.column_stack([fpga[c] for c in _TAP])
+        period = float(np.median(np.diff(fpga["t_s"]) / np.maximum(np.diff(fpga["index"]), 1)))
 
         def window(kind: float) -> np.ndarray | None:
-            sel = win[win[:, 0] == kind]
-            if not len(sel):
+            sel = win["kind"] == kind
+            if not sel.any():
                 return None
-            t0, t1 = sel[-1, 1], sel[-1, 2]
+            t0, t1 = win["t_start_s"][sel][-1], win["t_end_s"][sel][-1]
             return rows[(rows[:, 0] > t0) & (rows[:, 0] <= t1)]  # as the live tap: after t0, up to t1
 
         decay = self._decimate(window(DECAY), period)
         fit = fit_free_decay(*decay.T, method=self.fit_method, model=self.fit_model)
-        f0_hz = float(data.array(REF)[-1, 1]) if REF in data else None
+        f0_hz = float(data.table(REF)["f0_hz"][-1]) if REF in data else None
         if f0_hz is None:
             data.notes.append(f"no {REF} stream: the reference frequency is unknown, so is q_factor")
         out = self._decay_results(fit, f0_hz)

@@ -9,6 +9,7 @@ import numpy as np
 
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Demand, Param
+from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
 
 class HrgExcitation:
@@ -38,7 +39,7 @@ class HrgExcitation:
     def _amplitude_now(self, ctx) -> float:
         ctx.devices.fpga.sync()  # every frame up to the bench clock's now has been seen
         row = self._latest_row
-        return 0.0 if row is None else float(orbit_elements(row[2:6])["a"])
+        return 0.0 if row is None else float(orbit_elements(FPGA.columns_of(row, "cx", "sx", "cy", "sy"))["a"])
 
     def _start_loops(self, ctx) -> None:
         """AGC (at the amplitude setpoint), PLL and quadrature loop on, drive on."""

@@ -20,12 +20,13 @@ import numpy as np
 from bench.analysis.maslov import derived_ci95, free_param_names, identify_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, step
+from bench.engine.streams import Column, StreamSchema, declare
 
 from .hrg_excitation import HrgExcitation
 
 WINDOW = "decay_window"
-WINDOW_COLUMNS = ("t_start_s", "t_end_s", "ref_freq_hz", "rate_dps")
-_FPGA = {"t_s": 1, "cx": 2, "sx": 3, "cy": 4, "sy": 5}
+WINDOW_COLUMNS = declare(StreamSchema(WINDOW, "hrg-free-decay", (
+    Column("t_start_s", "s"), Column("t_end_s", "s"), Column("ref_freq_hz", "Hz"), Column("rate_dps", "deg/s")))).names
 
 
 METHODS = ("output-error", "equation-error")
@@ -175,12 +176,9 @@ class HrgFreeDecay(HrgExcitation, Procedure):
 
     @step("Excite and hold the amplitude")
     def excite(self, ctx):
-        unsubscribe = ctx.devices.fpga.subscribe(self._keep_latest)
-        try:
-            self._start_loops(ctx)
-            self._hold_amplitude(ctx)
-        finally:
-            unsubscribe()
+        ctx.subscribe(ctx.devices.fpga, self._keep_latest)
+        self._start_loops(ctx)
+        self._hold_amplitude(ctx)
 
     @step("Spin the table")
     def spin(self, ctx):
@@ -219,20 +217,17 @@ class HrgFreeDecay(HrgExcitation, Procedure):
     def _analyse(self, data, compute=None):
         """Identify the recorded window; `compute(fn, *args, **kw)` runs the identification
         (a run's `ctx.compute`, in a worker the engine can end), else it runs here."""
-        win = data.array(WINDOW)[-1]
-        fpga = data.array("fpga")
-        t = fpga[:, _FPGA["t_s"]]
-        sel = (t >= win[0]) & (t <= win[1])
-        rows = fpga[sel]
-        period = float(np.median(np.diff(rows[:, 1])))
+        win = {c: v[-1] for c, v in data.table(WINDOW).items()}
+        fpga = data.table("fpga")
+        sel = (fpga["t_s"] >= win["t_start_s"]) & (fpga["t_s"] <= win["t_end_s"])
+        period = float(np.median(np.diff(fpga["t_s"][sel])))
         dec = max(1, int(round(1.0 / (self.stream_hz * period))))
-        rows = boxcar(rows, dec)
-        t_s = rows[:, _FPGA["t_s"]]
-        q = rows[:, 2:6]
+        rows = boxcar(np.column_stack([fpga[c][sel] for c in ("t_s", "cx", "sx", "cy", "sy")]), dec)
+        t_s, q = rows[:, 0], rows[:, 1:5]
         run = compute or (lambda fn, *a, **kw: fn(*a, **kw))
-        results, fit = run(decay_results, t_s, q, rate_dps=float(win[3]), ref_freq_hz=float(win[2]),
-                           natural_freq_hz=self.natural_freq_hz, model=self.model, method=self.method,
-                           table_ripple=self.table_ripple)
+        results, fit = run(decay_results, t_s, q, rate_dps=float(win["rate_dps"]),
+                           ref_freq_hz=float(win["ref_freq_hz"]), natural_freq_hz=self.natural_freq_hz,
+                           model=self.model, method=self.method, table_ripple=self.table_ripple)
         return results, fit, t_s, q
 
     def analysis(self, data) -> list[Result]:

@@ -30,9 +30,14 @@ from bench.analysis.maslov import (
     identify_forced,
 )
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
+from bench.engine.streams import Column, StreamSchema, declare
 
-SWEEP_COLUMNS = ("t_s", "freq_hz", "direction", "q1", "p1", "q2", "p2", "amplitude", "phase_deg",
-                 "amplitude_y", "phase_y_deg", "settled")
+SWEEP = declare(StreamSchema("sweep", "mems-sweep", (
+    Column("t_s", "s"), Column("freq_hz", "Hz"), Column("direction", "1", "i1", legend={1: "up", -1: "down"}),
+    Column("q1", "1"), Column("p1", "1"), Column("q2", "1"), Column("p2", "1"),  # slow variables, model units
+    Column("amplitude", "1"), Column("phase_deg", "deg"), Column("amplitude_y", "1"), Column("phase_y_deg", "deg"),
+    Column("settled", "1", "u1", legend={0: "not settled", 1: "settled"}))))
+SWEEP_COLUMNS = SWEEP.names
 MODEL_ORDER = {"linear": 1, "cubic": 3, "quintic": 5}
 #: the derived quantities of the chosen model: unit, what it is
 DERIVED = {
@@ -274,7 +279,8 @@ class MemsSweep(Procedure):
         """Identify the sweep rows; with `compute` (a run's `ctx.compute`) in a worker the engine can end."""
         run = compute or (lambda fn, *a, **kw: fn(*a, **kw))
         results, curves, info = run(
-            sweep_analysis, rows[:, 1], rows[:, 3:7], rows[:, 2], natural_freq_hz=self.natural_freq_hz,
+            sweep_analysis, SWEEP.column(rows, "freq_hz"), SWEEP.columns_of(rows, "q1", "p1", "q2", "p2"),
+            SWEEP.column(rows, "direction"), natural_freq_hz=self.natural_freq_hz,
             bryan_factor=self.bryan_factor, improvement=self.improvement,
         )
         self.chosen_model = info["chosen"]  # the declared parameters follow it

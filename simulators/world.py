@@ -22,7 +22,7 @@ from .physics.averaged import Resonator, use_single_thread_blas
 from .physics.params import ResonatorParams
 
 
-class SampleBlock:
+class WorldBlock:
     """The samples of one block: index and time of each sample end, true and measured states,
     case rate and case angle.  The index, time, rate and angle arrays are made on first access
     (most devices need only `first_index` and `n`)."""
@@ -99,7 +99,7 @@ class WorldDevice(Protocol):
 
     def before_block(self, world: World, t_s: float, n: int, dt_s: float) -> None: ...
 
-    def after_block(self, world: World, block: SampleBlock) -> None: ...
+    def after_block(self, world: World, block: WorldBlock) -> None: ...
 
 
 class World:
@@ -132,7 +132,7 @@ class World:
         self.ripple_angle_rad: np.ndarray | None = None
         self.ref_freq_hz = self.params.f0_hz
         self._forces: dict[str, np.ndarray] = {}
-        self.last_block: SampleBlock | None = None
+        self.last_block: WorldBlock | None = None
         self._listeners: list[Any] = []
 
     # --- time ------------------------------------------------------------------------------
@@ -225,7 +225,7 @@ class World:
             ripple_angle_rad=self.ripple_angle_rad,
         )
         angle0 = self.case_angle_deg
-        block = SampleBlock(i0 + 1, q_true, q_meas, rate, angle0, dt, self.ripple_angle_rad)
+        block = WorldBlock(i0 + 1, q_true, q_meas, rate, angle0, dt, self.ripple_angle_rad)
         self.sample_index = i0 + n
         self.case_angle_deg = angle0 + rate * n * dt
         self.last_block = block

@@ -250,6 +250,13 @@ def test_window_on_the_engine_station_runs_and_reports(qtbot, tmp_path, monkeypa
         table = win.station._items["table"]
         rows = {table.child(i).text(0): table.child(i).text(1) for i in range(table.childCount())}
         assert float(rows["rate_dps"]) == pytest.approx(50.0, abs=0.5)
+        assert win.plots.p_rate.getAxis("left").labelText == "rate_dps (deg/s)"  # the stream's declared unit
+        from bench.gui.replay import replay_events
+
+        assert backend.join(60)  # the runner closes the raw file after it announced the end
+        declared = {e.schema.name: e.schema for e in replay_events(win.last_finished.raw_file)
+                    if isinstance(e, ev.StreamDeclared)}
+        assert declared["table"].units == ("s", "deg/s", "deg") and declared["fpga"].source == "fpga"
         assert win.results.report_button.isEnabled()
         html = win.render_report()
         assert html is not None and "table_rate_dps" in open(html).read()

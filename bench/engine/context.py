@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from . import events as ev
 from .measurement import Limits, Result
+from .streams import StreamSchema, schema_of
 
 
 class RunAborted(Exception):
@@ -147,6 +149,10 @@ class RunContext:
         self.log.propagate = False
         self._handler = _BusLogHandler(self)
         self.log.addHandler(self._handler)
+        self._finalizers: list[tuple[str, Callable[[], Any]]] = []
+        self._finalizers_lock = threading.Lock()
+        self._streams: dict[str, StreamSchema] = {}  # declared in this run (StreamDeclared sent)
+        self._streams_lock = threading.Lock()
 
     # --- events --------------------------------------------------------------------------
     def publish(self, cls: type[ev.Event], **fields: Any) -> None:
@@ -154,6 +160,46 @@ class RunContext:
 
     def close(self) -> None:
         self.log.removeHandler(self._handler)
+
+    # --- resources that live as long as the run --------------------------------------------
+    def defer(self, fn: Callable[[], Any], what: str = "") -> None:
+        """Run `fn` when the run ends, whatever happens (last deferred, first run), before the
+        safe state: the runner calls `close_resources`."""
+        with self._finalizers_lock:
+            self._finalizers.append((what or getattr(fn, "__qualname__", repr(fn)), fn))
+
+    def subscribe(self, device: Any, callback: Callable[[Any], None]) -> None:
+        """Subscribe `callback` to a device's stream for the rest of the run; the runner
+        unsubscribes it when the run ends (nothing for the procedure to undo)."""
+        unsubscribe = device.subscribe(callback)
+        name = getattr(callback, "__qualname__", type(callback).__name__)
+        self.defer(unsubscribe, f"unsubscribe {name}")
+
+    def close_resources(self, timeout_s: float = 5.0) -> list[str]:
+        """Run the deferred teardowns, last first, each on a helper thread given `timeout_s` (wall):
+        one that fails or hangs is logged and the next still runs.  Returns the failures."""
+        with self._finalizers_lock:
+            todo, self._finalizers = self._finalizers[::-1], []
+        failures: list[str] = []
+        for what, fn in todo:
+            error: list[BaseException] = []
+
+            def call(fn=fn, error=error) -> None:
+                try:
+                    fn()
+                except BaseException as exc:  # noqa: BLE001 - reported below, the next teardown runs
+                    error.append(exc)
+
+            worker = threading.Thread(target=call, name=f"run-teardown {what}", daemon=True)
+            worker.start()
+            worker.join(timeout_s)
+            if worker.is_alive():
+                failures.append(f"{what}: still running after {timeout_s:g} s")
+            elif error:
+                failures.append(f"{what}: {type(error[0]).__name__}: {error[0]}")
+        for text in failures:
+            self.log.error(f"run teardown failed: {text}")
+        return failures
 
     # --- engine checkpoints ----------------------------------------------------------------
     def checkpoint(self) -> None:
@@ -179,14 +225,33 @@ class RunContext:
         self.publish(ev.Progress, fraction=float(min(max(fraction, 0.0), 1.0)), message=message)
 
     # --- data ------------------------------------------------------------------------------
-    def record(self, stream: str, columns: tuple[str, ...] | list[str], data: np.ndarray) -> None:
-        """Rows of a named stream to the recorder (and every other subscriber)."""
+    def declare_stream(self, stream: str | StreamSchema) -> StreamSchema:
+        """Announce a stream's schema (once a run, before its first block); a name is looked up
+        among the declared streams (bench.engine.streams.declare)."""
+        schema = stream if isinstance(stream, StreamSchema) else schema_of(stream)
+        with self._streams_lock:
+            known = self._streams.get(schema.name)
+            if known is not None:
+                if known != schema:
+                    raise ValueError(f"stream {schema.name!r} was declared differently earlier in this run")
+                return known
+            self._streams[schema.name] = schema
+            self.publish(ev.StreamDeclared, schema=schema)  # under the lock: before any block of it
+        return schema
+
+    def record(self, stream: str | StreamSchema, columns: tuple[str, ...] | list[str], data: np.ndarray) -> None:
+        """Rows of a declared stream to the recorder (and every other subscriber); `columns` are
+        the schema's names, in its order."""
+        name = stream.name if isinstance(stream, StreamSchema) else stream
+        schema = self._streams.get(name) or self.declare_stream(stream)
+        if tuple(columns) != schema.names:
+            raise ValueError(f"record({name!r}): columns {tuple(columns)} are not the declared {schema.names}")
         arr = np.asarray(data, dtype=float)
         if arr.ndim == 1:
             arr = arr.reshape(1, -1)
         if arr.shape[1] != len(columns):
-            raise ValueError(f"record({stream!r}): data has {arr.shape[1]} columns, names give {len(columns)}")
-        self.publish(ev.SampleBlock, stream=stream, columns=tuple(columns), data=arr)
+            raise ValueError(f"record({name!r}): data has {arr.shape[1]} columns, names give {len(columns)}")
+        self.publish(ev.SampleBlock, stream=name, columns=schema.names, data=arr)
 
     def fit(self, name: str, **curves: np.ndarray) -> None:
         self.publish(ev.FitUpdate, name=name, curves={k: np.asarray(v) for k, v in curves.items()})

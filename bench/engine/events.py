@@ -55,6 +55,14 @@ class Progress(Event):
 
 
 @dataclass(frozen=True)
+class StreamDeclared(Event):
+    """A stream's schema (bench.engine.streams.StreamSchema), announced once a run before the
+    stream's first block: its source and each column's name, unit, type and legend."""
+
+    schema: Any = None
+
+
+@dataclass(frozen=True)
 class SampleBlock(Event):
     """A block of rows of one named stream, e.g. stream "fpga" with columns
     (t_s, cx, sx, cy, sy, ...), "table" with (t_s, rate_dps, angle_deg), "sweep" with
@@ -113,28 +121,22 @@ Subscriber = Callable[[Event], None]
 
 class EventBus:
     """Synchronous publish/subscribe.  A subscriber that raises is logged and kept out of the
-    engine's way: a broken plot must never stop a calibration or its safe state.  An *essential*
-    subscriber (the recorder) is different: its failure goes to `on_essential_error`, which the
-    runner sets to end the run at its next checkpoint."""
+    engine's way: a broken plot must never stop a calibration or its safe state.  (The recorder
+    is fed through bench.writer, whose failures reach the runner by their own path.)"""
 
     def __init__(self) -> None:
         self._subs: list[Subscriber] = []
-        self._essential: set[int] = set()
         self._lock = threading.Lock()
         self.errors: list[tuple[Subscriber, BaseException]] = []
-        self.on_essential_error: Callable[[Subscriber, BaseException], None] | None = None
 
-    def subscribe(self, callback: Subscriber, *, essential: bool = False) -> Callable[[], None]:
+    def subscribe(self, callback: Subscriber) -> Callable[[], None]:
         with self._lock:
             self._subs.append(callback)
-            if essential:
-                self._essential.add(id(callback))
 
         def unsubscribe() -> None:
             with self._lock:
                 if callback in self._subs:
                     self._subs.remove(callback)
-                    self._essential.discard(id(callback))
 
         return unsubscribe
 
@@ -145,8 +147,5 @@ class EventBus:
             try:
                 cb(event)
             except Exception as exc:  # noqa: BLE001 - isolation is the point
-                hook = self.on_essential_error
-                if hook is not None and id(cb) in self._essential:
-                    hook(cb, exc)
-                elif len(self.errors) < 1000:  # the first ones tell the story; keep memory bounded
+                if len(self.errors) < 1000:  # the first ones tell the story; keep memory bounded
                     self.errors.append((cb, exc))

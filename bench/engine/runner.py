@@ -85,6 +85,7 @@ class RunRecord:
     failed_step: str | None = None
     traceback: str | None = None
     store_error: str | None = None  # the results store did not take the record (it is in the spool)
+    stream_overflow_blocks: int = 0  # stream blocks real time dropped because the writer fell behind
     speed_achieved: float | None = None  # simulated s per wall s, on a real-time simulated station
 
     def as_json(self) -> dict[str, Any]:
@@ -129,7 +130,7 @@ class Runner:
         self.operator = operator
         self.duts = list(duts)
         self._abort_reason: str | None = None
-        self._fatal: RunAborted | None = None  # an essential subscriber (the recorder) failed
+        self._fatal: RunAborted | None = None  # the recorder failed (reported by the writer thread)
         self._running = threading.Event()
         self._running.set()
         self._in_run = False
@@ -172,7 +173,7 @@ class Runner:
         if check is not None:
             check()
 
-    def _essential_failed(self, _subscriber: Any, exc: BaseException) -> None:
+    def _recorder_failed(self, exc: BaseException) -> None:
         """The recorder could not write: the run ends at the next checkpoint (outcome ERROR)."""
         if self._fatal is None:
             if not isinstance(exc, RunAborted):
@@ -225,26 +226,30 @@ class Runner:
         steps = proc.step_specs()
         t0_sim, t0_wall = clock.now(), time.monotonic()
 
-        recorder = None
+        recorder = writer = None
         unsubscribe_rec = None
         if self.runs_dir is not None:
             from bench.recorder import RawDataError, Recorder
+            from bench.writer import WriterThread
 
             try:
-                recorder = Recorder.for_run(self.runs_dir, rec, station=st.describe())
+                recorder = Recorder.for_run(self.runs_dir, rec, station=st.describe(),
+                                            param_units={k: v.unit for k, v in proc.param_specs().items()})
             except RawDataError as exc:  # ends the run at its first checkpoint, before anything moves
                 self._fatal = exc
             else:
                 rec.raw_file = str(recorder.path)
-                self.bus.on_essential_error = self._essential_failed
-                unsubscribe_rec = self.bus.subscribe(recorder.on_event, essential=True)
+                # the recorder writes on its own thread, fed by a bounded queue (bench.writer)
+                writer = WriterThread(recorder, lockstep=lambda: bool(getattr(clock, "lockstep", False)),
+                                      on_error=self._recorder_failed)
+                unsubscribe_rec = self.bus.subscribe(writer.put)
         ctx = RunContext(
             run_id=run_id,
             params=proc.params,
             devices=st.devices,
             clock=clock,
             bus=self.bus,
-            recorder=recorder,
+            recorder=writer,
             checkpoint=self.checkpoint,
             station=st,
             procedure=proc,
@@ -297,6 +302,8 @@ class Runner:
             clock.guard = None
             if outcome is not None:
                 rec.failed_step = current
+            with _sigint_deferred(ctx):  # what the procedure acquired, before the safe state; never raises
+                ctx.close_resources()
             report = self._safe_state(ctx)
             if stop_streams is not None:
                 try:
@@ -321,10 +328,13 @@ class Runner:
             rec.wall_s = time.monotonic() - t0_wall
             self._report_speed(ctx, rec, clock)
             rec.finished_at = _dt.datetime.now(_dt.UTC).isoformat()
+            if writer is not None and writer.overflow_blocks:  # real time only: counted, never silent
+                rec.stream_overflow_blocks = writer.overflow_blocks
+                ctx.log.warning(writer.overflow_text())
             if recorder is not None:
                 if unsubscribe_rec is not None:
                     unsubscribe_rec()
-                    self.bus.on_essential_error = None
+                writer.close()
                 try:
                     recorder.close(rec)
                 except Exception as exc:  # noqa: BLE001 - the record and the store must still be written

@@ -205,6 +205,8 @@ class MainWindow(QMainWindow):
                 pending = {}
             if isinstance(e, ev.FitUpdate):
                 self.plots.set_fit(e.name, e.curves)
+            elif isinstance(e, ev.StreamDeclared):
+                self.plots.declare(e.schema)
             elif isinstance(e, ev.Progress):
                 self.steps.set_progress(e.fraction, e.message)
             elif isinstance(e, ev.StepStarted):

@@ -17,6 +17,7 @@ from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QGridLayout, QWidget
 
 from bench.analysis.slow_model import orbit_elements
+from bench.engine.streams import StreamSchema
 
 from .ringbuffer import MinMaxHistory, RingBuffer
 
@@ -108,6 +109,15 @@ class LivePlots(QWidget):
         self.timer.start()
 
     # --- data in ---------------------------------------------------------------------------
+    def declare(self, schema: StreamSchema) -> None:
+        """A StreamDeclared: the plots that show a column of the stream take its declared unit."""
+        shown = {("fpga", "cx"): self.p_q, ("table", "rate_dps"): self.p_rate,
+                 ("sweep", "amplitude"): self.p_amp, ("sweep", "phase_deg"): self.p_phase}
+        for col in schema.columns:
+            plot = shown.get((schema.name, col.name))
+            if plot is not None:
+                plot.setLabel("left", col.name if col.unit == "1" else f"{col.name} ({col.unit})")
+
     def clear(self) -> None:
         self.fpga.clear()
         self.table.clear()

@@ -18,6 +18,7 @@ import numpy as np
 
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import events as ev
+from bench.engine.streams import StreamSchema, schema_from_attrs
 
 CHUNK_ROWS = 20_000
 
@@ -54,8 +55,8 @@ def _columns(obj: h5py.Dataset) -> tuple[str, ...] | None:
     return None
 
 
-def _streams(f: h5py.File) -> list[tuple[str, tuple[str, ...], np.ndarray]]:
-    found: list[tuple[str, tuple[str, ...], np.ndarray]] = []
+def _streams(f: h5py.File) -> list[tuple[str, tuple[str, ...], np.ndarray, StreamSchema | None]]:
+    found: list[tuple[str, tuple[str, ...], np.ndarray, StreamSchema | None]] = []
 
     def visit(name: str, obj: Any) -> None:
         if not isinstance(obj, h5py.Dataset) or name.startswith("fits/"):
@@ -71,7 +72,8 @@ def _streams(f: h5py.File) -> list[tuple[str, tuple[str, ...], np.ndarray]]:
             return
         parts = name.split("/")
         stream = parts[-1] if parts[-1] not in ("data", "rows") or len(parts) == 1 else parts[-2]
-        found.append((_text(obj.attrs.get("stream", stream)), cols, np.asarray(data, dtype=float)))
+        stream = _text(obj.attrs.get("stream", stream))
+        found.append((stream, cols, np.asarray(data, dtype=float), schema_from_attrs(stream, cols, obj.attrs)))
 
     f.visititems(visit)
     return found
@@ -122,7 +124,9 @@ def replay_events(path: str | Path) -> list[ev.Event]:
     out: list[ev.Event] = [ev.RunStarted(run_id, 0.0, procedure=_text(attrs.get("procedure", "replay")),
                                          params=params, station=_text(attrs.get("station", "")),
                                          simulated=bool(attrs.get("simulated", False)), steps=("replay",))]
-    for stream, cols, data in streams:
+    for stream, cols, data, schema in streams:
+        if schema is not None:  # the declaration the file stored, announced as a live run does
+            out.append(ev.StreamDeclared(run_id, t_end, schema=schema))
         t_col = cols.index("t_s") if "t_s" in cols else None
         for i in range(0, len(data), CHUNK_ROWS):
             chunk = data[i:i + CHUNK_ROWS]

@@ -81,6 +81,13 @@ def quantity(name: str, declared: tuple[str, str] | None = None) -> tuple[str, s
     return name.replace("_", " "), ""
 
 
+def declared_units(data: Any, stream: str) -> dict[str, tuple[str, str]]:
+    """(quantity, unit) of each column whose unit the raw file declares (bench.engine.streams);
+    a dimensionless "1" is left to QUANTITIES, which may say what the number counts in."""
+    units = data.units(stream) if hasattr(data, "units") else {}
+    return {c: (quantity(c)[0], u) for c, u in units.items() if u not in ("", "1")}
+
+
 def label(name: str, declared: tuple[str, str] | None = None, *, short: bool = False) -> str:
     """Axis label 'quantity (unit)' of a column; short: 'name' over '(unit)', for stacked panels."""
     q, u = quantity(name, declared)
@@ -206,13 +213,14 @@ def table_figure(data: Any) -> list[ReportFigure]:
     if t is None or len(t) < 2:
         return []
     cols = [c for c in ("rate_dps", "angle_deg") if c in tab]
+    units = declared_units(data, "table")
     fig, ax = new_figure(len(cols), 1, height_in=1.6 + 1.2 * len(cols), sharex=True)
     for i, c in enumerate(cols):
         if c == "angle_deg":  # wraps at 360 deg: points, not a line across the wrap
             ax[i, 0].plot(t, tab[c], ".", color=f"C{i}", markersize=1.5)
         else:
             plot_record(ax[i, 0], t, tab[c], color=f"C{i}")
-        ax[i, 0].set_ylabel(label(c))
+        ax[i, 0].set_ylabel(label(c, units.get(c)))
     ax[-1, 0].set_xlabel(label("t_s"))
     return [ReportFigure("table", "Rate table: rate and angle", fig, f"{len(t)} readings of the table's status.")]
 
@@ -225,10 +233,11 @@ def stream_figure(data: Any, stream: str, columns: list[str] | None = None, *, t
     cols = [c for c in (columns or tab) if c in tab and c not in ("t_s", "index")]
     if t is None or len(t) < 2 or not cols:
         return None
+    units = declared_units(data, stream)
     fig, ax = new_figure(len(cols), 1, height_in=0.9 + 1.05 * len(cols), sharex=True)
     for i, c in enumerate(cols):
         plot_record(ax[i, 0], t, tab[c], color=f"C{i % 10}")
-        ax[i, 0].set_ylabel(label(c, short=len(cols) > 2))
+        ax[i, 0].set_ylabel(label(c, units.get(c), short=len(cols) > 2))
     ax[-1, 0].set_xlabel(label("t_s"))
     note = f"{len(t)} rows" + (f", drawn as min/max envelopes of {ENVELOPE_BINS} bins" if len(t) > 2 * ENVELOPE_BINS
                                else "")

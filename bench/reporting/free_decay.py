@@ -46,17 +46,18 @@ def trajectory(t_s: np.ndarray, q0: np.ndarray, params: dict[str, float], lam_ra
 
 
 def _record(proc: Any, data: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t_s, q, window row) of the identified record, decimated as the procedure's analysis does."""
-    from procedures.hrg_free_decay import _FPGA, WINDOW
+    """(t_s, q, window row in WINDOW_COLUMNS order) of the identified record, decimated as the
+    procedure's analysis does; columns by name."""
+    from procedures.hrg_free_decay import WINDOW, WINDOW_COLUMNS
 
-    win = data.array(WINDOW)[-1]
-    fpga = data.array("fpga")
-    t = fpga[:, _FPGA["t_s"]]
-    rows = fpga[(t >= win[0]) & (t <= win[1])]
-    period = float(np.median(np.diff(rows[:, 1])))
+    window = data.table(WINDOW)
+    win = np.array([window[c][-1] for c in WINDOW_COLUMNS])
+    fpga = data.table("fpga")
+    sel = (fpga["t_s"] >= window["t_start_s"][-1]) & (fpga["t_s"] <= window["t_end_s"][-1])
+    period = float(np.median(np.diff(fpga["t_s"][sel])))
     dec = max(1, int(round(1.0 / (proc.stream_hz * period))))
-    rows = rows[::dec]
-    return rows[:, _FPGA["t_s"]], rows[:, 2:6], win
+    q = np.column_stack([fpga[c][sel][::dec] for c in ("cx", "sx", "cy", "sy")])
+    return fpga["t_s"][sel][::dec], q, win
 
 
 def figures(proc: Any, data: Any) -> list[ReportFigure]:

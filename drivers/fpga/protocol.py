@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from bench.engine.streams import Column, StreamSchema, declare
+
 SYNC = b"\xa5\x5a"
 SYNC_U16 = 0x5AA5
 CRC_INIT = 0xFFFF
@@ -239,7 +241,18 @@ def encode_frame(ftype: int, seq: int, addr: int, payload: bytes = b"") -> bytes
 
 
 # --- stream -----------------------------------------------------------------------------------
-STREAM_COLUMNS = ("index", "t_s", "cx", "sx", "cy", "sy", "amp_ctrl", "freq_ctrl", "quad_ctrl", "prec_ctrl")
+#: the FPGA stream: sample index and time, the four slow variables (amplitude units, as the AGC
+#: setpoint) and the four loop outputs (forces in 1/s per unit amplitude, the PLL's offset in Hz)
+STREAM_SCHEMA = declare(StreamSchema("fpga", "fpga", (
+    Column("index", "1", "u8", doc="sample number since the FPGA started"),
+    Column("t_s", "s", doc="time of the sample (bench clock)"),
+    Column("cx", "1", "f4"), Column("sx", "1", "f4"), Column("cy", "1", "f4"), Column("sy", "1", "f4"),
+    Column("amp_ctrl", "1/s", "f4", doc="amplitude (AGC) force"),
+    Column("freq_ctrl", "Hz", "f4", doc="reference frequency minus REF_FREQ_HZ"),
+    Column("quad_ctrl", "1/s", "f4", doc="quadrature force"),
+    Column("prec_ctrl", "1/s", "f4", doc="whole-angle precession force"),
+)))
+STREAM_COLUMNS = STREAM_SCHEMA.names
 STREAM_PAYLOAD = 48
 STREAM_DTYPE = np.dtype(
     [

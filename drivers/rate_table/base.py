@@ -6,9 +6,13 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
+from bench.engine.streams import Column, StreamSchema, declare
 from bench.validation import check_limit
 from drivers.errors import DeviceError, LinkLostError, SafetyTripError
 
+#: the table's readings a station records during a run
+TABLE_STREAM = declare(StreamSchema("table", "table", (
+    Column("t_s", "s"), Column("rate_dps", "deg/s"), Column("angle_deg", "deg"))))
 #: |rate| below which the table counts as at rest (deg/s): safe_state and stop confirmations.
 REST_RATE_DPS = 0.05
 #: bench-clock period of the polls inside the waits (s): 10 ms of virtual time per poll.

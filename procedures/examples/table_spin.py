@@ -1,6 +1,9 @@
 """Spin the table at a rate, hold it there, and check the rate the table reports."""
 
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
+from bench.engine.streams import Column, StreamSchema, declare
+
+HOLD = declare(StreamSchema("hold", "table-spin", (Column("t_s", "s"), Column("rate_dps", "deg/s"))))
 
 
 class TableSpin(Procedure):
@@ -33,7 +36,7 @@ class TableSpin(Procedure):
         for k in range(10):
             ctx.sleep(self.hold_s / 10)  # bench clock: virtual time on a simulated station
             status = ctx.devices.table.status()
-            ctx.record("hold", ("t_s", "rate_dps"), [[ctx.clock.now(), status.rate_dps]])  # raw data, on disk
+            ctx.record(HOLD, HOLD.names, [[ctx.clock.now(), status.rate_dps]])  # raw data, on disk
             ctx.progress((k + 1) / 10, f"{status.rate_dps:.3f} deg/s")
         for result in self.analysis(ctx.data()):
             ctx.report(result)
