@@ -7,12 +7,33 @@ import json
 import math
 import signal
 import sys
+import threading
 import time
 from typing import Any
 
 EXIT_OK, EXIT_BAD_OUTCOME, EXIT_USAGE = 0, 1, 2
 EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 70, 130, 141
 BAD_OUTCOMES = ("ERROR", "ABORTED", "FAIL")
+
+
+def _interrupted_early(signum: int, _frame: Any) -> None:
+    """SIGINT/SIGTERM while the CLI is still importing (before main()'s error boundary): one line and
+    the conventional exit code, no traceback; nothing has been opened yet, so nothing to make safe."""
+    import os
+
+    os.write(2, f"gyrobench: interrupted ({signal.Signals(signum).name}) before anything started\n".encode())
+    os._exit(128 + signum)
+
+
+def _interrupt(signum: int, _frame: Any) -> None:
+    """Inside main(): SIGTERM is handled like Ctrl-C (the boundary prints one line); a run installs
+    its own handlers that abort it into the safe state, and puts these back afterwards."""
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+if __name__ == "__main__" or sys.argv[0].endswith("gyrobench"):  # the CLI's own process, not an importer
+    for _sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(_sig, _interrupted_early)
 
 
 class CliError(Exception):
@@ -168,14 +189,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
             signal.signal(sig, handler)
     js = rec.as_json()
     report = None
-    if args.report and js.get("raw_file"):  # beside the raw file, same name with .html
-        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if not rec.store_error else None)
+    if args.report and js.get("raw_file"):  # beside the raw file, same name with .html (and .pdf)
+        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if not rec.store_error else None,
+                               pdf=args.pdf)
     if args.json:
         print(json.dumps(js))
     else:
         _print_record(js)
-        if report is not None:
-            print(f"  report {report}")
+        for path in report or []:
+            print(f"  report {path}")
     sys.stdout.flush()
     _warn_unfired_faults(station, faults)
     if rec.store_error:  # the run's record is not in the store (it is in the spool): not a clean exit
@@ -184,18 +206,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_BAD_OUTCOME if rec.outcome in BAD_OUTCOMES else EXIT_OK
 
 
-def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None = None) -> Any:
-    """Render the HTML report of a recorded run beside its raw file (or to output); its path."""
-    from pathlib import Path
+def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None = None, pdf: bool = False) -> Any:
+    """Render the HTML report (and with pdf the PDF) of a recorded run beside its raw file (or
+    to output); their paths."""
+    from bench.reporting import PdfUnavailable, write_report
 
-    from bench.recorder import open_run
-    from bench.report import render_report
-
-    with open_run(raw_file) as data:
-        html = render_report(data, row)
-        out = Path(output or data.path.with_suffix(".html"))
-    out.write_text(html)
-    return out
+    try:
+        return write_report(raw_file, row, output, pdf=pdf)
+    except PdfUnavailable as exc:  # checked before anything is written: the HTML alone, and why
+        _err(str(exc))
+        return write_report(raw_file, row, output)
 
 
 def _print_record(js: dict[str, Any]) -> None:
@@ -376,6 +396,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
                 why += f" (incomplete run: {incomplete})"
             _err(f"cannot analyse run {run_id} with {cls.name!r}: {why}")
             return EXIT_BAD_OUTCOME
+        figures = _write_figures(data, proc, args.figures) if args.figures else []
         notes = list(data.notes)
         truth = data.truth or {}
     if store is not None:
@@ -383,7 +404,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     out = {r.name if r.dut is None else f"{r.dut}:{r.name}": r.as_json() for r in results}
     if args.json:
         print(json.dumps({"run_id": run_id, "measurements": out, "truth": truth or None, "incomplete": incomplete,
-                          "notes": notes}))
+                          "notes": notes, "figures": [str(p) for p in figures]}))
     else:
         print(f"re-analysis of run {run_id} ({cls.name})")
         if incomplete:
@@ -393,7 +414,21 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
         for name, m in out.items():
             t = f"  truth {truth[name]:.6g}" if name in truth else ""
             print(f"  {name} = {m['value']} {m['unit']}  ci95 {m['ci95']}  {m['outcome']}{t}")
+        for path in figures:
+            print(f"  figure {path}")
     return EXIT_OK
+
+
+def _write_figures(data, proc, directory: str) -> list:
+    """The figures the report draws for this run, as SVG files in directory; their paths."""
+    from pathlib import Path
+
+    from bench.reporting import figures_for
+
+    Path(directory).mkdir(parents=True, exist_ok=True)
+    figs, notes = figures_for(data, proc)
+    data.notes.extend(notes)
+    return [f.save(directory) for f in figs]
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
@@ -410,8 +445,9 @@ def _cmd_report(args: argparse.Namespace) -> int:
     with data:
         row = store.get_run(run_id) if store is not None else None
         raw_file = str(data.path)
-    print(_write_report(raw_file, row, args.output))
-    return EXIT_OK
+    paths = _write_report(raw_file, row, args.output, pdf=args.pdf)
+    print("\n".join(str(p) for p in paths))
+    return EXIT_USAGE if args.pdf and len(paths) < 2 else EXIT_OK
 
 
 def _cmd_design(args: argparse.Namespace) -> int:
@@ -509,6 +545,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--operator", default="")
     run.add_argument("--dut", action="append", default=[], metavar="SERIAL", help="serial of a gyro under test")
     run.add_argument("--report", action="store_true", help="also write the run's HTML report and print its path")
+    run.add_argument("--pdf", action="store_true", help="with --report: the report as a PDF too")
     run.set_defaults(func=_cmd_run)
 
     design = sub.add_parser("design", help="experiment design: table rate and record length for a procedure")
@@ -552,6 +589,9 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--procedure", default=None, help="analyse with another procedure (name or file)")
         if name == "report":
             p.add_argument("-o", "--output", default=None)
+            p.add_argument("--pdf", action="store_true", help="the report as a PDF too, beside the HTML")
+        if name == "analyze":
+            p.add_argument("--figures", default=None, metavar="DIR", help="also write the report's figures (SVG)")
         p.set_defaults(func=func)
 
     sim = sub.add_parser("sim", help="serve the simulated devices standalone in real time; print their addresses")
@@ -573,6 +613,9 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or bool(os.environ.get("GYROBENCH_DEBUG"))  # anywhere on the line
     argv = [a for a in argv if a != "--debug"]
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, _interrupt)
     try:
         args = build_parser().parse_args(argv)
         code = int(args.func(args))
@@ -581,8 +624,8 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # `gyrobench runs | head`: the reader left; say nothing more
         _silence_stdout()
         return EXIT_BROKEN_PIPE
-    except KeyboardInterrupt:
-        _err("interrupted (Ctrl-C)")
+    except KeyboardInterrupt as exc:
+        _err("interrupted (SIGTERM)" if str(exc) == "SIGTERM" else "interrupted (Ctrl-C)")
         return EXIT_INTERRUPTED
     except CliError as exc:
         _err(str(exc))

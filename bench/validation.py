@@ -77,7 +77,8 @@ def not_above(name: str, value: float, limit: float, unit: str = "") -> str:
 
 
 def not_one_of(name: str, value: Any, choices: Iterable[Any]) -> str:
-    return f"{name}={fmt_value(value)} is not one of {', '.join(map(str, choices))}"
+    shown = [repr(c) if c == "" else str(c) for c in choices]  # an empty choice stays visible
+    return f"{name}={fmt_value(value)} is not one of {', '.join(shown)}"
 
 
 def missing_key(name: str, expected: str) -> str:

@@ -317,3 +317,10 @@ class HrgDamping(HrgExcitation, Procedure):
         elif self.compensate:
             data.notes.append("no verification windows: the drift before and after compensation was not measured")
         return out
+
+    def figures(self, data) -> list:
+        """The figures this run's results need (bench.reporting.damping): the report and
+        `gyrobench analyze --figures` draw these."""
+        from bench.reporting.damping import figures
+
+        return figures(self, data)

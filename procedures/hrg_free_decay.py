@@ -185,3 +185,10 @@ class HrgFreeDecay(HrgExcitation, Procedure):
     def analysis(self, data) -> list[Result]:
         """Re-fit a recorded run from its `decay_window` and `fpga` streams."""
         return self._analyse(data)[0]
+
+    def figures(self, data) -> list:
+        """The figures this run's results need (bench.reporting.free_decay): the report and
+        `gyrobench analyze --figures` draw these."""
+        from bench.reporting.free_decay import figures
+
+        return figures(self, data)

@@ -250,3 +250,10 @@ class MemsSweep(Procedure):
         rows = np.column_stack([tab[c] for c in SWEEP_COLUMNS])
         results, _, _ = self._analyse(rows)
         return results
+
+    def figures(self, data) -> list:
+        """The figures this run's results need (bench.reporting.sweep): the report and
+        `gyrobench analyze --figures` draw these."""
+        from bench.reporting.sweep import figures
+
+        return figures(self, data)

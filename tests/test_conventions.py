@@ -21,7 +21,7 @@ from types import SimpleNamespace
 import pytest
 
 import procedures
-from bench.engine import Procedure
+from bench.engine.demands import KINDS, Demand
 from bench.engine.params import Param
 from bench.station import DRIVERS, ROLES, SIM_KEYS, STATION_KEYS, Key, StationError, builtin_stations, load_config
 from bench.validation import LimitError, fmt_value
@@ -79,11 +79,14 @@ def test_procedure_conventions(name):
         problems.append(f"name {cls.name!r} is not kebab-case")
     if not cls.requires or not set(cls.requires) <= set(ROLES):
         problems.append(f"requires={cls.requires!r}: declare the device roles needed, from {ROLES}")
-    for attr in ("kinds", "demands"):  # what else the engine asks procedures to declare, when it does
-        if hasattr(Procedure, attr):
-            value = getattr(cls, attr)
-            if not isinstance(value, tuple | dict | frozenset) or not all(isinstance(v, str) for v in value):
-                problems.append(f"{attr}={value!r}: declare names (a tuple of str)")
+    kinds = getattr(cls, "kinds", ())
+    if not isinstance(kinds, tuple) or not set(kinds) <= set(KINDS):
+        problems.append(f"kinds={kinds!r}: a tuple of kinds from {KINDS} (empty: any gyro)")
+    for d in cls({}).demands():  # what the defaults ask of the station, checked before anything moves
+        if not isinstance(d, Demand) or d.role not in cls.requires:
+            problems.append(f"demand {d!r}: a Demand on one of the required roles {cls.requires}")
+        elif not d.limit_key.startswith("max_") or not d.unit:
+            problems.append(f"demand {d.text()}: limited by a station max_* key, with a unit")
     steps = cls.step_specs()
     if not steps:
         problems.append("no steps")

@@ -108,8 +108,9 @@ def _maps(pid: int) -> str:
 
 
 @pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="needs /proc to see how far start-up went")
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("when", ["imports", "before-open", "running"])
-def test_ctrl_c_in_the_first_second_is_one_line(tmp_path, when):
+def test_ctrl_c_in_the_first_second_is_one_line(tmp_path, when, sig):
     """SIGINT while the CLI imports its libraries, while it prepares the station, and just after
     the run began: one line (or the run's ABORTED record), never a traceback (item 15).  The
     moment is found from the process itself, not from a sleep, so the test is not timing-bound."""
@@ -125,7 +126,7 @@ def test_ctrl_c_in_the_first_second_is_one_line(tmp_path, when):
     deadline = time.monotonic() + 60
     while not ready() and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.002)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
     assert "Traceback" not in err, err
     # 130 (or killed by SIGINT, as Python reports a Ctrl-C inside some imports) before the run;
@@ -135,7 +136,8 @@ def test_ctrl_c_in_the_first_second_is_one_line(tmp_path, when):
         res = json.loads(out)
         assert res["outcome"] == "ABORTED" and res["safe_state"] is True
     else:
-        assert err.strip() == "gyrobench: interrupted (Ctrl-C)", err
+        name = "Ctrl-C" if sig == signal.SIGINT else "SIGTERM"
+        assert err.strip() == f"gyrobench: interrupted ({name})", err
 
 
 @pytest.mark.parametrize(

@@ -117,7 +117,7 @@ def test_station_kind_from_its_file_or_its_preset(tmp_path):
 def test_a_bad_kind_in_a_station_file_names_the_key(tmp_path):
     from bench.station import StationError
 
-    with pytest.raises(StationError, match="kind = 'ring'"):
+    with pytest.raises(StationError, match="kind='ring' is not one of '', hrg, mems-ring"):
         load_config(_station_file(tmp_path, kind='kind = "ring"'))
 
 

@@ -40,9 +40,9 @@ SPEC = register_driver(
         keys=table_keys(
             {
                 "host": Key(str, "", doc="controller address (TCP); its real-time computer is 192.168.53.1"),
-                "port": Key(int, 9878, 1, 65535),
+                "port": Key(int, 9878, 1, 65535, doc="TCP port of the ACL command interface"),
                 "visa_resource": Key(str, "", doc="VISA resource instead of TCP, e.g. GPIB0::1::INSTR"),
-                "axis": Key(int, 1, 1, 6),
+                "axis": Key(int, 1, 1, 6, doc="controller axis the gyro is mounted on"),
                 "vtrip_dps": Key(float, 0.0, 0.0, 40000.0, doc="velocity trip; 0: 1.1 x max_rate_dps", unit="deg/s"),
                 "lockout": Key(bool, True, doc="lock the other interfaces out while connected"),
             }

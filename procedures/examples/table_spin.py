@@ -40,3 +40,10 @@ class TableSpin(Procedure):
         tol = self.tolerance_dps
         limits = (self.rate_dps - tol, self.rate_dps + tol)
         return [Result("table_rate_dps", float(rate.mean()), "deg/s", limits=limits)]
+
+    def figures(self, data) -> list:
+        """The figures this run's results need (bench.reporting.table_spin): the report and
+        `gyrobench analyze --figures` draw these."""
+        from bench.reporting.table_spin import figures
+
+        return figures(self, data)

@@ -1,0 +1,177 @@
+"""A run's report: the figures its procedure names (matplotlib), laid out with its identity,
+parameters and measurements by a Jinja2 template into one self-contained HTML page (figures as
+inline SVG), and the same page as a PDF (WeasyPrint, the `pdf` extra) for the calibration file."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from .figures import ReportFigure, generic_figures
+from .numbers import DASH, error_in_intervals, limits, plain, sig, truth_text, with_interval
+
+TEMPLATES = Path(__file__).with_name("templates")
+
+
+def procedure_of(data: Any) -> Any | None:
+    """The run's procedure, built with the run's parameters (None when it is not found or the
+    recorded parameters no longer validate)."""
+    from procedures import find_procedure
+
+    try:
+        return find_procedure(str(data.attrs.get("procedure", "")))(data.params)
+    except Exception:  # noqa: BLE001 - an unknown or changed procedure still gets a report
+        return None
+
+
+def figures_for(data: Any, proc: Any = None) -> tuple[list[ReportFigure], list[str]]:
+    """(figures, notes): the figures the procedure names through its `figures(data)` hook, else a
+    plot of every stream; a hook that fails on this data leaves a note and the stream plots."""
+    proc = proc if proc is not None else procedure_of(data)
+    hook = getattr(proc, "figures", None)
+    if hook is None:
+        return generic_figures(data), []
+    try:
+        return list(hook(data)), []
+    except Exception as exc:  # noqa: BLE001 - a figure that cannot be drawn must not lose the report
+        why = f"{type(exc).__name__}: {exc}"
+        return generic_figures(data), [f"the figures of {proc.name} could not be drawn from this run ({why}); "
+                                       "the raw streams are plotted instead"]
+
+
+def _param_rows(data: Any, proc: Any) -> list[dict[str, str]]:
+    specs = type(proc).param_specs() if proc is not None else {}
+    rows = []
+    for name, value in data.params.items():
+        spec = specs.get(name)
+        rows.append({"name": name, "value": plain(value) if not isinstance(value, str) else value,
+                     "unit": getattr(spec, "unit", "") or "", "doc": getattr(spec, "doc", "") or ""})
+    return rows
+
+
+def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, str]]:
+    truth = data.truth or {}
+    incomplete = data.incomplete
+    found: dict[str, dict[str, Any]] = {}
+    for m in data.measurements():
+        key = m["name"] if m.get("dut") is None else f"{m['dut']}:{m['name']}"
+        found[key] = {**m, "name": key, "source": "run"}
+    if row is not None:
+        for m in row.get("measurements", []):
+            if m.get("source") == "analyze":
+                name = m["name"] + (" (re-analysis, incomplete run)" if incomplete else " (re-analysis)")
+                ci = [m.get("ci95_low"), m.get("ci95_high")]
+                found[name] = {**m, "name": name, "ci95": ci if None not in ci else None, "base": m["name"]}
+    out = []
+    for name, m in found.items():
+        ci = m.get("ci95")
+        value, interval = with_interval(m.get("value"), ci)
+        t = truth.get(m.get("base", name))
+        out.append({
+            "name": name, "value": value, "interval": interval, "unit": m.get("unit") or "",
+            "limits": limits(m.get("low"), m.get("high")), "outcome": m.get("outcome") or DASH,
+            "truth": truth_text(t, ci) if t is not None else DASH,
+            "error": error_in_intervals(m.get("value"), t, ci) if t is not None else DASH,
+        })
+    return out
+
+
+def _identity(data: Any, proc: Any) -> list[tuple[str, str]]:
+    a = data.attrs
+    duts = a.get("duts") or []
+    station = a.get("station") or {}
+    sim = station.get("simulation") or {}
+    return [
+        ("run id", str(a.get("run_id", DASH))),
+        ("procedure", f"{a.get('procedure', DASH)}" + (f" — {type(proc).title()}" if proc is not None else "")),
+        ("station", f"{a.get('station_id', DASH)}" + (" (simulated" + (f", preset {sim['preset']}" if sim.get("preset")
+                                                                       else "") + ")" if a.get("simulated") else "")),
+        ("DUT", ", ".join(map(str, duts)) if duts else DASH),
+        ("operator", str(a.get("operator") or DASH)),
+        ("software version", str(a.get("software_version") or DASH)),
+        ("seed", str(a["seed"]) if a.get("seed") is not None else DASH),
+        ("started", str(a.get("started_at") or DASH)),
+        ("finished", str(a.get("finished_at") or DASH)),
+        ("bench time", f"{sig(a.get('simulated_s'))} s" if a.get("simulated_s") is not None else DASH),
+        ("wall time", f"{sig(a.get('wall_s'))} s" if a.get("wall_s") is not None else DASH),
+    ]
+
+
+def _log_rows(data: Any, limit: int = 200) -> list[tuple[str, str, str]]:
+    rows = data.log()
+    return [(f"{float(r.get('t_sim_s', math.nan)):.3f}", str(r.get("level", "")), str(r.get("msg", "")))
+            for r in rows[-limit:]]
+
+
+def context(data: Any, row: dict[str, Any] | None = None,
+            figures: tuple[list[ReportFigure], list[str]] | None = None) -> dict[str, Any]:
+    """Everything the template shows, as text (numbers already formatted); figures: the result
+    of `figures_for(data)` when the caller already has it."""
+    proc = procedure_of(data)
+    figs, notes = figures if figures is not None else figures_for(data, proc)
+    a = data.attrs
+    truth_shown = bool(a.get("simulated") and data.truth)
+    return {
+        "run_id": a.get("run_id", data.path.stem),
+        "procedure": a.get("procedure", ""),
+        "outcome": a.get("outcome", "UNFINISHED"),
+        "end_reason": a.get("end_reason", "the run did not finish (killed?)"),
+        "safe_state": bool(a.get("safe_state")),
+        "incomplete": data.incomplete,
+        "identity": _identity(data, proc),
+        "params": _param_rows(data, proc),
+        "measurements": _measurement_rows(data, row),
+        "truth_shown": truth_shown,
+        "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key, "table": f.table} for f in figs],
+        "notes": notes + list(getattr(data, "notes", [])),
+        "log": _log_rows(data),
+    }
+
+
+def render_html(data: Any, row: dict[str, Any] | None = None, ctx: dict[str, Any] | None = None) -> str:
+    """The report page of one run (a RunData) and, when known, its results-store row."""
+    import jinja2
+
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=jinja2.select_autoescape(),
+                             trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
+    return env.get_template("report.html.j2").render(**(ctx or context(data, row)))
+
+
+class PdfUnavailable(RuntimeError):
+    """WeasyPrint (the `pdf` extra) is not installed."""
+
+
+def _weasyprint() -> Any:
+    try:
+        import weasyprint
+    except (ImportError, OSError) as exc:  # not installed, or its system libraries (Pango) missing
+        raise PdfUnavailable(f"a PDF report needs WeasyPrint: pip install 'gyrobench[pdf]' ({exc})") from None
+    return weasyprint
+
+
+def write_pdf(html: str, path: str | Path) -> Path:
+    """The report page as a PDF (WeasyPrint renders the inline SVG figures as vectors)."""
+    weasyprint = _weasyprint()
+    import logging
+
+    logging.getLogger("fontTools").setLevel(logging.WARNING)
+    weasyprint.HTML(string=html).write_pdf(str(path))
+    return Path(path)
+
+
+def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output: str | Path | None = None,
+                 pdf: bool = False) -> list[Path]:
+    """Write the HTML report beside the raw file (or to output) and, with pdf, the PDF beside it."""
+    from bench.recorder import open_run
+
+    if pdf:
+        _weasyprint()  # a missing PDF library is said before anything is written
+    with open_run(raw_file) as data:
+        html = render_html(data, row)
+        out = Path(output or data.path.with_suffix(".html"))
+    out.write_text(html, encoding="utf-8")
+    paths = [out]
+    if pdf:
+        paths.append(write_pdf(html, out.with_suffix(".pdf")))
+    return paths

@@ -1,0 +1,248 @@
+"""Shared figure helpers: matplotlib figures (Agg, no pyplot state) with axes that name their
+quantity and unit, min/max envelopes for long records, fits over data with a residual panel,
+equal-aspect polar plots, and the figure's SVG for the report."""
+
+from __future__ import annotations
+
+import io
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+if "matplotlib.pyplot" not in sys.modules:  # off screen; figures here never touch pyplot's state
+    matplotlib.use("Agg")
+import numpy as np  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+#: points of a record drawn as a line; longer records are drawn as a min/max envelope of this many bins
+ENVELOPE_BINS = 1200
+WIDTH_IN = 7.6
+_RC = {
+    "font.size": 8.5,
+    "axes.titlesize": 9.5,
+    "axes.labelsize": 8.5,
+    "legend.fontsize": 7.5,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "lines.linewidth": 1.0,
+    "svg.fonttype": "none",  # text stays text: small files, selectable, the page's font
+    "svg.hashsalt": None,
+}
+matplotlib.rcParams.update(_RC)
+
+#: quantity of a stream column or curve by its name; the unit comes from the name's suffix (an
+#: explicit entry wins).  The run-contract issue will declare both with each stream column.
+QUANTITIES: dict[str, tuple[str, str]] = {
+    "t_s": ("time t", "s"),
+    "freq_hz": ("drive frequency f", "Hz"),
+    "rate_dps": ("table rate Ω", "deg/s"),
+    "angle_deg": ("table angle", "deg"),
+    "theta_deg": ("wave angle θ", "deg"),
+    "drift_dph": ("drift", "deg/h"),
+    "cx": ("slow variable cx", "model units"),
+    "sx": ("slow variable sx", "model units"),
+    "cy": ("slow variable cy", "model units"),
+    "sy": ("slow variable sy", "model units"),
+    "q1": ("q1", "model units"),
+    "p1": ("p1", "model units"),
+    "q2": ("q2", "model units"),
+    "p2": ("p2", "model units"),
+    "amplitude": ("amplitude A", "model units"),
+    "amplitude_y": ("amplitude B", "model units"),
+    "phase_deg": ("phase φ", "deg"),
+    "phase_y_deg": ("phase ψ", "deg"),
+    "energy": ("energy E", "model units²"),
+    "quadrature_rel": ("quadrature k/a", "1"),
+    "amp_ctrl": ("amplitude control", "DAC units"),
+    "freq_ctrl": ("frequency control", "DAC units"),
+    "quad_ctrl": ("quadrature control", "DAC units"),
+    "prec_ctrl": ("precession control", "DAC units"),
+}
+_SUFFIX_UNITS = (
+    ("_per_s", "1/s"), ("_dps2", "deg/s²"), ("_dps", "deg/s"), ("_dph", "deg/h"), ("_deg", "deg"), ("_rad", "rad"),
+    ("_hz", "Hz"), ("_s", "s"), ("_v", "V"),
+)
+
+
+def quantity(name: str, declared: tuple[str, str] | None = None) -> tuple[str, str]:
+    """(quantity, unit) of a column: declared, known, or read from the name's unit suffix."""
+    if declared:
+        return declared
+    if name in QUANTITIES:
+        return QUANTITIES[name]
+    for suffix, unit in _SUFFIX_UNITS:
+        if name.endswith(suffix):
+            return name[: -len(suffix)].replace("_", " "), unit
+    return name.replace("_", " "), ""
+
+
+def label(name: str, declared: tuple[str, str] | None = None, *, short: bool = False) -> str:
+    """Axis label 'quantity (unit)' of a column; short: 'name' over '(unit)', for stacked panels."""
+    q, u = quantity(name, declared)
+    if short:
+        return f"{name}\n({u})" if u else name
+    return f"{q} ({u})" if u else q
+
+
+@dataclass
+class ReportFigure:
+    """One figure of a report: a file-name key, a title, the matplotlib figure and a note."""
+
+    key: str
+    title: str
+    figure: Figure
+    note: str = ""
+    #: numbers the figure supports, shown beneath it: (header, rows of text)
+    table: tuple[list[str], list[list[str]]] | None = None
+
+    def svg(self) -> str:
+        """The figure as an inline <svg> element (no XML prologue)."""
+        buf = io.StringIO()
+        self.figure.savefig(buf, format="svg", metadata={"Date": None})
+        text = buf.getvalue()
+        return text[text.index("<svg"):]
+
+    def save(self, directory: str | Path, fmt: str = "svg") -> Path:
+        path = Path(directory) / f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', self.key)}.{fmt}"
+        self.figure.savefig(path, format=fmt, metadata={"Date": None} if fmt in ("svg", "pdf") else None)
+        return path
+
+
+def new_figure(nrows: int = 1, ncols: int = 1, *, height_in: float = 3.0, width_in: float = WIDTH_IN,
+               **kwargs: Any) -> tuple[Figure, Any]:
+    """A constrained-layout figure (labels never clipped) and its axes array."""
+    from matplotlib.ticker import MaxNLocator
+
+    fig = Figure(figsize=(width_in, height_in), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False, **kwargs)
+    if ncols > 1:  # narrow panels: fewer x ticks, so their labels do not run into each other
+        for ax in axes.flat:
+            ax.xaxis.set_major_locator(MaxNLocator(nbins=4 if ncols > 2 else 5))
+    return fig, axes
+
+
+def envelope(x: np.ndarray, y: np.ndarray, bins: int = ENVELOPE_BINS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x, min, max) over `bins` equal runs of samples: what a long record looks like on paper,
+    every sample represented (no sample dropped, so no aliasing); short records come back as
+    (x, y, y)."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    n = len(y)
+    if n <= 2 * bins:
+        return x, y, y
+    per = n // bins
+    m = per * bins
+    yb = y[:m].reshape(bins, per)
+    lo, hi = np.nanmin(yb, axis=1), np.nanmax(yb, axis=1)
+    xb = x[:m].reshape(bins, per).mean(axis=1)
+    if m < n:  # the tail that does not fill a bin
+        xb = np.append(xb, x[m:].mean())
+        lo = np.append(lo, np.nanmin(y[m:]))
+        hi = np.append(hi, np.nanmax(y[m:]))
+    return xb, lo, hi
+
+
+def plot_record(ax: Axes, x: np.ndarray, y: np.ndarray, *, color: str | None = None, label: str | None = None,
+                **kwargs: Any) -> None:
+    """A record as a line, or as its min/max envelope when it is long."""
+    xe, lo, hi = envelope(x, y)
+    if lo is hi:
+        ax.plot(xe, lo, color=color, label=label, **kwargs)
+        return
+    poly = ax.fill_between(xe, lo, hi, color=color, linewidth=0.6, label=label, alpha=0.8)
+    if color is None:
+        poly.set_edgecolor(poly.get_facecolor())
+
+
+def fit_with_residuals(x: np.ndarray, y: np.ndarray, y_fit: np.ndarray, *, xname: str, yname: str,
+                       ylabel: str | None = None, data_label: str = "measured", fit_label: str = "fit",
+                       residual: np.ndarray | None = None, residual_label: str | None = None,
+                       height_in: float = 3.6) -> Figure:
+    """Data with the fitted curve over them and the residual (data - fit) in a panel beneath."""
+    fig, ax = new_figure(2, 1, height_in=height_in, sharex=True, gridspec_kw={"height_ratios": [3, 1.3]})
+    top, bottom = ax[0, 0], ax[1, 0]
+    if len(x) <= 2 * ENVELOPE_BINS:  # points under the curve, so the curve does not hide them
+        top.plot(x, y, ".", color="C0", markersize=2.5, label=data_label)
+    else:
+        plot_record(top, x, y, color="C0", label=data_label)
+    xf, _, yf = envelope(x, y_fit)
+    top.plot(xf, yf, "--", color="C3", label=fit_label, linewidth=1.0)
+    top.set_ylabel(ylabel or label(yname))
+    top.legend(loc="best")
+    r = np.asarray(y, dtype=float) - np.asarray(y_fit, dtype=float) if residual is None else residual
+    plot_record(bottom, x, r, color="C0")
+    bottom.axhline(0.0, color="C3", linewidth=0.8)
+    bottom.set_ylabel(residual_label or "residual")
+    bottom.set_xlabel(label(xname))
+    return fig
+
+
+def equal_aspect(ax: Axes) -> None:
+    """1:1 axes for a polar (phase-plane) plot: circles stay circles."""
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.axhline(0.0, color="0.6", linewidth=0.6)
+    ax.axvline(0.0, color="0.6", linewidth=0.6)
+
+
+def measurement(data: Any, name: str) -> dict[str, Any] | None:
+    """The last recorded measurement of that name (None when the run did not report it)."""
+    found = None
+    for m in data.measurements():
+        if m.get("name") == name:
+            found = m
+    return found
+
+
+def table_figure(data: Any) -> list[ReportFigure]:
+    """The rate table's rate and angle on their own axes, from the `table` stream."""
+    if "table" not in data:
+        return []
+    tab = data.table("table")
+    t = tab.get("t_s")
+    if t is None or len(t) < 2:
+        return []
+    cols = [c for c in ("rate_dps", "angle_deg") if c in tab]
+    fig, ax = new_figure(len(cols), 1, height_in=1.6 + 1.2 * len(cols), sharex=True)
+    for i, c in enumerate(cols):
+        if c == "angle_deg":  # wraps at 360 deg: points, not a line across the wrap
+            ax[i, 0].plot(t, tab[c], ".", color=f"C{i}", markersize=1.5)
+        else:
+            plot_record(ax[i, 0], t, tab[c], color=f"C{i}")
+        ax[i, 0].set_ylabel(label(c))
+    ax[-1, 0].set_xlabel(label("t_s"))
+    return [ReportFigure("table", "Rate table: rate and angle", fig, f"{len(t)} readings of the table's status.")]
+
+
+def stream_figure(data: Any, stream: str, columns: list[str] | None = None, *, title: str | None = None,
+                  key: str | None = None) -> ReportFigure | None:
+    """A stream's columns against time, each on its own axis (long records as envelopes)."""
+    tab = data.table(stream)
+    t = tab.get("t_s")
+    cols = [c for c in (columns or tab) if c in tab and c not in ("t_s", "index")]
+    if t is None or len(t) < 2 or not cols:
+        return None
+    fig, ax = new_figure(len(cols), 1, height_in=0.9 + 1.05 * len(cols), sharex=True)
+    for i, c in enumerate(cols):
+        plot_record(ax[i, 0], t, tab[c], color=f"C{i % 10}")
+        ax[i, 0].set_ylabel(label(c, short=len(cols) > 2))
+    ax[-1, 0].set_xlabel(label("t_s"))
+    note = f"{len(t)} rows" + (f", drawn as min/max envelopes of {ENVELOPE_BINS} bins" if len(t) > 2 * ENVELOPE_BINS
+                               else "")
+    return ReportFigure(key or stream, title or f"Stream {stream}", fig, note + ".")
+
+
+def generic_figures(data: Any) -> list[ReportFigure]:
+    """For a procedure that names no figures: every stream of 10 rows or more, column by column."""
+    out = []
+    for stream in data.streams():
+        tab = data.table(stream)
+        if len(tab.get("t_s", ())) >= 10:
+            cols = [c for c in tab if c not in ("t_s", "index")][:6]
+            fig = stream_figure(data, stream, cols)
+            if fig is not None:
+                out.append(fig)
+    return out
