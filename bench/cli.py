@@ -25,10 +25,16 @@ def _interrupted_early(signum: int, _frame: Any) -> None:
     os._exit(128 + signum)
 
 
+_SIGNALLED: list[str] = []  # the signal that interrupted main(), if any
+
+
 def _interrupt(signum: int, _frame: Any) -> None:
-    """Inside main(): SIGTERM is handled like Ctrl-C (the boundary prints one line); a run installs
-    its own handlers that abort it into the safe state, and puts these back afterwards."""
-    raise KeyboardInterrupt(signal.Signals(signum).name)
+    """Inside main(): SIGINT and SIGTERM raise KeyboardInterrupt (the boundary prints one line); a
+    run installs its own handlers that abort it into the safe state, and puts these back after.
+    The signal is remembered: a library that turns the interrupt into its own error (numpy's
+    import wraps it in an ImportError) is still reported as the interruption it was."""
+    _SIGNALLED.append(signal.Signals(signum).name)
+    raise KeyboardInterrupt(_SIGNALLED[-1])
 
 
 if __name__ == "__main__" or sys.argv[0].endswith("gyrobench"):  # the CLI's own process, not an importer
@@ -614,7 +620,7 @@ def main(argv: list[str] | None = None) -> int:
     debug = "--debug" in argv or bool(os.environ.get("GYROBENCH_DEBUG"))  # anywhere on the line
     argv = [a for a in argv if a != "--debug"]
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, _interrupt)
         signal.signal(signal.SIGTERM, _interrupt)
     try:
         args = build_parser().parse_args(argv)
@@ -631,6 +637,9 @@ def main(argv: list[str] | None = None) -> int:
         _err(str(exc))
         return exc.code
     except Exception as exc:  # noqa: BLE001 - the boundary: classify, never print a bare traceback
+        if _SIGNALLED:  # the interrupt surfaced as another error (inside an import, a library)
+            _err("interrupted (SIGTERM)" if _SIGNALLED[-1] == "SIGTERM" else "interrupted (Ctrl-C)")
+            return EXIT_INTERRUPTED
         return _report_exception(exc, debug)
 
 

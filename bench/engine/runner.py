@@ -319,13 +319,6 @@ class Runner:
             rec.wall_s = time.monotonic() - t0_wall
             self._report_speed(ctx, rec, clock)
             rec.finished_at = _dt.datetime.now(_dt.UTC).isoformat()
-            ctx.publish(
-                ev.RunFinished,
-                outcome=rec.outcome,
-                end_reason=rec.end_reason,
-                safe_state=rec.safe_state,
-                raw_file=rec.raw_file,
-            )
             if recorder is not None:
                 if unsubscribe_rec is not None:
                     unsubscribe_rec()
@@ -340,6 +333,14 @@ class Runner:
                 rec.store_error = self.store.finish_run(rec, spool_dir)
                 if rec.store_error:
                     ctx.publish(ev.Log, level="ERROR", message=rec.store_error)
+            # last: a listener (the window, a line) may open the raw file and the store's row at once
+            ctx.publish(
+                ev.RunFinished,
+                outcome=rec.outcome,
+                end_reason=rec.end_reason,
+                safe_state=rec.safe_state,
+                raw_file=rec.raw_file,
+            )
         return rec
 
     def _report_speed(self, ctx: RunContext, rec: RunRecord, clock: Any) -> None:

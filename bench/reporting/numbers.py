@@ -19,7 +19,10 @@ def _finite(x: Any) -> float | None:
 
 
 def _fixed_or_sci(v: float, last_digit: int) -> str:
-    """v rounded to the decade 10**last_digit; scientific notation outside 1e-3 .. 1e6."""
+    """v rounded to the decade 10**last_digit; scientific notation outside 1e-3 .. 1e6; an exact
+    zero (a truth of 0) is '0', not a row of zeros."""
+    if v == 0:
+        return "0"
     mag = math.floor(math.log10(abs(v))) if v else last_digit
     if -3 <= mag < 6 or not v:
         return f"{v:.{max(0, -last_digit)}f}"
