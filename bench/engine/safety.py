@@ -9,6 +9,10 @@ from typing import Any
 
 #: roles in the order the safe state visits them; a role not listed goes last
 SAFE_ORDER: tuple[str, ...] = ("fpga", "table", "frontend")
+#: the parts of a station's safe state, in the order they are done; each device's spec says which
+#: part it plays.  A part holds a list of devices, so with several gyros on one table every slot's
+#: drive is cut before the one shared table is brought to rest, and then every slot's outputs go off
+SAFE_PARTS: tuple[str, ...] = ("drive-cut", "table-to-rest", "outputs-off")
 
 
 @dataclass
@@ -25,6 +29,14 @@ def ordered_roles(roles: Iterable[str]) -> list[str]:
     roles = list(roles)
     rank = {r: i for i, r in enumerate(SAFE_ORDER)}
     return sorted(roles, key=lambda r: (rank.get(r, len(SAFE_ORDER)), roles.index(r)))
+
+
+def by_part(parts: dict[str, str]) -> list[tuple[str, list[str]]]:
+    """Roles (role -> part) grouped into SAFE_PARTS order, each part's roles in the given order."""
+    unknown = sorted({p for p in parts.values() if p not in SAFE_PARTS})
+    if unknown:
+        raise ValueError(f"safe-state part(s) {unknown} not one of {SAFE_PARTS}")
+    return [(part, [r for r, p in parts.items() if p == part]) for part in SAFE_PARTS]
 
 
 def bring_to_safe_state(devices: dict[str, Any]) -> SafeStateReport:

@@ -1,11 +1,11 @@
 """The station entry of the two-SR865 front end (`driver = "sr865-pair-frontend"`): its keys, how
-to build it and how to serve its simulator.  bench/station.py imports this module."""
+to build it, its health and safe-state part; bench.devices finds and imports this module."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from bench.station import DriverSpec, Key, StationError, register_driver
+from bench.devices import DriverSpec, Key, StationError, register_driver
 
 
 def _build(cfg: dict[str, Any], clock: Any) -> Any:
@@ -29,15 +29,7 @@ def _build(cfg: dict[str, Any], clock: Any) -> Any:
     return fe
 
 
-def _serve(world: Any, cfg: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
-    from simulators.frontend.sr865_server import serve_sr865_pair
-
-    handle = serve_sr865_pair(world)
-    master, slave = handle.resources
-    return handle, {"resource": master, "resource2": slave}
-
-
-def _health(fe: Any) -> None:
+def _health(fe: Any, since: Any = None) -> None:
     fe.idn  # noqa: B018 - a query to each lock-in proves both answer
 
 
@@ -45,6 +37,7 @@ SPEC = register_driver(
     DriverSpec(
         name="sr865-pair-frontend",
         role="frontend",
+        part="outputs-off",
         keys={
             "driver": Key(str, required=True),
             "resource": Key(str, "", doc="VISA resource of the lock-in on channel 1 (the reference master)"),
@@ -54,7 +47,7 @@ SPEC = register_driver(
             "timeout_s": Key(float, 2.0, 0.05, 60.0, doc="deadline of one query", unit="s"),
         },
         build=_build,
-        serve=_serve,
+        serve="simulators.frontend.sr865_server:serve_station",
         health=_health,
         doc="two SR860-series lock-ins (PyMeasure) as the drive/pickoff front end",
     )

@@ -1,11 +1,13 @@
 """The station entry of the Acutrol table (`driver = "acutrol-table"`): its keys, how to build the
-driver from them and how to serve its simulator.  bench/station.py imports this module."""
+driver from them, its health and safe-state part; bench.devices finds and imports this module."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from bench.station import DriverSpec, Key, StationError, _table_health, _table_keys, register_driver
+from bench.devices import DriverSpec, Key, StationError, register_driver
+
+from .station_keys import TABLE_HEALTH_COLUMNS, table_health, table_keys
 
 
 def _build(cfg: dict[str, Any], clock: Any) -> Any:
@@ -30,18 +32,12 @@ def _build(cfg: dict[str, Any], clock: Any) -> Any:
     return table
 
 
-def _serve(world: Any, cfg: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
-    from simulators.rate_table.acutronic_server import serve_acutrol_table
-
-    handle = serve_acutrol_table(world, max_rate_dps=cfg["max_rate_dps"], max_accel_dps2=cfg["max_accel_dps2"])
-    return handle, {"host": handle.host, "port": handle.port, "visa_resource": ""}
-
-
 SPEC = register_driver(
     DriverSpec(
         name="acutrol-table",
         role="table",
-        keys=_table_keys(
+        part="table-to-rest",
+        keys=table_keys(
             {
                 "host": Key(str, "", doc="controller address (TCP); its real-time computer is 192.168.53.1"),
                 "port": Key(int, 9878, 1, 65535, doc="TCP port of the ACL command interface"),
@@ -52,8 +48,9 @@ SPEC = register_driver(
             }
         ),
         build=_build,
-        serve=_serve,
-        health=_table_health,
+        serve="simulators.rate_table.acutronic_server:serve_station",
+        health=table_health,
+        health_columns=TABLE_HEALTH_COLUMNS,
         doc="Acutronic ACUTROL3000 table controller, ACL over TCP or GPIB (VISA)",
     )
 )

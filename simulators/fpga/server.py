@@ -14,6 +14,7 @@ import select
 import socket
 import threading
 import tty
+from typing import Any
 
 import numpy as np
 
@@ -325,3 +326,9 @@ def serve_fpga(world, *, transport: str = "socket", seed: int = 0, write_timeout
     """Start the simulated FPGA on `world`; the handle has `.url`, `.stop()`, `.inject(kind)`,
     `.clear_faults()`, `.firmware` and the fault counters."""
     return FpgaServer(world, transport=transport, seed=seed, write_timeout_s=write_timeout_s).start()
+
+
+def serve_station(world: Any, cfg: dict[str, Any]) -> tuple[FpgaServer, dict[str, Any]]:
+    """A simulated station's `fpga-link` (seeded by the world); (handle, the link's URL)."""
+    handle = serve_fpga(world, seed=world.seed)
+    return handle, {"url": handle.url}

@@ -23,4 +23,10 @@ def serve_frontend(
     return FrontEndServer(world, model, host=host, port=port).start()
 
 
-__all__ = ["FORCE_SOURCE", "FrontEndModel", "FrontEndServer", "serve_frontend"]
+def serve_station(world: Any, cfg: dict[str, Any]) -> tuple[FrontEndServer, dict[str, Any]]:
+    """A simulated station's `scpi-frontend` (seeded by the world); (handle, its VISA resource)."""
+    handle = serve_frontend(world, seed=world.seed)
+    return handle, {"resource": handle.resource_name}
+
+
+__all__ = ["FORCE_SOURCE", "FrontEndModel", "FrontEndServer", "serve_frontend", "serve_station"]

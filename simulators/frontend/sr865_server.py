@@ -302,3 +302,10 @@ def serve_sr865_pair(
         world.attach(master)
         world.attach(slave)
     return Sr865PairServer(world, (master, slave), host)
+
+
+def serve_station(world: Any, cfg: dict[str, Any]) -> tuple[Sr865PairServer, dict[str, Any]]:
+    """A simulated station's `sr865-pair-frontend`; (handle, both lock-ins' VISA resources)."""
+    handle = serve_sr865_pair(world)
+    master, slave = handle.resources
+    return handle, {"resource": master, "resource2": slave}

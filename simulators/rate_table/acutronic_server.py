@@ -15,6 +15,7 @@ import socket
 import socketserver
 import threading
 import time
+from typing import Any
 
 from drivers.rate_table import acutronic_protocol as ap
 from drivers.rate_table import modbus_protocol as mp
@@ -342,3 +343,9 @@ def serve_acutrol_table(
     with world.lock:
         world.attach(mech)
     return AcutrolTableServer(world, mech, host=host, port=port)
+
+
+def serve_station(world: Any, cfg: dict[str, Any]) -> tuple[AcutrolTableServer, dict[str, Any]]:
+    """A simulated station's `acutrol-table`: served from its station keys; (handle, driver address keys)."""
+    handle = serve_acutrol_table(world, max_rate_dps=cfg["max_rate_dps"], max_accel_dps2=cfg["max_accel_dps2"])
+    return handle, {"host": handle.host, "port": handle.port, "visa_resource": ""}

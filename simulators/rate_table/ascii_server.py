@@ -11,6 +11,7 @@ import socket
 import socketserver
 import threading
 import tty
+from typing import Any
 
 from drivers.rate_table import ascii_protocol as ap
 from drivers.rate_table import modbus_protocol as mp
@@ -258,3 +259,11 @@ def serve_ascii_table(
     with world.lock:
         world.attach(mech)
     return AsciiTableServer(world, mech, host=host, port=port, use_pty=use_pty)
+
+
+def serve_station(world: Any, cfg: dict[str, Any]) -> tuple[AsciiTableServer, dict[str, Any]]:
+    """A simulated station's `ascii-table`: served from its station keys; (handle, driver address keys)."""
+    handle = serve_ascii_table(
+        world, max_rate_dps=cfg["max_rate_dps"], max_accel_dps2=cfg["max_accel_dps2"], watchdog_s=cfg["watchdog_s"]
+    )
+    return handle, {"url": handle.url}

@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import threading
 from dataclasses import dataclass, field
+from typing import Any
 
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
@@ -244,3 +245,15 @@ def serve_modbus_table(
     with world.lock:
         world.attach(mech)
     return ModbusTableServer(world, mech, host=host, port=port, framer=framer, device_id=device_id, use_pty=use_pty)
+
+
+def serve_station(world: Any, cfg: dict[str, Any]) -> tuple[ModbusTableServer, dict[str, Any]]:
+    """A simulated station's `modbus-table`: served from its station keys; (handle, driver address keys)."""
+    handle = serve_modbus_table(
+        world,
+        max_rate_dps=cfg["max_rate_dps"],
+        max_accel_dps2=cfg["max_accel_dps2"],
+        watchdog_s=cfg["watchdog_s"],
+        device_id=cfg["device_id"],
+    )
+    return handle, {"host": handle.host, "port": handle.port, "serial_port": ""}

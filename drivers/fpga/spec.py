@@ -1,0 +1,80 @@
+"""The station entry of the FPGA register link and demodulated stream (`driver = "fpga-link"`):
+its keys, build, health (link alive, no frame lost since the run's stream began), its stream and
+its safe-state part (it cuts the drive)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from bench.devices import DriverSpec, Key, StreamSpec, register_driver
+from drivers.errors import DeviceError, LinkLostError
+
+from .protocol import STREAM_COLUMNS
+
+
+def _build(cfg: dict[str, Any], clock: Any) -> Any:
+    from .link import FpgaLink
+
+    link = FpgaLink(cfg["url"], clock=clock, timeout_s=cfg["timeout_s"])
+    link.connect()
+    return link
+
+
+def _counters(link: Any) -> tuple[int, int, int]:
+    """Frames dropped, frames corrupt, blocks a subscriber failed on: the counts a run compares."""
+    s = link.stats
+    return (s.dropped, s.corrupt, s.callback_errors)
+
+
+def _health(link: Any, since: tuple[int, int, int] | None = None) -> None:
+    """Lost link, or a frame lost or rejected since the run's stream began (`since`), is a link fault."""
+    if not link.connected:
+        raise LinkLostError(f"FPGA link {link.url} lost")
+    if getattr(link.clock, "lockstep", False):
+        # lockstep: the world waits while the stream catches up to the bench clock, so a
+        # link that died is found at this check's simulated time, not whenever the reader
+        # thread happens to notice (a real bench's FPGA clock is not the bench's: skipped)
+        link.sync(timeout_wall_s=max(1.0, 2.0 * getattr(link, "timeout_s", 1.0)))
+    if since is None:  # no run stream started: nothing to compare against yet
+        return
+    s = link.stats
+    if s.dropped > since[0] or s.corrupt > since[1]:
+        raise LinkLostError(
+            f"FPGA link {link.url}: stream frames lost ({s.dropped - since[0]}) or corrupt ({s.corrupt - since[1]})"
+        )
+    if s.callback_errors > since[2]:  # the recorder (or a procedure's tap) failed on a block
+        raise DeviceError(
+            f"FPGA stream: {s.callback_errors - since[2]} block(s) not taken by a subscriber (recorder?); "
+            "the raw data would be incomplete"
+        )
+
+
+def _start_stream(link: Any, cfg: dict[str, Any]) -> None:
+    link.start_stream(cfg["decimation"])
+
+
+def _stop_stream(link: Any, clock: Any) -> None:
+    """Let the stream reach the bench clock's time (nothing recorded is cut short), then stop it."""
+    if link.connected:
+        link.wait_for_sample(float(clock.now()), timeout_wall_s=5.0)
+        link.stop_stream()
+
+
+SPEC = register_driver(
+    DriverSpec(
+        name="fpga-link",
+        role="fpga",
+        part="drive-cut",
+        keys={
+            "driver": Key(str, required=True),
+            "url": Key(str, "", doc="serial port or pyserial URL"),
+            "timeout_s": Key(float, 1.0, 0.01, 30.0, doc="wall time allowed for a reply", unit="s"),
+            "decimation": Key(int, 1, 1, 100000, doc="stream every Nth sample"),
+        },
+        build=_build,
+        serve="simulators.fpga.server:serve_station",
+        health=_health,
+        stream=StreamSpec(tuple(STREAM_COLUMNS), start=_start_stream, stop=_stop_stream, counters=_counters),
+        doc="FPGA register link and demodulated stream",
+    )
+)
