@@ -27,6 +27,7 @@ def window(qtbot, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     backend = EngineBackend("sim-hrg", seed=0)
     win = MainWindow(backend)
+    win.ask_close_during_run = lambda: True  # a test that fails mid-run must not wait on a question box
     qtbot.addWidget(win)
     win.show()
     yield win
@@ -126,3 +127,22 @@ def test_pause_says_the_table_keeps_its_rate_and_close_asks_first(window, qtbot,
     assert win.close()  # "Yes": abort, wait for the safe state, close
     assert len(answers) == 2 and not win.backend.running()
     assert win.last_finished is not None and win.last_finished.outcome == "ABORTED" and win.last_finished.safe_state
+
+
+def test_time_axes_start_at_the_run_and_the_run_shows_its_progress(window, qtbot):
+    win = window
+    win.station.speed.setCurrentText("max")
+    win.backend.station.clock.sleep(50.0)  # the bench has been on for a while before this run
+    _start(qtbot, win, "hrg-free-decay", record_s=5.0)
+    qtbot.waitUntil(lambda: win.run_active and win.plots.fpga.total_rows > 500, timeout=WAIT_MS)
+    t0 = win.run_t0_s
+    assert t0 >= 50.0
+    qtbot.waitUntil(lambda: win.last_finished is not None, timeout=WAIT_MS)
+    win.plots.refresh(force=True)
+    x, _ = win.plots.c_q[0].getData()
+    assert 0.0 <= x[0] < 5.0 and x[-1] < win.t_sim_s - t0 + 1.0  # seconds since the run started
+    assert win.run_id and win.run_id in win.run_info.text() and "elapsed" in win.run_info.text()
+    assert win.run_progress.value() == 1000 and win.run_fraction() == 1.0
+    for p in (win.plots.p_q, win.plots.p_e, win.plots.p_rate, win.plots.p_amp):
+        assert p.getAxis("left").labelUnits  # units on every axis
+    assert win.plots.p_e.getAxis("left").labelUnits == "V\u00b2"

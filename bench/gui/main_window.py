@@ -20,6 +20,7 @@ from PySide6.QtWidgets import (
     QLabel,
     QMainWindow,
     QMessageBox,
+    QProgressBar,
     QPushButton,
     QScrollArea,
     QSizePolicy,
@@ -41,6 +42,15 @@ GIL_SWITCH_S = 0.0005
 CLOSE_WAIT_S = 120.0  # closing during a run waits this long for its safe state (then backend.close waits on)
 STATUS_STYLES = {"green": "color: #1a6b1a; font-weight: bold;", "red": "color: #c00000; font-weight: bold;",
                  "amber": "color: #9a6200; font-weight: bold;", "neutral": ""}
+
+
+def _duration(seconds: float) -> str:
+    """12.3 s, 4 min 05 s, 2 h 03 min."""
+    if seconds < 60:
+        return f"{seconds:.1f} s"
+    if seconds < 3600:
+        return f"{int(seconds // 60)} min {int(seconds % 60):02d} s"
+    return f"{int(seconds // 3600)} h {int(seconds % 3600 // 60):02d} min"
 
 
 def outcome_colour(outcome: str) -> str:
@@ -95,6 +105,16 @@ class MainWindow(QMainWindow):
             lab.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
             lab.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         self.steps = StepList()
+        self.run_info = QLabel("no run")  # run id, elapsed, whole-run progress, time left
+        self.run_info.setObjectName("run_info")
+        self.run_info.setWordWrap(True)
+        self.run_progress = QProgressBar()
+        self.run_progress.setRange(0, 1000)
+        self.run_progress.setFormat("run %p%")
+        self.run_t0_s = 0.0
+        self.run_id = ""
+        self.steps_done = 0
+        self.step_fraction = 0.0
         self.plots = LivePlots(refresh_hz=refresh_hz)
         self.log = LogPane()
         self.results = ResultsTable()
@@ -121,7 +141,10 @@ class MainWindow(QMainWindow):
         proc_lay.addWidget(self.safe_label)
         left_lay.addWidget(proc_box, 2)
         step_box = QGroupBox("Steps")
-        QVBoxLayout(step_box).addWidget(self.steps)
+        step_lay = QVBoxLayout(step_box)
+        step_lay.addWidget(self.run_info)
+        step_lay.addWidget(self.run_progress)
+        step_lay.addWidget(self.steps)
         left_lay.addWidget(step_box, 1)
         left.setMinimumWidth(320)
         left.setMaximumWidth(420)
@@ -244,12 +267,15 @@ class MainWindow(QMainWindow):
                 self.plots.set_fit(e.name, e.curves)
             elif isinstance(e, ev.Progress):
                 self.steps.set_progress(e.fraction, e.message)
+                self.step_fraction = min(1.0, max(0.0, e.fraction))
             elif isinstance(e, ev.StepStarted):
                 self.steps.set_status(e.name, "running")
                 if not self.paused and not self.aborting:
                     self.set_status_line(f"step {e.index + 1}/{e.total}: {e.title or e.name}", "neutral")
             elif isinstance(e, ev.StepFinished):
                 self.steps.set_status(e.name, e.status)
+                self.steps_done += 1
+                self.step_fraction = 0.0
             elif isinstance(e, ev.Measurement):
                 self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut)
             elif isinstance(e, ev.Log):
@@ -263,13 +289,37 @@ class MainWindow(QMainWindow):
         if pending:
             self._add_blocks(pending)
         self.station.set_time(self.t_sim_s)
+        if self.run_active:
+            self._show_run_info()
 
     def _add_blocks(self, pending: dict[tuple[str, tuple[str, ...]], list[np.ndarray]]) -> None:
         for (stream, columns), arrays in pending.items():
             self.plots.add_samples(stream, columns, arrays[0] if len(arrays) == 1 else np.concatenate(arrays))
 
+    def run_fraction(self) -> float:
+        """The whole run's progress: finished steps plus the current one's fraction, over all
+        steps (the engine declares no step durations: each step counts the same)."""
+        n = max(1, self.steps.tree.topLevelItemCount())
+        return min(1.0, (self.steps_done + self.step_fraction) / n)
+
+    def _show_run_info(self) -> None:
+        elapsed = max(0.0, self.t_sim_s - self.run_t0_s)
+        frac = self.run_fraction()
+        self.run_progress.setValue(int(round(1000 * frac)))
+        left = "time left: estimating..."
+        if self.run_active and 0.02 < frac < 1.0 and elapsed > 0:
+            left = f"about {_duration(elapsed * (1.0 - frac) / frac)} left (estimated from the progress so far)"
+        elif not self.run_active:
+            left = "finished"
+        self.run_info.setText(f"run {self.run_id}  \u00b7  elapsed {_duration(elapsed)}  \u00b7  {left}")
+
     def _on_run_started(self, e: ev.RunStarted) -> None:
         self.plots.clear()
+        self.plots.set_origin(e.t_sim_s if e.t_sim_s > 0 else None)  # a replay's RunStarted says 0
+        self.run_t0_s = e.t_sim_s
+        self.run_id = e.run_id
+        self.steps_done = 0
+        self.step_fraction = 0.0
         self.results.clear()
         self.steps.set_steps(e.steps)
         self.run_active = True
@@ -290,6 +340,7 @@ class MainWindow(QMainWindow):
         self.log.add(e.t_sim_s, level, f"run {e.run_id} finished: {e.outcome} ({e.end_reason})")
         self.set_status_line(f"{e.outcome}: {e.end_reason}" if e.end_reason else e.outcome, outcome_colour(e.outcome))
         self.plots.refresh(force=True)
+        self._show_run_info()
         self._update_buttons()
 
     # --- replay and report -----------------------------------------------------------------
