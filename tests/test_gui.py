@@ -36,6 +36,7 @@ def window(qtbot, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     backend = EngineBackend("sim-hrg", seed=0)
     win = MainWindow(backend)
+    win.ask_close_during_run = lambda: True  # a test that fails mid-run must not wait on a question box
     qtbot.addWidget(win)
     win.show()
     yield win

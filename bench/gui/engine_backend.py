@@ -18,6 +18,7 @@ from bench.engine.params import Param
 
 DEFAULT_STATION = "sim-hrg"
 STATUS_EVERY_WALL_S = 0.5
+POLL_HZ = 2.0  # the station panel's refresh from the devices: modest, the links are the run's first
 
 
 def default_station() -> str:
@@ -52,6 +53,10 @@ class EngineBackend:
         self._thread: threading.Thread | None = None
         self._table_row: tuple[float, float] | None = None
         self._last_status_wall = 0.0
+        self._in_run = False  # set before the run's thread starts, cleared once its safe state is done
+        self._io_gate = threading.Lock()  # a panel read and a run's start never overlap on a device
+        self._poll_stop = threading.Event()
+        self._poller: threading.Thread | None = None
         self.bus.subscribe(self._watch)
         self.station.open()
         self.publish_status()
@@ -93,6 +98,8 @@ class EngineBackend:
             raise RuntimeError("a run is already going on")
         proc = find_procedure(procedure)(values)  # ParamError (a ValueError) before anything moves
         check_station(proc, self.station)  # StationMismatch (a ValueError): another kind, or above a limit
+        with self._io_gate:  # waits for a panel read in progress: from here on only the run talks to devices
+            self._in_run = True
         self._thread = threading.Thread(target=self._run, args=(proc,), name=f"run-{procedure}", daemon=True)
         self._thread.start()
 
@@ -101,7 +108,9 @@ class EngineBackend:
             self.runner.run(proc)
         except Exception as exc:  # noqa: BLE001 - the runner reports its own failures; this is the rest
             self.bus.publish(ev.Log("", self.station.clock.now(), level="ERROR", message=f"run failed: {exc}"))
-        self.publish_status()
+        self._in_run = False
+        self._table_row = None  # the stream's last row is the run's, not the table's now
+        self.publish_status()  # read from the devices: the state the safe state left
 
     def pause(self) -> None:
         self.runner.pause()
@@ -123,7 +132,31 @@ class EngineBackend:
             self._thread.join(timeout_s)
         return not self.running()
 
+    def start_polling(self, hz: float = POLL_HZ) -> None:
+        """Refresh the station panel from the devices `hz` times a second in a worker thread (also
+        between runs); its StationStatus reaches the window through the bus and the bridge."""
+        if self._poller is not None:
+            return
+        self._poll_stop.clear()
+
+        def loop() -> None:
+            while not self._poll_stop.wait(1.0 / hz):
+                try:
+                    self.publish_status()
+                except Exception as exc:  # noqa: BLE001 - the panel must not take the window down
+                    log.debug("station panel refresh failed: %s", exc)
+
+        self._poller = threading.Thread(target=loop, name="station-panel", daemon=True)
+        self._poller.start()
+
+    def stop_polling(self) -> None:
+        self._poll_stop.set()
+        if self._poller is not None:
+            self._poller.join(5.0)
+            self._poller = None
+
     def close(self) -> None:
+        self.stop_polling()
         if self.running():
             self.abort()
             # the run's own safe state must finish before its devices close: a slow ramp-down
@@ -151,24 +184,45 @@ class EngineBackend:
             self.publish_status(event.run_id)
 
     def publish_status(self, run_id: str = "") -> None:
+        """Publish the station panel's state.  Between runs it is read from the devices (table
+        status, drive outputs, link counters); during a run only what needs no device I/O (the
+        run's own table readings, link counters), so the run's transactions are never interleaved."""
         self._last_status_wall = time.monotonic()
+        with self._io_gate:
+            devices = self._read_devices(talk=not self._in_run)
+        self.bus.publish(ev.StationStatus(run_id, self.station.clock.now(), devices=devices))
+
+    def _read_devices(self, *, talk: bool) -> dict[str, dict[str, Any]]:
         devices: dict[str, dict[str, Any]] = {}
         for role, cfg in self.station.config.devices.items():
             dev = self.station.devices.get(role)
             info: dict[str, Any] = {"connected": bool(dev is not None and getattr(dev, "connected", True)),
-                                    "driver": cfg.get("driver", "?"), "simulated": self.simulated}
-            stats = getattr(dev, "stats", None)
-            if callable(stats):
-                try:
-                    s = stats()
-                    info.update(frames=s.frames, dropped=s.dropped, corrupt=s.corrupt)
-                except Exception:  # noqa: BLE001 - counters are a courtesy
-                    pass
-            if role == "table" and self._table_row is not None:
+                                    "driver": cfg.get("driver", "?")}
+            try:
+                if dev is not None:
+                    info.update(_read_device(role, dev, talk=talk))
+            except Exception as exc:  # noqa: BLE001 - a device that does not answer is shown down
+                info["connected"] = False
+                info["error"] = str(exc) or type(exc).__name__
+            if role == "table" and "rate_dps" not in info and self._table_row is not None:
                 info["rate_dps"], info["angle_deg"] = self._table_row
             devices[role] = info
-        world = getattr(self.station, "world", None)
-        if world is not None and "frontend" in devices:
-            with world.lock:
-                devices["frontend"]["drive"] = bool(np.any(world.total_force))
-        self.bus.publish(ev.StationStatus(run_id, self.station.clock.now(), devices=devices))
+        return devices
+
+
+def _read_device(role: str, dev: Any, *, talk: bool) -> dict[str, Any]:
+    """What the panel shows of one device; `talk` allows queries over its link."""
+    out: dict[str, Any] = {}
+    stats = getattr(dev, "stats", None)
+    if stats is not None and not callable(stats):  # the FPGA link's counters (no I/O)
+        out.update(frames=int(stats.frames), lost=int(stats.dropped), crc_errors=int(stats.corrupt))
+    if not talk:
+        return out
+    if role == "table":
+        st = dev.status()
+        out.update(rate_dps=float(st.rate_dps), angle_deg=float(st.angle_deg), enabled=bool(st.enabled))
+        if st.tripped:
+            out["tripped"] = st.trip_reason()
+    elif role == "frontend" and hasattr(dev, "channels"):
+        out["drive"] = any(bool(c.output_on) for c in dev.channels.values())
+    return out

@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 from PySide6.QtCore import Qt, QUrl
 from PySide6.QtGui import QAction, QDesktopServices
 from PySide6.QtWidgets import (
+    QApplication,
     QComboBox,
     QFileDialog,
     QGroupBox,
@@ -18,8 +20,10 @@ from PySide6.QtWidgets import (
     QLabel,
     QMainWindow,
     QMessageBox,
+    QProgressBar,
     QPushButton,
     QScrollArea,
+    QSizePolicy,
     QSplitter,
     QTabWidget,
     QVBoxLayout,
@@ -35,6 +39,28 @@ from .param_form import ParameterForm
 from .plots import LivePlots
 
 GIL_SWITCH_S = 0.0005
+CLOSE_WAIT_S = 120.0  # closing during a run waits this long for its safe state (then backend.close waits on)
+STATUS_STYLES = {"green": "color: #1a6b1a; font-weight: bold;", "red": "color: #c00000; font-weight: bold;",
+                 "amber": "color: #9a6200; font-weight: bold;", "neutral": ""}
+
+
+def _duration(seconds: float) -> str:
+    """12.3 s, 4 min 05 s, 2 h 03 min."""
+    if seconds < 60:
+        return f"{seconds:.1f} s"
+    if seconds < 3600:
+        return f"{int(seconds // 60)} min {int(seconds % 60):02d} s"
+    return f"{int(seconds // 3600)} h {int(seconds % 3600 // 60):02d} min"
+
+
+def outcome_colour(outcome: str) -> str:
+    """Green only for a run that completed or passed; red for ERROR/FAIL/INTERRUPTED; amber for the rest."""
+    if outcome in ("COMPLETE", "PASS"):
+        return "green"
+    if outcome in ("ERROR", "FAIL", "INTERRUPTED"):
+        return "red"
+    return "amber"
+
 LOCKSTEP_WAIT_S = 0.25  # longest the bridge holds a lockstep engine per event
 
 
@@ -49,9 +75,10 @@ class MainWindow(QMainWindow):
         sys.setswitchinterval(min(sys.getswitchinterval(), GIL_SWITCH_S))
         self.backend = backend
         self.setWindowTitle(f"gyrobench - {backend.station_name}")
-        self.resize(1400, 900)
+        self.resize(1280, 860)
         self.run_active = False
         self.paused = False
+        self.aborting = False
         self.last_finished: ev.RunFinished | None = None
         self.t_sim_s = 0.0
         self.screenshot_t_s: float | None = None
@@ -71,7 +98,23 @@ class MainWindow(QMainWindow):
         self.abort_button = QPushButton("Abort")
         self.abort_button.setStyleSheet("QPushButton:enabled { background: #c00000; color: white; font-weight: bold; }")
         self.safe_label = QLabel("")
+        self.status_line = QLabel("ready")  # what the run is doing / how it ended, in its colour
+        self.status_line.setObjectName("status_line")
+        for lab in (self.safe_label, self.status_line):
+            lab.setWordWrap(True)  # a long error wraps: it never widens the window
+            lab.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+            lab.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         self.steps = StepList()
+        self.run_info = QLabel("no run")  # run id, elapsed, whole-run progress, time left
+        self.run_info.setObjectName("run_info")
+        self.run_info.setWordWrap(True)
+        self.run_progress = QProgressBar()
+        self.run_progress.setRange(0, 1000)
+        self.run_progress.setFormat("run %p%")
+        self.run_t0_s = 0.0
+        self.run_id = ""
+        self.steps_done = 0
+        self.step_fraction = 0.0
         self.plots = LivePlots(refresh_hz=refresh_hz)
         self.log = LogPane()
         self.results = ResultsTable()
@@ -94,10 +137,14 @@ class MainWindow(QMainWindow):
         for b in (self.start_button, self.pause_button, self.abort_button):
             buttons.addWidget(b)
         proc_lay.addLayout(buttons)
+        proc_lay.addWidget(self.status_line)
         proc_lay.addWidget(self.safe_label)
         left_lay.addWidget(proc_box, 2)
         step_box = QGroupBox("Steps")
-        QVBoxLayout(step_box).addWidget(self.steps)
+        step_lay = QVBoxLayout(step_box)
+        step_lay.addWidget(self.run_info)
+        step_lay.addWidget(self.run_progress)
+        step_lay.addWidget(self.steps)
         left_lay.addWidget(step_box, 1)
         left.setMinimumWidth(320)
         left.setMaximumWidth(420)
@@ -133,6 +180,8 @@ class MainWindow(QMainWindow):
         self.bridge.events.connect(self.on_events)
         self._set_backpressure(float(self.station.speed.currentData()))
         self._on_procedure(self.procedure.currentText())
+        if hasattr(backend, "start_polling"):
+            backend.start_polling()  # the station panel from the devices, also between runs
 
     # --- controls --------------------------------------------------------------------------
     def _on_procedure(self, name: str) -> None:
@@ -157,6 +206,12 @@ class MainWindow(QMainWindow):
         lost there: the world waits); in real time or on a real bench, never."""
         self.bridge.max_wait_s = LOCKSTEP_WAIT_S if self.backend.simulated and math.isinf(speed) else 0.0
 
+    def set_status_line(self, text: str, colour: str) -> None:
+        """The line under the buttons (and the status bar): `colour` is one of STATUS_COLOURS."""
+        self.status_line.setText(text)
+        self.status_line.setStyleSheet(STATUS_STYLES[colour])
+        self.statusBar().showMessage(text.splitlines()[0][:200] if text else "")
+
     def start(self) -> None:
         """Start the selected procedure with the form's values (refused while one is invalid)."""
         if not self.form.validate() or self.run_active:
@@ -165,11 +220,13 @@ class MainWindow(QMainWindow):
             self.backend.start(self.procedure.currentText(), self.form.values())
         except (ValueError, RuntimeError) as exc:
             self.log.add(self.t_sim_s, "ERROR", str(exc))
-            self.statusBar().showMessage(str(exc))
+            self.set_status_line(f"not started: {exc}", "red")
             return
         self.run_active = True
         self.paused = False
+        self.aborting = False
         self.safe_label.setText("")
+        self.set_status_line("running", "neutral")
         self._update_buttons()
 
     def toggle_pause(self) -> None:
@@ -180,14 +237,17 @@ class MainWindow(QMainWindow):
         else:
             self.backend.pause()
         self.paused = not self.paused
-        self.statusBar().showMessage("paused" if self.paused else "running")
+        if self.paused:
+            self.set_status_line("Paused \u2014 the table keeps its rate", "amber")
+        else:
+            self.set_status_line("running", "neutral")
         self._update_buttons()
 
     def abort(self) -> None:
         if self.run_active:
             self.backend.abort()
-            self.safe_label.setText("aborting: waiting for the safe state...")
-            self.statusBar().showMessage("aborting")
+            self.aborting = True
+            self.set_status_line("aborting: waiting for the safe state...", "amber")
 
     # --- events ----------------------------------------------------------------------------
     def on_events(self, batch: list[ev.Event]) -> None:
@@ -209,11 +269,15 @@ class MainWindow(QMainWindow):
                 self.plots.declare(e.schema)
             elif isinstance(e, ev.Progress):
                 self.steps.set_progress(e.fraction, e.message)
+                self.step_fraction = min(1.0, max(0.0, e.fraction))
             elif isinstance(e, ev.StepStarted):
                 self.steps.set_status(e.name, "running")
-                self.statusBar().showMessage(f"step {e.index + 1}/{e.total}: {e.title or e.name}")
+                if not self.paused and not self.aborting:
+                    self.set_status_line(f"step {e.index + 1}/{e.total}: {e.title or e.name}", "neutral")
             elif isinstance(e, ev.StepFinished):
                 self.steps.set_status(e.name, e.status)
+                self.steps_done += 1
+                self.step_fraction = 0.0
             elif isinstance(e, ev.Measurement):
                 self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut)
             elif isinstance(e, ev.Log):
@@ -227,13 +291,37 @@ class MainWindow(QMainWindow):
         if pending:
             self._add_blocks(pending)
         self.station.set_time(self.t_sim_s)
+        if self.run_active:
+            self._show_run_info()
 
     def _add_blocks(self, pending: dict[tuple[str, tuple[str, ...]], list[np.ndarray]]) -> None:
         for (stream, columns), arrays in pending.items():
             self.plots.add_samples(stream, columns, arrays[0] if len(arrays) == 1 else np.concatenate(arrays))
 
+    def run_fraction(self) -> float:
+        """The whole run's progress: finished steps plus the current one's fraction, over all
+        steps (the engine declares no step durations: each step counts the same)."""
+        n = max(1, self.steps.tree.topLevelItemCount())
+        return min(1.0, (self.steps_done + self.step_fraction) / n)
+
+    def _show_run_info(self) -> None:
+        elapsed = max(0.0, self.t_sim_s - self.run_t0_s)
+        frac = self.run_fraction()
+        self.run_progress.setValue(int(round(1000 * frac)))
+        left = "time left: estimating..."
+        if self.run_active and 0.02 < frac < 1.0 and elapsed > 0:
+            left = f"about {_duration(elapsed * (1.0 - frac) / frac)} left (estimated from the progress so far)"
+        elif not self.run_active:
+            left = "finished"
+        self.run_info.setText(f"run {self.run_id}  \u00b7  elapsed {_duration(elapsed)}  \u00b7  {left}")
+
     def _on_run_started(self, e: ev.RunStarted) -> None:
         self.plots.clear()
+        self.plots.set_origin(e.t_sim_s if e.t_sim_s > 0 else None)  # a replay's RunStarted says 0
+        self.run_t0_s = e.t_sim_s
+        self.run_id = e.run_id
+        self.steps_done = 0
+        self.step_fraction = 0.0
         self.results.clear()
         self.steps.set_steps(e.steps)
         self.run_active = True
@@ -244,14 +332,17 @@ class MainWindow(QMainWindow):
     def _on_run_finished(self, e: ev.RunFinished) -> None:
         self.run_active = False
         self.paused = False
+        self.aborting = False
         self.last_finished = e
         self.results.set_outcome(e.outcome, e.safe_state, e.end_reason)
         self.results.set_report(e.raw_file if e.raw_file and Path(e.raw_file).exists() else None)
         self.safe_label.setText("safe state confirmed" if e.safe_state else "SAFE STATE NOT CONFIRMED")
-        self.safe_label.setStyleSheet("color: #207020;" if e.safe_state else "color: #c00000; font-weight: bold;")
-        self.log.add(e.t_sim_s, "INFO", f"run {e.run_id} finished: {e.outcome} ({e.end_reason})")
-        self.statusBar().showMessage(f"{e.outcome}: {e.end_reason}")
+        self.safe_label.setStyleSheet(STATUS_STYLES["neutral"] if e.safe_state else STATUS_STYLES["red"])
+        level = "ERROR" if outcome_colour(e.outcome) == "red" else "INFO"
+        self.log.add(e.t_sim_s, level, f"run {e.run_id} finished: {e.outcome} ({e.end_reason})")
+        self.set_status_line(f"{e.outcome}: {e.end_reason}" if e.end_reason else e.outcome, outcome_colour(e.outcome))
         self.plots.refresh(force=True)
+        self._show_run_info()
         self._update_buttons()
 
     # --- replay and report -----------------------------------------------------------------
@@ -298,7 +389,27 @@ class MainWindow(QMainWindow):
         if path:
             QDesktopServices.openUrl(QUrl.fromLocalFile(path))
 
+    def ask_close_during_run(self) -> bool:
+        """Ask before closing during a run (tests replace QMessageBox.question)."""
+        answer = QMessageBox.question(
+            self, "gyrobench", "A run is going on. Abort it (the station goes to its safe state) and close?",
+            QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
+        return answer == QMessageBox.StandardButton.Yes
+
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        if self.run_active or self.backend.running():
+            if self.run_active:  # after RunFinished the thread only says its last words: no question
+                if not self.ask_close_during_run():
+                    event.ignore()
+                    return
+                self.abort()
+            deadline = time.monotonic() + CLOSE_WAIT_S
+            while self.backend.running() and time.monotonic() < deadline:  # the run's own safe state
+                QApplication.processEvents()
+                time.sleep(0.01)
+            self.bridge.drain()
+        if hasattr(self.backend, "stop_polling"):
+            self.backend.stop_polling()
         self.bridge.detach()
         self.plots.shutdown()
         super().closeEvent(event)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import math
 from typing import Any
 
@@ -14,6 +15,7 @@ from PySide6.QtWidgets import (
     QPlainTextEdit,
     QProgressBar,
     QPushButton,
+    QSizePolicy,
     QTableWidget,
     QTableWidgetItem,
     QTreeWidget,
@@ -26,6 +28,9 @@ from .backend import SPEEDS
 
 OUTCOME_COLOURS = {"PASS": "#b7e4b7", "FAIL": "#f4b6b6", "MARGINAL": "#ffe29a", "ERROR": "#f4b6b6",
                    "ABORTED": "#dddddd", "COMPLETE": "#ffffff", "RUNNING": "#cfe3ff", "INTERRUPTED": "#f4b6b6"}
+DEVICE_LABELS = {"rate_dps": "table rate [deg/s]", "angle_deg": "table angle [deg]", "drive": "drive output",
+                 "frames": "stream frames received", "lost": "stream frames lost",
+                 "crc_errors": "frames rejected (CRC/malformed)", "enabled": "table enabled"}
 STATUS_MARKS = {"running": "\u25b6", "done": "\u2713", "error": "\u2717", "aborted": "\u25a0", "skipped": "-",
                 "pending": " "}
 
@@ -73,6 +78,8 @@ class StationPanel(QWidget):
         self.sim_time.setText(f"t = {t_sim_s:.1f} s")
 
     def update_devices(self, devices: dict[str, dict[str, Any]]) -> None:
+        """Show each device's fields as read; one that does not answer is marked DOWN in red with
+        the reason, and a field no longer read disappears (no stale values)."""
         for name, fields in devices.items():
             item = self._items.get(name)
             if item is None:
@@ -81,19 +88,42 @@ class StationPanel(QWidget):
                 self._items[name] = item
                 item.setExpanded(True)
             connected = fields.get("connected")
-            item.setText(1, "connected" if connected else ("disconnected" if connected is not None else ""))
-            if connected is not None:
-                item.setForeground(1, QBrush(QColor("#207020" if connected else "#c00000")))
+            error = fields.get("error")
+            if connected is False or error:
+                text = f"DOWN: {error}" if error else "DOWN (disconnected)"
+            else:
+                text = "connected" if connected else ""
+            item.setText(1, text)
+            item.setToolTip(1, text)
+            item.setForeground(1, QBrush(QColor("#207020" if text == "connected" else "#c00000")))
+            shown = {k: v for k, v in fields.items() if k not in ("connected", "error")}
             existing = {item.child(i).text(0): item.child(i) for i in range(item.childCount())}
-            for key, value in fields.items():
-                if key == "connected":
-                    continue
-                text = f"{value:.3f}" if isinstance(value, float) else str(value)
+            for key in set(existing) - set(shown):
+                item.removeChild(existing.pop(key))
+            for key, value in shown.items():
+                label = DEVICE_LABELS.get(key, key)
+                text = f"{value:.3f}" if isinstance(value, float) else ("on" if value is True else
+                                                                     "off" if value is False else str(value))
                 child = existing.get(key)
                 if child is None:
-                    item.addChild(QTreeWidgetItem([key, text]))
-                else:
-                    child.setText(1, text)
+                    child = QTreeWidgetItem([key, text])
+                    item.addChild(child)
+                child.setText(1, text)
+                child.setToolTip(0, label)
+
+    def value(self, device: str, key: str) -> str | None:
+        """The text shown for one field of one device (None when absent)."""
+        item = self._items.get(device)
+        if item is None:
+            return None
+        for i in range(item.childCount()):
+            if item.child(i).text(0) == key:
+                return item.child(i).text(1)
+        return None
+
+    def state(self, device: str) -> str | None:
+        item = self._items.get(device)
+        return None if item is None else item.text(1)
 
 
 class StepList(QWidget):
@@ -172,8 +202,10 @@ class ResultsTable(QWidget):
         lay.addWidget(self.table)
         row = QHBoxLayout()
         self.outcome = QLabel("")
-        row.addWidget(self.outcome)
-        row.addStretch(1)
+        self.outcome.setWordWrap(True)  # a long reason wraps; it never pushes "Open report" away
+        self.outcome.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+        self.outcome.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        row.addWidget(self.outcome, 1)
         self.report_button = QPushButton("Open report")
         self.report_button.setEnabled(False)
         row.addWidget(self.report_button)
@@ -201,10 +233,23 @@ class ResultsTable(QWidget):
             self.table.setItem(r, c, item)
 
     def set_outcome(self, outcome: str, safe_state: bool, reason: str) -> None:
+        """The run's outcome and reason in its colour; when the run did not complete, measurements
+        it listed as COMPLETE say so (they are not a completed run's results)."""
         safe = "safe state confirmed" if safe_state else "SAFE STATE NOT CONFIRMED"
         colour = OUTCOME_COLOURS.get(outcome, "#ffffff")
-        self.outcome.setText(f"<b>{outcome}</b> - {reason} - {safe}")
+        self.outcome.setText(f"<b>{outcome}</b> - {html.escape(reason)} - {safe}")
         self.outcome.setStyleSheet(f"background: {colour}; padding: 2px;")
+        if outcome in ("COMPLETE", "PASS", "FAIL", "MARGINAL"):
+            return
+        col = self.HEADERS.index("outcome")
+        for r in range(self.table.rowCount()):
+            item = self.table.item(r, col)
+            if item is not None and item.text() == "COMPLETE":
+                item.setText(f"not confirmed (run {outcome})")
+                for c in range(self.table.columnCount()):
+                    cell = self.table.item(r, c)
+                    if cell is not None:
+                        cell.setBackground(QBrush(QColor(colour)))
 
     def set_report(self, path: str | None) -> None:
         self.report_path = path

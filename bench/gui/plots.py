@@ -59,6 +59,7 @@ class LivePlots(QWidget):
         self.refresh_cost_s: deque[float] = deque(maxlen=2000)
         self._dirty = False
         self._theta_last_rad: float | None = None
+        self.t0_s: float | None = 0.0  # the run's start on the bench clock: the time axes are time since then
 
         # one view per plot: a frame repaints only the plots whose data changed
         grid = QGridLayout(self)
@@ -73,21 +74,27 @@ class LivePlots(QWidget):
             return w.getPlotItem()
 
         self.p_q = add_plot(0, 0, "cx, sx, cy, sy")
+        self.p_q.setLabel("left", "cx..sy", units="V")
         self.p_q.addLegend(offset=(5, 5))
         self.c_q = [self.p_q.plot(pen=pg.mkPen(c, width=1), name=n)
                     for c, n in zip(PEN_COLOURS, ("cx", "sx", "cy", "sy"), strict=True)]
         self.p_e = add_plot(0, 1, "E (log) and fit")
         self.p_e.setLogMode(x=False, y=True)
+        self.p_e.setLabel("left", "E", units="V\u00b2")
         self.c_e = self.p_e.plot(pen=pg.mkPen("#1f77b4", width=1))
         self.c_fit = self.p_e.plot(pen=pg.mkPen("#d62728", width=2, style=pg.QtCore.Qt.PenStyle.DashLine))
         self.p_theta = add_plot(1, 0, "wave angle theta (deg)")
+        self.p_theta.setLabel("left", "\u03b8", units="deg")
         self.c_theta = self.p_theta.plot(pen=pg.mkPen("#9467bd", width=1))
         self.p_rate = add_plot(1, 1, "table rate (deg/s)")
+        self.p_rate.setLabel("left", "rate", units="deg/s")
         self.c_rate = self.p_rate.plot(pen=pg.mkPen("#8c564b", width=1))
         self.p_amp = add_plot(2, 0, "sweep amplitude")
+        self.p_amp.setLabel("left", "amplitude", units="V")
         self.c_amp = self.p_amp.plot(pen=pg.mkPen("#1f77b4"), symbol="o", symbolSize=5, symbolBrush="#1f77b4")
         self.c_amp_fit = self.p_amp.plot(pen=pg.mkPen("#d62728", width=2))
         self.p_phase = add_plot(2, 1, "sweep phase (deg)")
+        self.p_phase.setLabel("left", "phase", units="deg")
         self.c_phase = self.p_phase.plot(pen=pg.mkPen("#ff7f0e"), symbol="o", symbolSize=5, symbolBrush="#ff7f0e")
         self.c_phase_fit = self.p_phase.plot(pen=pg.mkPen("#d62728", width=2))
         self.sweep_views = self.views[4:6]
@@ -95,13 +102,16 @@ class LivePlots(QWidget):
         # no grid: redrawing grid lines with the axes costs ~10 ms per plot per frame (raster)
         self.time_plots = (self.p_q, self.p_e, self.p_theta, self.p_rate)
         for p in self.time_plots:
-            p.setLabel("bottom", "t", units="s")
+            p.setLabel("bottom", "t since the run started", units="s")
             p.enableAutoRange(x=False)
         self._x_range: tuple[float, float] | None = None
         for p in (self.p_amp, self.p_phase):
             p.setLabel("bottom", "f", units="Hz")
         for w in self.views:  # a fixed width: no relayout when the tick labels change
-            w.getPlotItem().getAxis("left").setWidth(62)
+            axis = w.getPlotItem().getAxis("left")
+            axis.setWidth(76)
+            axis.enableAutoSIPrefix(False)  # V stays V (a log axis with a prefix would mislead)
+            w.getPlotItem().getAxis("bottom").enableAutoSIPrefix(False)
 
         self.timer = QTimer(self)
         self.timer.setInterval(max(1, int(round(1000.0 / refresh_hz))))
@@ -118,7 +128,13 @@ class LivePlots(QWidget):
             if plot is not None:
                 plot.setLabel("left", col.name if col.unit == "1" else f"{col.name} ({col.unit})")
 
+    def set_origin(self, t0_s: float | None) -> None:
+        """Time axes from here on are seconds since `t0_s` (the run's start), not bench time;
+        None: since the first sample (a replay whose file does not say when the run began)."""
+        self.t0_s = None if t0_s is None else float(t0_s)
+
     def clear(self) -> None:
+        self.t0_s = 0.0
         self.fpga.clear()
         self.table.clear()
         self.recent.clear()
@@ -138,6 +154,11 @@ class LivePlots(QWidget):
         if data.ndim != 2 or data.shape[0] == 0:
             return
         columns = tuple(columns)
+        if "t_s" in columns and self.t0_s is None:
+            self.t0_s = float(data[0, columns.index("t_s")])
+        if self.t0_s and "t_s" in columns:
+            data = data.copy()
+            data[:, columns.index("t_s")] -= self.t0_s
         q = _columns(columns, data, ("t_s", "cx", "sx", "cy", "sy"))
         if q is not None:
             el = orbit_elements(q[:, 1:5])
@@ -195,6 +216,8 @@ class LivePlots(QWidget):
         """A FitUpdate: an E(t) model ({t_s, E_fit | energy_fit | E}) or a sweep model
         ({freq_hz, amplitude[, phase_deg]}; the one named "sweep_model" wins)."""
         self.fits[name] = {k: np.asarray(v, dtype=float) for k, v in curves.items()}
+        if "t_s" in self.fits[name]:
+            self.fits[name]["t_s"] = self.fits[name]["t_s"] - (self.t0_s or 0.0)
         self._dirty = True
 
     # --- drawing ---------------------------------------------------------------------------
