@@ -250,8 +250,9 @@ def test_window_on_the_engine_station_runs_and_reports(qtbot, tmp_path, monkeypa
         assert win.plots.fpga.total_rows > 0 and win.plots.table.total_rows > 0
         table = win.station._items["table"]
         rows = {table.child(i).text(0): table.child(i).text(1) for i in range(table.childCount())}
-        assert float(rows["rate_dps"]) == pytest.approx(50.0, abs=0.5)
-        assert win.plots.p_rate.getAxis("left").labelText == "rate_dps (deg/s)"  # the stream's declared unit
+        assert float(rows["rate_dps"]) == pytest.approx(0.0, abs=0.5)  # after the safe state: at rest
+        axis = win.plots.p_rate.getAxis("left")
+        assert (axis.labelText, axis.labelUnits) == ("rate_dps", "deg/s")  # the stream's declared unit
         from bench.gui.replay import replay_events
 
         assert backend.join(60)  # the runner closes the raw file after it announced the end

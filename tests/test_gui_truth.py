@@ -122,6 +122,7 @@ def test_pause_says_the_table_keeps_its_rate_and_close_asks_first(window, qtbot,
         return QMessageBox.StandardButton.No if len(answers) == 1 else QMessageBox.StandardButton.Yes
 
     monkeypatch.setattr(QMessageBox, "question", answer)
+    del win.ask_close_during_run  # the fixture's always-yes answer off: this test asks the real question
     assert not win.close()  # "No": the window stays, the run goes on
     assert win.backend.running() and win.isVisible()
     assert win.close()  # "Yes": abort, wait for the safe state, close

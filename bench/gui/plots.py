@@ -125,8 +125,8 @@ class LivePlots(QWidget):
                  ("sweep", "amplitude"): self.p_amp, ("sweep", "phase_deg"): self.p_phase}
         for col in schema.columns:
             plot = shown.get((schema.name, col.name))
-            if plot is not None:
-                plot.setLabel("left", col.name if col.unit == "1" else f"{col.name} ({col.unit})")
+            if plot is not None and col.unit not in ("", "1"):  # a unitless column keeps the plot's own label
+                plot.setLabel("left", col.name, units=col.unit)
 
     def set_origin(self, t0_s: float | None) -> None:
         """Time axes from here on are seconds since `t0_s` (the run's start), not bench time;
