@@ -356,21 +356,3 @@ def _warnings_of(logger_name: str):
         yield said
     finally:
         logger.removeHandler(handler)
-
-
-@contextlib.contextmanager
-def _warnings_of(logger_name: str):
-    """The warnings a logger (and its children) emits inside the block, as a list of texts."""
-    said: list[str] = []
-
-    class _Keep(logging.Handler):
-        def emit(self, record: logging.LogRecord) -> None:
-            said.append(record.getMessage())
-
-    handler = _Keep(logging.WARNING)
-    logger = logging.getLogger(logger_name)
-    logger.addHandler(handler)
-    try:
-        yield said
-    finally:
-        logger.removeHandler(handler)
