@@ -211,9 +211,11 @@ class Station:
             spec = self.spec(role)
             if spec.health is None:
                 continue
-            rows = spec.health(self.devices[role], self._stream_since.get(role))
-            if spec.health_columns and rows is not None and self._ctx is not None:
-                self._ctx.record(role, ("t_s", *spec.health_columns), np.column_stack([[now_sim], rows]))
+            device = self.devices[role]
+            rows = spec.health(device, self._stream_since.get(role))
+            columns = spec.health_columns or getattr(device, "health_columns", ())  # an instrument's own
+            if columns and rows is not None and self._ctx is not None:
+                self._ctx.record(role, ("t_s", *columns), np.column_stack([[now_sim], rows]))
 
     def ensure_ready(self) -> None:
         """Before a run: ask every device for a sign of life; a device whose link was lost since
