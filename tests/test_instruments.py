@@ -99,7 +99,7 @@ def test_a_run_logs_each_instrument_with_its_units(tmp_path):
     data = open_run(record.raw_file)
     supply = data.table("supply")
     assert tuple(supply) == ("t_s", "ch_1_voltage", "ch_1_current")
-    assert len(supply) >= 5 and np.allclose(supply["ch_1_voltage"], 15.0)
+    assert len(supply["t_s"]) >= 5 and np.allclose(supply["ch_1_voltage"], 15.0)
     assert np.allclose(supply["ch_1_current"], k2200.QUIESCENT_A)
     assert data.units("supply") == {"t_s": "s", "ch_1_voltage": "V", "ch_1_current": "A"}
     assert data.units("dmm") == {"t_s": "s", "voltage_ac": "V"}
