@@ -124,3 +124,11 @@ def test_station_file_mistakes_are_named(tmp_path, table, error):
     with pytest.raises((StationError, DeviceError)) as info:
         SimStation(str(path)).open().close()
     assert error in str(info.value), str(info.value)
+
+
+def test_the_window_panel_shows_the_logged_properties(station):
+    from bench.gui.engine_backend import _read_device
+
+    shown = _read_device("supply", station.devices["supply"], talk=True)
+    assert shown == {"ch_1.voltage": "15 V", "ch_1.current": "0.15 A"}
+    assert _read_device("supply", station.devices["supply"], talk=False) == {}  # no I/O during a run

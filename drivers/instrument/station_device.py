@@ -122,6 +122,13 @@ class InstrumentDevice:
                 raise ProtocolError(f"{self.role}: {path} read {v!r}, not a number") from None
         return np.asarray([values], dtype=float)
 
+    def panel_values(self) -> dict[str, str]:
+        """The logged properties as the station panel shows them (`ch_1.current`: `0.15 A`)."""
+        row = self.read_record()
+        if row is None:
+            return {}
+        return {path: f"{value:.6g} {unit}" for (path, unit), value in zip(self.record.items(), row[0], strict=True)}
+
     def health(self) -> np.ndarray | None:
         """A sign of life: the recorded properties, or the identity when none is recorded."""
         if self.record:
