@@ -158,7 +158,10 @@ class Station:
 
     # --- lifecycle -------------------------------------------------------------------------
     def open(self) -> Station:
-        """Connect every device (starting the simulators first on a simulated station)."""
+        """Connect every device (starting the simulators first on a simulated station); an open
+        station stays as it is (`with station.open() as st` opens once)."""
+        if self.devices:
+            return self
         try:
             for role, cfg in self.config.devices.items():
                 self.devices[role] = self.spec(role).build(self._device_cfg(role, cfg), self.clock)
