@@ -22,6 +22,9 @@ from bench.validation import KIND_WORDS, ValidationError, convert, missing_key, 
 #: the roles a station file may name (`[devices.<role>]`); the several-gyros issue adds slots of
 #: `frontend`/`fpga` (N front ends and N links per station) beside the one shared `table`
 ROLES = ("table", "frontend", "fpga")
+#: the role of a driver placed under any other name (`[devices.dmm]`, `[devices.supply]`): an
+#: instrument the station sets up, logs and makes safe, and procedures reach as `ctx.devices.<name>`
+INSTRUMENT = "instrument"
 
 
 class StationError(ValueError):
@@ -118,6 +121,8 @@ class DriverSpec:
     safe_state: Callable[[Any], bool] = _device_safe_state
     health_columns: tuple[str, ...] = ()
     stream: StreamSpec | None = None
+    #: check_config(where, cfg) -> None: what a key's type cannot say (StationError names the key)
+    check_config: Callable[[str, dict[str, Any]], None] | None = None
 
     def serve_simulator(self, world: Any, cfg: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
         """Start this model's simulator on the world; (handle, address keys)."""
@@ -135,8 +140,8 @@ DRIVERS: dict[str, DriverSpec] = {}
 
 def register_driver(spec: DriverSpec) -> DriverSpec:
     """Add a model to the registry (the name in a station file's `driver = ...`)."""
-    if spec.role not in ROLES:
-        raise ValueError(f"driver {spec.name!r}: role {spec.role!r} is not one of {ROLES}")
+    if spec.role not in (*ROLES, INSTRUMENT):
+        raise ValueError(f"driver {spec.name!r}: role {spec.role!r} is not one of {(*ROLES, INSTRUMENT)}")
     if spec.part not in SAFE_PARTS:
         raise ValueError(f"driver {spec.name!r}: part {spec.part!r} is not one of {SAFE_PARTS} (its safe-state part)")
     DRIVERS[spec.name] = spec

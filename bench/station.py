@@ -158,7 +158,10 @@ class Station:
 
     # --- lifecycle -------------------------------------------------------------------------
     def open(self) -> Station:
-        """Connect every device (starting the simulators first on a simulated station)."""
+        """Connect every device (starting the simulators first on a simulated station); an open
+        station stays as it is (`with station.open() as st` opens once)."""
+        if self.devices:
+            return self
         try:
             for role, cfg in self.config.devices.items():
                 self.devices[role] = self.spec(role).build(self._device_cfg(role, cfg), self.clock)
@@ -211,9 +214,11 @@ class Station:
             spec = self.spec(role)
             if spec.health is None:
                 continue
-            rows = spec.health(self.devices[role], self._stream_since.get(role))
-            if spec.health_columns and rows is not None and self._ctx is not None:
-                self._ctx.record(role, ("t_s", *spec.health_columns), np.column_stack([[now_sim], rows]))
+            device = self.devices[role]
+            rows = spec.health(device, self._stream_since.get(role))
+            columns = spec.health_columns or getattr(device, "health_columns", ())  # an instrument's own
+            if columns and rows is not None and self._ctx is not None:
+                self._ctx.record(role, ("t_s", *columns), np.column_stack([[now_sim], rows]))
 
     def ensure_ready(self) -> None:
         """Before a run: ask every device for a sign of life; a device whose link was lost since

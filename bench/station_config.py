@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bench.devices import DRIVERS, ROLES, Key, StationError, check_table
+from bench.devices import DRIVERS, INSTRUMENT, ROLES, Key, StationError, check_table
 from bench.validation import missing_key, not_a, not_one_of
 
 BUILTIN_DIR = Path(__file__).resolve().parent / "stations"
@@ -86,20 +86,33 @@ def load_config(name_or_path: str | Path) -> StationConfig:
     devices: dict[str, dict[str, Any]] = {}
     for role, table in (raw.get("devices") or {}).items():
         where = f"{path}: [devices.{role}]"
-        if role not in ROLES:
-            raise StationError(f"{path}: [devices.{role}] unknown role {role!r} (allowed: {', '.join(ROLES)})")
+        if role not in ROLES and not role.isidentifier():
+            raise StationError(
+                f"{path}: [devices.{role}] {role!r} is not a name (roles: {', '.join(ROLES)}, or a name of your "
+                f"own, letters, digits and _, for an instrument)"
+            )
         if not isinstance(table, dict):
             raise StationError(f"{path}: {not_a(f'devices.{role}', table, 'a table')}")
         name = table.get("driver")
-        fitting = sorted(n for n, spec in DRIVERS.items() if spec.role == role)
+        kind = role if role in ROLES else INSTRUMENT
+        fitting = sorted(n for n, spec in DRIVERS.items() if spec.role == kind)
         if name is None:
             raise StationError(f"{where} {missing_key('driver', 'one of ' + ', '.join(fitting))}")
         if not isinstance(name, str) or name not in DRIVERS:
             raise StationError(f"{where} {not_one_of('driver', name, fitting)}")
         spec = DRIVERS[name]
-        if spec.role != role:
+        if kind == INSTRUMENT and spec.role in ROLES:
+            raise StationError(
+                f"{where} unknown role {role!r}: a {spec.role} driver goes under [devices.{spec.role}] "
+                f"(a name of your own holds an instrument: driver = one of {', '.join(fitting)})"
+            )
+        if spec.role != kind:
             raise StationError(f"{where} {not_one_of('driver', name, fitting)} (it is a {spec.role} driver)")
         cfg = check_table(where, table, spec.keys)
+        if spec.check_config is not None:
+            spec.check_config(where, cfg)
+        if kind == INSTRUMENT:
+            cfg["role"] = role  # the instrument's name in the run, its logged stream and `ctx.devices`
         if sim is None:
             missing = [k for k in ("resource", "url") if k in spec.keys and not cfg.get(k)]
             if missing:

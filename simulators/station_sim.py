@@ -79,6 +79,8 @@ class SimStation(Station):
         return self.addresses
 
     def open(self) -> SimStation:
+        if self.devices:  # already open: the same simulators and drivers
+            return self
         try:
             self.start_simulators()
         except Exception:

@@ -165,8 +165,9 @@ def test_every_station_file_loads_and_names_itself():
         assert config.id == stem, f"{path}: id {config.id!r} differs from the file name"
         for role, cfg in config.devices.items():
             spec = DRIVERS[cfg["driver"]]
-            assert spec.role == role, f"{path}: [devices.{role}] uses {spec.name}, a {spec.role} driver"
-            assert set(cfg) <= set(spec.keys), f"{path}: [devices.{role}] keys beyond the spec"
+            kind = role if role in ROLES else "instrument"  # an instrument goes under a name of its own
+            assert spec.role == kind, f"{path}: [devices.{role}] uses {spec.name}, a {spec.role} driver"
+            assert set(cfg) - {"role"} <= set(spec.keys), f"{path}: [devices.{role}] keys beyond the spec"
     text = "".join(p.read_text() for p in stations.values())
     assert "\t" not in text
 
@@ -183,7 +184,7 @@ def _all_keys() -> list[tuple[str, str, Key]]:
 def test_every_driver_spec_is_complete():
     assert {"modbus-table", "ascii-table", "scpi-frontend", "fpga-link"} <= set(DRIVERS)
     for spec in DRIVERS.values():
-        assert spec.doc.strip() and spec.role in ROLES and callable(spec.build), spec.name
+        assert spec.doc.strip() and spec.role in (*ROLES, "instrument") and callable(spec.build), spec.name
         assert spec.keys["driver"].required, f"{spec.name}: `driver` names the model and is required"
 
 
@@ -196,7 +197,7 @@ def test_every_config_key_is_documented_and_checked_in_the_shared_words(where, n
     assert not _unit_problems(name, key.unit, numeric), _unit_problems(name, key.unit, numeric)
     if not key.required:
         assert key.check(where, name, key.default) == key.default  # the default is valid
-    kind_word = {float: "a number", int: "an integer", str: "text", bool: "true or false"}[key.type]
+    kind_word = {float: "a number", int: "an integer", str: "text", bool: "true or false", dict: "a table"}[key.type]
     with pytest.raises(StationError) as bad_kind:
         key.check(where, name, ["x"])
     assert str(bad_kind.value) == f"{where} {name}=['x'] is not {kind_word}"

@@ -151,3 +151,15 @@ def test_same_procedure_on_an_ascii_table_only_station(tmp_path):
         rec = Runner(st, runs_dir=tmp_path / "runs").run(TableSpin, {"rate_dps": -80.0, "hold_s": 0.5})
         assert rec.outcome == "PASS" and rec.safe_state and rec.safe_detail["order"] == ["table"]
         assert abs(st.handles["table"].mechanics.rate_dps) < 0.05
+
+
+def test_opening_an_open_station_keeps_its_devices_and_simulators():
+    """`with SimStation(...).open() as st` used to open twice: a second set of simulators and
+    drivers, the first table's heartbeat left beating against a stopped simulator."""
+    from bench.station import SimStation
+
+    with SimStation("sim-hrg").open() as station:
+        devices, handles = dict(station.devices), dict(station.handles)
+        assert station.open() is station
+        assert station.devices == devices and station.handles == handles
+    assert not station.devices and not devices["table"].heartbeat.running

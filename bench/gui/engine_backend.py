@@ -225,4 +225,6 @@ def _read_device(role: str, dev: Any, *, talk: bool) -> dict[str, Any]:
             out["tripped"] = st.trip_reason()
     elif role == "frontend" and hasattr(dev, "channels"):
         out["drive"] = any(bool(c.output_on) for c in dev.channels.values())
+    elif callable(getattr(dev, "panel_values", None)):  # an instrument: its logged properties
+        out.update(dev.panel_values())
     return out

@@ -19,8 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
-
-from .pymeasure_adapter import PyMeasureDevice
+from drivers.instrument.pymeasure_adapter import PyMeasureDevice
 
 log = logging.getLogger(__name__)
 SR860_CLASS = "pymeasure.instruments.srs.SR860"

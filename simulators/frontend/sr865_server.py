@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import cmath
 import math
-import socket
-import socketserver
-import threading
 from typing import Any
 
 import numpy as np
 from scipy.signal import lfilter
+
+from simulators.line_server import LineServer
 
 #: OFLT index -> time constant (s), the SR86x table (1 us .. 30 ks, 1-3-10 steps)
 TIME_CONSTANTS_S = tuple(m * 10.0**e for e in range(-6, 5) for m in (1.0, 3.0))
@@ -215,58 +214,12 @@ class Sr865Model:
         raise _Err(ESR_COMMAND_ERROR, f"unknown or unsupported command {unit!r}")
 
 
-class _LineServer:
-    """One instrument's socket: LF-terminated lines in, answers out, under world.lock."""
-
-    def __init__(self, world: Any, model: Sr865Model, host: str) -> None:
-        self.world, self.model = world, model
-        self.hang = False
-        self.garble = False
-        self._stop = threading.Event()
-        outer = self
-
-        class Handler(socketserver.StreamRequestHandler):
-            def handle(self) -> None:
-                self.connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                while not outer._stop.is_set():
-                    raw = self.rfile.readline(65536)
-                    if not raw:
-                        return
-                    with outer.world.lock:
-                        answer = outer.model.execute(raw.decode("ascii", "replace"))
-                    if answer is not None and not outer.hang:
-                        if outer.garble:  # two noise bytes, then the first half of the answer
-                            answer = "\x7f#" + answer[: len(answer) // 2]
-                        self.wfile.write((answer + "\n").encode("ascii", "replace"))
-
-        self._tcp = socketserver.ThreadingTCPServer((host, 0), Handler, bind_and_activate=False)
-        self._tcp.daemon_threads = True
-        self._tcp.allow_reuse_address = True
-        self._tcp.server_bind()
-        self._tcp.server_activate()
-        self.host, self.port = self._tcp.server_address[:2]
-        self._thread = threading.Thread(
-            target=self._tcp.serve_forever, kwargs={"poll_interval": 0.05}, name="sr865-sim", daemon=True
-        )
-        self._thread.start()
-
-    @property
-    def resource_name(self) -> str:
-        return f"TCPIP::{self.host}::{self.port}::SOCKET"
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._tcp.shutdown()
-        self._tcp.server_close()
-        self._thread.join(timeout=5.0)
-
-
 class Sr865PairServer:
     """Handle of the two simulated lock-ins: `.resources` (master, slave), `.models`, `inject`, `stop`."""
 
     def __init__(self, world: Any, models: tuple[Sr865Model, Sr865Model], host: str = "127.0.0.1") -> None:
         self.world, self.models = world, models
-        self.servers = [_LineServer(world, m, host) for m in models]
+        self.servers = [LineServer(world, m.execute, host, name="sr865-sim") for m in models]
 
     @property
     def resources(self) -> tuple[str, str]:

@@ -5,6 +5,7 @@ rules hold (docs/frontend_sr865.md).  PyMeasure is an optional extra: `gyrobench
 from __future__ import annotations
 
 import importlib
+import warnings
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -46,7 +47,9 @@ class PyMeasureDevice:
         if "::SOCKET" in self.resource.upper():
             kw.setdefault("visa_library", "@py")  # pyvisa-py speaks raw sockets without a vendor VISA
         try:
-            self.instrument = cls(self.resource, **kw)
+            with warnings.catch_warnings():  # PyMeasure warns that it does not know if a class speaks SCPI
+                warnings.simplefilter("ignore", FutureWarning)
+                self.instrument = cls(self.resource, **kw)
         except Exception as exc:  # noqa: BLE001 - pyvisa/pymeasure raise many kinds on a bad address
             raise LinkLostError(f"{self.name}: cannot open {self.resource} ({exc})") from exc
         return self
