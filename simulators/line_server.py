@@ -1,6 +1,7 @@
-"""A line-oriented instrument on a loopback TCP socket (VISA `TCPIP::host::port::SOCKET`): LF-terminated
-commands in, each answered (or not) by `execute(line)` under the world's lock.  Shared by the
-simulated lock-ins, supply and multimeter; `hang` and `garble` are the faults a test injects."""
+"""A line-oriented instrument on a loopback TCP socket: LF-terminated commands in, each answered
+(or not) by a reply function.  `LineServer` is the socket (shared by the simulated tables' ASCII
+and ACL dialects); `TextLineServer` answers `execute(line)` under the world's lock with the
+faults a test injects (`hang`, `garble`), for the SCPI instruments (VISA `TCPIP::host::port::SOCKET`)."""
 
 from __future__ import annotations
 
@@ -12,31 +13,26 @@ from typing import Any
 
 
 class LineServer:
-    """Serve `execute` (str -> answer or None) on a free loopback port until `stop()`."""
+    """Serve `reply(line) -> bytes | None` on a loopback port (0: a free one) until `stop()`."""
 
-    def __init__(self, world: Any, execute: Callable[[str], str | None], host: str = "127.0.0.1",
-                 name: str = "instrument-sim") -> None:
-        self.world, self.execute = world, execute
-        self.hang = False  # stop answering (a hung instrument)
-        self.garble = False  # two noise bytes, then half of every answer
+    def __init__(self, reply: Callable[[str], bytes | None], host: str = "127.0.0.1", port: int = 0,
+                 name: str = "line-server", max_line: int = 65536) -> None:
         self._stop = threading.Event()
         outer = self
+        self.reply = reply
 
         class Handler(socketserver.StreamRequestHandler):
             def handle(self) -> None:
                 self.connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                 while not outer._stop.is_set():
-                    raw = self.rfile.readline(65536)
+                    raw = self.rfile.readline(max_line)
                     if not raw:
                         return
-                    with outer.world.lock:
-                        answer = outer.execute(raw.decode("ascii", "replace"))
-                    if answer is not None and not outer.hang:
-                        if outer.garble:
-                            answer = "\x7f#" + answer[: len(answer) // 2]
-                        self.wfile.write((answer + "\n").encode("ascii", "replace"))
+                    out = outer.reply(raw.decode("ascii", "replace"))
+                    if out is not None:
+                        self.wfile.write(out)
 
-        self._tcp = socketserver.ThreadingTCPServer((host, 0), Handler, bind_and_activate=False)
+        self._tcp = socketserver.ThreadingTCPServer((host, port), Handler, bind_and_activate=False)
         self._tcp.daemon_threads = True
         self._tcp.allow_reuse_address = True
         self._tcp.server_bind()
@@ -49,6 +45,7 @@ class LineServer:
 
     @property
     def resource_name(self) -> str:
+        """The socket as a VISA resource (pyvisa-py)."""
         return f"TCPIP::{self.host}::{self.port}::SOCKET"
 
     def stop(self) -> None:
@@ -56,3 +53,24 @@ class LineServer:
         self._tcp.shutdown()
         self._tcp.server_close()
         self._thread.join(timeout=5.0)
+
+
+class TextLineServer(LineServer):
+    """Answer `execute(line) -> str | None` under `world.lock`, LF-terminated; `hang` stops the
+    answers, `garble` sends two noise bytes and half of each answer."""
+
+    def __init__(self, world: Any, execute: Callable[[str], str | None], host: str = "127.0.0.1",
+                 name: str = "instrument-sim") -> None:
+        self.world, self.execute = world, execute
+        self.hang = False
+        self.garble = False
+        super().__init__(self._answer, host, 0, name)
+
+    def _answer(self, line: str) -> bytes | None:
+        with self.world.lock:
+            answer = self.execute(line)
+        if answer is None or self.hang:
+            return None
+        if self.garble:
+            answer = "\x7f#" + answer[: len(answer) // 2]
+        return (answer + "\n").encode("ascii", "replace")

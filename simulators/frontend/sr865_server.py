@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import lfilter
 
-from simulators.line_server import LineServer
+from simulators.line_server import TextLineServer
 
 #: OFLT index -> time constant (s), the SR86x table (1 us .. 30 ks, 1-3-10 steps)
 TIME_CONSTANTS_S = tuple(m * 10.0**e for e in range(-6, 5) for m in (1.0, 3.0))
@@ -219,7 +219,7 @@ class Sr865PairServer:
 
     def __init__(self, world: Any, models: tuple[Sr865Model, Sr865Model], host: str = "127.0.0.1") -> None:
         self.world, self.models = world, models
-        self.servers = [LineServer(world, m.execute, host, name="sr865-sim") for m in models]
+        self.servers = [TextLineServer(world, m.execute, host, name="sr865-sim") for m in models]
 
     @property
     def resources(self) -> tuple[str, str]:

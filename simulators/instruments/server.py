@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from simulators.line_server import LineServer
+from simulators.line_server import TextLineServer
 
 from .scpi import ScpiInstrument
 
@@ -14,7 +14,7 @@ class InstrumentServer:
 
     def __init__(self, world: Any, model: ScpiInstrument, name: str) -> None:
         self.world, self.model = world, model
-        self.server = LineServer(world, model.execute, name=name)
+        self.server = TextLineServer(world, model.execute, name=name)
 
     @property
     def resource(self) -> str:

@@ -11,14 +11,12 @@ of one message joined by ';'.  A command message without a query gets no answer 
 from __future__ import annotations
 
 import math
-import socket
-import socketserver
-import threading
 import time
 from typing import Any
 
 from drivers.rate_table import acutronic_protocol as ap
 from drivers.rate_table import modbus_protocol as mp
+from simulators.line_server import LineServer
 
 from .ascii_server import _LinkFaults
 from .fault_controls import TableFaultControls
@@ -274,35 +272,13 @@ class AcutrolTableServer(TableFaultControls):
         self.controller = AcutrolController(world, mechanics)
         self.link_faults = _LinkFaults()
         self._late_s = 0.0
-        self._stop = threading.Event()
-        outer = self
-
-        class Handler(socketserver.StreamRequestHandler):
-            def handle(self) -> None:
-                self.connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                while not outer._stop.is_set():
-                    raw = self.rfile.readline(65536)
-                    if not raw:
-                        return
-                    out = outer._reply(raw.decode("ascii", "replace"))
-                    if out is not None:
-                        self.wfile.write(out)
-
-        self._tcp = socketserver.ThreadingTCPServer((host, port), Handler, bind_and_activate=False)
-        self._tcp.daemon_threads = True
-        self._tcp.allow_reuse_address = True
-        self._tcp.server_bind()
-        self._tcp.server_activate()
-        self.host, self.port = self._tcp.server_address[:2]
-        self._thread = threading.Thread(
-            target=self._tcp.serve_forever, kwargs={"poll_interval": 0.05}, name="acutrol-table", daemon=True
-        )
-        self._thread.start()
+        self._server = LineServer(self._reply, host, port, name="acutrol-table")
+        self.host, self.port = self._server.host, self._server.port
 
     @property
     def resource_name(self) -> str:
         """The same socket as a VISA resource (pyvisa-py), for the GPIB-style path."""
-        return f"TCPIP::{self.host}::{self.port}::SOCKET"
+        return self._server.resource_name
 
     def delay_next_reply(self, wall_s: float) -> None:
         """The next answer goes out `wall_s` late (a late reply the driver must not mistake for
@@ -320,10 +296,7 @@ class AcutrolTableServer(TableFaultControls):
         return None if answer is None else (answer + ap.TERMINATOR).encode("ascii", "replace")
 
     def stop(self) -> None:
-        self._stop.set()
-        self._tcp.shutdown()
-        self._tcp.server_close()
-        self._thread.join(timeout=5.0)
+        self._server.stop()
         with self.world.lock:
             self.world.detach(self.mechanics)
 

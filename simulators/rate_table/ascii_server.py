@@ -7,14 +7,13 @@ import math
 import os
 import pty
 import select
-import socket
-import socketserver
 import threading
 import tty
 from typing import Any
 
 from drivers.rate_table import ascii_protocol as ap
 from drivers.rate_table import modbus_protocol as mp
+from simulators.line_server import LineServer
 
 from .fault_controls import TableFaultControls
 from .mechanics import CommandRejected, TableMechanics
@@ -170,18 +169,10 @@ class AsciiTableServer(TableFaultControls):
             self._slave = slave
             self._thread = threading.Thread(target=self._serve_pty, name="ascii-table-pty", daemon=True)
             self._tcp = None
+            self._thread.start()
         else:
-            handler = self._make_handler()
-            self._tcp = socketserver.ThreadingTCPServer((host, port), handler, bind_and_activate=False)
-            self._tcp.daemon_threads = True
-            self._tcp.allow_reuse_address = True
-            self._tcp.server_bind()
-            self._tcp.server_activate()
-            self.host, self.port = self._tcp.server_address[:2]
-            self._thread = threading.Thread(
-                target=self._tcp.serve_forever, kwargs={"poll_interval": 0.05}, name="ascii-table", daemon=True
-            )
-        self._thread.start()
+            self._tcp = LineServer(self._reply, host, port, name="ascii-table", max_line=4096)
+            self.host, self.port = self._tcp.host, self._tcp.port
 
     @property
     def url(self) -> str:
@@ -190,22 +181,6 @@ class AsciiTableServer(TableFaultControls):
     def _reply(self, line: str) -> bytes | None:
         reply = self.link_faults.apply(self.controller.handle_line(line))
         return None if reply is None else (reply + ap.TERMINATOR).encode("ascii", "replace")
-
-    def _make_handler(self):
-        outer = self
-
-        class Handler(socketserver.StreamRequestHandler):
-            def handle(self) -> None:
-                self.connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                while not outer._stop.is_set():
-                    raw = self.rfile.readline(4096)
-                    if not raw:
-                        return
-                    out = outer._reply(raw.decode("ascii", "replace"))
-                    if out is not None:
-                        self.wfile.write(out)
-
-        return Handler
 
     def _serve_pty(self) -> None:
         buf = b""
@@ -226,10 +201,9 @@ class AsciiTableServer(TableFaultControls):
     def stop(self) -> None:
         self._stop.set()
         if self._tcp is not None:
-            self._tcp.shutdown()
-            self._tcp.server_close()
-        self._thread.join(timeout=5.0)
-        if self._tcp is None:
+            self._tcp.stop()
+        else:
+            self._thread.join(timeout=5.0)
             for fd in (self._master, self._slave):
                 try:
                     os.close(fd)
