@@ -131,13 +131,16 @@ def context(data: Any, row: dict[str, Any] | None = None,
     }
 
 
-def render_html(data: Any, row: dict[str, Any] | None = None, ctx: dict[str, Any] | None = None) -> str:
-    """The report page of one run (a RunData) and, when known, its results-store row."""
+def render_html(data: Any, row: dict[str, Any] | None = None, ctx: dict[str, Any] | None = None, *,
+                template: str = "report.html.j2", extra: dict[str, Any] | None = None) -> str:
+    """The report page of one run (a RunData) and, when known, its results-store row.  template: a
+    template in bench/reporting/templates that extends report.html.j2 and fills its `certificate`
+    block (a page before the report); extra: the variables that template adds."""
     import jinja2
 
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=jinja2.select_autoescape(),
                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
-    return env.get_template("report.html.j2").render(**(ctx or context(data, row)))
+    return env.get_template(template).render(**(ctx or context(data, row)), **(extra or {}))
 
 
 class PdfUnavailable(RuntimeError):

@@ -3,7 +3,8 @@
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.engine.streams import Column, StreamSchema, declare
 
-HOLD = declare(StreamSchema("hold", "table-spin", (Column("t_s", "s"), Column("rate_dps", "deg/s"))))
+HOLD = declare(StreamSchema("hold", "table-spin", (Column("t_s", "s", quantity="time t"),
+                                                    Column("rate_dps", "deg/s", quantity="table rate Ω"))))
 
 
 class TableSpin(Procedure):
