@@ -102,7 +102,8 @@ def _drift_declarations() -> tuple[Measurement, ...]:
                                    f"{m} theta drift amplitude, {words} (fit of mean + 4, 8, 12 theta)",
                                    truth=truth, when=when, when_doc=when_doc))
             out.append(Measurement(f"drift_{name}_{m}theta_phase_deg", "deg",
-                                   f"phase of the {m} theta drift term, amplitude sin {m}(theta - phase), {words}",
+                                   f"phase of the {m} theta drift term, amplitude sin {m}(theta - phase), {words} "
+                                   "(interval: the whole period when the amplitude's holds 0)",
                                    when=when, when_doc=when_doc))
         out.append(Measurement(f"drift_{name}_rest_rms_dph", "deg/h",
                                f"rms of the drift the harmonic fit leaves, {words} (noise)",
@@ -330,7 +331,8 @@ class HrgDamping(HrgExcitation, Procedure):
             results.append(Result(f"drift_{name}_mean_dph", full.mean, ci95=full.mean_ci95))
             for m, h in full.harmonics.items():
                 results.append(Result(f"drift_{name}_{m}theta_dph", h.amplitude, ci95=h.ci95))
-                results.append(Result(f"drift_{name}_{m}theta_phase_deg", math.degrees(h.phase_rad)))
+                results.append(Result(f"drift_{name}_{m}theta_phase_deg", math.degrees(h.phase_rad),
+                                      ci95=tuple(math.degrees(x) for x in h.phase_ci95)))
             results.append(Result(f"drift_{name}_rest_rms_dph", full.rest_rms))
             curves[name] = (mids, drift * to_dph)
         ratio = amps["before"] / amps["after"] if amps["after"] > 0 else math.inf

@@ -18,8 +18,8 @@ import pytest
 
 from bench.recorder import open_run
 from bench.reporting import figures_for, render_html
-from bench.reporting.damping import harmonic_fit
-from bench.reporting.figures import envelope, label
+from bench.reporting.damping import drift_model
+from bench.reporting.figures import NO_UNIT, envelope
 from bench.reporting.free_decay import trajectory
 from bench.reporting.numbers import error_in_intervals, limits, plain, sig, with_interval
 from tests.needs import need
@@ -55,12 +55,6 @@ def test_a_value_without_an_interval_gets_four_significant_digits_and_empty_fiel
     assert error_in_intervals(1.0, 2.0, None) == "—"
 
 
-def test_axis_labels_name_quantity_and_unit():
-    assert label("t_s") == "time t (s)" and label("freq_hz") == "drive frequency f (Hz)"
-    assert label("rate_dps") == "table rate Ω (deg/s)" and label("decay_per_s") == "decay (1/s)"
-    assert label("x", ("position", "mm")) == "position (mm)"
-
-
 # --- figure helpers ----------------------------------------------------------------------------
 def test_envelope_keeps_every_extreme_of_a_long_record():
     """A one-sample spike survives the reduction (decimation by 10 would drop 9 in 10 of them)."""
@@ -73,17 +67,6 @@ def test_envelope_keeps_every_extreme_of_a_long_record():
     assert np.all(lo <= hi)
     short = envelope(t[:100], y[:100])
     assert np.array_equal(short[1], y[:100])
-
-
-def test_harmonic_fit_recovers_known_harmonics_with_intervals():
-    rng = np.random.default_rng(2)
-    th = rng.uniform(-math.pi / 4, math.pi / 4, 400)
-    y = 3.0 + 10.0 * np.cos(4 * th - 0.3) + 2.0 * np.sin(8 * th) + 0.5 * np.cos(12 * th) + rng.normal(0, 0.2, th.size)
-    fit = harmonic_fit(th, y)
-    for term, truth in (("mean", 3.0), ("4θ", 10.0), ("8θ", 2.0), ("12θ", 0.5)):
-        v, (lo, hi) = fit["terms"][term]
-        assert lo <= truth <= hi and hi - lo < 0.2, (term, v, lo, hi)
-    assert np.std(fit["residual"]) == pytest.approx(0.2, rel=0.15)
 
 
 def test_linear_trajectory_matches_an_adaptive_integration():

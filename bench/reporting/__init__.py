@@ -45,9 +45,14 @@ def _param_rows(data: Any, proc: Any) -> list[dict[str, str]]:
     rows = []
     for name, value in data.params.items():
         spec = specs.get(name)
+        unit = getattr(spec, "unit", "") or ("1" if _is_number(value) else "")  # "": dimensionless, as declared
         rows.append({"name": name, "value": plain(value) if not isinstance(value, str) else value,
-                     "unit": getattr(spec, "unit", "") or "", "doc": getattr(spec, "doc", "") or ""})
+                     "unit": unit, "doc": getattr(spec, "doc", "") or ""})
     return rows
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, str]]:
@@ -71,7 +76,7 @@ def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, s
         value, interval = with_interval(m.get("value"), ci)
         t = truth.get(m.get("base", name))
         out.append({
-            "name": name, "value": value, "interval": interval, "unit": m.get("unit") or "",
+            "name": name, "value": value, "interval": interval, "unit": m.get("unit") or "1",  # "": dimensionless
             "limits": limits(m.get("low"), m.get("high")), "outcome": m.get("outcome") or DASH,
             "truth": truth_text(t, ci) if t is not None else DASH,
             "error": error_in_intervals(m.get("value"), t, ci) if t is not None else DASH,
