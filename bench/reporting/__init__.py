@@ -118,7 +118,9 @@ def context(data: Any, row: dict[str, Any] | None = None,
     proc = procedure_of(data)
     figs, notes = figures if figures is not None else figures_for(data, proc)
     a = data.attrs
-    truth_shown = bool(a.get("simulated") and data.truth)
+    rows = _measurement_rows(data, row)
+    # the truth columns on a simulated station, when a measurement has a truth to compare with
+    truth_shown = bool(a.get("simulated") and data.truth and any(r["truth"] != DASH for r in rows))
     return {
         "run_id": a.get("run_id", data.path.stem),
         "procedure": a.get("procedure", ""),
@@ -128,7 +130,7 @@ def context(data: Any, row: dict[str, Any] | None = None,
         "incomplete": data.incomplete,
         "identity": _identity(data, proc),
         "params": _param_rows(data, proc),
-        "measurements": _measurement_rows(data, row),
+        "measurements": rows,
         "truth_shown": truth_shown,
         "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key, "table": f.table} for f in figs],
         "notes": notes + list(getattr(data, "notes", [])),
