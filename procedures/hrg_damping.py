@@ -44,7 +44,7 @@ declare(StreamSchema("hrg-damping residuals", "hrg-damping", (
     _T, Column("residual_ln_e", "1", quantity="residual ln E"))))
 for _name in ("before", "after"):
     declare(StreamSchema(f"hrg-damping drift {_name}", "hrg-damping", (
-        _THETA, Column("drift_dph", "deg/h", quantity="drift (output-referred)"))))
+        _THETA, Column("drift_dph", "deg/h", quantity="drift, output-referred"))))
 _TAP = ("t_s", "cx", "sx", "cy", "sy")  # the FPGA stream's columns a tap keeps, in this order
 _MAX_CURVE_POINTS = 2000
 

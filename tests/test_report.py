@@ -6,7 +6,6 @@ console message, every figure shown; under CI=true a missing browser fails the t
 from __future__ import annotations
 
 import math
-import os
 import re
 import shutil
 import subprocess
@@ -18,6 +17,7 @@ import pytest
 
 from bench.recorder import open_run
 from bench.reporting import figures_for, render_html
+from bench.reporting.browser import chromium, load, screenshot
 from bench.reporting.damping import drift_model
 from bench.reporting.figures import NO_UNIT, envelope
 from bench.reporting.free_decay import trajectory
@@ -32,7 +32,6 @@ RUNS = {
     "mems-sweep": ("sim-mems", {"n_points": 9}),
     "table-spin": ("sim-hrg", {"hold_s": 0.5}),
 }
-DOCS = Path(__file__).resolve().parents[1] / "docs"
 
 
 # --- numbers ------------------------------------------------------------------------------------
@@ -304,22 +303,15 @@ def test_cli_report_pdf_and_analyze_figures(runs, tmp_path):
 
 # --- in a real browser -------------------------------------------------------------------------
 def _chromium() -> str | None:
-    return shutil.which("chromium") or shutil.which("chromium-browser")
+    return chromium()
 
 
-def browse(page: Path, profile: Path, screenshot: Path | None = None) -> tuple[str, list[str]]:
+def browse(page: Path, profile: Path, screenshot_png: Path | None = None) -> tuple[str, list[str]]:
     """(DOM after load, console messages) of a page in headless Chromium."""
-    flags = [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-             "--disable-background-networking", "--disable-component-update", "--disable-sync",
-             f"--user-data-dir={profile}", "--enable-logging=stderr", "--v=0", "--hide-scrollbars"]
-    run = subprocess.run(flags + ["--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0, run.stderr[-2000:]
-    console = [line for line in run.stderr.splitlines() if ":CONSOLE" in line]
-    if screenshot is not None:
-        shot = subprocess.run(flags + [f"--screenshot={screenshot}", "--window-size=1280,4000", page.as_uri()],
-                              capture_output=True, text=True, timeout=120)
-        assert shot.returncode == 0 and screenshot.is_file(), shot.stderr[-2000:]
-    return run.stdout, console
+    dom, console = load(page, profile)
+    if screenshot_png is not None:
+        screenshot(page, screenshot_png, profile, full_page=True)
+    return dom, console
 
 
 def test_the_console_check_sees_an_error(tmp_path):
@@ -333,17 +325,13 @@ def test_the_console_check_sees_an_error(tmp_path):
 
 @pytest.mark.parametrize("name", list(RUNS))
 def test_report_loads_in_headless_chromium_with_every_figure(pages, name, tmp_path):
-    """No console message at all (the page has no script) and one <svg> a figure in the DOM.  With
-    GYROBENCH_DOCS_SCREENSHOTS=1 a screenshot replaces docs/report_<name>.png."""
+    """No console message at all (the page has no script) and one <svg> a figure in the DOM.  (The
+    screenshots in docs/ are of full default runs: docs/make_report_screenshots.py.)"""
     need(_chromium() is not None, "Debian's chromium is not installed (apt-get install chromium)")
-    update_docs = os.environ.get("GYROBENCH_DOCS_SCREENSHOTS") == "1"
-    shot = tmp_path / f"report_{name}.png"
-    dom, console = browse(pages[name][0], tmp_path / "profile", shot if update_docs else None)
+    dom, console = browse(pages[name][0], tmp_path / "profile")
     assert console == []
     assert dom.count("<svg") == len(EXPECTED_FIGURES[name])
     assert dom.count("<figcaption>") == len(EXPECTED_FIGURES[name])
-    if update_docs:
-        shutil.copy(shot, DOCS / f"report_{name}.png")
 
 
 def test_report_pdf_without_weasyprint_writes_the_html_and_says_why(runs, tmp_path, monkeypatch, capsys):

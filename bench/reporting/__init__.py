@@ -145,7 +145,7 @@ def render_html(data: Any, row: dict[str, Any] | None = None, ctx: dict[str, Any
     block (a page before the report); extra: the variables that template adds."""
     import jinja2
 
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=jinja2.select_autoescape(),
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True,
                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
     return env.get_template(template).render(**(ctx or context(data, row)), **(extra or {}))
 

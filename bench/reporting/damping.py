@@ -18,6 +18,7 @@ from .figures import (
     log_label,
     measurement,
     new_figure,
+    plot_record,
     stream_figure,
     table_figure,
 )
@@ -76,22 +77,51 @@ def energy_figure(data: Any) -> list[ReportFigure]:
     return [ReportFigure("hrg-damping_energy", "Free decay: ln E with the fit and residuals", fig, note)]
 
 
+def _decay_elements(data: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(t_s, theta_deg unwrapped, k/a) at every FPGA sample of the decay window, or None when the
+    run recorded no window (the live curves are thinned by dropping samples, which aliases the 4θ
+    pumping of the quadrature; the report reduces the full record by envelopes instead)."""
+    from bench.analysis.slow_model import orbit_elements
+    from procedures.hrg_damping import DECAY, WINDOWS
+
+    if WINDOWS not in data or "fpga" not in data:
+        return None
+    win = data.table(WINDOWS)
+    sel = win["kind"] == DECAY
+    if not sel.any():
+        return None
+    fpga = data.table("fpga")
+    t = fpga["t_s"]
+    rows = (t > win["t_start_s"][sel][-1]) & (t <= win["t_end_s"][sel][-1])
+    if rows.sum() < 8:
+        return None
+    el = orbit_elements(np.column_stack([fpga[c][rows] for c in ("cx", "sx", "cy", "sy")]).astype(float))
+    theta = np.degrees(np.unwrap(4 * el["theta_rad"]) / 4)
+    return t[rows], theta, el["k"] / np.maximum(el["a"], 1e-300)
+
+
 def theta_figure(data: Any) -> list[ReportFigure]:
     fits = data.fits()
     th = fits.get(_THETA)
     if not th:
         return []
     quad = fits.get(_QUAD)
+    full = _decay_elements(data)
+    if full is not None:
+        t, theta, k = full
+        th, quad = {"t_s": t, "theta_deg": theta}, {"t_s": t, "quadrature_rel": k}
     rows = 2 if quad else 1
     fig, ax = new_figure(rows, 1, height_in=1.4 + 1.3 * rows, sharex=True)
-    ax[0, 0].plot(th["t_s"], th["theta_deg"], color="C0")
+    plot_record(ax[0, 0], th["t_s"], th["theta_deg"], color="C0")
     ax[0, 0].set_ylabel(axis_label(data, _THETA, "theta_deg"))
     if quad:
-        ax[1, 0].plot(quad["t_s"], quad["quadrature_rel"], color="C2")
+        plot_record(ax[1, 0], quad["t_s"], quad["quadrature_rel"], color="C2")
         ax[1, 0].set_ylabel(axis_label(data, _QUAD, "quadrature_rel"))
     ax[-1, 0].set_xlabel(axis_label(data, _THETA, "t_s"))
+    how = (f"every one of the {len(th['t_s'])} FPGA samples of the decay record, drawn as min/max envelopes"
+           if full is not None else "the run's thinned curves")
     return [ReportFigure("hrg-damping_theta", "Free decay: wave angle θ(t) and quadrature", fig,
-                         "Wave angle (unwrapped) and relative quadrature k/a during the decay record.")]
+                         f"Wave angle (unwrapped) and relative quadrature k/a during the decay record ({how}).")]
 
 
 def _fmt(m: dict[str, Any] | None) -> str:
@@ -110,7 +140,7 @@ def drift_figure(data: Any) -> list[ReportFigure]:
     curves = {n: c for n, c in curves.items() if c and len(c.get("theta_deg", ())) >= 8}
     if not curves:
         return []
-    fig, ax = new_figure(2, len(curves), height_in=4.2, sharex=True, sharey="row",
+    fig, ax = new_figure(2, len(curves), height_in=4.6, sharex=True, sharey="row",
                          gridspec_kw={"height_ratios": [3, 1.3]})
     rows, rest_text = [], []
     grid = np.linspace(-45.0, 45.0, 361)
@@ -143,7 +173,7 @@ def drift_figure(data: Any) -> list[ReportFigure]:
         rows.append([name, "mean", *with_interval(mean["value"], mean.get("ci95")), "—", mean.get("unit", "")])
         for m, (amp, phase) in model["terms"].items():
             rows.append([name, f"{m}θ", *with_interval(amp["value"], amp.get("ci95")),
-                         f"{with_interval(phase['value'], phase.get('ci95'))[0]} {phase.get('unit', '')}",
+                         " ".join(with_interval(phase["value"], phase.get("ci95"))) + f" {phase.get('unit', '')}",
                          amp.get("unit", "")])
         if rest:
             rows.append([name, "rest rms", *with_interval(rest["value"], rest.get("ci95")), "—", rest.get("unit", "")])
@@ -162,8 +192,9 @@ def drift_figure(data: Any) -> list[ReportFigure]:
             + (f" ({'; '.join(rest_text)})" if rest_text else "") + ".")
     if ratio:
         note += f" drift_reduction_ratio (4θ before / 4θ after) = {with_interval(ratio['value'], None)[0]}."
+    header = ["record", "term", "amplitude", "95 % interval", "phase [95 % interval]", "unit"]
     return [ReportFigure("hrg-damping_drift", "Drift against the wave angle, before and after compensation", fig,
-                         note, (["record", "term", "amplitude", "95 % interval", "phase", "unit"], rows))]
+                         note, (header, rows))]
 
 
 def figures(proc: Any, data: Any) -> list[ReportFigure]:

@@ -40,8 +40,8 @@ NO_UNIT = "no unit declared"
 
 
 def unit_text(unit: str | None) -> str:
-    """A declared unit as an axis writes it ("1": a quantity of dimension one)."""
-    return unit if unit else NO_UNIT
+    """A declared unit as an axis writes it ("1": a quantity of dimension one; deg/s^2 as deg/s²)."""
+    return unit.replace("^2", "²").replace("^3", "³") if unit else NO_UNIT
 
 
 def declared(data: Any, source: str, column: str) -> tuple[str, str]:
@@ -193,14 +193,35 @@ def table_figure(data: Any) -> list[ReportFigure]:
         return []
     cols = [c for c in ("rate_dps", "angle_deg") if c in tab]
     fig, ax = new_figure(len(cols), 1, height_in=1.6 + 1.2 * len(cols), sharex=True)
+    note = f"{len(t)} readings of the table's status."
     for i, c in enumerate(cols):
+        if c == "angle_deg" and "rate_dps" in tab:  # reported in [0, 360): unwrapped with the rate readings
+            plot_record(ax[i, 0], t, unwrap_angle_deg(t, tab[c], tab["rate_dps"]), color=f"C{i}")
+            ax[i, 0].set_ylabel(axis_label(data, "table", c, quantity="table angle, unwrapped"))
+            note += (" The table reports its angle in [0, 360); it is unwrapped here with the rate readings (each "
+                     "step's whole turns from the rate, the rest from the angle read).")
+            continue
         if c == "angle_deg":  # wraps at 360 deg: points, not a line across the wrap
-            ax[i, 0].plot(t, tab[c], ".", color=f"C{i}", markersize=1.5)
+            ax[i, 0].plot(t, tab[c], ".", color=f"C{i}", markersize=1.5 if len(t) > 500 else 3)
         else:
             plot_record(ax[i, 0], t, tab[c], color=f"C{i}")
         ax[i, 0].set_ylabel(axis_label(data, "table", c))
     ax[-1, 0].set_xlabel(axis_label(data, "table", "t_s"))
-    return [ReportFigure("table", "Rate table: rate and angle", fig, f"{len(t)} readings of the table's status.")]
+    return [ReportFigure("table", "Rate table: rate and angle", fig, note)]
+
+
+def unwrap_angle_deg(t_s: np.ndarray, angle_deg: np.ndarray, rate_dps: np.ndarray) -> np.ndarray:
+    """An angle read in [0, 360) made continuous: between two readings the table turned the angle
+    difference read plus the whole turns that bring it nearest the rate's trapezoid integral (right
+    while the integral errs by under 180 deg a step, which sampling the angle alone cannot give
+    above 180 deg a step)."""
+    t, a, r = (np.asarray(x, dtype=float) for x in (t_s, angle_deg, rate_dps))
+    if len(a) < 2:
+        return a
+    turned = 0.5 * (r[1:] + r[:-1]) * np.diff(t)
+    step = np.diff(a)
+    step += 360.0 * np.round((turned - step) / 360.0)
+    return np.concatenate([[a[0]], a[0] + np.cumsum(step)])
 
 
 def stream_figure(data: Any, stream: str, columns: list[str] | None = None, *, title: str | None = None,
