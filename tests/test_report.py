@@ -21,7 +21,7 @@ from bench.reporting.browser import chromium, load, screenshot
 from bench.reporting.damping import drift_model
 from bench.reporting.figures import NO_UNIT, envelope
 from bench.reporting.free_decay import trajectory
-from bench.reporting.numbers import error_in_intervals, limits, plain, sig, with_interval
+from bench.reporting.numbers import error_in_intervals, limits, plain, pretty_unit, sig, with_interval
 from tests.needs import need
 
 #: short runs, seconds each (the report, not the physics, is under test here)
@@ -52,6 +52,21 @@ def test_a_value_without_an_interval_gets_four_significant_digits_and_empty_fiel
     assert limits(99.5, 100.5) == "[99.5, 100.5]" and limits(None, 3) == "≤ 3" and limits(None, None) == "—"
     assert error_in_intervals(19.968, 20.0, (19.882, 20.054)) == "−0.37"
     assert error_in_intervals(1.0, 2.0, None) == "—"
+    # rounding that carries into the next decade keeps four significant digits, not five or three
+    assert sig(99.9988) == "100.0" and sig(9.99951e6) == "1.000e7" and sig(-0.0099999) == "−0.01000"
+
+
+def test_the_table_angle_is_unwrapped_with_the_rate_readings():
+    """At 500 deg/s read every 0.39 s the angle moves 195 deg a reading: the angle alone cannot be
+    unwrapped (np.unwrap gets it wrong), with the rate readings it comes back exactly."""
+    from bench.reporting.figures import unwrap_angle_deg
+
+    t = np.arange(0.0, 40.0, 0.39)
+    rate = np.clip(t * 200.0, 0.0, 500.0)  # 200 deg/s^2 up to 500 deg/s
+    true = np.where(t < 2.5, 100.0 * t ** 2, 625.0 + 500.0 * (t - 2.5))
+    read = true % 360.0
+    assert np.max(np.abs(unwrap_angle_deg(t, read, rate) - true)) < 1e-9
+    assert np.max(np.abs(np.degrees(np.unwrap(np.radians(read))) - true)) > 360.0
 
 
 # --- figure helpers ----------------------------------------------------------------------------
@@ -134,7 +149,8 @@ def declared_units(data) -> set[str]:
     """Every unit the run declared: its streams' columns, its fits' curves, its measurements."""
     units = {u for s in data.streams() for _, u in data.declared(s).values()}
     units |= {u for f in data.fits() for _, u in data.declared(f).values()}
-    return (units | {m.get("unit") or "1" for m in data.measurements()}) - {""}
+    units = (units | {m.get("unit") or "1" for m in data.measurements()}) - {""}
+    return {pretty_unit(u) for u in units}  # as printed: deg/s^2 as deg/s²
 
 
 def undeclared_axes(figs, data) -> list[tuple[str, str]]:
@@ -171,6 +187,7 @@ def test_each_procedure_names_its_figures_and_the_page_shows_them(pages, name):
         err = error_in_intervals(meas["tau_s"]["value"], 300.0, meas["tau_s"]["ci95"])
         assert f">{err}</td>" in html
         assert "mean + 4θ + 8θ + 12θ" in html and "<td>8θ</td>" in html and "rest rms" in html
+        assert "drift_&lt;record&gt;_mean_dph" in html  # text is escaped, never read as markup
 
 
 @pytest.mark.parametrize("name", list(RUNS))
@@ -205,7 +222,7 @@ def test_an_axis_follows_the_declared_unit_and_a_missing_one_is_caught(runs, tmp
         labels = {(f.key, ax.get_ylabel()) for f in figs for ax in f.figure.axes}
         assert ("table-spin_rate", "spin rate ω (rad/s)") in labels
         assert undeclared_axes(figs, data) == [("table", f"table rate Ω ({NO_UNIT})"), ("table", f"time t ({NO_UNIT})"),
-                                               ("table", f"table angle ({NO_UNIT})")]
+                                               ("table", f"table angle, unwrapped ({NO_UNIT})")]
     raw = _copy(runs["hrg-damping"], tmp_path)
     with h5py.File(raw, "r+") as f:  # a fit's curve declared in another unit
         for name in ("before", "after"):
@@ -213,7 +230,7 @@ def test_an_axis_follows_the_declared_unit_and_a_missing_one_is_caught(runs, tmp
     with open_run(raw) as data:
         figs, _ = figures_for(data)
         drift = next(f for f in figs if f.key == "hrg-damping_drift")
-        assert drift.figure.axes[0].get_ylabel() == "drift (output-referred) (deg/s)"
+        assert drift.figure.axes[0].get_ylabel() == "drift, output-referred (deg/s)"
 
 
 def test_the_drift_figure_draws_the_model_the_run_reported(runs):

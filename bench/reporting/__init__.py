@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from .figures import ReportFigure, generic_figures
-from .numbers import DASH, error_in_intervals, limits, plain, sig, truth_text, with_interval
+from .numbers import DASH, error_in_intervals, limits, plain, pretty_unit, sig, truth_text, with_interval
 
 TEMPLATES = Path(__file__).with_name("templates")
 
@@ -47,7 +47,7 @@ def _param_rows(data: Any, proc: Any) -> list[dict[str, str]]:
         spec = specs.get(name)
         unit = getattr(spec, "unit", "") or ("1" if _is_number(value) else "")  # "": dimensionless, as declared
         rows.append({"name": name, "value": plain(value) if not isinstance(value, str) else value,
-                     "unit": unit, "doc": getattr(spec, "doc", "") or ""})
+                     "unit": pretty_unit(unit), "doc": getattr(spec, "doc", "") or ""})
     return rows
 
 
@@ -76,7 +76,7 @@ def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, s
         value, interval = with_interval(m.get("value"), ci)
         t = truth.get(m.get("base", name))
         out.append({
-            "name": name, "value": value, "interval": interval, "unit": m.get("unit") or "1",  # "": dimensionless
+            "name": name, "value": value, "interval": interval, "unit": pretty_unit(m.get("unit") or "1"),
             "limits": limits(m.get("low"), m.get("high")), "outcome": m.get("outcome") or DASH,
             "truth": truth_text(t, ci) if t is not None else DASH,
             "error": error_in_intervals(m.get("value"), t, ci) if t is not None else DASH,

@@ -19,6 +19,8 @@ import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from .numbers import pretty_unit  # noqa: E402
+
 #: points of a record drawn as a line; longer records are drawn as a min/max envelope of this many bins
 ENVELOPE_BINS = 1200
 WIDTH_IN = 7.6
@@ -41,7 +43,7 @@ NO_UNIT = "no unit declared"
 
 def unit_text(unit: str | None) -> str:
     """A declared unit as an axis writes it ("1": a quantity of dimension one; deg/s^2 as deg/s²)."""
-    return unit.replace("^2", "²").replace("^3", "³") if unit else NO_UNIT
+    return pretty_unit(unit) if unit else NO_UNIT
 
 
 def declared(data: Any, source: str, column: str) -> tuple[str, str]:

@@ -114,6 +114,11 @@ def truth_text(truth: Any, ci95: Any) -> str:
     return _minus(_fixed_or_sci(t, d)) if d is not None else sig(t)
 
 
+def pretty_unit(unit: str) -> str:
+    """A unit as printed: powers as superscripts (deg/s^2 -> deg/s²)."""
+    return unit.replace("^2", "²").replace("^3", "³")
+
+
 def plain(x: Any, digits: int = 6) -> str:
     """A set value (a parameter, a limit) as written: up to `digits` significant digits, no
     trailing zeros ('500', '0.277', '1e-4')."""
