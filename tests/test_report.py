@@ -360,3 +360,24 @@ def test_report_pdf_without_weasyprint_writes_the_html_and_says_why(runs, tmp_pa
     out, err = capsys.readouterr()
     assert code == 2 and "WeasyPrint" in err and "gyrobench[pdf]" in err and "Traceback" not in err
     assert (tmp_path / "r.html").is_file() and not (tmp_path / "r.pdf").exists()
+
+
+def test_a_certificate_page_fills_the_report_templates_block(runs, tmp_path, monkeypatch):
+    """The extension point for the production line's certificate (#17): a template that extends
+    report.html.j2 and fills its `certificate` block is rendered before the report, with its own
+    variables, and the report below it is unchanged."""
+    import bench.reporting as reporting
+
+    shutil.copy(reporting.TEMPLATES / "report.html.j2", tmp_path / "report.html.j2")
+    (tmp_path / "cert.html.j2").write_text('{% extends "report.html.j2" %}{% block certificate %}'
+                                           '<section id="cert">Certificate {{ serial }}</section>{% endblock %}')
+    with open_run(runs["table-spin"]) as data:
+        plain_page = render_html(data)
+        monkeypatch.setattr(reporting, "TEMPLATES", tmp_path)
+        page = render_html(data, template="cert.html.j2", extra={"serial": "SN-0042 <A>"})
+    assert '<section id="cert">Certificate SN-0042 &lt;A&gt;</section>' in page
+    assert page.index('id="cert"') < page.index("<h1>")
+    def text(html: str) -> str:  # the figures' clip-path ids are drawn afresh each time
+        return re.sub(r"<svg.*?</svg>", "", html, flags=re.S)
+
+    assert text(page.replace('<section id="cert">Certificate SN-0042 &lt;A&gt;</section>', "")) == text(plain_page)
