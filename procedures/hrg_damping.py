@@ -101,9 +101,11 @@ def _drift_declarations() -> tuple[Measurement, ...]:
             out.append(Measurement(f"drift_{name}_{m}theta_dph", "deg/h",
                                    f"{m} theta drift amplitude, {words} (fit of mean + 4, 8, 12 theta)",
                                    truth=truth, when=when, when_doc=when_doc))
+            # the damping drift's 4 theta term is sin 4(theta - theta_tau): its phase is the damping axis
             out.append(Measurement(f"drift_{name}_{m}theta_phase_deg", "deg",
                                    f"phase of the {m} theta drift term, amplitude sin {m}(theta - phase), {words} "
                                    "(interval: the whole period when the amplitude's holds 0)",
+                                   truth="theta_tau_deg" if (name, m) == ("before", 4) else None,
                                    when=when, when_doc=when_doc))
         out.append(Measurement(f"drift_{name}_rest_rms_dph", "deg/h",
                                f"rms of the drift the harmonic fit leaves, {words} (noise)",
