@@ -139,6 +139,8 @@ def plot_record(ax: Axes, x: np.ndarray, y: np.ndarray, *, color: str | None = N
     """A record as a line, or as its min/max envelope when it is long."""
     xe, lo, hi = envelope(x, y)
     if lo is hi:
+        if len(xe) < 100:  # a few readings: each one marked, so the line is not read as a record
+            kwargs = {"marker": "o", "markersize": 2.5, **kwargs}
         ax.plot(xe, lo, color=color, label=label, **kwargs)
         return
     poly = ax.fill_between(xe, lo, hi, color=color, linewidth=0.6, label=label, alpha=0.8)
