@@ -173,14 +173,16 @@ def write_pdf(html: str, path: str | Path) -> Path:
 
 
 def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output: str | Path | None = None,
-                 pdf: bool = False) -> list[Path]:
-    """Write the HTML report beside the raw file (or to output) and, with pdf, the PDF beside it."""
+                 pdf: bool = False, *, template: str = "report.html.j2",
+                 extra: dict[str, Any] | None = None) -> list[Path]:
+    """Write the HTML report beside the raw file (or to output) and, with pdf, the PDF beside it;
+    template and extra: as render_html (a page that extends the report, e.g. a certificate)."""
     from bench.recorder import open_run
 
     if pdf:
         _weasyprint()  # a missing PDF library is said before anything is written
     with open_run(raw_file) as data:
-        html = render_html(data, row)
+        html = render_html(data, row, template=template, extra=extra)
         out = Path(output or data.path.with_suffix(".html"))
     out.write_text(html, encoding="utf-8")
     paths = [out]
