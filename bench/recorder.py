@@ -230,10 +230,15 @@ class Recorder:
             self._log_row(event.t_sim_s, "STEP", f"{kind} {event.name}")
         elif isinstance(event, ev.FitUpdate):
             grp = self._f["fits"].require_group(event.name)
+            declared = _fit_columns(event.name)
             for key, arr in event.curves.items():
                 if key in grp:
                     del grp[key]
-                grp.create_dataset(key, data=np.asarray(arr)).attrs["units"] = unit_from_name(key)
+                ds = grp.create_dataset(key, data=np.asarray(arr))
+                col = declared.get(key)
+                ds.attrs["units"] = col.unit if col is not None else unit_from_name(key)
+                if col is not None and col.quantity:
+                    ds.attrs["quantity"] = col.quantity
 
     def append(self, stream: str, columns: tuple[str, ...], data: np.ndarray) -> None:
         """Append rows to a stream; the first block fixes its columns.  Rows are buffered and
@@ -286,6 +291,7 @@ class Recorder:
             return
         ds.attrs["source"] = schema.source
         ds.attrs["units"] = np.array(schema.units, dtype=_STR)
+        ds.attrs["quantities"] = np.array(schema.quantities, dtype=_STR)
         ds.attrs["dtypes"] = np.array([c.dtype for c in schema.columns], dtype=_STR)
         for col, legend in schema.legends().items():
             ds.attrs[f"legend_{col}"] = _json({str(k): v for k, v in legend.items()})
@@ -600,6 +606,22 @@ class RunData:
             return dict.fromkeys(names, "")
         return {c: u.decode() if isinstance(u, bytes) else str(u) for c, u in zip(names, units, strict=True)}
 
+    def declared(self, source: str) -> dict[str, tuple[str, str]]:
+        """(quantity, unit) of each column of a stream, or each curve of a fit, as the run declared
+        it (quantity: the column's name where none is declared; unit: "" where a file predates them)."""
+        def text(v: Any) -> str:
+            return v.decode() if isinstance(v, bytes) else str(v)
+
+        if source in self.f["streams"]:
+            attrs, names = self._stream(source).attrs, self.columns(source)
+            quantities = attrs.get("quantities")
+            quantities = [text(q) for q in quantities] if quantities is not None else names
+            return {c: (q or c, u) for c, q, u in zip(names, quantities, self.units(source).values(), strict=True)}
+        if source in self.f["fits"]:
+            return {c: (text(ds.attrs.get("quantity", c)), text(ds.attrs.get("units", "")))
+                    for c, ds in self.f["fits"][source].items()}
+        raise MissingStream(f"{self.path.name} has no stream or fit {source!r}")
+
     def legends(self, stream: str) -> dict[str, dict[int, str]]:
         """The coded columns' legends (code -> meaning), from the stream's declaration."""
         attrs = self._stream(stream).attrs
@@ -635,6 +657,15 @@ class RunData:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _fit_columns(name: str) -> dict[str, Any]:
+    """The declared columns of a fit's curves (a StreamSchema declared under the fit's name), by
+    curve name; {} for a fit declared nowhere (its curves' units then come from their names)."""
+    try:
+        return {c.name: c for c in schema_of(name).columns}
+    except KeyError:
+        return {}
 
 
 def open_run(path: str | Path) -> RunData:

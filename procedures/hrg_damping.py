@@ -32,6 +32,19 @@ WINDOW_COLUMNS = declare(StreamSchema(WINDOWS, "hrg-damping", (
     Column("t_start_s", "s"), Column("t_end_s", "s")))).names
 REF = "damping_reference"  # the reference frequency held during the decay, for Q = pi f0 tau
 declare(StreamSchema(REF, "hrg-damping", (Column("t_s", "s"), Column("f0_hz", "Hz"))))
+# the fits' curves, declared like stream columns: the report's axes take their quantities and units
+_T = Column("t_s", "s", quantity="time t")
+_THETA = Column("theta_deg", "deg", quantity="wave angle θ")
+declare(StreamSchema("hrg-damping theta", "hrg-damping", (_T, _THETA)))
+declare(StreamSchema("hrg-damping quadrature", "hrg-damping", (
+    _T, Column("quadrature_rel", "1", quantity="quadrature k/a"))))
+declare(StreamSchema("hrg-damping energy", "hrg-damping", (
+    _T, Column("energy", "1", quantity="energy E"), Column("energy_fit", "1", quantity="fitted energy E"))))
+declare(StreamSchema("hrg-damping residuals", "hrg-damping", (
+    _T, Column("residual_ln_e", "1", quantity="residual ln E"))))
+for _name in ("before", "after"):
+    declare(StreamSchema(f"hrg-damping drift {_name}", "hrg-damping", (
+        _THETA, Column("drift_dph", "deg/h", quantity="drift, output-referred"))))
 _TAP = ("t_s", "cx", "sx", "cy", "sy")  # the FPGA stream's columns a tap keeps, in this order
 _MAX_CURVE_POINTS = 2000
 
@@ -88,6 +101,12 @@ def _drift_declarations() -> tuple[Measurement, ...]:
             out.append(Measurement(f"drift_{name}_{m}theta_dph", "deg/h",
                                    f"{m} theta drift amplitude, {words} (fit of mean + 4, 8, 12 theta)",
                                    truth=truth, when=when, when_doc=when_doc))
+            # the damping drift's 4 theta term is sin 4(theta - theta_tau): its phase is the damping axis
+            out.append(Measurement(f"drift_{name}_{m}theta_phase_deg", "deg",
+                                   f"phase of the {m} theta drift term, amplitude sin {m}(theta - phase), {words} "
+                                   "(interval: the whole period when the amplitude's holds 0)",
+                                   truth="theta_tau_deg" if (name, m) == ("before", 4) else None,
+                                   when=when, when_doc=when_doc))
         out.append(Measurement(f"drift_{name}_rest_rms_dph", "deg/h",
                                f"rms of the drift the harmonic fit leaves, {words} (noise)",
                                when=when, when_doc=when_doc))
@@ -314,6 +333,8 @@ class HrgDamping(HrgExcitation, Procedure):
             results.append(Result(f"drift_{name}_mean_dph", full.mean, ci95=full.mean_ci95))
             for m, h in full.harmonics.items():
                 results.append(Result(f"drift_{name}_{m}theta_dph", h.amplitude, ci95=h.ci95))
+                results.append(Result(f"drift_{name}_{m}theta_phase_deg", math.degrees(h.phase_rad),
+                                      ci95=tuple(math.degrees(x) for x in h.phase_ci95)))
             results.append(Result(f"drift_{name}_rest_rms_dph", full.rest_rms))
             curves[name] = (mids, drift * to_dph)
         ratio = amps["before"] / amps["after"] if amps["after"] > 0 else math.inf

@@ -27,6 +27,10 @@ from .hrg_excitation import HrgExcitation
 WINDOW = "decay_window"
 WINDOW_COLUMNS = declare(StreamSchema(WINDOW, "hrg-free-decay", (
     Column("t_start_s", "s"), Column("t_end_s", "s"), Column("ref_freq_hz", "Hz"), Column("rate_dps", "deg/s")))).names
+#: the orbit elements of the record, declared like a stream: the report's axes take their units here
+declare(StreamSchema("hrg-free-decay elements", "hrg-free-decay", (
+    Column("t_s", "s", quantity="time t"), Column("energy", "1", quantity="energy E"),
+    Column("theta_deg", "deg", quantity="wave angle θ"))))
 
 
 METHODS = ("output-error", "equation-error")

@@ -33,9 +33,13 @@ from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.engine.streams import Column, StreamSchema, declare
 
 SWEEP = declare(StreamSchema("sweep", "mems-sweep", (
-    Column("t_s", "s"), Column("freq_hz", "Hz"), Column("direction", "1", "i1", legend={1: "up", -1: "down"}),
-    Column("q1", "1"), Column("p1", "1"), Column("q2", "1"), Column("p2", "1"),  # slow variables, model units
-    Column("amplitude", "1"), Column("phase_deg", "deg"), Column("amplitude_y", "1"), Column("phase_y_deg", "deg"),
+    Column("t_s", "s", quantity="time t"), Column("freq_hz", "Hz", quantity="drive frequency f"),
+    Column("direction", "1", "i1", legend={1: "up", -1: "down"}),
+    # slow variables, model units
+    Column("q1", "1", quantity="in-phase q1"), Column("p1", "1", quantity="quadrature p1"),
+    Column("q2", "1", quantity="in-phase q2"), Column("p2", "1", quantity="quadrature p2"),
+    Column("amplitude", "1", quantity="amplitude A"), Column("phase_deg", "deg", quantity="phase φ"),
+    Column("amplitude_y", "1", quantity="amplitude B"), Column("phase_y_deg", "deg", quantity="phase ψ"),
     Column("settled", "1", "u1", legend={0: "not settled", 1: "settled"}))))
 SWEEP_COLUMNS = SWEEP.names
 MODEL_ORDER = {"linear": 1, "cubic": 3, "quintic": 5}

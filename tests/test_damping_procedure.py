@@ -119,7 +119,7 @@ def test_analysis_refits_the_recorded_run(run):
     live = {r.name: r.value for r in record.measurements}
     for name in ("theta_tau_deg", "delta_inv_tau_per_s", "tau_s", "drift_before_dph", "drift_after_dph",
                  "drift_after_mean_dph", "drift_after_8theta_dph", "drift_after_rest_rms_dph",
-                 "drift_after_4theta_expected_dph"):
+                 "drift_after_4theta_expected_dph", "drift_before_4theta_phase_deg", "drift_after_8theta_phase_deg"):
         assert again[name] == pytest.approx(live[name], rel=1e-6), name
 
 

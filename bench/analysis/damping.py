@@ -763,12 +763,14 @@ def fit_angle_drift(theta_rad, rate_rad_s) -> AngleDriftFit:
 
 @dataclass(frozen=True)
 class DriftHarmonic:
-    """One harmonic m of a drift against the wave angle: amplitude sin m(theta - phase)."""
+    """One harmonic m of a drift against the wave angle: amplitude sin m(theta - phase); phase_ci95:
+    the phase's 95 % interval (rad; the whole period 2 pi / m when the amplitude's interval holds 0)."""
 
     order: int
     amplitude: float
     phase_rad: float
     ci95: tuple[float, float]
+    phase_ci95: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -786,8 +788,8 @@ class DriftHarmonics:
         """The same fit in other units (factor > 0, e.g. rad/s -> output-referred deg/h)."""
         if not factor > 0:
             raise ValueError(f"factor={factor!r} must be > 0")
-        hs = {m: DriftHarmonic(m, h.amplitude * factor, h.phase_rad, (h.ci95[0] * factor, h.ci95[1] * factor))
-              for m, h in self.harmonics.items()}
+        hs = {m: DriftHarmonic(m, h.amplitude * factor, h.phase_rad, (h.ci95[0] * factor, h.ci95[1] * factor),
+                               h.phase_ci95) for m, h in self.harmonics.items()}
         lo, hi = self.mean_ci95
         return DriftHarmonics(self.mean * factor, (lo * factor, hi * factor), hs, self.rest_rms * factor,
                               self.n_samples)
@@ -836,7 +838,14 @@ def fit_drift_harmonics(theta_rad, rate, orders: tuple[int, ...] = (4, 8, 12)) -
         lo = 0.0 if holds_zero else max(0.0, amp - reach)
         # A cos + B sin = amp sin(m th + psi), psi = atan2(A, B)  ->  phase = -psi / m
         phase = (-math.atan2(a, b) / m) % (2 * math.pi / m)
-        hs[m] = DriftHarmonic(m, amp, phase, (lo, amp + reach))
+        # the phase's interval: the angle the confidence ellipse subtends seen from 0 (delta method:
+        # d psi = (B dA - A dB) / amp^2), Student t; the whole period when the ellipse holds 0
+        g = np.array([b, -a]) / max(amp * amp, 1e-300)
+        half = t * math.sqrt(max(float(g @ c @ g), 0.0)) / m
+        period = 2 * math.pi / m
+        p_ci = (phase - period / 2, phase + period / 2) if holds_zero or half >= period / 2 else (phase - half,
+                                                                                                phase + half)
+        hs[m] = DriftHarmonic(m, amp, phase, (lo, amp + reach), p_ci)
     half = t * math.sqrt(max(float(cov[0, 0]), 0.0))
     return DriftHarmonics(float(p[0]), (float(p[0]) - half, float(p[0]) + half), hs, math.sqrt(float(r @ r) / th.size),
                           int(th.size))

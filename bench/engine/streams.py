@@ -24,17 +24,18 @@ DIMENSIONLESS = "1"
 
 @dataclass(frozen=True)
 class Column:
-    """One column: its name, unit ("1" when dimensionless), numpy type code and, for a coded
-    column, what each code means."""
+    """One column: its name, unit ("1" when dimensionless), numpy type code, for a coded column
+    what each code means, and the quantity it holds in words (an axis names it: "table rate Ω")."""
 
     name: str
     unit: str
     dtype: str = "f8"
     legend: tuple[tuple[int, str], ...] = ()
     doc: str = ""
+    quantity: str = ""
 
     def __init__(self, name: str, unit: str, dtype: str = "f8", legend: Mapping[int, str] | None = None,
-                 doc: str = "") -> None:
+                 doc: str = "", quantity: str = "") -> None:
         if not name.isidentifier():
             raise ValueError(f"column name {name!r} is not an identifier")
         np.dtype(dtype)  # a bad type code fails here, where it is declared
@@ -43,6 +44,7 @@ class Column:
         object.__setattr__(self, "dtype", dtype)
         object.__setattr__(self, "legend", tuple(sorted((int(k), str(v)) for k, v in (legend or {}).items())))
         object.__setattr__(self, "doc", doc)
+        object.__setattr__(self, "quantity", quantity)
 
     def code(self, meaning: str) -> int:
         """The code of a meaning in this column's legend."""
@@ -74,6 +76,11 @@ class StreamSchema:
     @property
     def units(self) -> tuple[str, ...]:
         return tuple(c.unit for c in self.columns)
+
+    @property
+    def quantities(self) -> tuple[str, ...]:
+        """Each column's quantity in words, or its name where none is declared."""
+        return tuple(c.quantity or c.name for c in self.columns)
 
     def index(self, name: str) -> int:
         """Position of a column (KeyError naming the stream's columns if there is none)."""
@@ -110,11 +117,14 @@ def schema_from_attrs(name: str, columns: tuple[str, ...], attrs: Mapping) -> St
         return None
     dtypes = attrs.get("dtypes")
     dtypes = [text(d) for d in dtypes] if dtypes is not None and len(dtypes) == len(columns) else ["f8"] * len(columns)
+    quantities = attrs.get("quantities")
+    quantities = [text(q) for q in quantities] if quantities is not None and len(quantities) == len(columns) else [
+        ""] * len(columns)
     cols = []
-    for c, u, d in zip(columns, units, dtypes, strict=True):
+    for c, u, d, q in zip(columns, units, dtypes, quantities, strict=True):
         legend = attrs.get(f"legend_{c}")
         legend = {int(k): v for k, v in json.loads(text(legend)).items()} if legend is not None else None
-        cols.append(Column(c, text(u), d, legend=legend))
+        cols.append(Column(c, text(u), d, legend=legend, quantity=q if q != c else ""))
     return StreamSchema(name, text(attrs.get("source", name)), tuple(cols))
 
 

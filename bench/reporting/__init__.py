@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from .figures import ReportFigure, generic_figures
-from .numbers import DASH, error_in_intervals, limits, plain, sig, truth_text, with_interval
+from .numbers import DASH, error_in_intervals, limits, plain, pretty_unit, sig, truth_text, with_interval
 
 TEMPLATES = Path(__file__).with_name("templates")
 
@@ -45,9 +45,14 @@ def _param_rows(data: Any, proc: Any) -> list[dict[str, str]]:
     rows = []
     for name, value in data.params.items():
         spec = specs.get(name)
+        unit = getattr(spec, "unit", "") or ("1" if _is_number(value) else "")  # "": dimensionless, as declared
         rows.append({"name": name, "value": plain(value) if not isinstance(value, str) else value,
-                     "unit": getattr(spec, "unit", "") or "", "doc": getattr(spec, "doc", "") or ""})
+                     "unit": pretty_unit(unit), "doc": getattr(spec, "doc", "") or ""})
     return rows
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, str]]:
@@ -71,7 +76,7 @@ def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, s
         value, interval = with_interval(m.get("value"), ci)
         t = truth.get(m.get("base", name))
         out.append({
-            "name": name, "value": value, "interval": interval, "unit": m.get("unit") or "",
+            "name": name, "value": value, "interval": interval, "unit": pretty_unit(m.get("unit") or "1"),
             "limits": limits(m.get("low"), m.get("high")), "outcome": m.get("outcome") or DASH,
             "truth": truth_text(t, ci) if t is not None else DASH,
             "error": error_in_intervals(m.get("value"), t, ci) if t is not None else DASH,
@@ -113,7 +118,9 @@ def context(data: Any, row: dict[str, Any] | None = None,
     proc = procedure_of(data)
     figs, notes = figures if figures is not None else figures_for(data, proc)
     a = data.attrs
-    truth_shown = bool(a.get("simulated") and data.truth)
+    rows = _measurement_rows(data, row)
+    # the truth columns on a simulated station, when a measurement has a truth to compare with
+    truth_shown = bool(a.get("simulated") and data.truth and any(r["truth"] != DASH for r in rows))
     return {
         "run_id": a.get("run_id", data.path.stem),
         "procedure": a.get("procedure", ""),
@@ -123,7 +130,7 @@ def context(data: Any, row: dict[str, Any] | None = None,
         "incomplete": data.incomplete,
         "identity": _identity(data, proc),
         "params": _param_rows(data, proc),
-        "measurements": _measurement_rows(data, row),
+        "measurements": rows,
         "truth_shown": truth_shown,
         "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key, "table": f.table} for f in figs],
         "notes": notes + list(getattr(data, "notes", [])),
@@ -131,13 +138,16 @@ def context(data: Any, row: dict[str, Any] | None = None,
     }
 
 
-def render_html(data: Any, row: dict[str, Any] | None = None, ctx: dict[str, Any] | None = None) -> str:
-    """The report page of one run (a RunData) and, when known, its results-store row."""
+def render_html(data: Any, row: dict[str, Any] | None = None, ctx: dict[str, Any] | None = None, *,
+                template: str = "report.html.j2", extra: dict[str, Any] | None = None) -> str:
+    """The report page of one run (a RunData) and, when known, its results-store row.  template: a
+    template in bench/reporting/templates that extends report.html.j2 and fills its `certificate`
+    block (a page before the report); extra: the variables that template adds."""
     import jinja2
 
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=jinja2.select_autoescape(),
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True,
                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
-    return env.get_template("report.html.j2").render(**(ctx or context(data, row)))
+    return env.get_template(template).render(**(ctx or context(data, row)), **(extra or {}))
 
 
 class PdfUnavailable(RuntimeError):
@@ -163,14 +173,16 @@ def write_pdf(html: str, path: str | Path) -> Path:
 
 
 def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output: str | Path | None = None,
-                 pdf: bool = False) -> list[Path]:
-    """Write the HTML report beside the raw file (or to output) and, with pdf, the PDF beside it."""
+                 pdf: bool = False, *, template: str = "report.html.j2",
+                 extra: dict[str, Any] | None = None) -> list[Path]:
+    """Write the HTML report beside the raw file (or to output) and, with pdf, the PDF beside it;
+    template and extra: as render_html (a page that extends the report, e.g. a certificate)."""
     from bench.recorder import open_run
 
     if pdf:
         _weasyprint()  # a missing PDF library is said before anything is written
     with open_run(raw_file) as data:
-        html = render_html(data, row)
+        html = render_html(data, row, template=template, extra=extra)
         out = Path(output or data.path.with_suffix(".html"))
     out.write_text(html, encoding="utf-8")
     paths = [out]

@@ -1,6 +1,7 @@
 """hrg-damping figures: ln E with its fit and residuals, the wave angle and quadrature, the drift
-against the wave angle before and after compensation with the fitted harmonics and residuals,
-the table's rate and angle, and the FPGA's slow variables."""
+against the wave angle before and after compensation with the model the run reported (mean and
+harmonics, from its measurements) and the residuals, the table's rate and angle, and the FPGA's
+slow variables.  Every axis takes its quantity and unit from the run's declarations."""
 
 from __future__ import annotations
 
@@ -9,121 +10,191 @@ from typing import Any
 
 import numpy as np
 
-from .figures import ReportFigure, fit_with_residuals, label, measurement, new_figure, stream_figure, table_figure
+from .figures import (
+    ReportFigure,
+    axis_label,
+    declared,
+    fit_with_residuals,
+    log_label,
+    measurement,
+    new_figure,
+    plot_record,
+    stream_figure,
+    table_figure,
+)
 from .numbers import with_interval
 
 HARMONICS = (4, 8, 12)
+_ENERGY, _RESIDUALS, _THETA, _QUAD = ("hrg-damping energy", "hrg-damping residuals", "hrg-damping theta",
+                                      "hrg-damping quadrature")
 
 
-def harmonic_fit(theta_rad: np.ndarray, y: np.ndarray, harmonics: tuple[int, ...] = HARMONICS) -> dict[str, Any]:
-    """Least squares of y = mean + sum_k (a_k cos k theta + b_k sin k theta): coefficients,
-    amplitudes |a_k, b_k| with 95 % intervals (delta method, t quantile) and a model function."""
-    from scipy import special
+def drift_model(data: Any, record: str) -> dict[str, Any] | None:
+    """The drift model the run reported for a record ("before", "after"): its mean and each harmonic
+    present (amplitude sin m(theta - phase)) from the recorded measurements drift_<record>_mean_dph,
+    _<m>theta_dph and _<m>theta_phase_deg, with the rms the fit left; None when the run did not
+    record them (a run older than the phase measurements, or without compensation)."""
+    mean = measurement(data, f"drift_{record}_mean_dph")
+    if mean is None:
+        return None
+    terms = {}
+    for m in HARMONICS:
+        amp = measurement(data, f"drift_{record}_{m}theta_dph")
+        phase = measurement(data, f"drift_{record}_{m}theta_phase_deg")
+        if amp is None or phase is None or amp.get("value") is None or phase.get("value") is None:
+            return None
+        terms[m] = (amp, phase)
+    rest = measurement(data, f"drift_{record}_rest_rms_dph")
 
-    th, y = np.asarray(theta_rad, dtype=float), np.asarray(y, dtype=float)
+    def model(theta_deg: np.ndarray) -> np.ndarray:
+        th = np.radians(np.asarray(theta_deg, dtype=float))
+        y = np.full_like(th, float(mean["value"]))
+        for m, (amp, phase) in terms.items():
+            y += float(amp["value"]) * np.sin(m * (th - math.radians(float(phase["value"]))))
+        return y
 
-    def design(t: np.ndarray) -> np.ndarray:
-        cols = [np.ones_like(t)]
-        for k in harmonics:
-            cols += [np.cos(k * t), np.sin(k * t)]
-        return np.column_stack(cols)
-
-    x = design(th)
-    p, *_ = np.linalg.lstsq(x, y, rcond=None)
-    r = y - x @ p
-    dof = max(len(y) - len(p), 1)
-    cov = float(r @ r) / dof * np.linalg.pinv(x.T @ x)
-    tq = float(special.stdtrit(dof, 0.975))
-    terms = {"mean": (float(p[0]), (float(p[0] - tq * math.sqrt(cov[0, 0])), float(p[0] + tq * math.sqrt(cov[0, 0]))))}
-    for i, k in enumerate(harmonics):
-        a, b = p[1 + 2 * i], p[2 + 2 * i]
-        amp = math.hypot(a, b)
-        g = np.zeros(len(p))
-        if amp > 0:
-            g[1 + 2 * i], g[2 + 2 * i] = a / amp, b / amp
-        sd = math.sqrt(max(float(g @ cov @ g), 0.0))
-        terms[f"{k}θ"] = (amp, (max(0.0, amp - tq * sd), amp + tq * sd))
-    return {"p": p, "terms": terms, "model": lambda t: design(np.asarray(t, dtype=float)) @ p, "residual": r}
+    return {"mean": mean, "terms": terms, "rest": rest, "model": model}
 
 
 def energy_figure(data: Any) -> list[ReportFigure]:
     fits = data.fits()
-    e = fits.get("hrg-damping energy")
+    e = fits.get(_ENERGY)
     if not e:
         return []
     t, energy, efit = e["t_s"], e["energy"], e["energy_fit"]
     ok = (energy > 0) & (efit > 0)
-    res = fits.get("hrg-damping residuals", {}).get("residual_ln_e")
+    res = fits.get(_RESIDUALS, {}).get("residual_ln_e")
     res = res[ok] if res is not None and len(res) == len(t) else None
-    fig = fit_with_residuals(t[ok], np.log(energy[ok]), np.log(efit[ok]), xname="t_s", yname="ln E",
-                             ylabel="ln E (E in model units²)", fit_label="free-decay fit", residual=res,
-                             residual_label="residual ln E")
+    e_unit = declared(data, _ENERGY, "energy")[1]
+    fig = fit_with_residuals(t[ok], np.log(energy[ok]), np.log(efit[ok]), xlabel=axis_label(data, _ENERGY, "t_s"),
+                             ylabel=log_label("E", e_unit), fit_label="free-decay fit", residual=res,
+                             residual_label=axis_label(data, _RESIDUALS, "residual_ln_e"))
     tau = measurement(data, "tau_s")
     note = "Energy E = cx² + sx² + cy² + sy² of the decay record and the fitted free-decay model."
     if tau:
         v, ci = with_interval(tau["value"], tau.get("ci95"))
-        note += f" τ = {v} s, 95 % interval {ci} s."
+        note += f" τ = {v} {tau.get('unit') or ''}, 95 % interval {ci} {tau.get('unit') or ''}."
     return [ReportFigure("hrg-damping_energy", "Free decay: ln E with the fit and residuals", fig, note)]
+
+
+def _decay_elements(data: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(t_s, theta_deg unwrapped, k/a) at every FPGA sample of the decay window, or None when the
+    run recorded no window (the live curves are thinned by dropping samples, which aliases the 4θ
+    pumping of the quadrature; the report reduces the full record by envelopes instead)."""
+    from bench.analysis.slow_model import orbit_elements
+    from procedures.hrg_damping import DECAY, WINDOWS
+
+    if WINDOWS not in data or "fpga" not in data:
+        return None
+    win = data.table(WINDOWS)
+    sel = win["kind"] == DECAY
+    if not sel.any():
+        return None
+    fpga = data.table("fpga")
+    t = fpga["t_s"]
+    rows = (t > win["t_start_s"][sel][-1]) & (t <= win["t_end_s"][sel][-1])
+    if rows.sum() < 8:
+        return None
+    el = orbit_elements(np.column_stack([fpga[c][rows] for c in ("cx", "sx", "cy", "sy")]).astype(float))
+    theta = np.degrees(np.unwrap(4 * el["theta_rad"]) / 4)
+    return t[rows], theta, el["k"] / np.maximum(el["a"], 1e-300)
 
 
 def theta_figure(data: Any) -> list[ReportFigure]:
     fits = data.fits()
-    th = fits.get("hrg-damping theta")
+    th = fits.get(_THETA)
     if not th:
         return []
-    quad = fits.get("hrg-damping quadrature")
+    quad = fits.get(_QUAD)
+    full = _decay_elements(data)
+    if full is not None:
+        t, theta, k = full
+        th, quad = {"t_s": t, "theta_deg": theta}, {"t_s": t, "quadrature_rel": k}
     rows = 2 if quad else 1
     fig, ax = new_figure(rows, 1, height_in=1.4 + 1.3 * rows, sharex=True)
-    ax[0, 0].plot(th["t_s"], th["theta_deg"], color="C0")
-    ax[0, 0].set_ylabel(label("theta_deg"))
+    plot_record(ax[0, 0], th["t_s"], th["theta_deg"], color="C0")
+    ax[0, 0].set_ylabel(axis_label(data, _THETA, "theta_deg"))
     if quad:
-        ax[1, 0].plot(quad["t_s"], quad["quadrature_rel"], color="C2")
-        ax[1, 0].set_ylabel(label("quadrature_rel"))
-    ax[-1, 0].set_xlabel(label("t_s"))
+        plot_record(ax[1, 0], quad["t_s"], quad["quadrature_rel"], color="C2")
+        ax[1, 0].set_ylabel(axis_label(data, _QUAD, "quadrature_rel"))
+    ax[-1, 0].set_xlabel(axis_label(data, _THETA, "t_s"))
+    how = (f"every one of the {len(th['t_s'])} FPGA samples of the decay record, drawn as min/max envelopes"
+           if full is not None else "the run's thinned curves")
     return [ReportFigure("hrg-damping_theta", "Free decay: wave angle θ(t) and quadrature", fig,
-                         "Wave angle (unwrapped) and relative quadrature k/a during the decay record.")]
+                         f"Wave angle (unwrapped) and relative quadrature k/a during the decay record ({how}).")]
+
+
+def _fmt(m: dict[str, Any] | None) -> str:
+    if m is None:
+        return "—"
+    v, ci = with_interval(m.get("value"), m.get("ci95"))
+    return v + (f" {ci}" if ci != "—" else "")
 
 
 def drift_figure(data: Any) -> list[ReportFigure]:
-    """Drift against the wave angle before and after compensation: points, the mean + 4θ model of
-    drift_before/after_dph and the mean + 4θ, 8θ, 12θ harmonics fitted here, residuals beneath."""
+    """Drift against the wave angle before and after compensation: the points, the model the run
+    reported (mean and 4θ, 8θ, 12θ harmonics, from its measurements) drawn over them, and the
+    residual (points minus that model) beneath."""
     fits = data.fits()
     curves = {n: fits.get(f"hrg-damping drift {n}") for n in ("before", "after")}
     curves = {n: c for n, c in curves.items() if c and len(c.get("theta_deg", ())) >= 8}
     if not curves:
         return []
-    fig, ax = new_figure(2, len(curves), height_in=3.8, sharex=True, sharey="row",
+    fig, ax = new_figure(2, len(curves), height_in=4.6, sharex=True, sharey="row",
                          gridspec_kw={"height_ratios": [3, 1.3]})
-    rows = []
+    rows, rest_text = [], []
     grid = np.linspace(-45.0, 45.0, 361)
     for j, (name, c) in enumerate(curves.items()):
+        src = f"hrg-damping drift {name}"
         # the harmonics repeat every 90 deg: the unwrapped angle folded into [-45, 45)
         th, y = (np.asarray(c["theta_deg"]) + 45.0) % 90.0 - 45.0, np.asarray(c["drift_dph"])
-        full = harmonic_fit(np.radians(th), y)
-        four = harmonic_fit(np.radians(th), y, (4,))
+        model = drift_model(data, name)
         top, bottom = ax[0, j], ax[1, j]
         top.plot(th, y, ".", color="C0", markersize=3, label="measured (per block)")
-        top.plot(grid, four["model"](np.radians(grid)), "--", color="C1", label="mean + 4θ")
-        top.plot(grid, full["model"](np.radians(grid)), color="C3", label="mean + 4θ, 8θ, 12θ")
         top.set_title(f"compensation {'off' if name == 'before' else 'on'} ({name})")
-        bottom.plot(th, full["residual"], ".", color="C0", markersize=3)
-        bottom.axhline(0.0, color="C3", linewidth=0.8)
-        bottom.set_xlabel(label("theta_deg"))
+        bottom.set_xlabel(axis_label(data, src, "theta_deg", quantity="wave angle θ, folded"))
         if j == 0:
-            top.set_ylabel(label("drift_dph"))
-            bottom.set_ylabel("residual (deg/h)")
-        for term, (v, ci) in full["terms"].items():
-            rows.append([name, term, *with_interval(v, ci), "deg/h"])
-        m = measurement(data, f"drift_{name}_dph")
-        if m:
-            rows.append([name, f"4θ alone: drift_{name}_dph (reported)", *with_interval(m["value"], m.get("ci95")),
-                         "deg/h"])
-    fig.legend(*ax[0, 0].get_legend_handles_labels(), loc="outside upper center", ncols=3)
+            top.set_ylabel(axis_label(data, src, "drift_dph"))
+            bottom.set_ylabel(axis_label(data, src, "drift_dph", quantity="measured − model"))
+        if model is None:
+            top.text(0.5, 0.95, "the run recorded no drift model for this record", transform=top.transAxes,
+                     ha="center", va="top", fontsize=7.5)
+            continue
+        rest = model["rest"]
+        rest_words = f"rest rms {_fmt(rest)} {rest.get('unit', '')}" if rest else "rest rms not recorded"
+        top.plot(grid, model["model"](grid), color="C3",
+                 label="reported model: mean + 4θ + 8θ + 12θ")
+        top.text(0.02, 0.03, rest_words, transform=top.transAxes, fontsize=7.5, va="bottom",
+                 bbox={"facecolor": "white", "edgecolor": "0.8", "alpha": 0.85, "pad": 2})
+        rest_text.append(f"{name}: {rest_words}")
+        bottom.plot(th, y - model["model"](th), ".", color="C0", markersize=3)
+        bottom.axhline(0.0, color="C3", linewidth=0.8)
+        mean = model["mean"]
+        rows.append([name, "mean", *with_interval(mean["value"], mean.get("ci95")), "—", mean.get("unit", "")])
+        for m, (amp, phase) in model["terms"].items():
+            rows.append([name, f"{m}θ", *with_interval(amp["value"], amp.get("ci95")),
+                         " ".join(with_interval(phase["value"], phase.get("ci95"))) + f" {phase.get('unit', '')}",
+                         amp.get("unit", "")])
+        if rest:
+            rows.append([name, "rest rms", *with_interval(rest["value"], rest.get("ci95")), "—", rest.get("unit", "")])
+    handles, labels = [], []
+    for a in ax[0]:
+        for h, lab in zip(*a.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(handles, labels, loc="outside upper center", ncols=2)
+    ratio = measurement(data, "drift_reduction_ratio")
     note = ("Drift rate per block against the wave angle (folded into one 90° period), referred to the gyro output "
-            "(÷ K), with the residual of the mean + 4θ, 8θ, 12θ model beneath. The raw file holds the 4θ amplitude "
-            "only, so the mean and the harmonics are fitted here for the figure; amplitudes with 95 % intervals below.")
+            "(÷ K). The line is the model the run reported: the mean and the 4θ, 8θ and 12θ harmonics, each "
+            "amplitude · sin m(θ − phase), from the measurements drift_<record>_mean_dph, drift_<record>_<m>theta_dph "
+            "and drift_<record>_<m>theta_phase_deg; beneath, the points minus that model"
+            + (f" ({'; '.join(rest_text)})" if rest_text else "") + ".")
+    if ratio:
+        note += f" drift_reduction_ratio (4θ before / 4θ after) = {with_interval(ratio['value'], None)[0]}."
+    header = ["record", "term", "amplitude", "95 % interval", "phase [95 % interval]", "unit"]
     return [ReportFigure("hrg-damping_drift", "Drift against the wave angle, before and after compensation", fig,
-                         note, (["record", "term", "amplitude", "95 % interval", "unit"], rows))]
+                         note, (header, rows))]
 
 
 def figures(proc: Any, data: Any) -> list[ReportFigure]:

@@ -19,6 +19,8 @@ import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from .numbers import pretty_unit  # noqa: E402
+
 #: points of a record drawn as a line; longer records are drawn as a min/max envelope of this many bins
 ENVELOPE_BINS = 1200
 WIDTH_IN = 7.6
@@ -35,65 +37,44 @@ _RC = {
 }
 matplotlib.rcParams.update(_RC)
 
-#: quantity of a stream column or curve by its name; the unit comes from the name's suffix (an
-#: explicit entry wins).  The run-contract issue will declare both with each stream column.
-QUANTITIES: dict[str, tuple[str, str]] = {
-    "t_s": ("time t", "s"),
-    "freq_hz": ("drive frequency f", "Hz"),
-    "rate_dps": ("table rate Ω", "deg/s"),
-    "angle_deg": ("table angle", "deg"),
-    "theta_deg": ("wave angle θ", "deg"),
-    "drift_dph": ("drift", "deg/h"),
-    "cx": ("slow variable cx", "model units"),
-    "sx": ("slow variable sx", "model units"),
-    "cy": ("slow variable cy", "model units"),
-    "sy": ("slow variable sy", "model units"),
-    "q1": ("q1", "model units"),
-    "p1": ("p1", "model units"),
-    "q2": ("q2", "model units"),
-    "p2": ("p2", "model units"),
-    "amplitude": ("amplitude A", "model units"),
-    "amplitude_y": ("amplitude B", "model units"),
-    "phase_deg": ("phase φ", "deg"),
-    "phase_y_deg": ("phase ψ", "deg"),
-    "energy": ("energy E", "model units²"),
-    "quadrature_rel": ("quadrature k/a", "1"),
-    "amp_ctrl": ("amplitude control", "DAC units"),
-    "freq_ctrl": ("frequency control", "DAC units"),
-    "quad_ctrl": ("quadrature control", "DAC units"),
-    "prec_ctrl": ("precession control", "DAC units"),
-}
-_SUFFIX_UNITS = (
-    ("_per_s", "1/s"), ("_dps2", "deg/s²"), ("_dps", "deg/s"), ("_dph", "deg/h"), ("_deg", "deg"), ("_rad", "rad"),
-    ("_hz", "Hz"), ("_s", "s"), ("_v", "V"),
-)
+#: an axis whose column the run did not declare a unit for shows this (a defect the tests catch)
+NO_UNIT = "no unit declared"
 
 
-def quantity(name: str, declared: tuple[str, str] | None = None) -> tuple[str, str]:
-    """(quantity, unit) of a column: declared, known, or read from the name's unit suffix."""
-    if declared:
-        return declared
-    if name in QUANTITIES:
-        return QUANTITIES[name]
-    for suffix, unit in _SUFFIX_UNITS:
-        if name.endswith(suffix):
-            return name[: -len(suffix)].replace("_", " "), unit
-    return name.replace("_", " "), ""
+def unit_text(unit: str | None) -> str:
+    """A declared unit as an axis writes it ("1": a quantity of dimension one; deg/s^2 as deg/s²)."""
+    return pretty_unit(unit) if unit else NO_UNIT
 
 
-def declared_units(data: Any, stream: str) -> dict[str, tuple[str, str]]:
-    """(quantity, unit) of each column whose unit the raw file declares (bench.engine.streams);
-    a dimensionless "1" is left to QUANTITIES, which may say what the number counts in."""
-    units = data.units(stream) if hasattr(data, "units") else {}
-    return {c: (quantity(c)[0], u) for c, u in units.items() if u not in ("", "1")}
+def declared(data: Any, source: str, column: str) -> tuple[str, str]:
+    """(quantity, unit) of a stream's column or a fit's curve as the run declared it (the raw
+    file's declaration, bench.engine.streams); the unit is "" where nothing was declared."""
+    try:
+        return data.declared(source).get(column, (column, ""))
+    except KeyError:
+        return column, ""
 
 
-def label(name: str, declared: tuple[str, str] | None = None, *, short: bool = False) -> str:
-    """Axis label 'quantity (unit)' of a column; short: 'name' over '(unit)', for stacked panels."""
-    q, u = quantity(name, declared)
+def axis_label(data: Any, source: str, column: str, *, quantity: str | None = None, short: bool = False) -> str:
+    """Axis label 'quantity (unit)' of a declared column (quantity: words for a derived axis in
+    the column's unit); short: 'column' over '(unit)', for stacked narrow panels."""
+    q, unit = declared(data, source, column)
     if short:
-        return f"{name}\n({u})" if u else name
-    return f"{q} ({u})" if u else q
+        return f"{column}\n({unit_text(unit)})"
+    return f"{quantity or q} ({unit_text(unit)})"
+
+
+def log_label(name: str, unit: str) -> str:
+    """Axis label of the natural log of a declared quantity: 'ln E (1)', or 'ln(E / unit) (1)'."""
+    if not unit:
+        return f"ln {name} ({NO_UNIT})"
+    return f"ln {name} (1)" if unit == "1" else f"ln({name} / {unit}) (1)"
+
+
+def measured_label(quantity: str, m: dict[str, Any] | None) -> str:
+    """Axis label of a quantity in the unit of a recorded measurement (as its procedure declared it)."""
+    unit = None if m is None else (m.get("unit") or "1")
+    return f"{quantity} ({unit_text(unit)})"
 
 
 @dataclass
@@ -158,6 +139,8 @@ def plot_record(ax: Axes, x: np.ndarray, y: np.ndarray, *, color: str | None = N
     """A record as a line, or as its min/max envelope when it is long."""
     xe, lo, hi = envelope(x, y)
     if lo is hi:
+        if len(xe) < 100:  # a few readings: each one marked, so the line is not read as a record
+            kwargs = {"marker": "o", "markersize": 2.5, **kwargs}
         ax.plot(xe, lo, color=color, label=label, **kwargs)
         return
     poly = ax.fill_between(xe, lo, hi, color=color, linewidth=0.6, label=label, alpha=0.8)
@@ -165,8 +148,8 @@ def plot_record(ax: Axes, x: np.ndarray, y: np.ndarray, *, color: str | None = N
         poly.set_edgecolor(poly.get_facecolor())
 
 
-def fit_with_residuals(x: np.ndarray, y: np.ndarray, y_fit: np.ndarray, *, xname: str, yname: str,
-                       ylabel: str | None = None, data_label: str = "measured", fit_label: str = "fit",
+def fit_with_residuals(x: np.ndarray, y: np.ndarray, y_fit: np.ndarray, *, xlabel: str, ylabel: str,
+                       data_label: str = "measured", fit_label: str = "fit",
                        residual: np.ndarray | None = None, residual_label: str | None = None,
                        height_in: float = 3.6) -> Figure:
     """Data with the fitted curve over them and the residual (data - fit) in a panel beneath."""
@@ -178,13 +161,13 @@ def fit_with_residuals(x: np.ndarray, y: np.ndarray, y_fit: np.ndarray, *, xname
         plot_record(top, x, y, color="C0", label=data_label)
     xf, _, yf = envelope(x, y_fit)
     top.plot(xf, yf, "--", color="C3", label=fit_label, linewidth=1.0)
-    top.set_ylabel(ylabel or label(yname))
+    top.set_ylabel(ylabel)
     top.legend(loc="best")
     r = np.asarray(y, dtype=float) - np.asarray(y_fit, dtype=float) if residual is None else residual
     plot_record(bottom, x, r, color="C0")
     bottom.axhline(0.0, color="C3", linewidth=0.8)
     bottom.set_ylabel(residual_label or "residual")
-    bottom.set_xlabel(label(xname))
+    bottom.set_xlabel(xlabel)
     return fig
 
 
@@ -213,16 +196,36 @@ def table_figure(data: Any) -> list[ReportFigure]:
     if t is None or len(t) < 2:
         return []
     cols = [c for c in ("rate_dps", "angle_deg") if c in tab]
-    units = declared_units(data, "table")
     fig, ax = new_figure(len(cols), 1, height_in=1.6 + 1.2 * len(cols), sharex=True)
+    note = f"{len(t)} readings of the table's status."
     for i, c in enumerate(cols):
+        if c == "angle_deg" and "rate_dps" in tab:  # reported in [0, 360): unwrapped with the rate readings
+            plot_record(ax[i, 0], t, unwrap_angle_deg(t, tab[c], tab["rate_dps"]), color=f"C{i}")
+            ax[i, 0].set_ylabel(axis_label(data, "table", c, quantity="table angle, unwrapped"))
+            note += (" The table reports its angle in [0, 360); it is unwrapped here with the rate readings (each "
+                     "step's whole turns from the rate, the rest from the angle read).")
+            continue
         if c == "angle_deg":  # wraps at 360 deg: points, not a line across the wrap
-            ax[i, 0].plot(t, tab[c], ".", color=f"C{i}", markersize=1.5)
+            ax[i, 0].plot(t, tab[c], ".", color=f"C{i}", markersize=1.5 if len(t) > 500 else 3)
         else:
             plot_record(ax[i, 0], t, tab[c], color=f"C{i}")
-        ax[i, 0].set_ylabel(label(c, units.get(c)))
-    ax[-1, 0].set_xlabel(label("t_s"))
-    return [ReportFigure("table", "Rate table: rate and angle", fig, f"{len(t)} readings of the table's status.")]
+        ax[i, 0].set_ylabel(axis_label(data, "table", c))
+    ax[-1, 0].set_xlabel(axis_label(data, "table", "t_s"))
+    return [ReportFigure("table", "Rate table: rate and angle", fig, note)]
+
+
+def unwrap_angle_deg(t_s: np.ndarray, angle_deg: np.ndarray, rate_dps: np.ndarray) -> np.ndarray:
+    """An angle read in [0, 360) made continuous: between two readings the table turned the angle
+    difference read plus the whole turns that bring it nearest the rate's trapezoid integral (right
+    while the integral errs by under 180 deg a step, which sampling the angle alone cannot give
+    above 180 deg a step)."""
+    t, a, r = (np.asarray(x, dtype=float) for x in (t_s, angle_deg, rate_dps))
+    if len(a) < 2:
+        return a
+    turned = 0.5 * (r[1:] + r[:-1]) * np.diff(t)
+    step = np.diff(a)
+    step += 360.0 * np.round((turned - step) / 360.0)
+    return np.concatenate([[a[0]], a[0] + np.cumsum(step)])
 
 
 def stream_figure(data: Any, stream: str, columns: list[str] | None = None, *, title: str | None = None,
@@ -233,12 +236,11 @@ def stream_figure(data: Any, stream: str, columns: list[str] | None = None, *, t
     cols = [c for c in (columns or tab) if c in tab and c not in ("t_s", "index")]
     if t is None or len(t) < 2 or not cols:
         return None
-    units = declared_units(data, stream)
     fig, ax = new_figure(len(cols), 1, height_in=0.9 + 1.05 * len(cols), sharex=True)
     for i, c in enumerate(cols):
         plot_record(ax[i, 0], t, tab[c], color=f"C{i % 10}")
-        ax[i, 0].set_ylabel(label(c, units.get(c), short=len(cols) > 2))
-    ax[-1, 0].set_xlabel(label("t_s"))
+        ax[i, 0].set_ylabel(axis_label(data, stream, c, short=len(cols) > 2))
+    ax[-1, 0].set_xlabel(axis_label(data, stream, "t_s"))
     note = f"{len(t)} rows" + (f", drawn as min/max envelopes of {ENVELOPE_BINS} bins" if len(t) > 2 * ENVELOPE_BINS
                                else "")
     return ReportFigure(key or stream, title or f"Stream {stream}", fig, note + ".")

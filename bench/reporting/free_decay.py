@@ -9,9 +9,20 @@ from typing import Any
 
 import numpy as np
 
-from .figures import ReportFigure, label, measurement, new_figure, plot_record, table_figure
+from .figures import (
+    ReportFigure,
+    axis_label,
+    declared,
+    log_label,
+    measurement,
+    new_figure,
+    plot_record,
+    table_figure,
+    unit_text,
+)
 
 _NAMES = ("cx", "sx", "cy", "sy")
+_ELEMENTS = "hrg-free-decay elements"  # the fit whose declaration gives E's and theta's units
 
 
 def _params(proc: Any, data: Any, t: np.ndarray, q: np.ndarray) -> tuple[dict[str, float], str]:
@@ -72,30 +83,31 @@ def figures(proc: Any, data: Any) -> list[ReportFigure]:
             params, source = _params(proc, data, t, q)
             lam = 2.0 * math.pi * (float(win[2]) - proc.natural_freq_hz)
             model = trajectory(t, q[0], params, lam)
-            out += [_slow_figure(t, q, model, source, proc.model), _elements_figure(t, q, model, orbit_elements)]
+            out += [_slow_figure(data, t, q, model, source, proc.model),
+                    _elements_figure(data, t, q, model, orbit_elements)]
     return out + table_figure(data)
 
 
-def _slow_figure(t: np.ndarray, q: np.ndarray, model: np.ndarray, source: str, name: str) -> ReportFigure:
+def _slow_figure(data: Any, t: np.ndarray, q: np.ndarray, model: np.ndarray, source: str, name: str) -> ReportFigure:
     fig, ax = new_figure(4, 2, height_in=5.4, sharex=True, gridspec_kw={"width_ratios": [1.6, 1]})
     for i, n in enumerate(_NAMES):
         plot_record(ax[i, 0], t, q[:, i], color="C0", label="measured")
         ax[i, 0].plot(t, model[:, i], "--", color="C3", label="identified model")
-        ax[i, 0].set_ylabel(label(n, short=True))
+        ax[i, 0].set_ylabel(axis_label(data, "fpga", n, short=True))
         plot_record(ax[i, 1], t, q[:, i] - model[:, i], color="C0")
         ax[i, 1].axhline(0.0, color="C3", linewidth=0.8)
-        ax[i, 1].set_ylabel(f"residual {n}")
+        ax[i, 1].set_ylabel(f"residual {n}\n({unit_text(declared(data, 'fpga', n)[1])})")
     ax[0, 0].legend(loc="upper right", ncols=2)
     ax[0, 0].set_title("measured and model")
     ax[0, 1].set_title("measured − model")
     for j in (0, 1):
-        ax[-1, j].set_xlabel(label("t_s"))
+        ax[-1, j].set_xlabel(axis_label(data, "fpga", "t_s"))
     return ReportFigure("hrg-free-decay_slow", "Slow variables with the identified model's trajectory", fig,
                         f"The {name} slow-variable model integrated forward from the first sample of the record with "
                         f"the identified parameters ({source}); residuals on the right.")
 
 
-def _elements_figure(t: np.ndarray, q: np.ndarray, model: np.ndarray, orbit_elements: Any) -> ReportFigure:
+def _elements_figure(data: Any, t: np.ndarray, q: np.ndarray, model: np.ndarray, orbit_elements: Any) -> ReportFigure:
     em, en = orbit_elements(q), orbit_elements(model)
     fig, ax = new_figure(2, 2, height_in=3.8, sharex=True, gridspec_kw={"width_ratios": [1.6, 1]})
     ok = (em["E"] > 0) & (en["E"] > 0)
@@ -103,16 +115,19 @@ def _elements_figure(t: np.ndarray, q: np.ndarray, model: np.ndarray, orbit_elem
     th_m = np.degrees(np.unwrap(4 * em["theta_rad"]) / 4)
     th_n = np.degrees(np.unwrap(4 * en["theta_rad"]) / 4)
     th_n += 90.0 * np.round((th_m[0] - th_n[0]) / 90.0)
-    for i, (ym, yn, name) in enumerate(((ln_m, ln_n, "ln E (E in model units²)"), (th_m, th_n, label("theta_deg")))):
+    e_unit, th_unit = declared(data, _ELEMENTS, "energy")[1], declared(data, _ELEMENTS, "theta_deg")[1]
+    labels = ((log_label("E", e_unit), f"residual ln E\n({unit_text(e_unit and '1')})"),
+              (axis_label(data, _ELEMENTS, "theta_deg"), f"residual θ\n({unit_text(th_unit)})"))
+    for i, (ym, yn, (name, res_name)) in enumerate(((ln_m, ln_n, labels[0]), (th_m, th_n, labels[1]))):
         tt = t[ok] if i == 0 else t
         plot_record(ax[i, 0], tt, ym, color="C0", label="measured")
         ax[i, 0].plot(tt, yn, "--", color="C3", label="identified model")
         ax[i, 0].set_ylabel(name)
         plot_record(ax[i, 1], tt, ym - yn, color="C0")
         ax[i, 1].axhline(0.0, color="C3", linewidth=0.8)
-        ax[i, 1].set_ylabel("residual " + ("ln E" if i == 0 else "θ (deg)"))
+        ax[i, 1].set_ylabel(res_name)
     ax[0, 0].legend(loc="best")
     for j in (0, 1):
-        ax[-1, j].set_xlabel(label("t_s"))
+        ax[-1, j].set_xlabel(axis_label(data, "fpga", "t_s"))
     return ReportFigure("hrg-free-decay_elements", "Energy and wave angle with the identified model", fig,
                         "Orbit elements of the measured and modelled slow variables.")

@@ -23,7 +23,8 @@ def _fixed_or_sci(v: float, last_digit: int) -> str:
     zero (a truth of 0) is '0', not a row of zeros."""
     if v == 0:
         return "0"
-    mag = math.floor(math.log10(abs(v))) if v else last_digit
+    vr = round(v, -last_digit)  # the magnitude after rounding: 9.9996e6 to 4 digits is 1.000e7
+    mag = math.floor(math.log10(abs(vr))) if vr else last_digit
     if -3 <= mag < 6 or not v:
         return f"{v:.{max(0, -last_digit)}f}"
     decimals = max(0, mag - last_digit)
@@ -47,6 +48,8 @@ def sig(x: Any, digits: int = 4) -> str:
     if v == 0:
         return "0"
     mag = math.floor(math.log10(abs(v)))
+    if abs(round(v, digits - 1 - mag)) >= 10.0 ** (mag + 1):  # rounds up into the next decade: 99.9988 -> 100.0
+        mag += 1
     text = _fixed_or_sci(v, mag - digits + 1)
     return text.replace("-", "−") if text.startswith("-") else text
 
@@ -109,6 +112,11 @@ def truth_text(truth: Any, ci95: Any) -> str:
         return "0"
     d = last_digit(ci95)
     return _minus(_fixed_or_sci(t, d)) if d is not None else sig(t)
+
+
+def pretty_unit(unit: str) -> str:
+    """A unit as printed: powers as superscripts (deg/s^2 -> deg/s²)."""
+    return unit.replace("^2", "²").replace("^3", "³")
 
 
 def plain(x: Any, digits: int = 6) -> str:

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .figures import ReportFigure, equal_aspect, label, new_figure
+from .figures import ReportFigure, axis_label, equal_aspect, new_figure
 from .numbers import sig
 
 MODELS = ("linear", "cubic", "quintic")
@@ -44,7 +44,8 @@ def sweep_models(proc: Any, data: Any) -> dict[str, Any]:
     # the measured frequencies are on the grid, so each model is solved once per branch
     grid = np.union1d(np.linspace(f.min(), f.max(), GRID_POINTS), f)
     out = {"f": f, "dir": d, "q": q, "grid": grid, "chosen": chosen, "sigma": {m: fits[m].sigma for m in MODELS},
-           "curves": {}, "at_points": {}}
+           "curves": {}, "at_points": {},
+           "label": lambda c, **kw: axis_label(data, "sweep", c, **kw)}  # quantity and unit as declared
     idx = np.searchsorted(grid, f)
     for m in MODELS:
         br = out["curves"][m] = _branches(fits[m], grid)
@@ -67,9 +68,9 @@ def _sweep_figure(s: dict[str, Any], ch: int) -> ReportFigure:
             a, p = _amp_phase(s["q"][sel], ch)
             amp_ax.plot(s["f"][sel], a, mk, color=col, markersize=4, fillstyle="none", label=name)
             ph_ax.plot(s["f"][sel], p, mk, color=col, markersize=4, fillstyle="none")
-    amp_ax.set_ylabel(label("amplitude" if ch == 0 else "amplitude_y", short=False))
-    ph_ax.set_ylabel(label("phase_deg" if ch == 0 else "phase_y_deg"))
-    ph_ax.set_xlabel(label("freq_hz"))
+    amp_ax.set_ylabel(s["label"]("amplitude" if ch == 0 else "amplitude_y"))
+    ph_ax.set_ylabel(s["label"]("phase_deg" if ch == 0 else "phase_y_deg"))
+    ph_ax.set_xlabel(s["label"]("freq_hz"))
     fig.legend(loc="outside upper center", ncols=5)  # above the axes: never over the resonance
     n = "1 (q1, p1)" if ch == 0 else "2 (q2, p2)"
     return ReportFigure(f"mems-sweep_channel{ch + 1}", f"Channel {n}: amplitude and phase against frequency", fig,
@@ -92,8 +93,8 @@ def _polar_figure(s: dict[str, Any]) -> ReportFigure:
                        label=name)
         equal_aspect(a)
         qn, pn = ("q1", "p1") if ch == 0 else ("q2", "p2")
-        a.set_xlabel(label(qn))
-        a.set_ylabel(label(pn))
+        a.set_xlabel(s["label"](qn))
+        a.set_ylabel(s["label"](pn))
         a.set_title(f"channel {ch + 1}")
     fig.legend(*ax[0, 0].get_legend_handles_labels(), loc="outside upper center", ncols=5)
     return ReportFigure("mems-sweep_polar", "Polar plots (1:1): in-phase against quadrature response", fig,
@@ -111,9 +112,9 @@ def _residual_figure(s: dict[str, Any]) -> ReportFigure:
             ax[i, ch].axhline(0.0, color=_COLOR[m], linewidth=0.9)
             ax[i, ch].set_title(f"{m} model, channel {ch + 1}" + (f"  (fit σ = {sig(s['sigma'][m], 3)})"
                                                                    if ch == 0 else ""), fontsize=8.5)
-        ax[i, 0].set_ylabel("ΔA (model units)")
+        ax[i, 0].set_ylabel(s["label"]("amplitude", quantity="ΔA"))
     for ch in (0, 1):
-        ax[-1, ch].set_xlabel(label("freq_hz"))
+        ax[-1, ch].set_xlabel(s["label"]("freq_hz"))
     return ReportFigure("mems-sweep_residuals", "Residuals of each model: measured minus model amplitude", fig,
                         "Amplitude measured minus the model's steady state on the branch of the point's sweep "
                         "direction (▲ up, ▼ down); each model on its own scale.")

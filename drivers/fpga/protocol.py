@@ -245,12 +245,13 @@ def encode_frame(ftype: int, seq: int, addr: int, payload: bytes = b"") -> bytes
 #: setpoint) and the four loop outputs (forces in 1/s per unit amplitude, the PLL's offset in Hz)
 STREAM_SCHEMA = declare(StreamSchema("fpga", "fpga", (
     Column("index", "1", "u8", doc="sample number since the FPGA started"),
-    Column("t_s", "s", doc="time of the sample (bench clock)"),
-    Column("cx", "1", "f4"), Column("sx", "1", "f4"), Column("cy", "1", "f4"), Column("sy", "1", "f4"),
-    Column("amp_ctrl", "1/s", "f4", doc="amplitude (AGC) force"),
-    Column("freq_ctrl", "Hz", "f4", doc="reference frequency minus REF_FREQ_HZ"),
-    Column("quad_ctrl", "1/s", "f4", doc="quadrature force"),
-    Column("prec_ctrl", "1/s", "f4", doc="whole-angle precession force"),
+    Column("t_s", "s", doc="time of the sample (bench clock)", quantity="time t"),
+    Column("cx", "1", "f4", quantity="slow variable cx"), Column("sx", "1", "f4", quantity="slow variable sx"),
+    Column("cy", "1", "f4", quantity="slow variable cy"), Column("sy", "1", "f4", quantity="slow variable sy"),
+    Column("amp_ctrl", "1/s", "f4", doc="amplitude (AGC) force", quantity="amplitude control"),
+    Column("freq_ctrl", "Hz", "f4", doc="reference frequency minus REF_FREQ_HZ", quantity="frequency control"),
+    Column("quad_ctrl", "1/s", "f4", doc="quadrature force", quantity="quadrature control"),
+    Column("prec_ctrl", "1/s", "f4", doc="whole-angle precession force", quantity="precession control"),
 )))
 STREAM_COLUMNS = STREAM_SCHEMA.names
 STREAM_PAYLOAD = 48

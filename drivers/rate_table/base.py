@@ -12,7 +12,8 @@ from drivers.errors import DeviceError, LinkLostError, SafetyTripError
 
 #: the table's readings a station records during a run
 TABLE_STREAM = declare(StreamSchema("table", "table", (
-    Column("t_s", "s"), Column("rate_dps", "deg/s"), Column("angle_deg", "deg"))))
+    Column("t_s", "s", quantity="time t"), Column("rate_dps", "deg/s", quantity="table rate Ω"),
+    Column("angle_deg", "deg", quantity="table angle"))))
 #: |rate| below which the table counts as at rest (deg/s): safe_state and stop confirmations.
 REST_RATE_DPS = 0.05
 #: bench-clock period of the polls inside the waits (s): 10 ms of virtual time per poll.

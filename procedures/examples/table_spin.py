@@ -3,7 +3,8 @@
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.engine.streams import Column, StreamSchema, declare
 
-HOLD = declare(StreamSchema("hold", "table-spin", (Column("t_s", "s"), Column("rate_dps", "deg/s"))))
+HOLD = declare(StreamSchema("hold", "table-spin", (Column("t_s", "s", quantity="time t"),
+                                                    Column("rate_dps", "deg/s", quantity="table rate Ω"))))
 
 
 class TableSpin(Procedure):
@@ -45,7 +46,13 @@ class TableSpin(Procedure):
         """The measurement from the recorded readings: the same code live and in
         `gyrobench analyze RUN`."""
         rate = data.table("hold")["rate_dps"]
-        return [Result("table_rate_dps", float(rate.mean()))]  # unit and limits: the declaration
+        mean = float(rate.mean())
+        if len(rate) < 2:
+            return [Result("table_rate_dps", mean)]  # unit and limits: the declaration
+        from scipy import stats
+
+        half = float(stats.t.ppf(0.975, len(rate) - 1) * rate.std(ddof=1) / len(rate) ** 0.5)
+        return [Result("table_rate_dps", mean, ci95=(mean - half, mean + half))]  # of the mean of the readings
 
     def figures(self, data) -> list:
         """The figures this run's results need (bench.reporting.table_spin): the report and
