@@ -16,6 +16,8 @@ import numpy as np
 from bench.engine import events as ev
 from bench.engine.params import Param
 
+from .manual_backend import ManualBackendMixin
+
 DEFAULT_STATION = "sim-hrg"
 STATUS_EVERY_WALL_S = 0.5
 POLL_HZ = 2.0  # the station panel's refresh from the devices: modest, the links are the run's first
@@ -27,7 +29,7 @@ def default_station() -> str:
 
 log = logging.getLogger(__name__)
 
-class EngineBackend:
+class EngineBackend(ManualBackendMixin):
     """GuiBackend over `bench.engine.Runner` on a `bench.station.Station` (opened here)."""
 
     def __init__(self, station: str, *, seed: int | None = None, runs_dir: str | Path | None = None,
@@ -95,7 +97,7 @@ class EngineBackend:
         from procedures import find_procedure
 
         if self.running():
-            raise RuntimeError("a run is already going on")
+            raise RuntimeError(self.busy_text() or "a run is already going on")
         proc = find_procedure(procedure)(values)  # ParamError (a ValueError) before anything moves
         check_station(proc, self.station)  # StationMismatch (a ValueError): another kind, or above a limit
         with self._io_gate:  # waits for a panel read in progress: from here on only the run talks to devices
