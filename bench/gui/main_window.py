@@ -180,6 +180,9 @@ class MainWindow(QMainWindow):
         self.bridge.events.connect(self.on_events)
         self._set_backpressure(float(self.station.speed.currentData()))
         self._on_procedure(self.procedure.currentText())
+        from .manual_panel import install as install_manual
+
+        install_manual(self)  # the manual-control dock and the SAFE STATE button always on the toolbar
         if hasattr(backend, "start_polling"):
             backend.start_polling()  # the station panel from the devices, also between runs
 
