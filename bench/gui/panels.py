@@ -12,7 +12,6 @@ from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
     QLabel,
-    QPlainTextEdit,
     QProgressBar,
     QPushButton,
     QSizePolicy,
@@ -25,6 +24,7 @@ from PySide6.QtWidgets import (
 )
 
 from .backend import SPEEDS
+from .log_view import LogPane  # noqa: F401 - the window's log (levels in colour, filter, follows)
 
 OUTCOME_COLOURS = {"PASS": "#b7e4b7", "FAIL": "#f4b6b6", "MARGINAL": "#ffe29a", "ERROR": "#f4b6b6",
                    "ABORTED": "#dddddd", "COMPLETE": "#ffffff", "RUNNING": "#cfe3ff", "INTERRUPTED": "#f4b6b6"}
@@ -172,18 +172,6 @@ class StepList(QWidget):
     def set_progress(self, fraction: float, message: str) -> None:
         self.progress.setValue(int(round(1000 * min(1.0, max(0.0, fraction)))))
         self.message.setText(message)
-
-
-class LogPane(QPlainTextEdit):
-    """The run's log, newest last, bounded so a chatty run cannot eat the memory."""
-
-    def __init__(self, parent: QWidget | None = None, max_lines: int = 5000) -> None:
-        super().__init__(parent)
-        self.setReadOnly(True)
-        self.setMaximumBlockCount(max_lines)
-
-    def add(self, t_sim_s: float, level: str, message: str) -> None:
-        self.appendPlainText(f"{t_sim_s:9.3f}  {level:<7} {message}")
 
 
 class ResultsTable(QWidget):
