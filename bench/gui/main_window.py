@@ -282,7 +282,7 @@ class MainWindow(QMainWindow):
                 self.steps_done += 1
                 self.step_fraction = 0.0
             elif isinstance(e, ev.Measurement):
-                self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut)
+                self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut, ci95=e.ci95)
             elif isinstance(e, ev.Log):
                 self.log.add(e.t_sim_s, e.level, e.message)
             elif isinstance(e, ev.StationStatus):
@@ -326,6 +326,9 @@ class MainWindow(QMainWindow):
         self.steps_done = 0
         self.step_fraction = 0.0
         self.results.clear()
+        from .run_truth import truth_for_run
+
+        self.results.set_truth(truth_for_run(self.backend, e.procedure))  # the truth column (simulated)
         self.steps.set_steps(e.steps)
         self.run_active = True
         self.last_finished = None

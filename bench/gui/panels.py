@@ -23,6 +23,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from bench.engine.measurement import NOT_MEASURED
+
 from .backend import SPEEDS
 from .log_view import LogPane  # noqa: F401 - the window's log (levels in colour, filter, follows)
 
@@ -175,10 +177,11 @@ class StepList(QWidget):
 
 
 class ResultsTable(QWidget):
-    """Measurements with value, limits and a PASS/FAIL/MARGINAL colour; a button opens the
-    run's report when there is one."""
+    """Measurements with value, 95 % interval, limits, a PASS/FAIL/MARGINAL colour and, on a
+    simulated station, the truth; a declared measurement never reported reads "not measured".
+    The table is as tall as its rows; a button opens the run's report when there is one."""
 
-    HEADERS = ("measurement", "value", "unit", "low", "high", "outcome")
+    HEADERS = ("measurement", "value", "95% interval", "unit", "limits", "outcome", "truth")
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -187,7 +190,10 @@ class ResultsTable(QWidget):
         self.table = QTableWidget(0, len(self.HEADERS))
         self.table.setHorizontalHeaderLabels(self.HEADERS)
         self.table.verticalHeader().setVisible(False)
+        self.table.horizontalHeader().setStretchLastSection(True)
+        self.table.setVerticalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAsNeeded)
         lay.addWidget(self.table)
+        self.truths: dict[str, float] = {}
         row = QHBoxLayout()
         self.outcome = QLabel("")
         self.outcome.setWordWrap(True)  # a long reason wraps; it never pushes "Open report" away
@@ -198,27 +204,51 @@ class ResultsTable(QWidget):
         self.report_button.setEnabled(False)
         row.addWidget(self.report_button)
         lay.addLayout(row)
+        lay.addStretch(1)
         self.report_path: str | None = None
+        self._fit_rows()
 
     def clear(self) -> None:
         self.table.setRowCount(0)
         self.outcome.setText("")
         self.report_path = None
         self.report_button.setEnabled(False)
+        self.truths = {}
+        self._fit_rows()
+
+    def set_truth(self, truths: dict[str, float]) -> None:
+        """The simulator's true value of each measurement, by name (empty on a real bench)."""
+        self.truths = dict(truths)
 
     def add(self, name: str, value: float, unit: str, low: float | None, high: float | None, outcome: str,
-            dut: str | None = None) -> None:
+            dut: str | None = None, ci95: tuple[float, float] | None = None, truth: float | None = None) -> None:
         r = self.table.rowCount()
         self.table.insertRow(r)
         label = name if dut is None else f"{name} [{dut}]"
-        cells = (label, f"{value:.6g}", unit, "" if low is None else f"{low:.6g}",
-                 "" if high is None else f"{high:.6g}", outcome)
+        truth = self.truths.get(name) if truth is None else truth
+        measured = outcome != NOT_MEASURED and value is not None and math.isfinite(value)
+        cells = (label, f"{value:.6g}" if measured else "not measured", _interval(ci95) if measured else "", unit,
+                 _limits(low, high), outcome.replace("_", " ") if outcome == NOT_MEASURED else outcome,
+                 _truth(truth, ci95 if measured else None))
         colour = QColor(OUTCOME_COLOURS.get(outcome, "#ffffff"))
         for c, text in enumerate(cells):
             item = QTableWidgetItem(text)
             item.setFlags(item.flags() & ~Qt.ItemFlag.ItemIsEditable)
             item.setBackground(QBrush(colour))
+            if not measured and c in (1, 5):
+                item.setForeground(QBrush(QColor("#707070")))
             self.table.setItem(r, c, item)
+        self._fit_rows()
+
+    def _fit_rows(self) -> None:
+        """Columns to their contents, and the table exactly as tall as its rows (at least one)."""
+        self.table.resizeColumnsToContents()
+        self.table.resizeRowsToContents()
+        rows = sum(self.table.rowHeight(r) for r in range(self.table.rowCount()))
+        rows = max(rows, self.table.verticalHeader().defaultSectionSize())
+        bar = self.table.horizontalScrollBar().sizeHint().height()
+        self.table.setFixedHeight(self.table.horizontalHeader().sizeHint().height() + rows + bar
+                                  + 2 * self.table.frameWidth())
 
     def set_outcome(self, outcome: str, safe_state: bool, reason: str) -> None:
         """The run's outcome and reason in its colour; when the run did not complete, measurements
@@ -242,3 +272,27 @@ class ResultsTable(QWidget):
     def set_report(self, path: str | None) -> None:
         self.report_path = path
         self.report_button.setEnabled(path is not None)
+
+
+def _interval(ci95: tuple[float, float] | None) -> str:
+    return "" if ci95 is None else f"[{ci95[0]:.6g}, {ci95[1]:.6g}]"
+
+
+def _limits(low: float | None, high: float | None) -> str:
+    if low is not None and high is not None:
+        return f"{low:.6g} to {high:.6g}"
+    if low is not None:
+        return f">= {low:.6g}"
+    if high is not None:
+        return f"<= {high:.6g}"
+    return ""
+
+
+def _truth(truth: float | None, ci95: tuple[float, float] | None) -> str:
+    """The simulated truth, marked when the 95 % interval holds it (or misses it)."""
+    if truth is None:
+        return ""
+    if ci95 is None:
+        return f"{truth:.6g}"
+    inside = ci95[0] <= truth <= ci95[1]
+    return f"{truth:.6g} ({'in' if inside else 'OUTSIDE'} the interval)"
