@@ -35,6 +35,8 @@ def test_form_fits_the_default_window_and_refusals_show_at_the_field(qtbot, tmp_
             assert not scroll.horizontalScrollBar().isVisible(), name
             assert win.minimumSizeHint().width() <= default_w
             for param in win.form.specs:
+                name = win.form.name_labels[param.name]  # the name is never clipped
+                assert name.width() >= name.fontMetrics().horizontalAdvance(param.name), param.name
                 hint = win.form.hints[param.name]
                 assert param.limit_text() in hint.text()
                 assert hint.width() <= scroll.viewport().width()

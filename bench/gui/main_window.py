@@ -323,6 +323,7 @@ class MainWindow(QMainWindow):
         self.plots.set_origin(e.t_sim_s if e.t_sim_s > 0 else None)  # a replay's RunStarted says 0
         self.run_t0_s = e.t_sim_s
         self.run_id = e.run_id
+        self.safe_label.setText("")  # the last run's safe state is not this one's (manual control starts here too)
         self.steps_done = 0
         self.step_fraction = 0.0
         self.results.clear()

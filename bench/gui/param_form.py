@@ -53,11 +53,12 @@ class ParameterForm(QWidget):
         is (wrapped, never scrolled sideways), and the reason a value is refused, right there."""
         while self.layout_.rowCount():
             self.layout_.removeRow(0)
-        self.layout_.setRowWrapPolicy(QFormLayout.RowWrapPolicy.WrapLongRows)
+        self.layout_.setRowWrapPolicy(QFormLayout.RowWrapPolicy.WrapAllRows)  # name above its field: never clipped
         self.specs = tuple(specs)
         self.fields = {}
         self.field_errors: dict[str, QLabel] = {}
         self.hints: dict[str, QLabel] = {}
+        self.name_labels: dict[str, QLabel] = {}
         self.error_label = QLabel("")  # every refusal at once, kept for callers; each is shown at its field
         for param in self.specs:
             field = self._make_field(param)
@@ -66,7 +67,8 @@ class ParameterForm(QWidget):
             label = param.name + (f" [{param.unit}]" if param.unit else "")
             hint_text = "; ".join(t for t in (param.limit_text(), param.doc) if t)
             field.setToolTip(hint_text)
-            self.layout_.addRow(_wrapping(label), field)
+            self.name_labels[param.name] = QLabel(label)  # a short identifier: shown whole, above its field
+            self.layout_.addRow(self.name_labels[param.name], field)
             hint = _wrapping(hint_text, HINT_STYLE)
             self.hints[param.name] = hint
             self.layout_.addRow(hint)
