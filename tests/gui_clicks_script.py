@@ -123,7 +123,8 @@ def main(shot: str) -> int:
         seen["result_headers"] = list(res.HEADERS)
         seen["result_rows"] = [{h: res.table.item(r, c).text() for c, h in enumerate(res.HEADERS)}
                                for r in range(res.table.rowCount())]
-        seen["results_fit"] = res.table.verticalScrollBar().maximum() == 0
+        wait(lambda: False, 0.3)
+        seen["results_h"] = [res.table.height(), res.table.maximumHeight(), win.height()]
         manual_clicks(win, backend, world, seen, shot)
     finally:
         win.close()

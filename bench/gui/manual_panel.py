@@ -20,6 +20,7 @@ from PySide6.QtWidgets import (
     QLabel,
     QLineEdit,
     QPushButton,
+    QScrollArea,
     QSizePolicy,
     QVBoxLayout,
     QWidget,
@@ -244,7 +245,12 @@ class ManualDock(QDockWidget):
         super().__init__("Manual control", parent)
         self.setObjectName("manual_dock")
         self.panel = panel
-        self.setWidget(panel)
+        scroll = QScrollArea()  # on a small screen the panel scrolls; it never makes the window taller
+        scroll.setWidget(panel)
+        scroll.setWidgetResizable(True)
+        scroll.setFrameShape(QScrollArea.Shape.NoFrame)
+        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.setWidget(scroll)
 
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
         self.panel.end()

@@ -15,6 +15,7 @@ from PySide6.QtWidgets import (
     QProgressBar,
     QPushButton,
     QSizePolicy,
+    QSplitter,
     QTableWidget,
     QTableWidgetItem,
     QTreeWidget,
@@ -192,7 +193,7 @@ class ResultsTable(QWidget):
         self.table.verticalHeader().setVisible(False)
         self.table.horizontalHeader().setStretchLastSection(True)
         self.table.setVerticalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAsNeeded)
-        lay.addWidget(self.table)
+        lay.addWidget(self.table, 1)  # the room goes to the rows first, up to their height
         self.truths: dict[str, float] = {}
         row = QHBoxLayout()
         self.outcome = QLabel("")
@@ -204,7 +205,7 @@ class ResultsTable(QWidget):
         self.report_button.setEnabled(False)
         row.addWidget(self.report_button)
         lay.addLayout(row)
-        lay.addStretch(1)
+        lay.addStretch(0)  # what the rows do not need stays below the report button
         self.report_path: str | None = None
         self._fit_rows()
 
@@ -241,14 +242,32 @@ class ResultsTable(QWidget):
         self._fit_rows()
 
     def _fit_rows(self) -> None:
-        """Columns to their contents, and the table exactly as tall as its rows (at least one)."""
+        """Columns to their contents, and the table as tall as its rows (at least one) where there is room."""
         self.table.resizeColumnsToContents()
         self.table.resizeRowsToContents()
         rows = sum(self.table.rowHeight(r) for r in range(self.table.rowCount()))
         rows = max(rows, self.table.verticalHeader().defaultSectionSize())
         bar = self.table.horizontalScrollBar().sizeHint().height()
-        self.table.setFixedHeight(self.table.horizontalHeader().sizeHint().height() + rows + bar
-                                  + 2 * self.table.frameWidth())
+        head = self.table.horizontalHeader().sizeHint().height() + bar + 2 * self.table.frameWidth()
+        # as tall as its rows where there is room; never taller, and never making the window taller
+        self.table.setMaximumHeight(head + rows)
+        self.table.setMinimumHeight(head + min(rows, 2 * self.table.verticalHeader().defaultSectionSize()))
+        self._grow_pane(head + rows)
+
+    def _grow_pane(self, table_h: int) -> None:
+        """In the window's plots/results splitter, give the results pane the height its rows need
+        (at most half the splitter; it only grows, so the operator's own split stands otherwise)."""
+        child, parent = self, self.parentWidget()
+        vertical = Qt.Orientation.Vertical
+        while parent is not None and not (isinstance(parent, QSplitter) and parent.orientation() == vertical):
+            child, parent = parent, parent.parentWidget()
+        if parent is None or parent.count() != 2 or parent.widget(1) is not child:
+            return
+        sizes = parent.sizes()
+        extra = child.height() - self.table.height()  # tab bar, outcome line, report button
+        want = min(sum(sizes) // 2, table_h + extra + self.outcome.sizeHint().height())
+        if want > sizes[1]:
+            parent.setSizes([sum(sizes) - want, want])
 
     def set_outcome(self, outcome: str, safe_state: bool, reason: str) -> None:
         """The run's outcome and reason in its colour; when the run did not complete, measurements
