@@ -195,6 +195,7 @@ class ResultsTable(QWidget):
         self.table.setVerticalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAsNeeded)
         lay.addWidget(self.table, 1)  # the room goes to the rows first, up to their height
         self.truths: dict[str, float] = {}
+        self._split_before: list[int] | None = None  # the plots/results split before the rows grew it
         row = QHBoxLayout()
         self.outcome = QLabel("")
         self.outcome.setWordWrap(True)  # a long reason wraps; it never pushes "Open report" away
@@ -266,7 +267,14 @@ class ResultsTable(QWidget):
         sizes = parent.sizes()
         extra = child.height() - self.table.height()  # tab bar, outcome line, report button
         want = min(sum(sizes) // 2, table_h + extra + self.outcome.sizeHint().height())
+        if table_h <= 0 or self.table.rowCount() == 0:  # cleared: the split from before the rows came back
+            if self._split_before is not None:
+                parent.setSizes(self._split_before)
+                self._split_before = None
+            return
         if want > sizes[1]:
+            if self._split_before is None:
+                self._split_before = sizes
             parent.setSizes([sum(sizes) - want, want])
 
     def set_outcome(self, outcome: str, safe_state: bool, reason: str) -> None:
