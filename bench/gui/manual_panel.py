@@ -203,7 +203,10 @@ class ManualPanel(QWidget):
 
     # --- display ---------------------------------------------------------------------------------
     def refresh(self) -> None:
-        """Show the session's state (read by the engine's thread) and the refusals of done actions."""
+        """Show the session's state (read by the engine's thread) and the refusals of done actions
+        (nothing to do while the dock is hidden: the window's redraws keep the CPU)."""
+        if not self.isVisible():
+            return
         for action, error in list(self._pending):
             if action.done.is_set():
                 self._pending.remove((action, error))

@@ -13,7 +13,7 @@ from collections import deque
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import QTimer
+from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import QGridLayout, QLabel, QWidget
 
 from bench.analysis.slow_model import orbit_elements
@@ -135,6 +135,7 @@ class LivePlots(QWidget):
             w.getPlotItem().getAxis("bottom").enableAutoSIPrefix(False)
 
         self.timer = QTimer(self)
+        self.timer.setTimerType(Qt.TimerType.PreciseTimer)  # a coarse timer drifts late under load: fewer frames
         self.timer.setInterval(max(1, int(round(1000.0 / refresh_hz))))
         self.timer.timeout.connect(self.refresh)
         self.timer.start()
