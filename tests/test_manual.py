@@ -77,7 +77,8 @@ def test_a_rate_beyond_the_table_limit_is_refused_naming_the_limit(sim_station, 
         assert "fpga" in f["streams"]  # the stream the session started
 
 
-def test_a_fault_during_a_session_brings_the_table_to_rest_and_cuts_the_drive(sim_station, runner):
+@pytest.mark.parametrize("fault", ["table-fault", "link-drop"])
+def test_a_fault_during_a_session_brings_the_table_to_rest_and_cuts_the_drive(sim_station, runner, fault):
     world = sim_station.world
     session, thread, out = _start(runner, sim_station)
     try:
@@ -86,14 +87,14 @@ def test_a_fault_during_a_session_brings_the_table_to_rest_and_cuts_the_drive(si
         assert _wait_for(lambda: abs(world.case_rate_dps - 200.0) < 0.5, thread)
         with world.lock:
             assert np.any(world.total_force)  # the drive is on
-        sim_station.inject("table-fault")
+        sim_station.inject(fault)
         thread.join(60)
     finally:
         session.end()
         thread.join(60)
     rec = out["rec"]
     assert rec.outcome == ERROR and rec.safe_state, rec.end_reason
-    assert "trip" in rec.end_reason or "fault" in rec.end_reason
+    assert ("trip" in rec.end_reason) if fault == "table-fault" else ("link lost" in rec.end_reason)
     assert abs(world.case_rate_dps) < 0.1  # the simulator's own state: at rest, drive cut
     with world.lock:
         assert not np.any(world.total_force)
@@ -113,3 +114,28 @@ def test_a_run_cannot_start_while_a_session_holds_the_station(sim_station, runne
         runner.abort("safe state button")
         thread.join(60)
     assert out["rec"].outcome == ABORTED and out["rec"].safe_state
+
+
+def test_stream_stop_and_start_are_done_and_recorded(sim_station, runner):
+    link = sim_station.devices["fpga"]
+    session, thread, out = _start(runner, sim_station)
+    try:
+        assert session.submit("stream_stop").wait()
+        assert not link._streaming and session.state.stream_on is False
+        frames = link.stats.frames
+        assert session.submit("table_rate", 10.0).wait()  # time passes, link checks go on, no frames
+        assert _wait_for(lambda: abs(sim_station.world.case_rate_dps - 10.0) < 0.5, thread)
+        assert link.stats.frames == frames
+        assert session.submit("stream_start").wait()
+        assert _wait_for(lambda: link.stats.frames > frames + 100, thread)
+    finally:
+        session.end()
+        thread.join(60)
+    rec = out["rec"]
+    assert rec.outcome == COMPLETE and rec.safe_state, rec.end_reason
+    with h5py.File(rec.raw_file, "r") as f:
+        acts = np.asarray(f["streams/manual_actions"])
+        on = acts[:, ACTIONS_STREAM.index("stream_on")].astype(int).tolist()
+        assert on == [1, 0, 0, 1]
+        log = "\n".join(x.decode() if isinstance(x, bytes) else str(x) for x in np.asarray(f["log"]).ravel())
+        assert "manual: stream_stop" in log and "manual: table_rate 10" in log
