@@ -103,3 +103,20 @@ def test_manual_control_cannot_start_during_a_run(window, qtbot):
     qtbot.mouseClick(win.safe_state_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: win.last_finished is not None, timeout=WAIT_MS)
     assert win.last_finished.outcome == "ABORTED" and win.last_finished.safe_state
+
+
+def test_closing_the_window_during_a_session_ends_it_in_the_safe_state(window, qtbot):
+    win = window
+    world = win.backend.station.world
+    panel = _open_and_start(qtbot, win)
+    qtbot.mouseClick(panel.drive_on_button, Qt.MouseButton.LeftButton)
+    panel.rate_edit.setText("80")
+    qtbot.mouseClick(panel.rate_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: abs(world.case_rate_dps - 80.0) < 0.5, timeout=WAIT_MS)
+    win.close()  # asks first (answered yes by the fixture), then aborts to the safe state and waits
+    assert not win.backend.running()
+    rec = win.backend.runner.record
+    assert rec.procedure == "manual" and rec.outcome == "ABORTED" and rec.safe_state
+    assert abs(world.case_rate_dps) < 0.1
+    with world.lock:
+        assert not np.any(world.total_force)

@@ -329,7 +329,7 @@ class MainWindow(QMainWindow):
         self.results.clear()
         from .run_truth import truth_for_run
 
-        self.results.set_truth(truth_for_run(self.backend, e.procedure))  # the truth column (simulated)
+        self.results.set_truth(truth_for_run(self.backend, e.procedure, e.run_id))  # the truth column (simulated)
         self.steps.set_steps(e.steps)
         self.run_active = True
         self.last_finished = None
