@@ -181,17 +181,21 @@ class EngineBackend(ManualBackendMixin):
                 self._table_row = (float(row[cols.index("rate_dps")]), float(row[cols.index("angle_deg")]))
         if isinstance(event, ev.StationStatus):
             return
+        if isinstance(event, ev.RunFinished):  # the safe state is done: read it from the devices, in the
+            self._table_row = None  # run's own thread, before the window hears of the end (never the run's rows)
+            self.publish_status(event.run_id, talk=True)
+            return
         at_step = isinstance(event, (ev.RunStarted, ev.StepStarted, ev.StepFinished))
         if at_step or time.monotonic() - self._last_status_wall > STATUS_EVERY_WALL_S:
             self.publish_status(event.run_id)
 
-    def publish_status(self, run_id: str = "") -> None:
+    def publish_status(self, run_id: str = "", *, talk: bool | None = None) -> None:
         """Publish the station panel's state.  Between runs it is read from the devices (table
         status, drive outputs, link counters); during a run only what needs no device I/O (the
         run's own table readings, link counters), so the run's transactions are never interleaved."""
         self._last_status_wall = time.monotonic()
         with self._io_gate:
-            devices = self._read_devices(talk=not self._in_run)
+            devices = self._read_devices(talk=not self._in_run if talk is None else talk)
         self.bus.publish(ev.StationStatus(run_id, self.station.clock.now(), devices=devices))
 
     def _read_devices(self, *, talk: bool) -> dict[str, dict[str, Any]]:
