@@ -120,3 +120,15 @@ def test_closing_the_window_during_a_session_ends_it_in_the_safe_state(window, q
     assert abs(world.case_rate_dps) < 0.1
     with world.lock:
         assert not np.any(world.total_force)
+
+
+def test_safe_state_on_an_idle_station_is_done_and_said(window, qtbot):
+    win = window
+    station = win.backend.station
+    with win.backend._io_gate:  # the panel's poller talks to the devices too
+        station.devices["table"].enable()
+        station.devices["table"].set_rate(30.0)  # left turning by hand, outside any run or session
+    qtbot.waitUntil(lambda: abs(station.world.case_rate_dps - 30.0) < 0.5 or station.clock.sleep(0.1), timeout=WAIT_MS)
+    qtbot.mouseClick(win.safe_state_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: "safe state button: safe state confirmed" in win.log.toPlainText(), timeout=WAIT_MS)
+    assert abs(station.world.case_rate_dps) < 0.1
