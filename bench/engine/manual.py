@@ -92,6 +92,7 @@ class ManualState:
     agc_setpoint: float = 1.0
     stream_on: bool = False
     rate_dps: float | None = None  # the table's own reading
+    drive_read: bool | None = None  # the FPGA's own status: drive on
     angle_deg: float | None = None
     t_s: float = 0.0
     run_id: str = ""
@@ -194,6 +195,11 @@ class ManualSession:
         if table is not None:
             st = table.status()
             self.state.rate_dps, self.state.angle_deg = float(st.rate_dps), float(st.angle_deg)
+        fpga = ctx.devices.get("fpga")
+        if fpga is not None:
+            from drivers.fpga.protocol import ST_DRIVE_ON
+
+            self.state.drive_read = bool(int(fpga.read_register("STATUS")) & ST_DRIVE_ON)
 
     def _apply(self, ctx: Any, action: Action) -> None:
         text = action.kind if action.value is None else f"{action.kind} {action.value:g}"

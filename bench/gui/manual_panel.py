@@ -111,7 +111,7 @@ class ManualPanel(QWidget):
         fl = QFormLayout(shown)
         self.readings: dict[str, QLabel] = {}
         for key, label in (("rate_dps", "table rate [deg/s]"), ("rate_cmd_dps", "commanded [deg/s]"),
-                           ("drive_on", "drive"), ("agc_setpoint", "AGC setpoint"), ("stream_on", "stream"),
+                           ("drive_on", "drive (read back)"), ("agc_setpoint", "AGC setpoint"), ("stream_on", "stream"),
                            ("last", "last action")):
             value = _wrapping_label("-")
             value.setObjectName(f"manual_{key}")
@@ -223,7 +223,7 @@ class ManualPanel(QWidget):
             s = self.session.state
             self.state_label.setText(f"<b>manual control</b> (session {s.run_id}) at t = {s.t_s:.1f} s")
             shown = {"rate_dps": "-" if s.rate_dps is None else f"{s.rate_dps:.3f}",
-                     "rate_cmd_dps": f"{s.rate_cmd_dps:g}", "drive_on": "on" if s.drive_on else "off",
+                     "rate_cmd_dps": f"{s.rate_cmd_dps:g}", "drive_on": _drive_text(s.drive_read, s.drive_on),
                      "agc_setpoint": f"{s.agc_setpoint:g}", "stream_on": "on" if s.stream_on else "off",
                      "last": s.last or "-"}
         else:
@@ -239,6 +239,14 @@ class ManualPanel(QWidget):
             return float(text)
         except ValueError:
             return math.nan
+
+
+def _drive_text(read: bool | None, commanded: bool) -> str:
+    """The drive as the FPGA reports it, and the command when they differ."""
+    if read is None:
+        return "-"
+    text = "on" if read else "off"
+    return text if read == commanded else f"{text} (commanded {'on' if commanded else 'off'})"
 
 
 class ManualDock(QDockWidget):
