@@ -41,8 +41,20 @@ def test_cursor_readout_gives_x_y_and_the_nearest_values(plots):
     view_q, view_e = plots.views[0], plots.views[1]
     text = plots.cursor.show_at(view_q, 10.0, 0.5)
     assert text.startswith("cx..sy: x = 10 s, y = 0.5") and "cx 0.96" in text  # exp(-10/300) = 0.967
-    text = plots.cursor.show_at(view_e, 10.0, np.log10(0.9))  # the log axis: E's own value, not a decade
+    # E within less than a decade is drawn on a linear axis (a log one would have one tick or none)
+    assert not plots.e_log and plots.p_e.titleLabel.text.count("E (log)") == 0
+    text = plots.cursor.show_at(view_e, 10.0, 0.9)
     assert "y = 0.9" in text and "E 0.93" in text  # E = a^2 = exp(-20/300) = 0.9355
+    fast = _decay(20_000)
+    fast[:, 0] += 20.0
+    fast[:, 1] = np.exp(-fast[:, 0] / 2.0)  # into the noise: many decades, a log axis
+    plots.add_samples("fpga", FPGA_COLS[:5], fast)
+    plots.refresh(force=True)
+    assert plots.e_log and "E (log)" in plots.p_e.titleLabel.text
+    text = plots.cursor.show_at(view_e, 30.0, np.log10(1e-5))  # the log axis: E's own value, not a decade
+    assert "y = 1e-05" in text
+    e_near = float(text.split("nearest: E ")[1].split(",")[0])
+    assert e_near == pytest.approx(np.exp(-30.0), rel=0.2)  # E = a^2 = exp(-t), at the nearest drawn sample
     assert plots.cursor_label.text() == text
     # a mouse move over the data box goes the same way
     vb = view_q.getPlotItem().getViewBox()

@@ -27,6 +27,7 @@ SWEEP_COLS = ("freq_hz", "amplitude", "phase_deg")
 E_FIT_KEYS = ("E_fit", "energy_fit", "E")  # model E(t) keys of a FitUpdate (not the measured "energy")
 PEN_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 FIT_COLOUR = "#d62728"
+E_LOG_ABOVE, E_LINEAR_BELOW = 10.0, 5.0  # E's max/min ratio at which its axis turns log, and back to linear
 
 
 def legend_title(*entries: tuple[str, str]) -> str:
@@ -92,6 +93,7 @@ class LivePlots(QWidget):
                     for c, n in zip(PEN_COLOURS, ("cx", "sx", "cy", "sy"), strict=True)]
         self.p_e = add_plot(0, 1, legend_title(("E (log)", "#1f77b4"), ("fit", FIT_COLOUR)))
         self.p_e.setLogMode(x=False, y=True)
+        self.e_log = True  # E's axis: log over more than a decade, linear within one (_choose_e_scale)
         self.p_e.setLabel("left", "E", units="1")
         self.c_e = self.p_e.plot(pen=pg.mkPen("#1f77b4", width=1), name="E")
         self.c_fit = self.p_e.plot(pen=pg.mkPen(FIT_COLOUR, width=2, style=pg.QtCore.Qt.PenStyle.DashLine), name="fit")
@@ -256,7 +258,9 @@ class LivePlots(QWidget):
         if len(self.fpga):
             for i, curve in enumerate(self.c_q):
                 curve.setData(*self.fpga.curve(i))
-            self.c_e.setData(*self.fpga.curve(4, positive_only=True))
+            e_t, e_v = self.fpga.curve(4, positive_only=True)
+            self.c_e.setData(e_t, e_v)
+            self._choose_e_scale(e_v)
             self.c_theta.setData(*self.fpga.curve(5))
         if len(self.table):
             self.c_rate.setData(*self.table.curve(0))
@@ -281,6 +285,22 @@ class LivePlots(QWidget):
         now = time.perf_counter()
         self.refresh_times.append(now)
         self.refresh_cost_s.append(now - t0)
+
+    def _choose_e_scale(self, e: np.ndarray) -> None:
+        """E on a log axis when it spans more than a decade (a decay into the noise), else linear: a
+        log axis over less than a decade has one tick or none, and the values cannot be read."""
+        if not len(e):
+            return
+        span = float(e.max() / max(e.min(), 1e-300))
+        log = self.e_log
+        if log and span < E_LINEAR_BELOW:
+            log = False
+        elif not log and span > E_LOG_ABOVE:
+            log = True
+        if log != self.e_log:
+            self.e_log = log
+            self.p_e.setLogMode(x=False, y=log)
+            self.p_e.setTitle(legend_title(("E (log)" if log else "E", "#1f77b4"), ("fit", FIT_COLOUR)))
 
     def _show_sweep(self, shown: bool) -> None:
         """The sweep row takes room only once a sweep sends points."""
