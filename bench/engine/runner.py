@@ -194,7 +194,11 @@ class Runner:
                 f"{sorted(self.station.devices)}"
             )
         if self._in_run:
-            raise RuntimeError("this runner is already running a procedure")
+            from .manual import busy_text  # names what holds the station: a run or manual control
+
+            held = self.record
+            raise RuntimeError(busy_text(held.procedure, held.run_id, self.station.id) if held
+                               else "this runner is already running a procedure")
         self._in_run = True
         try:
             return self._run(proc)

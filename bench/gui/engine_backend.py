@@ -16,6 +16,8 @@ import numpy as np
 from bench.engine import events as ev
 from bench.engine.params import Param
 
+from .manual_backend import ManualBackendMixin
+
 DEFAULT_STATION = "sim-hrg"
 STATUS_EVERY_WALL_S = 0.5
 POLL_HZ = 2.0  # the station panel's refresh from the devices: modest, the links are the run's first
@@ -27,7 +29,7 @@ def default_station() -> str:
 
 log = logging.getLogger(__name__)
 
-class EngineBackend:
+class EngineBackend(ManualBackendMixin):
     """GuiBackend over `bench.engine.Runner` on a `bench.station.Station` (opened here)."""
 
     def __init__(self, station: str, *, seed: int | None = None, runs_dir: str | Path | None = None,
@@ -95,7 +97,7 @@ class EngineBackend:
         from procedures import find_procedure
 
         if self.running():
-            raise RuntimeError("a run is already going on")
+            raise RuntimeError(self.busy_text() or "a run is already going on")
         proc = find_procedure(procedure)(values)  # ParamError (a ValueError) before anything moves
         check_station(proc, self.station)  # StationMismatch (a ValueError): another kind, or above a limit
         with self._io_gate:  # waits for a panel read in progress: from here on only the run talks to devices
@@ -179,17 +181,21 @@ class EngineBackend:
                 self._table_row = (float(row[cols.index("rate_dps")]), float(row[cols.index("angle_deg")]))
         if isinstance(event, ev.StationStatus):
             return
+        if isinstance(event, ev.RunFinished):  # the safe state is done: read it from the devices, in the
+            self._table_row = None  # run's own thread, before the window hears of the end (never the run's rows)
+            self.publish_status(event.run_id, talk=True)
+            return
         at_step = isinstance(event, (ev.RunStarted, ev.StepStarted, ev.StepFinished))
         if at_step or time.monotonic() - self._last_status_wall > STATUS_EVERY_WALL_S:
             self.publish_status(event.run_id)
 
-    def publish_status(self, run_id: str = "") -> None:
+    def publish_status(self, run_id: str = "", *, talk: bool | None = None) -> None:
         """Publish the station panel's state.  Between runs it is read from the devices (table
         status, drive outputs, link counters); during a run only what needs no device I/O (the
         run's own table readings, link counters), so the run's transactions are never interleaved."""
         self._last_status_wall = time.monotonic()
         with self._io_gate:
-            devices = self._read_devices(talk=not self._in_run)
+            devices = self._read_devices(talk=not self._in_run if talk is None else talk)
         self.bus.publish(ev.StationStatus(run_id, self.station.clock.now(), devices=devices))
 
     def _read_devices(self, *, talk: bool) -> dict[str, dict[str, Any]]:

@@ -180,6 +180,9 @@ class MainWindow(QMainWindow):
         self.bridge.events.connect(self.on_events)
         self._set_backpressure(float(self.station.speed.currentData()))
         self._on_procedure(self.procedure.currentText())
+        from .manual_panel import install as install_manual
+
+        install_manual(self)  # the manual-control dock and the SAFE STATE button always on the toolbar
         if hasattr(backend, "start_polling"):
             backend.start_polling()  # the station panel from the devices, also between runs
 
@@ -279,7 +282,7 @@ class MainWindow(QMainWindow):
                 self.steps_done += 1
                 self.step_fraction = 0.0
             elif isinstance(e, ev.Measurement):
-                self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut)
+                self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut, ci95=e.ci95)
             elif isinstance(e, ev.Log):
                 self.log.add(e.t_sim_s, e.level, e.message)
             elif isinstance(e, ev.StationStatus):
@@ -320,9 +323,13 @@ class MainWindow(QMainWindow):
         self.plots.set_origin(e.t_sim_s if e.t_sim_s > 0 else None)  # a replay's RunStarted says 0
         self.run_t0_s = e.t_sim_s
         self.run_id = e.run_id
+        self.safe_label.setText("")  # the last run's safe state is not this one's (manual control starts here too)
         self.steps_done = 0
         self.step_fraction = 0.0
         self.results.clear()
+        from .run_truth import truth_for_run
+
+        self.results.set_truth(truth_for_run(self.backend, e.procedure, e.run_id))  # the truth column (simulated)
         self.steps.set_steps(e.steps)
         self.run_active = True
         self.last_finished = None

@@ -12,10 +12,10 @@ from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
     QLabel,
-    QPlainTextEdit,
     QProgressBar,
     QPushButton,
     QSizePolicy,
+    QSplitter,
     QTableWidget,
     QTableWidgetItem,
     QTreeWidget,
@@ -24,7 +24,10 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from bench.engine.measurement import NOT_MEASURED
+
 from .backend import SPEEDS
+from .log_view import LogPane  # noqa: F401 - the window's log (levels in colour, filter, follows)
 
 OUTCOME_COLOURS = {"PASS": "#b7e4b7", "FAIL": "#f4b6b6", "MARGINAL": "#ffe29a", "ERROR": "#f4b6b6",
                    "ABORTED": "#dddddd", "COMPLETE": "#ffffff", "RUNNING": "#cfe3ff", "INTERRUPTED": "#f4b6b6"}
@@ -174,23 +177,12 @@ class StepList(QWidget):
         self.message.setText(message)
 
 
-class LogPane(QPlainTextEdit):
-    """The run's log, newest last, bounded so a chatty run cannot eat the memory."""
-
-    def __init__(self, parent: QWidget | None = None, max_lines: int = 5000) -> None:
-        super().__init__(parent)
-        self.setReadOnly(True)
-        self.setMaximumBlockCount(max_lines)
-
-    def add(self, t_sim_s: float, level: str, message: str) -> None:
-        self.appendPlainText(f"{t_sim_s:9.3f}  {level:<7} {message}")
-
-
 class ResultsTable(QWidget):
-    """Measurements with value, limits and a PASS/FAIL/MARGINAL colour; a button opens the
-    run's report when there is one."""
+    """Measurements with value, 95 % interval, limits, a PASS/FAIL/MARGINAL colour and, on a
+    simulated station, the truth; a declared measurement never reported reads "not measured".
+    The table is as tall as its rows; a button opens the run's report when there is one."""
 
-    HEADERS = ("measurement", "value", "unit", "low", "high", "outcome")
+    HEADERS = ("measurement", "value", "95% interval", "unit", "limits", "outcome", "truth")
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -199,7 +191,11 @@ class ResultsTable(QWidget):
         self.table = QTableWidget(0, len(self.HEADERS))
         self.table.setHorizontalHeaderLabels(self.HEADERS)
         self.table.verticalHeader().setVisible(False)
-        lay.addWidget(self.table)
+        self.table.horizontalHeader().setStretchLastSection(True)
+        self.table.setVerticalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAsNeeded)
+        lay.addWidget(self.table, 1)  # the room goes to the rows first, up to their height
+        self.truths: dict[str, float] = {}
+        self._split_before: list[int] | None = None  # the plots/results split before the rows grew it
         row = QHBoxLayout()
         self.outcome = QLabel("")
         self.outcome.setWordWrap(True)  # a long reason wraps; it never pushes "Open report" away
@@ -210,27 +206,76 @@ class ResultsTable(QWidget):
         self.report_button.setEnabled(False)
         row.addWidget(self.report_button)
         lay.addLayout(row)
+        lay.addStretch(0)  # what the rows do not need stays below the report button
         self.report_path: str | None = None
+        self._fit_rows()
 
     def clear(self) -> None:
         self.table.setRowCount(0)
         self.outcome.setText("")
         self.report_path = None
         self.report_button.setEnabled(False)
+        self.truths = {}
+        self._fit_rows()
+
+    def set_truth(self, truths: dict[str, float]) -> None:
+        """The simulator's true value of each measurement, by name (empty on a real bench)."""
+        self.truths = dict(truths)
 
     def add(self, name: str, value: float, unit: str, low: float | None, high: float | None, outcome: str,
-            dut: str | None = None) -> None:
+            dut: str | None = None, ci95: tuple[float, float] | None = None, truth: float | None = None) -> None:
         r = self.table.rowCount()
         self.table.insertRow(r)
         label = name if dut is None else f"{name} [{dut}]"
-        cells = (label, f"{value:.6g}", unit, "" if low is None else f"{low:.6g}",
-                 "" if high is None else f"{high:.6g}", outcome)
+        truth = self.truths.get(name) if truth is None else truth
+        measured = outcome != NOT_MEASURED and value is not None and math.isfinite(value)
+        cells = (label, f"{value:.6g}" if measured else "not measured", _interval(ci95) if measured else "", unit,
+                 _limits(low, high), outcome.replace("_", " ") if outcome == NOT_MEASURED else outcome,
+                 _truth(truth, ci95 if measured else None))
         colour = QColor(OUTCOME_COLOURS.get(outcome, "#ffffff"))
         for c, text in enumerate(cells):
             item = QTableWidgetItem(text)
             item.setFlags(item.flags() & ~Qt.ItemFlag.ItemIsEditable)
             item.setBackground(QBrush(colour))
+            if not measured and c in (1, 5):
+                item.setForeground(QBrush(QColor("#707070")))
             self.table.setItem(r, c, item)
+        self._fit_rows()
+
+    def _fit_rows(self) -> None:
+        """Columns to their contents, and the table as tall as its rows (at least one) where there is room."""
+        self.table.resizeColumnsToContents()
+        self.table.resizeRowsToContents()
+        rows = sum(self.table.rowHeight(r) for r in range(self.table.rowCount()))
+        rows = max(rows, self.table.verticalHeader().defaultSectionSize())
+        bar = self.table.horizontalScrollBar().sizeHint().height()
+        head = self.table.horizontalHeader().sizeHint().height() + bar + 2 * self.table.frameWidth()
+        # as tall as its rows where there is room; never taller, and never making the window taller
+        self.table.setMaximumHeight(head + rows)
+        self.table.setMinimumHeight(head + min(rows, 2 * self.table.verticalHeader().defaultSectionSize()))
+        self._grow_pane(head + rows)
+
+    def _grow_pane(self, table_h: int) -> None:
+        """In the window's plots/results splitter, give the results pane the height its rows need
+        (at most half the splitter; it only grows, so the operator's own split stands otherwise)."""
+        child, parent = self, self.parentWidget()
+        vertical = Qt.Orientation.Vertical
+        while parent is not None and not (isinstance(parent, QSplitter) and parent.orientation() == vertical):
+            child, parent = parent, parent.parentWidget()
+        if parent is None or parent.count() != 2 or parent.widget(1) is not child:
+            return
+        sizes = parent.sizes()
+        extra = child.height() - self.table.height()  # tab bar, outcome line, report button
+        want = min(sum(sizes) // 2, table_h + extra + self.outcome.sizeHint().height())
+        if table_h <= 0 or self.table.rowCount() == 0:  # cleared: the split from before the rows came back
+            if self._split_before is not None:
+                parent.setSizes(self._split_before)
+                self._split_before = None
+            return
+        if want > sizes[1]:
+            if self._split_before is None:
+                self._split_before = sizes
+            parent.setSizes([sum(sizes) - want, want])
 
     def set_outcome(self, outcome: str, safe_state: bool, reason: str) -> None:
         """The run's outcome and reason in its colour; when the run did not complete, measurements
@@ -254,3 +299,27 @@ class ResultsTable(QWidget):
     def set_report(self, path: str | None) -> None:
         self.report_path = path
         self.report_button.setEnabled(path is not None)
+
+
+def _interval(ci95: tuple[float, float] | None) -> str:
+    return "" if ci95 is None else f"[{ci95[0]:.6g}, {ci95[1]:.6g}]"
+
+
+def _limits(low: float | None, high: float | None) -> str:
+    if low is not None and high is not None:
+        return f"{low:.6g} to {high:.6g}"
+    if low is not None:
+        return f">= {low:.6g}"
+    if high is not None:
+        return f"<= {high:.6g}"
+    return ""
+
+
+def _truth(truth: float | None, ci95: tuple[float, float] | None) -> str:
+    """The simulated truth, marked when the 95 % interval holds it (or misses it)."""
+    if truth is None:
+        return ""
+    if ci95 is None:
+        return f"{truth:.6g}"
+    inside = ci95[0] <= truth <= ci95[1]
+    return f"{truth:.6g} ({'in' if inside else 'OUTSIDE'} the interval)"

@@ -7,11 +7,24 @@ from __future__ import annotations
 from typing import Any
 
 from PySide6.QtCore import Signal
-from PySide6.QtWidgets import QCheckBox, QComboBox, QFormLayout, QLabel, QLineEdit, QWidget
+from PySide6.QtWidgets import QCheckBox, QComboBox, QFormLayout, QLabel, QLineEdit, QSizePolicy, QWidget
 
 from bench.engine.params import Param
 
 INVALID_STYLE = "QLineEdit { background: #ffd6d6; border: 1px solid #c00000; }"
+HINT_STYLE = "color: #555555; font-size: 9pt;"
+ERROR_STYLE = "color: #c00000;"
+
+
+def _wrapping(text: str, style: str = "") -> QLabel:
+    """A label that wraps to the width it is given (its text never sets the form's width)."""
+    label = QLabel(text)
+    label.setWordWrap(True)
+    label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+    label.setMinimumWidth(60)
+    if style:
+        label.setStyleSheet(style)
+    return label
 
 
 def format_value(value: Any) -> str:
@@ -36,20 +49,34 @@ class ParameterForm(QWidget):
         self.error_label = QLabel("")
 
     def set_specs(self, specs: tuple[Param, ...]) -> None:
+        """One row a parameter: its name and unit with the field, under them its limits and what it
+        is (wrapped, never scrolled sideways), and the reason a value is refused, right there."""
         while self.layout_.rowCount():
             self.layout_.removeRow(0)
+        self.layout_.setRowWrapPolicy(QFormLayout.RowWrapPolicy.WrapAllRows)  # name above its field: never clipped
         self.specs = tuple(specs)
         self.fields = {}
-        self.error_label = QLabel("")
-        self.error_label.setStyleSheet("color: #c00000;")
-        self.error_label.setWordWrap(True)
+        self.field_errors: dict[str, QLabel] = {}
+        self.hints: dict[str, QLabel] = {}
+        self.name_labels: dict[str, QLabel] = {}
+        self.error_label = QLabel("")  # every refusal at once, kept for callers; each is shown at its field
         for param in self.specs:
             field = self._make_field(param)
+            field.setMinimumWidth(70)
             self.fields[param.name] = field
             label = param.name + (f" [{param.unit}]" if param.unit else "")
-            field.setToolTip("; ".join(t for t in (param.doc, param.limit_text()) if t))
-            self.layout_.addRow(label, field)
-        self.layout_.addRow(self.error_label)
+            hint_text = "; ".join(t for t in (param.limit_text(), param.doc) if t)
+            field.setToolTip(hint_text)
+            self.name_labels[param.name] = QLabel(label)  # a short identifier: shown whole, above its field
+            self.layout_.addRow(self.name_labels[param.name], field)
+            hint = _wrapping(hint_text, HINT_STYLE)
+            self.hints[param.name] = hint
+            self.layout_.addRow(hint)
+            error = _wrapping("", ERROR_STYLE)
+            error.setObjectName(f"error_{param.name}")
+            error.setVisible(False)
+            self.field_errors[param.name] = error
+            self.layout_.addRow(error)
         self.validate()
 
     def _make_field(self, param: Param) -> QWidget:
@@ -101,6 +128,9 @@ class ParameterForm(QWidget):
             if isinstance(w, QLineEdit):
                 w.setStyleSheet("" if ok else INVALID_STYLE)
         self.error_label.setText("\n".join(self.errors.values()))
+        for name, label in getattr(self, "field_errors", {}).items():
+            label.setText(self.errors.get(name, ""))
+            label.setVisible(name in self.errors)
         valid = not self.errors
         self.validity_changed.emit(valid)
         return valid

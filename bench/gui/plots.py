@@ -13,8 +13,8 @@ from collections import deque
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import QTimer
-from PySide6.QtWidgets import QGridLayout, QWidget
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtWidgets import QGridLayout, QLabel, QWidget
 
 from bench.analysis.slow_model import orbit_elements
 from bench.engine.streams import StreamSchema
@@ -26,6 +26,18 @@ TABLE_COLS = ("t_s", "rate_dps", "angle_deg")
 SWEEP_COLS = ("freq_hz", "amplitude", "phase_deg")
 E_FIT_KEYS = ("E_fit", "energy_fit", "E")  # model E(t) keys of a FitUpdate (not the measured "energy")
 PEN_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
+FIT_COLOUR = "#d62728"
+E_LOG_ABOVE, E_LINEAR_BELOW = 10.0, 5.0  # E's max/min ratio at which its axis turns log, and back to linear
+
+
+def legend_title(*entries: tuple[str, str]) -> str:
+    """A plot title that is its legend, above the data: each (name, colour) in its colour."""
+    return ", ".join(f'<span style="color:{c}; font-weight:bold">{n}</span>' for n, c in entries)
+
+
+def squared_unit(unit: str) -> str:
+    """The unit of a sum of squares (E = cx^2 + ... ): V -> V\u00b2; dimensionless stays "1"."""
+    return "1" if unit in ("", "1") else f"{unit}\u00b2"
 
 
 def _columns(columns: tuple[str, ...], data: np.ndarray, wanted: tuple[str, ...]) -> np.ndarray | None:
@@ -73,30 +85,41 @@ class LivePlots(QWidget):
             self.views.append(w)
             return w.getPlotItem()
 
-        self.p_q = add_plot(0, 0, "cx, sx, cy, sy")
-        self.p_q.setLabel("left", "cx..sy", units="V")
-        self.p_q.addLegend(offset=(5, 5))
+        # legends are the titles (above the data, never over it); units are the streams' declared
+        # ones (bench.engine.streams; the FPGA's slow variables are in AGC setpoint units: "1")
+        self.p_q = add_plot(0, 0, legend_title(*zip(("cx", "sx", "cy", "sy"), PEN_COLOURS, strict=True)))
+        self.p_q.setLabel("left", "cx..sy", units="1")
         self.c_q = [self.p_q.plot(pen=pg.mkPen(c, width=1), name=n)
                     for c, n in zip(PEN_COLOURS, ("cx", "sx", "cy", "sy"), strict=True)]
-        self.p_e = add_plot(0, 1, "E (log) and fit")
+        self.p_e = add_plot(0, 1, legend_title(("E (log)", "#1f77b4"), ("fit", FIT_COLOUR)))
         self.p_e.setLogMode(x=False, y=True)
-        self.p_e.setLabel("left", "E", units="V\u00b2")
-        self.c_e = self.p_e.plot(pen=pg.mkPen("#1f77b4", width=1))
-        self.c_fit = self.p_e.plot(pen=pg.mkPen("#d62728", width=2, style=pg.QtCore.Qt.PenStyle.DashLine))
-        self.p_theta = add_plot(1, 0, "wave angle theta (deg)")
+        self.e_log = True  # E's axis: log over more than a decade, linear within one (_choose_e_scale)
+        self.p_e.setLabel("left", "E", units="1")
+        self.c_e = self.p_e.plot(pen=pg.mkPen("#1f77b4", width=1), name="E")
+        self.c_fit = self.p_e.plot(pen=pg.mkPen(FIT_COLOUR, width=2, style=pg.QtCore.Qt.PenStyle.DashLine), name="fit")
+        self.p_theta = add_plot(1, 0, legend_title(("wave angle \u03b8", "#9467bd")))
         self.p_theta.setLabel("left", "\u03b8", units="deg")
-        self.c_theta = self.p_theta.plot(pen=pg.mkPen("#9467bd", width=1))
-        self.p_rate = add_plot(1, 1, "table rate (deg/s)")
+        self.c_theta = self.p_theta.plot(pen=pg.mkPen("#9467bd", width=1), name="\u03b8")
+        self.p_rate = add_plot(1, 1, legend_title(("table rate", "#8c564b")))
         self.p_rate.setLabel("left", "rate", units="deg/s")
-        self.c_rate = self.p_rate.plot(pen=pg.mkPen("#8c564b", width=1))
-        self.p_amp = add_plot(2, 0, "sweep amplitude")
-        self.p_amp.setLabel("left", "amplitude", units="V")
-        self.c_amp = self.p_amp.plot(pen=pg.mkPen("#1f77b4"), symbol="o", symbolSize=5, symbolBrush="#1f77b4")
-        self.c_amp_fit = self.p_amp.plot(pen=pg.mkPen("#d62728", width=2))
-        self.p_phase = add_plot(2, 1, "sweep phase (deg)")
+        self.c_rate = self.p_rate.plot(pen=pg.mkPen("#8c564b", width=1), name="rate")
+        self.p_amp = add_plot(2, 0, legend_title(("sweep amplitude", "#1f77b4"), ("model", FIT_COLOUR)))
+        self.p_amp.setLabel("left", "amplitude", units="1")
+        self.c_amp = self.p_amp.plot(pen=pg.mkPen("#1f77b4"), symbol="o", symbolSize=5, symbolBrush="#1f77b4",
+                                     name="amplitude")
+        self.c_amp_fit = self.p_amp.plot(pen=pg.mkPen(FIT_COLOUR, width=2), name="model")
+        self.p_phase = add_plot(2, 1, legend_title(("sweep phase", "#ff7f0e"), ("model", FIT_COLOUR)))
         self.p_phase.setLabel("left", "phase", units="deg")
-        self.c_phase = self.p_phase.plot(pen=pg.mkPen("#ff7f0e"), symbol="o", symbolSize=5, symbolBrush="#ff7f0e")
-        self.c_phase_fit = self.p_phase.plot(pen=pg.mkPen("#d62728", width=2))
+        self.c_phase = self.p_phase.plot(pen=pg.mkPen("#ff7f0e"), symbol="o", symbolSize=5, symbolBrush="#ff7f0e",
+                                         name="phase")
+        self.c_phase_fit = self.p_phase.plot(pen=pg.mkPen(FIT_COLOUR, width=2), name="model")
+        from .plot_cursor import CursorReadout
+
+        self.cursor_label = QLabel("hover over a plot: x and y under the pointer")
+        self.cursor_label.setObjectName("cursor_readout")
+        grid.addWidget(self.cursor_label, 3, 0, 1, 2)
+        self.cursor = CursorReadout(self.views, ("cx..sy", "E", "\u03b8", "table rate", "sweep amplitude",
+                                                 "sweep phase"), self.cursor_label)
         self.sweep_views = self.views[4:6]
         self._show_sweep(False)
         # no grid: redrawing grid lines with the axes costs ~10 ms per plot per frame (raster)
@@ -114,6 +137,7 @@ class LivePlots(QWidget):
             w.getPlotItem().getAxis("bottom").enableAutoSIPrefix(False)
 
         self.timer = QTimer(self)
+        self.timer.setTimerType(Qt.TimerType.PreciseTimer)  # a coarse timer drifts late under load: fewer frames
         self.timer.setInterval(max(1, int(round(1000.0 / refresh_hz))))
         self.timer.timeout.connect(self.refresh)
         self.timer.start()
@@ -121,12 +145,15 @@ class LivePlots(QWidget):
     # --- data in ---------------------------------------------------------------------------
     def declare(self, schema: StreamSchema) -> None:
         """A StreamDeclared: the plots that show a column of the stream take its declared unit."""
-        shown = {("fpga", "cx"): self.p_q, ("table", "rate_dps"): self.p_rate,
-                 ("sweep", "amplitude"): self.p_amp, ("sweep", "phase_deg"): self.p_phase}
+        shown = {("fpga", "cx"): (self.p_q, "cx..sy"), ("table", "rate_dps"): (self.p_rate, "rate_dps"),
+                 ("sweep", "amplitude"): (self.p_amp, "amplitude"), ("sweep", "phase_deg"): (self.p_phase, "phase_deg"),
+                 ("fpga", "theta_deg"): (self.p_theta, "\u03b8")}
         for col in schema.columns:
-            plot = shown.get((schema.name, col.name))
-            if plot is not None and col.unit not in ("", "1"):  # a unitless column keeps the plot's own label
-                plot.setLabel("left", col.name, units=col.unit)
+            plot, text = shown.get((schema.name, col.name), (None, ""))
+            if plot is not None:  # a dimensionless column says so ("1"): every axis has its unit
+                plot.setLabel("left", text, units=col.unit or "1")
+            if (schema.name, col.name) == ("fpga", "cx"):  # E = cx^2 + sx^2 + cy^2 + sy^2
+                self.p_e.setLabel("left", "E", units=squared_unit(col.unit))
 
     def set_origin(self, t0_s: float | None) -> None:
         """Time axes from here on are seconds since `t0_s` (the run's start), not bench time;
@@ -231,7 +258,9 @@ class LivePlots(QWidget):
         if len(self.fpga):
             for i, curve in enumerate(self.c_q):
                 curve.setData(*self.fpga.curve(i))
-            self.c_e.setData(*self.fpga.curve(4, positive_only=True))
+            e_t, e_v = self.fpga.curve(4, positive_only=True)
+            self.c_e.setData(e_t, e_v)
+            self._choose_e_scale(e_v)
             self.c_theta.setData(*self.fpga.curve(5))
         if len(self.table):
             self.c_rate.setData(*self.table.curve(0))
@@ -256,6 +285,22 @@ class LivePlots(QWidget):
         now = time.perf_counter()
         self.refresh_times.append(now)
         self.refresh_cost_s.append(now - t0)
+
+    def _choose_e_scale(self, e: np.ndarray) -> None:
+        """E on a log axis when it spans more than a decade (a decay into the noise), else linear: a
+        log axis over less than a decade has one tick or none, and the values cannot be read."""
+        if not len(e):
+            return
+        span = float(e.max() / max(e.min(), 1e-300))
+        log = self.e_log
+        if log and span < E_LINEAR_BELOW:
+            log = False
+        elif not log and span > E_LOG_ABOVE:
+            log = True
+        if log != self.e_log:
+            self.e_log = log
+            self.p_e.setLogMode(x=False, y=log)
+            self.p_e.setTitle(legend_title(("E (log)" if log else "E", "#1f77b4"), ("fit", FIT_COLOUR)))
 
     def _show_sweep(self, shown: bool) -> None:
         """The sweep row takes room only once a sweep sends points."""

@@ -173,9 +173,27 @@ class MinMaxHistory:
             x[1::2] = np.where(first_min, tmax, tmin)
             y[0::2] = np.where(first_min, vmin, vmax)
             y[1::2] = np.where(first_min, vmax, vmin)
-            x = np.concatenate((x, self._pend_t))
-            y = np.concatenate((y, self._pend_v[:, col]))
+            tail_t, tail_v = _minmax_tail(self._pend_t, self._pend_v[:, col])  # < 1 bucket, but not raw
+            x = np.concatenate((x, tail_t))
+            y = np.concatenate((y, tail_v))
         if positive_only:
             ok = y > 0
             x, y = x[ok], y[ok]
         return x, y
+
+
+def _minmax_tail(t: np.ndarray, v: np.ndarray, chunks: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """The rows not yet in a bucket, as the min and max of at most `chunks` pieces in time order
+    (drawn raw they would be up to a whole bucket of points in the last pixels)."""
+    n = len(t)
+    if n <= 2 * chunks:
+        return t, v
+    size = -(-n // chunks)
+    m = n // size * size
+    tb, vb = t[:m].reshape(-1, size), v[:m].reshape(-1, size)
+    i_min, i_max = np.argmin(vb, axis=1), np.argmax(vb, axis=1)
+    rows = np.arange(len(tb))
+    first, second = np.minimum(i_min, i_max), np.maximum(i_min, i_max)
+    x = np.column_stack((tb[rows, first], tb[rows, second])).reshape(-1)
+    y = np.column_stack((vb[rows, first], vb[rows, second])).reshape(-1)
+    return np.concatenate((x, t[m:])), np.concatenate((y, v[m:]))
