@@ -73,7 +73,9 @@ def store(tmp_path):
     s.close()
 
 
-def test_find_runs_filters_by_procedure_station_dut_outcome_and_date(store):
+def test_find_runs_filters_by_procedure_station_dut_outcome_and_date(store_url):
+    """The same query on SQLite and PostgreSQL (store_url: both engines, conftest.py)."""
+    store = ResultsStore(store_url)
     docs = [
         run_doc("a", started="2026-11-01T09:00:00+00:00", duts=("HRG-001",)),
         run_doc("b", procedure="mems-sweep", station="sim-mems", started="2026-11-02T09:00:00+00:00"),
@@ -97,6 +99,7 @@ def test_find_runs_filters_by_procedure_station_dut_outcome_and_date(store):
     assert ids(since=dt.date(2026, 11, 2), until=dt.date(2026, 11, 3)) == ["c", "b"]  # whole days, inclusive
     rows, total = find_runs(store, RunFilter(limit=2))
     assert len(rows) == 2 and total == 4
+    store.close()
 
 
 def test_history_browser_filters_and_opens_a_run_in_its_own_replay_window(store, tmp_path, qtbot):

@@ -15,6 +15,7 @@ from PySide6.QtCore import Qt
 from PySide6.QtGui import QAction
 from PySide6.QtWidgets import (
     QGroupBox,
+    QHeaderView,
     QLabel,
     QMainWindow,
     QSizePolicy,
@@ -142,7 +143,12 @@ class ReplayWindow(QMainWindow):
         self.params = QTableWidget(0, 3)
         self.params.setHorizontalHeaderLabels(("parameter", "value", "unit"))
         self.params.verticalHeader().setVisible(False)
-        self.params.horizontalHeader().setStretchLastSection(True)
+        self.params.verticalHeader().setDefaultSectionSize(22)
+        head = self.params.horizontalHeader()  # name and unit as wide as they need, the value takes the rest
+        head.setSectionResizeMode(0, QHeaderView.ResizeMode.ResizeToContents)
+        head.setSectionResizeMode(1, QHeaderView.ResizeMode.Stretch)
+        head.setSectionResizeMode(2, QHeaderView.ResizeMode.ResizeToContents)
+        self.params.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         self.station = QTreeWidget()
         self.station.setHeaderLabels(("recorded station", ""))
         self.plots = LivePlots()
@@ -221,11 +227,11 @@ class ReplayWindow(QMainWindow):
                 item = QTableWidgetItem(text)
                 item.setFlags(item.flags() & ~Qt.ItemFlag.ItemIsEditable)
                 self.params.setItem(r, c, item)
-        self.params.resizeColumnsToContents()
         station = a.get("station")
         _fill_tree(self.station, station if isinstance(station, dict) else {"id": a.get("station_id", "?")})
         self.station.expandToDepth(0)
         self.station.resizeColumnToContents(0)
+        self.params.resizeRowsToContents()
         self._apply(rec.events)
         self.results.set_report(str(rec.path))
         self.statusBar().showMessage(f"replay of {rec.path}")
