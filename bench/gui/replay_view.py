@@ -82,8 +82,10 @@ def load_recorded(path: str | Path) -> Recorded:
             if "parameters" in f:
                 for name, ds in f["parameters"].items():
                     value = _decoded(ds[()])
-                    rec.params.append((name, f"{value:.10g}" if isinstance(value, float) else str(value),
-                                       str(_decoded(ds.attrs.get("units", "")))))
+                    unit = str(_decoded(ds.attrs.get("units", "")))
+                    if unit == "1" and not isinstance(value, (int, float)) or isinstance(value, bool):
+                        unit = ""  # a choice or a switch has no unit ("1" is the recorder's "none")
+                    rec.params.append((name, f"{value:.10g}" if isinstance(value, float) else str(value), unit))
     except (OSError, RuntimeError, KeyError, ValueError) as exc:
         rec.error = (f"{rec.path.name} is not a readable HDF5 file (truncated or corrupt): {_first_line(exc)}. "
                      f"Nothing from it is shown.")
@@ -168,8 +170,8 @@ class ReplayWindow(QMainWindow):
         st_box = QGroupBox("Station (as recorded)")
         QVBoxLayout(st_box).addWidget(self.station)
         lay.addWidget(st_box, 1)
-        left.setMinimumWidth(320)
-        left.setMaximumWidth(440)
+        left.setMinimumWidth(370)
+        left.setMaximumWidth(460)
         tabs = QTabWidget()
         tabs.addTab(self.results, "Results")
         tabs.addTab(self.log, "Log")
@@ -179,6 +181,7 @@ class ReplayWindow(QMainWindow):
         right.addWidget(tabs)
         right.setStretchFactor(0, 3)
         right.setStretchFactor(1, 1)
+        right.setSizes([540, 260])  # the recorded results get room to read
         split = QSplitter(Qt.Orientation.Horizontal)
         split.addWidget(left)
         split.addWidget(right)
