@@ -211,3 +211,19 @@ def test_open_report_without_a_browser_shows_the_path_and_copies_it(tmp_path, qt
     dialog = open_report.open_in_browser(page)
     qtbot.addWidget(dialog)
     assert "xdg-open" in dialog.message.text()
+
+
+def test_each_plot_menu_opens_the_export_dialog_on_that_plot(tmp_path, qtbot):
+    from bench.gui.export import ExportDialog, plot_sources
+    from bench.gui.replay_view import ReplayWindow
+
+    raw = tmp_path / "run.h5"
+    write_raw(raw, n=500)
+    win = ReplayWindow(raw)
+    qtbot.addWidget(win)
+    for title, (plot_item, _s) in plot_sources(win.plots).items():
+        entry = next(a for a in plot_item.getViewBox().menu.actions() if a.text().startswith("Export recorded"))
+        entry.trigger()
+        dialog = win.findChildren(ExportDialog)[-1]
+        assert dialog.plot.currentText() == title and dialog.raw_file == str(raw)
+        dialog.close()

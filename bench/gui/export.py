@@ -127,10 +127,20 @@ def export_plot(plots: Any, title: str, raw_file: str | Path | None, out: str | 
     return f"{n} rows of stream {stream!r} ({title}) written to {out}"
 
 
+def add_plot_menus(plots: Any, open_dialog: Any) -> None:
+    """Each plot's right-click menu gets "Export data or figure...", which opens the export dialog
+    on that plot (pyqtgraph's own "Export..." there writes the decimated curve, not the record)."""
+    for title, (plot_item, _stream) in plot_sources(plots).items():
+        menu = plot_item.getViewBox().menu
+        action = menu.addAction("Export recorded data or figure...")
+        action.triggered.connect(lambda _checked=False, t=title: open_dialog(t))
+
+
 class ExportDialog(QDialog):
     """Pick a plot and a format, then a file: File > Export... of the live window and the replay."""
 
-    def __init__(self, plots: Any, raw_file: str | None, parent: QWidget | None = None) -> None:
+    def __init__(self, plots: Any, raw_file: str | None, parent: QWidget | None = None,
+                 title: str | None = None) -> None:
         super().__init__(parent)
         self.setWindowTitle("Export")
         self.plots = plots
@@ -138,6 +148,8 @@ class ExportDialog(QDialog):
         form = QFormLayout(self)
         self.plot = QComboBox()
         self.plot.addItems(list(plot_sources(plots)))
+        if title:
+            self.plot.setCurrentText(title)
         self.format = QComboBox()
         self.format.addItems(list(FORMATS))
         form.addRow("plot", self.plot)

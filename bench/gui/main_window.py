@@ -172,8 +172,11 @@ class MainWindow(QMainWindow):
         self.history_action.triggered.connect(self.open_history)
         file_menu.addAction(self.history_action)
         self.export_action = QAction("&Export...", self)
-        self.export_action.triggered.connect(self.export_dialog)
+        self.export_action.triggered.connect(lambda: self.export_dialog())
         file_menu.addAction(self.export_action)
+        from .export import add_plot_menus
+
+        add_plot_menus(self.plots, self.export_dialog)
         self.side_windows: list[QWidget] = []  # history browser, replays, export and report dialogs
         self.statusBar().showMessage("ready")
 
@@ -380,13 +383,13 @@ class MainWindow(QMainWindow):
         self.side_windows.append(win)
         return win
 
-    def export_dialog(self) -> QWidget:
-        """File > Export...: a plot's recorded data (CSV, HDF5) or its figure (PNG, SVG)."""
+    def export_dialog(self, title: str | None = None) -> QWidget:
+        """File > Export... (or a plot's menu): a plot's recorded data (CSV, HDF5) or its figure (PNG, SVG)."""
         from .export import ExportDialog
 
         fin = self.last_finished
         raw = fin.raw_file if fin is not None and fin.raw_file and Path(fin.raw_file).exists() else None
-        dialog = ExportDialog(self.plots, raw, self)
+        dialog = ExportDialog(self.plots, raw, self, title)
         dialog.open()
         return dialog
 

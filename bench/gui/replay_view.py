@@ -194,7 +194,10 @@ class ReplayWindow(QMainWindow):
         self.setCentralWidget(central)
 
         export_action = QAction("&Export...", self)
-        export_action.triggered.connect(self.export_dialog)
+        export_action.triggered.connect(lambda: self.export_dialog())
+        from .export import add_plot_menus
+
+        add_plot_menus(self.plots, self.export_dialog)
         close_action = QAction("&Close", self)
         close_action.triggered.connect(self.close)
         menu = self.menuBar().addMenu("&File")
@@ -266,10 +269,10 @@ class ReplayWindow(QMainWindow):
         self.plots.refresh(force=True)
 
     # --- actions ------------------------------------------------------------------------------
-    def export_dialog(self) -> Any:
+    def export_dialog(self, title: str | None = None) -> Any:
         from .export import ExportDialog
 
-        dialog = ExportDialog(self.plots, self.raw_file, self)
+        dialog = ExportDialog(self.plots, self.raw_file, self, title)
         dialog.open()
         return dialog
 
