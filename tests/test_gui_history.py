@@ -227,3 +227,15 @@ def test_each_plot_menu_opens_the_export_dialog_on_that_plot(tmp_path, qtbot):
         dialog = win.findChildren(ExportDialog)[-1]
         assert dialog.plot.currentText() == title and dialog.raw_file == str(raw)
         dialog.close()
+
+
+def test_history_browser_on_a_store_that_is_down_says_so_in_one_line(qtbot):
+    pytest.importorskip("psycopg")
+    from bench.gui.history import HistoryBrowser
+
+    win = HistoryBrowser("postgresql+psycopg://nobody@127.0.0.1:9/nothing?connect_timeout=2")
+    qtbot.addWidget(win)
+    qtbot.waitUntil(lambda: not win.busy() and win.count.text() != "searching...", timeout=20_000)
+    text = win.count.text()
+    assert text.startswith("results store postgresql+psycopg://nobody@127.0.0.1:9/nothing") and "\n" not in text
+    assert "Traceback" not in text and win.model.rowCount() == 0 and "c00000" in win.count.styleSheet()
