@@ -200,15 +200,17 @@ def test_replay_of_a_recorded_run(window, qtbot):
         n_fpga, n_table = len(f["streams/fpga"]), len(f["streams/table"])
         n_results = len(f["measurements"])
 
-    replay = MainWindow(win.backend)
+    n_live_log = win.log.blockCount()
+    replay = win.open_run(str(path))  # its own window: the live window's plots, results and log stay
     qtbot.addWidget(replay)
-    replay.open_run(str(path))
+    assert replay is not win and replay.plots is not win.plots
     assert replay.plots.fpga.total_rows == n_fpga
     assert replay.plots.table.total_rows == n_table
     xf, yf = replay.plots.c_fit.getData()
     assert xf is not None and len(xf) > 10  # the run's stored fit
     assert replay.results.table.rowCount() == n_results
-    assert replay.last_finished.raw_file == str(path)
+    assert replay.raw_file == str(path)
+    assert win.log.blockCount() == n_live_log
 
 
 def test_screenshot_writes_a_non_blank_png(window, tmp_path):

@@ -128,14 +128,14 @@ def run_gui(station: str | None = None, *, run: str | None = None, screenshot: s
             window.station.set_speed(speed)
         elif backend.simulated and screenshot is None:
             window.station.set_speed(1.0)  # an interactive demo starts in real time
-        if open_run is not None:
-            window.open_run(open_run)
+        replay = window.open_run(open_run) if open_run is not None else None  # its own window
         if screenshot is not None:
             if run is None:
-                window.show()
+                shown = replay or window
+                shown.show()
                 app.processEvents()
-                window.plots.refresh(force=True)
-                window.grab().save(str(screenshot), "PNG")
+                shown.plots.refresh(force=True)
+                shown.grab().save(str(screenshot), "PNG")
             else:
                 out = take_screenshot(window, run, screenshot, at_s=at_s, params=params)
                 fin = window.last_finished

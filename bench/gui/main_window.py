@@ -9,8 +9,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from PySide6.QtCore import Qt, QUrl
-from PySide6.QtGui import QAction, QDesktopServices
+from PySide6.QtCore import Qt
+from PySide6.QtGui import QAction
 from PySide6.QtWidgets import (
     QApplication,
     QComboBox,
@@ -166,7 +166,18 @@ class MainWindow(QMainWindow):
 
         open_action = QAction("&Open recorded run...", self)
         open_action.triggered.connect(self._open_dialog)
-        self.menuBar().addMenu("&File").addAction(open_action)
+        file_menu = self.menuBar().addMenu("&File")
+        file_menu.addAction(open_action)
+        self.history_action = QAction("Run &history...", self)
+        self.history_action.triggered.connect(self.open_history)
+        file_menu.addAction(self.history_action)
+        self.export_action = QAction("&Export...", self)
+        self.export_action.triggered.connect(lambda: self.export_dialog())
+        file_menu.addAction(self.export_action)
+        from .export import add_plot_menus
+
+        add_plot_menus(self.plots, self.export_dialog)
+        self.side_windows: list[QWidget] = []  # history browser, replays, export and report dialogs
         self.statusBar().showMessage("ready")
 
         self.procedure.currentTextChanged.connect(self._on_procedure)
@@ -358,21 +369,36 @@ class MainWindow(QMainWindow):
         if path:
             self.open_run(path)
 
-    def open_run(self, path: str) -> None:
-        """Replay a recorded run into the plots, results and log (with its fit)."""
-        from .replay import replay_events
+    def open_run(self, path: str) -> QWidget:
+        """Replay a recorded run in its own window (its plots, results, log, recorded station and
+        parameters; never mixed with the live station's); a corrupt or incomplete file says so there."""
+        from .replay_view import ReplayWindow
 
-        if self.run_active:
-            QMessageBox.warning(self, "gyrobench", "A run is going on: abort it before opening a recorded run.")
-            return
-        try:
-            events = replay_events(path)
-        except (OSError, RuntimeError, ValueError, KeyError) as exc:  # h5py: RuntimeError on a file mid-write
-            self.log.add(self.t_sim_s, "ERROR", f"cannot open {path}: {exc}")
-            return
-        self.on_events(events)
-        self.plots.refresh(force=True)
-        self.statusBar().showMessage(f"replayed {path}")
+        win = ReplayWindow(path)
+        win.show()
+        self.side_windows.append(win)
+        self.statusBar().showMessage(f"replay of {path} opened in its own window")
+        return win
+
+    def open_history(self) -> QWidget:
+        """The history browser over this station's results store."""
+        from .history import HistoryBrowser
+
+        store = getattr(getattr(self.backend, "runner", None), "store", None)
+        win = HistoryBrowser(store.url if store is not None else None)
+        win.show()
+        self.side_windows.append(win)
+        return win
+
+    def export_dialog(self, title: str | None = None) -> QWidget:
+        """File > Export... (or a plot's menu): a plot's recorded data (CSV, HDF5) or its figure (PNG, SVG)."""
+        from .export import ExportDialog
+
+        fin = self.last_finished
+        raw = fin.raw_file if fin is not None and fin.raw_file and Path(fin.raw_file).exists() else None
+        dialog = ExportDialog(self.plots, raw, self, title)
+        dialog.open()
+        return dialog
 
     def render_report(self) -> str | None:
         """Write the HTML report of the shown run next to its raw file; its path."""
@@ -394,7 +420,11 @@ class MainWindow(QMainWindow):
             self.log.add(self.t_sim_s, "ERROR", f"report failed: {exc}")
             return
         if path:
-            QDesktopServices.openUrl(QUrl.fromLocalFile(path))
+            from .open_report import open_in_browser
+
+            dialog = open_in_browser(path, self)  # no browser here: says so with the path and a Copy button
+            if dialog is not None:
+                self.side_windows.append(dialog)
 
     def ask_close_during_run(self) -> bool:
         """Ask before closing during a run (tests replace QMessageBox.question)."""
@@ -418,5 +448,7 @@ class MainWindow(QMainWindow):
         if hasattr(self.backend, "stop_polling"):
             self.backend.stop_polling()
         self.bridge.detach()
+        for win in self.side_windows:
+            win.close()
         self.plots.shutdown()
         super().closeEvent(event)
