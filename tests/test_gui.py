@@ -200,7 +200,7 @@ def test_replay_of_a_recorded_run(window, qtbot):
         n_fpga, n_table = len(f["streams/fpga"]), len(f["streams/table"])
         n_results = len(f["measurements"])
 
-    n_live_log = win.log.blockCount()
+    n_live_log = win.log.text.blockCount()
     replay = win.open_run(str(path))  # its own window: the live window's plots, results and log stay
     qtbot.addWidget(replay)
     assert replay is not win and replay.plots is not win.plots
@@ -210,7 +210,7 @@ def test_replay_of_a_recorded_run(window, qtbot):
     assert xf is not None and len(xf) > 10  # the run's stored fit
     assert replay.results.table.rowCount() == n_results
     assert replay.raw_file == str(path)
-    assert win.log.blockCount() == n_live_log
+    assert win.log.text.blockCount() == n_live_log
 
 
 def test_screenshot_writes_a_non_blank_png(window, tmp_path):

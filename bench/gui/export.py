@@ -5,6 +5,7 @@ itself as PNG or SVG (pyqtgraph's image exporter; Qt's SVG painter).  `ExportDia
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -23,11 +24,15 @@ from PySide6.QtWidgets import (
 FORMATS = {"CSV (raw data)": "csv", "HDF5 (raw data)": "h5", "PNG (figure)": "png", "SVG (figure)": "svg"}
 
 
+#: each plot of a LivePlots by a plain name (its title is a coloured legend that may change)
+PLOTS = (("cx sx cy sy", "p_q", "fpga"), ("E", "p_e", "fpga"), ("wave angle", "p_theta", "fpga"),
+         ("table rate", "p_rate", "table"), ("sweep amplitude", "p_amp", "sweep"),
+         ("sweep phase", "p_phase", "sweep"))
+
+
 def plot_sources(plots: Any) -> dict[str, tuple[Any, str]]:
-    """Each plot of a LivePlots by its title: (its PlotItem, the recorded stream behind it)."""
-    pairs = ((plots.p_q, "fpga"), (plots.p_e, "fpga"), (plots.p_theta, "fpga"), (plots.p_rate, "table"),
-             (plots.p_amp, "sweep"), (plots.p_phase, "sweep"))
-    return {p.titleLabel.text or stream: (p, stream) for p, stream in pairs}
+    """Each plot of a LivePlots by its plain name: (its PlotItem, the recorded stream behind it)."""
+    return {name: (getattr(plots, attr), stream) for name, attr, stream in PLOTS}
 
 
 def read_stream(raw_file: str | Path, stream: str) -> tuple[np.ndarray, list[str], list[str], dict[str, Any]]:
@@ -85,7 +90,7 @@ def _export_svg(plot_item: Any, out: Path) -> None:
     gen.setFileName(str(out))
     gen.setSize(rect.size().toSize())
     gen.setViewBox(QRectF(0, 0, rect.width(), rect.height()))
-    gen.setTitle(plot_item.titleLabel.text or "gyrobench plot")
+    gen.setTitle(re.sub(r"<[^>]+>", "", plot_item.titleLabel.text or "") or "gyrobench plot")
     painter = QPainter(gen)
     try:
         plot_item.scene().render(painter, QRectF(0, 0, rect.width(), rect.height()), rect)
