@@ -180,6 +180,20 @@ class Environment:
             rate += self._noise_sum(n) / n
         return rate
 
+    def rate_samples(self, n: int) -> np.ndarray:
+        """The drift-rate noise (rad/s) of the next n samples, one per sample (synthetic records for
+        tests of the analysis; the World reads block means instead)."""
+        out = np.empty(n)
+        if self._noisy:
+            r = self._rng
+            drift_noise_fill(
+                r["white"], self._white_sd, r["flicker"], self._gm_phi, self._gm_drive, self._gm_state,
+                r["walk"], self._walk_sd, self._walk_state, out,
+            )  # fmt: skip
+        else:
+            out[:] = 0.0
+        return out
+
     def _noise_sum(self, n: int) -> float:
         """Sum of the drift-rate noise over the next n samples."""
         total, size = 0.0, len(self._chunk)
@@ -219,12 +233,13 @@ class Environment:
 
 #: the noise of each resonator preset that has one (simulators.physics.params.PRESETS)
 NOISE_PRESETS: dict[str, NoiseParams] = {
-    # a navigation-grade HRG in whole-angle mode (docs/noise_model.md): the three Allan terms apart
-    # by decades (N dominates below ~13 s, the floor to ~1 h, K above), a 2 deg/h turn-on spread
+    # an HRG in whole-angle mode (docs/noise_model.md), its three Allan terms all seen within a few
+    # hours: N dominates below ~10 s, the floor (0.2 deg/h) around 40 s, K above ~200 s; a turn-on
+    # bias of 1 deg/h with a spread of 2 deg/h
     "hrg-wa": NoiseParams(
-        arw_deg_rth=0.02,
-        bias_instability_dph=0.5,
-        rrw_dph_rth=0.5,
+        arw_deg_rth=0.01,
+        bias_instability_dph=0.3,
+        rrw_dph_rth=1.5,
         turn_on_bias_mean_dph=1.0,
         turn_on_bias_sd_dph=2.0,
         gain_x_ppm=300.0,
