@@ -19,8 +19,9 @@ from .kernels import drift_noise_fill
 DEG = math.pi / 180.0
 #: Earth's sidereal rate, deg/h (7.2921150e-5 rad/s)
 EARTH_RATE_DPH = math.degrees(7.2921150e-5) * 3600.0
-#: each process's stream of random numbers: SeedSequence(world seed, spawn_key=(id,)); the pickoff
-#: noise keeps the world seed itself (its draws are those of sim-hrg before the noise model)
+#: each process's stream of random numbers: SeedSequence(world seed, spawn_key=(id,)) (the turn-on
+#: bias: spawn_key=(4, turn-on number)); the pickoff noise keeps the world seed itself (its draws are
+#: those of sim-hrg before the noise model)
 PROCESS_IDS = {"white": 1, "flicker": 2, "walk": 3, "turn_on": 4}
 #: sigma(tau) of a flicker process on its flat floor, in units of B: sqrt(2 ln 2 / pi)
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
@@ -148,7 +149,8 @@ class Environment:
         phi = np.exp(-2.0 * math.pi * f * dt)
         self._gm_phi = phi
         self._gm_drive = np.sqrt(var * (1.0 - phi**2))
-        self._rng = {name: process_rng(seed, name) for name in PROCESS_IDS}
+        self._seed = seed
+        self._rng = {name: process_rng(seed, name) for name in PROCESS_IDS if name != "turn_on"}
         self._gm_state = np.sqrt(var) * self._rng["flicker"].standard_normal(len(f))  # stationary start
         self._walk_state = np.zeros(1)
         self._noisy = bool(self._white_sd or self._walk_sd or len(f))
@@ -165,12 +167,17 @@ class Environment:
         )  # fmt: skip
 
     def turn_on(self) -> None:
-        """A turn-on of the gyro: a new constant bias, N(mean, sd), from the turn-on process's generator."""
+        """A turn-on of the gyro: the constant bias of the next turn-on (turn_on_bias_of)."""
         self.turn_on_count += 1
+        self.turn_on_bias_dph = self.turn_on_bias_of(self.turn_on_count)
+
+    def turn_on_bias_of(self, count: int) -> float:
+        """The bias (deg/h) of turn-on number `count` (1 = the world's creation, 2 = the first drive-on,
+        ...): mean + sd z, z the first normal of SeedSequence(seed, spawn_key=(4, count)), so any
+        turn-on's bias is known without running the ones before it."""
         nz = self.noise
-        self.turn_on_bias_dph = nz.turn_on_bias_mean_dph + nz.turn_on_bias_sd_dph * float(
-            self._rng["turn_on"].standard_normal()
-        )
+        seq = np.random.SeedSequence(self._seed, spawn_key=(PROCESS_IDS["turn_on"], count))
+        return nz.turn_on_bias_mean_dph + nz.turn_on_bias_sd_dph * float(np.random.default_rng(seq).standard_normal())
 
     def block_rate_rad_s(self, n: int) -> float:
         """The equivalent input rate over the next block of n samples: Earth's rate, the turn-on
