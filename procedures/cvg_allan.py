@@ -20,7 +20,6 @@ from bench.analysis.allan import NoiseTerms, adev_band, allan_deviation, read_no
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, step
 from bench.engine.streams import Column, StreamSchema, declare
-from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
 from .hrg_damping import _StreamTap
 from .hrg_excitation import HrgExcitation
@@ -154,10 +153,11 @@ def _analyse(rows: np.ndarray, stream_hz: float, bryan_factor: float,
              level: float) -> tuple[list[Result], np.ndarray]:
     """Rate, Allan deviation, read-offs: (results, the curve's rows for CURVE)."""
     if rows is None or len(rows) < 16:
-        raise RuntimeError(f"the static record holds {0 if rows is None else len(rows)} samples; at least 16 are needed")
+        n = 0 if rows is None else len(rows)
+        raise RuntimeError(f"the static record holds {n} samples; at least 16 are needed")
     _t, rate = rate_from_stream(*rows.T, bryan_factor)
     curve = allan_deviation(rate, stream_hz)
-    terms = read_noise_terms(curve, level=level)
+    terms = read_noise_terms(curve, level=level, boxcar=True)  # the stream's frames are boxcar means
     lo, hi = adev_band(curve, terms)
     i_min = int(np.argmin(curve.adev))
     results = _term_results(terms) + [

@@ -3,8 +3,10 @@
 The overlapping Allan deviation comes from allantools (octave-spaced tau).  The read-offs follow
 the annex's slopes: angle random walk N from the -1/2 line (sigma = N / sqrt(tau), quoted at
 tau = 1 s, in deg/sqrt(h)), bias instability B from the flat minimum (sigma = 0.664 B), rate random
-walk K from the +1/2 line (sigma = K sqrt(tau / 3), quoted at tau = 3 s, in deg/h/sqrt(h)); a -1
-line (white angle noise, sigma = sqrt(3) Q / tau) is carried as a nuisance.  Each term is read at
+walk K from the +1/2 line (sigma = K sqrt(tau / 3), quoted at tau = 3 s, in deg/h/sqrt(h)).  A
+white angle noise (slope -1, the pickoffs' noise in whole-angle mode) is not modelled: read at one
+tau it is not separable from N, and fitted jointly its noise spreads onto N; a record's stream
+rate should keep it small at the shortest taus read (docs/noise_model.md).  Each term is read at
 one tau: the flat minimum for B, and for N and K the tau where the term's estimate is most precise
 (its share of the Allan variance against the chi-squared spread there).  The other terms' part of
 the Allan variance at that tau (from their own read-offs, iterated) is subtracted, so a term is not
@@ -21,14 +23,13 @@ from dataclasses import dataclass, field
 
 import allantools
 import numpy as np
-from scipy import optimize, stats
+from scipy import stats
 
 #: sigma(tau) of a flicker floor in units of B: sqrt(2 ln 2 / pi)
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 #: the terms: power p of tau in the Allan variance (c tau^p), Greenhall's alpha for frequency
 #: (rate) data, and what the annex calls them
 TERMS = {
-    "Q": (-2, 2, "white angle noise (slope -1)"),
     "N": (-1, 0, "angle random walk (slope -1/2)"),
     "B": (0, -1, "bias instability (flat)"),
     "K": (1, -2, "rate random walk (slope +1/2)"),
@@ -72,20 +73,20 @@ class TermReadoff:
 
 @dataclass(frozen=True)
 class NoiseTerms:
-    """The read-offs of a curve: arw (N), bias instability (B), rrw (K), the angle noise Q as a
-    nuisance, the model coefficients c_p of sigma^2 = sum c_p tau^p ((deg/h)^2 s^p) and the level."""
+    """The read-offs of a curve: arw (N), bias instability (B), rrw (K), the model coefficients c_p
+    of sigma^2 = sum c_p tau^p ((deg/h)^2 s^p) and the level."""
 
     arw: TermReadoff
     bias_instability: TermReadoff
     rrw: TermReadoff
-    angle_noise: TermReadoff
     coefficients: dict[str, float] = field(default_factory=dict)
     level: float = 0.95
+    boxcar_s: float = 0.0  # the angle samples' averaging time (read_noise_terms' `boxcar`)
 
     def model_adev(self, tau_s: np.ndarray) -> np.ndarray:
         """sigma(tau) of the read-off model (deg/h)."""
-        tau = np.asarray(tau_s, dtype=float)
-        return np.sqrt(sum(c * tau ** TERMS[k][0] for k, c in self.coefficients.items()))
+        total = sum(c * _basis_of(k, tau_s, self.boxcar_s) for k, c in self.coefficients.items())
+        return np.sqrt(np.maximum(total, 0.0))
 
 
 def allan_deviation(rate: np.ndarray, rate_hz: float) -> AllanCurve:
@@ -97,17 +98,23 @@ def allan_deviation(rate: np.ndarray, rate_hz: float) -> AllanCurve:
     return AllanCurve(np.asarray(taus), np.asarray(adev), np.asarray(ns), len(rate), float(rate_hz))
 
 
-def _basis(name: str, tau: np.ndarray | float) -> np.ndarray | float:
-    return np.asarray(tau, dtype=float) ** TERMS[name][0]
+def _basis_of(name: str, tau: np.ndarray | float, boxcar_s: float = 0.0) -> np.ndarray | float:
+    """tau^p; for the white rate term of samples that are boxcar means of the angle over boxcar_s
+    (a decimated stream), (1 - boxcar_s / (2 tau)) / tau (docs/noise_model.md)."""
+    tau = np.asarray(tau, dtype=float)
+    if name == "N" and boxcar_s:
+        return (1.0 - boxcar_s / (2.0 * tau)) / tau
+    return tau ** TERMS[name][0]
 
 
-def _initial_fit(curve: AllanCurve, edfs: dict[str, np.ndarray], usable: np.ndarray,
-                 iterations: int = 6) -> dict[str, float]:
-    """Non-negative least squares of sigma^2 = sum c_p tau^p over the usable points, each weighted
+def _initial_fit(curve: AllanCurve, edfs: dict[str, np.ndarray], usable: np.ndarray, boxcar_s: float = 0.0,
+                 iterations: int = 6) -> tuple[dict[str, float], dict[str, float]]:
+    """Least squares of sigma^2 = sum c_p tau^p over the usable points (unconstrained, so a term's
+    noise is not pushed one way onto the others), each weighted
     by the inverse of its chi-squared spread sqrt(2 / edf) sigma^2 under the current model
     (iteratively reweighted; edf of the noise type that dominates the point): a start for the read-offs."""
     tau, avar = curve.tau_s[usable], curve.adev[usable] ** 2
-    basis = np.column_stack([_basis(k, tau) for k in TERMS])
+    basis = np.column_stack([_basis_of(k, tau, boxcar_s) for k in TERMS])
     scale = np.max(basis, axis=0)
     edf_by_term = np.column_stack([edfs[k][usable] for k in TERMS])
     model = avar.copy()
@@ -116,33 +123,40 @@ def _initial_fit(curve: AllanCurve, edfs: dict[str, np.ndarray], usable: np.ndar
     for _ in range(iterations):
         edf = edf_by_term[np.arange(len(tau)), np.argmax(parts, axis=1)] if parts is not None else edf_by_term[:, 1]
         w = np.sqrt(edf / 2.0) / np.maximum(model, 1e-300)
-        c, _ = optimize.nnls(basis / scale * w[:, None], avar * w)
-        c = c / scale
-        parts = basis * c
-        model = np.maximum(parts.sum(axis=1), 1e-300)
-    return {k: float(v) for k, v in zip(TERMS, c, strict=True)}
+        a = basis / scale * w[:, None]
+        c = np.linalg.lstsq(a, avar * w, rcond=None)[0] / scale
+        parts = np.maximum(basis * c, 0.0)
+        model = np.maximum(parts.sum(axis=1), 0.1 * avar)
+    var = np.diag(np.linalg.pinv(a.T @ a)) / scale**2  # the weighted fit's covariance
+    return {k: float(v) for k, v in zip(TERMS, c, strict=True)}, {k: float(v) for k, v in zip(TERMS, var, strict=True)}
 
 
 def _value(name: str, c: float) -> float:
     """A coefficient c_p ((deg/h)^2 s^p) as the term's quoted value."""
     r = math.sqrt(max(c, 0.0))
-    return {"Q": r / math.sqrt(3.0) / 3600.0, "N": r / 60.0, "B": r / FLICKER_FLOOR, "K": r * math.sqrt(3.0) * 60.0}[name]
+    scale = {"N": 1.0 / 60.0, "B": 1.0 / FLICKER_FLOOR, "K": math.sqrt(3.0) * 60.0}
+    return r * scale[name]
 
 
 def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4,
-                     min_cluster: int = 8) -> NoiseTerms:
-    """N, B, K (and Q) read off an Allan curve of a rate in deg/h, each with its interval at `level`,
-    at taus of at least `min_cluster` samples.  Q in deg (sigma = sqrt(3) Q / tau), N in
-    deg/sqrt(h), B in deg/h, K in deg/h/sqrt(h)."""
+                     min_cluster: int = 8, boxcar: bool = False) -> NoiseTerms:
+    """N, B, K read off an Allan curve of a rate in deg/h, each with its interval at `level`, at taus
+    of at least `min_cluster` samples: N in deg/sqrt(h), B in deg/h, K in deg/h/sqrt(h).  `boxcar`:
+    the rates are differences of angles that are each the mean over a sample period (a boxcar-
+    decimated stream), which lowers the white rate term's Allan variance by (1 - tau0 / 2 tau)."""
     tau, avar = curve.tau_s, curve.adev**2
     edfs = {k: curve.edf(TERMS[k][1]) for k in TERMS}
     usable = curve.m >= min_cluster  # shorter clusters see the sampling and the spectra's upper ends
     if not usable.any():
         raise ValueError(f"the record is too short: no tau with {min_cluster} samples a cluster")
-    coef = _initial_fit(curve, edfs, usable)
-    seen_zero = {k for k, c in coef.items() if c == 0.0}
-    var_c = dict.fromkeys(TERMS, 0.0)  # each coefficient's variance, from its own read-off
-    chosen: dict[str, int] = {}
+    box = 1.0 / curve.rate_hz if boxcar else 0.0
+
+    def _basis(name: str, t: np.ndarray | float) -> np.ndarray | float:
+        return _basis_of(name, t, box)
+
+    coef, var_c = _initial_fit(curve, edfs, usable, box)  # var_c: each coefficient's variance
+    chosen = {"N": int(np.argmax(usable)), "B": int(np.argmin(np.where(usable, curve.adev, np.inf))),
+              "K": len(tau) - 1}  # until the loop reads them where they are most precise
 
     def others_at(k: str, i: int) -> tuple[float, float]:
         """The other terms' part of the Allan variance at tau_i and the variance of that part."""
@@ -151,12 +165,8 @@ def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4
         return float(part), float(var)
 
     for _ in range(iterations):
-        model = sum(coef[k] * _basis(k, tau) for k in TERMS)
+        model = np.maximum(sum(coef[k] * _basis(k, tau) for k in TERMS), 1e-300)
         for k in TERMS:
-            if coef[k] == 0.0 and k in seen_zero:
-                chosen[k] = {"Q": int(np.argmax(usable)), "N": int(np.argmin(np.abs(np.log(tau)))),
-                             "B": int(np.argmin(np.where(usable, model, np.inf))), "K": len(tau) - 1}[k]
-                continue  # not seen in the first fit: stays 0 (its interval says how large it could be)
             part = coef[k] * _basis(k, tau)
             if k == "B":  # the annex: the flat minimum (of the model: the measured one wanders at long tau)
                 i = int(np.argmin(np.where(usable, model, np.inf)))
@@ -171,7 +181,8 @@ def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4
             else:
                 continue
             others, oth_var = others_at(k, i)
-            coef[k] = max(0.0, (avar[i] - others) / _basis(k, tau[i]))
+            # not clipped at 0 here: a term's noise must not push its neighbours one way only
+            coef[k] = (avar[i] - others) / _basis(k, tau[i])
             var_c[k] = (2.0 * avar[i] ** 2 / edfs[k][i] + oth_var) / _basis(k, tau[i]) ** 2
             chosen[k] = i
     model = sum(coef[k] * _basis(k, tau) for k in TERMS)
@@ -192,14 +203,14 @@ def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4
         share = float(c * b / model[i]) if model[i] > 0 else 0.0
         out[k] = TermReadoff(k, _value(k, c), (_value(k, max(lo_c, 0.0)), _value(k, hi_c)), float(tau[i]), edf,
                              share)
-    return NoiseTerms(out["N"], out["B"], out["K"], out["Q"], coef, level)
+    return NoiseTerms(out["N"], out["B"], out["K"], coef, level, box)
 
 
 def adev_band(curve: AllanCurve, terms: NoiseTerms) -> tuple[np.ndarray, np.ndarray]:
     """The chi-squared band (lower, upper) of each point of the curve at the read-off's level, with
     the equivalent degrees of freedom of the noise type that dominates there."""
     tau = curve.tau_s
-    parts = np.array([terms.coefficients[k] * _basis(k, tau) for k in TERMS])
+    parts = np.array([terms.coefficients[k] * _basis_of(k, tau, terms.boxcar_s) for k in TERMS])
     dominant = np.argmax(parts, axis=0)
     alphas = [TERMS[k][1] for k in TERMS]
     edfs = {a: curve.edf(a) for a in set(alphas)}

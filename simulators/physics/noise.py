@@ -75,7 +75,9 @@ class NoiseParams:
             if getattr(self, name) < 0:
                 raise ValueError(f"noise parameter {name}={getattr(self, name)!r} must be >= 0")
         if not 0 < self.flicker_low_hz < self.flicker_high_hz:
-            raise ValueError(f"flicker band {self.flicker_low_hz!r} to {self.flicker_high_hz!r} Hz must be 0 < low < high")
+            raise ValueError(
+                f"flicker band {self.flicker_low_hz!r} to {self.flicker_high_hz!r} Hz must be 0 < low < high"
+            )
         if self.flicker_poles_per_decade < 1:
             raise ValueError("flicker_poles_per_decade must be >= 1")
 
