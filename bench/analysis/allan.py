@@ -4,9 +4,8 @@ The overlapping Allan deviation comes from allantools (octave-spaced tau).  The 
 the annex's slopes: angle random walk N from the -1/2 line (sigma = N / sqrt(tau), quoted at
 tau = 1 s, in deg/sqrt(h)), bias instability B from the flat minimum (sigma = 0.664 B), rate random
 walk K from the +1/2 line (sigma = K sqrt(tau / 3), quoted at tau = 3 s, in deg/h/sqrt(h)).  A
-white angle noise (slope -1, the pickoffs' noise in whole-angle mode) is not modelled: read at one
-tau it is not separable from N, and fitted jointly its noise spreads onto N; a record's stream
-rate should keep it small at the shortest taus read (docs/noise_model.md).  Each term is read at
+white angle noise Q (slope -1: the pickoffs' noise in whole-angle mode, a table's jitter) is a
+nuisance taken from a joint weighted fit of all four slopes over the curve.  Each of N, B, K is read at
 one tau: the flat minimum for B, and for N and K the tau where the term's estimate is most precise
 (its share of the Allan variance against the chi-squared spread there).  The other terms' part of
 the Allan variance at that tau (from their own read-offs, iterated) is subtracted, so a term is not
@@ -27,9 +26,11 @@ from scipy import stats
 
 #: sigma(tau) of a flicker floor in units of B: sqrt(2 ln 2 / pi)
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
+COVARIANCE_INFLATION = 4.0
 #: the terms: power p of tau in the Allan variance (c tau^p), Greenhall's alpha for frequency
 #: (rate) data, and what the annex calls them
 TERMS = {
+    "Q": (-2, 2, "white angle noise (slope -1)"),
     "N": (-1, 0, "angle random walk (slope -1/2)"),
     "B": (0, -1, "bias instability (flat)"),
     "K": (1, -2, "rate random walk (slope +1/2)"),
@@ -79,6 +80,7 @@ class NoiseTerms:
     arw: TermReadoff
     bias_instability: TermReadoff
     rrw: TermReadoff
+    angle_noise: TermReadoff  # Q (deg), the nuisance: sigma = sqrt(3) Q / tau
     coefficients: dict[str, float] = field(default_factory=dict)
     level: float = 0.95
     boxcar_s: float = 0.0  # the angle samples' averaging time (read_noise_terms' `boxcar`)
@@ -127,20 +129,24 @@ def _initial_fit(curve: AllanCurve, edfs: dict[str, np.ndarray], usable: np.ndar
         c = np.linalg.lstsq(a, avar * w, rcond=None)[0] / scale
         parts = np.maximum(basis * c, 0.0)
         model = np.maximum(parts.sum(axis=1), 0.1 * avar)
-    var = np.diag(np.linalg.pinv(a.T @ a)) / scale**2  # the weighted fit's covariance
+    # the weighted fit's covariance, times 4: overlapping deviations at neighbouring octaves are
+    # correlated, which the fit's independent weights ignore (the factor is checked by Monte Carlo,
+    # benchmarks/allan_coverage.py)
+    var = COVARIANCE_INFLATION * np.diag(np.linalg.pinv(a.T @ a)) / scale**2
     return {k: float(v) for k, v in zip(TERMS, c, strict=True)}, {k: float(v) for k, v in zip(TERMS, var, strict=True)}
 
 
 def _value(name: str, c: float) -> float:
     """A coefficient c_p ((deg/h)^2 s^p) as the term's quoted value."""
     r = math.sqrt(max(c, 0.0))
-    scale = {"N": 1.0 / 60.0, "B": 1.0 / FLICKER_FLOOR, "K": math.sqrt(3.0) * 60.0}
+    scale = {"Q": 1.0 / math.sqrt(3.0) / 3600.0, "N": 1.0 / 60.0, "B": 1.0 / FLICKER_FLOOR, "K": math.sqrt(3.0) * 60.0}
     return r * scale[name]
 
 
 def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4,
                      min_cluster: int = 8, boxcar: bool = False) -> NoiseTerms:
-    """N, B, K read off an Allan curve of a rate in deg/h, each with its interval at `level`, at taus
+    """N, B, K (and the nuisance Q, deg) read off an Allan curve of a rate in deg/h, each with its
+    interval at `level`, at taus
     of at least `min_cluster` samples: N in deg/sqrt(h), B in deg/h, K in deg/h/sqrt(h).  `boxcar`:
     the rates are differences of angles that are each the mean over a sample period (a boxcar-
     decimated stream), which lowers the white rate term's Allan variance by (1 - tau0 / 2 tau)."""
@@ -155,7 +161,8 @@ def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4
         return _basis_of(name, t, box)
 
     coef, var_c = _initial_fit(curve, edfs, usable, box)  # var_c: each coefficient's variance
-    chosen = {"N": int(np.argmax(usable)), "B": int(np.argmin(np.where(usable, curve.adev, np.inf))),
+    chosen = {"Q": int(np.argmax(usable)), "N": int(np.argmax(usable)),
+              "B": int(np.argmin(np.where(usable, curve.adev, np.inf))),
               "K": len(tau) - 1}  # until the loop reads them where they are most precise
 
     def others_at(k: str, i: int) -> tuple[float, float]:
@@ -167,6 +174,8 @@ def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4
     for _ in range(iterations):
         model = np.maximum(sum(coef[k] * _basis(k, tau) for k in TERMS), 1e-300)
         for k in TERMS:
+            if k == "Q":
+                continue  # a nuisance: as the joint fit left it (read at one tau it would share N's)
             part = coef[k] * _basis(k, tau)
             if k == "B":  # the annex: the flat minimum (of the model: the measured one wanders at long tau)
                 i = int(np.argmin(np.where(usable, model, np.inf)))
@@ -203,7 +212,7 @@ def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4
         share = float(c * b / model[i]) if model[i] > 0 else 0.0
         out[k] = TermReadoff(k, _value(k, c), (_value(k, max(lo_c, 0.0)), _value(k, hi_c)), float(tau[i]), edf,
                              share)
-    return NoiseTerms(out["N"], out["B"], out["K"], coef, level, box)
+    return NoiseTerms(out["N"], out["B"], out["K"], out["Q"], coef, level, box)
 
 
 def adev_band(curve: AllanCurve, terms: NoiseTerms) -> tuple[np.ndarray, np.ndarray]:
