@@ -11,7 +11,9 @@ one tau: the flat minimum for B, and for N and K the tau where the term's estima
 the Allan variance at that tau (from their own read-offs, iterated) is subtracted, so a term is not
 biased by its neighbours when the record is long enough to make the spread small.  The interval
 is the chi-squared interval of the Allan variance at that tau, with the equivalent degrees of
-freedom of Greenhall's algorithm for the term's noise type and the record's number of clusters.
+freedom of Greenhall's algorithm for the record's number of clusters and the noise types there
+(the fewest of those holding a tenth or more of the variance), widened by the uncertainty of
+what is subtracted.
 docs/noise_model.md gives the relations; the functions take plain arrays.
 """
 
@@ -171,8 +173,18 @@ def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4
         var = sum(var_c[o] * _basis(o, tau[i]) ** 2 for o in TERMS if o != k)
         return float(part), float(var)
 
+    def mixture_edf() -> np.ndarray:
+        """Equivalent degrees of freedom of each point for the mixture of terms there: the fewest of
+        the noise types that hold at least a tenth of the Allan variance (a random walk's share
+        leaves fewer degrees of freedom than the white part's share would suggest)."""
+        parts = np.array([np.maximum(coef[o] * _basis(o, tau), 0.0) for o in TERMS])
+        share = parts / np.maximum(parts.sum(axis=0), 1e-300)
+        e = np.array([edfs[o] for o in TERMS])
+        return np.min(np.where(share >= 0.1, e, np.inf), axis=0)
+
     for _ in range(iterations):
         model = np.maximum(sum(coef[k] * _basis(k, tau) for k in TERMS), 1e-300)
+        edf_mix = mixture_edf()
         for k in TERMS:
             if k == "Q":
                 continue  # a nuisance: as the joint fit left it (read at one tau it would share N's)
@@ -183,7 +195,7 @@ def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4
                 # the tau where the term is read most precisely: its share against the chi^2 spread
                 # there and the uncertainty of the other terms' part that is subtracted
                 oth_var = np.array([others_at(k, j)[1] for j in range(len(tau))])
-                spread = np.sqrt(2.0 * model**2 / edfs[k] + oth_var)
+                spread = np.sqrt(2.0 * model**2 / edf_mix + oth_var)
                 with np.errstate(divide="ignore", invalid="ignore"):
                     rel = np.where(usable & (part > 0), spread / part, np.inf)
                 i = int(np.argmin(rel))
@@ -192,13 +204,14 @@ def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4
             others, oth_var = others_at(k, i)
             # not clipped at 0 here: a term's noise must not push its neighbours one way only
             coef[k] = (avar[i] - others) / _basis(k, tau[i])
-            var_c[k] = (2.0 * avar[i] ** 2 / edfs[k][i] + oth_var) / _basis(k, tau[i]) ** 2
+            var_c[k] = (2.0 * avar[i] ** 2 / edf_mix[i] + oth_var) / _basis(k, tau[i]) ** 2
             chosen[k] = i
     model = sum(coef[k] * _basis(k, tau) for k in TERMS)
+    edf_mix = mixture_edf()
     z = stats.norm.ppf((1 + level) / 2)
     out = {}
     for k, i in chosen.items():
-        edf = float(edfs[k][i])
+        edf = float(edf_mix[i])
         lo_q, hi_q = stats.chi2.ppf([(1 + level) / 2, (1 - level) / 2], edf)
         others, oth_var = others_at(k, i)
         b = _basis(k, tau[i])

@@ -26,7 +26,7 @@ PROCESS_IDS = {"white": 1, "flicker": 2, "walk": 3, "turn_on": 4}
 #: sigma(tau) of a flicker process on its flat floor, in units of B: sqrt(2 ln 2 / pi)
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 #: the drift-rate noise is generated this far ahead (s of samples per compiled call)
-CHUNK_S = 2.0
+CHUNK_S = 10.0
 
 
 def dph_to_rad_s(x: float) -> float:
@@ -56,7 +56,7 @@ class NoiseParams:
     rrw_dph_rth: float = 0.0
     flicker_low_hz: float = 1e-6
     flicker_high_hz: float = 20.0
-    flicker_poles_per_decade: int = 2
+    flicker_poles_per_decade: int = 1
     turn_on_bias_mean_dph: float = 0.0
     turn_on_bias_sd_dph: float = 0.0
     gain_x_ppm: float = 0.0
@@ -242,13 +242,13 @@ class Environment:
 
 #: the noise of each resonator preset that has one (simulators.physics.params.PRESETS)
 NOISE_PRESETS: dict[str, NoiseParams] = {
-    # an HRG in whole-angle mode (docs/noise_model.md), its three Allan terms all seen within a few
-    # hours: N dominates below ~10 s, the floor (0.2 deg/h) around 40 s, K above ~200 s; a turn-on
+    # an HRG in whole-angle mode (docs/noise_model.md), its three Allan terms all told apart within
+    # an hour: N dominates below ~10 s, the floor (0.2 deg/h) around 20 s, K above ~50 s; a turn-on
     # bias of 1 deg/h with a spread of 2 deg/h
     "hrg-wa": NoiseParams(
         arw_deg_rth=0.01,
         bias_instability_dph=0.3,
-        rrw_dph_rth=1.5,
+        rrw_dph_rth=3.0,
         turn_on_bias_mean_dph=1.0,
         turn_on_bias_sd_dph=2.0,
         gain_x_ppm=300.0,
