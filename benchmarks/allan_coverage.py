@@ -4,7 +4,13 @@ frequency), with and without a white angle noise (the table's jitter as the stre
 each term, the share of records whose 95 % interval holds the truth, the mean and sd of
 estimate / truth, and the intervals' mean half-width.
 
-Run: .venv/bin/python benchmarks/allan_coverage.py [--seeds 200] [--hours 2,10]
+Run: .venv/bin/python benchmarks/allan_coverage.py [--seeds 200] [--hours 1,10]
+
+Measured 2026-11-23, 200 seeds (with the white angle noise; without it within 0.015):
+  1 h:  coverage N 0.985, B 0.975, K 0.975; estimate/truth N 1.000 +- 0.045, B 0.987 +- 0.145,
+        K 0.979 +- 0.191; interval half-widths 11 %, 33 %, 44 %
+  10 h: coverage N 0.970, B 0.945, K 0.930; estimate/truth N 1.003 +- 0.015, B 0.988 +- 0.052,
+        K 1.003 +- 0.070; interval half-widths 3.4 %, 10 %, 13 %
 """
 
 from __future__ import annotations
