@@ -65,11 +65,12 @@ class CvgAllan(HrgExcitation, Procedure):
     confidence = Param(0.95, unit="", low=0.5, high=0.999, doc="level of the read-offs' intervals")
 
     measurements = (
-        Measurement("arw_deg_rth", "deg/sqrt(h)", "angle random walk N: the -1/2 slope line at tau = 1 h (in "
-                    "deg/h at tau = 1 h, it is N / 60 at tau = 1 s)", truth=_truth_or_zero("arw_deg_rth")),
+        Measurement("arw_deg_rth", "deg/sqrt(h)", "angle random walk N: sigma = N / sqrt(tau), the -1/2 slope "
+                    "line's value at tau = 1 h (60 N deg/h at tau = 1 s)", truth=_truth_or_zero("arw_deg_rth")),
         Measurement("bias_instability_dph", "deg/h", "bias instability B: the flat minimum of the Allan "
                     "deviation / 0.664, the other terms' part removed", truth=_truth_or_zero("bias_instability_dph")),
-        Measurement("rrw_dph_rth", "deg/h/sqrt(h)", "rate random walk K: the +1/2 slope line at tau = 3 h",
+        Measurement("rrw_dph_rth", "deg/h/sqrt(h)", "rate random walk K: sigma = K sqrt(tau / 3), the +1/2 "
+                    "slope line's value at tau = 3 h",
                     truth=_truth_or_zero("rrw_dph_rth")),
         Measurement("allan_min_dph", "deg/h", "smallest Allan deviation of the curve (before any term is removed)"),
         Measurement("allan_min_tau_s", "s", "cluster time of the smallest Allan deviation"),
