@@ -167,3 +167,33 @@ def test_sim_hrg_wa_truth_has_the_noise_terms_and_earth():
     assert truth["arw_deg_rth"] == nz.arw_deg_rth and truth["rrw_dph_rth"] == nz.rrw_dph_rth
     assert truth["earth_rate_dph"] == pytest.approx(EARTH_RATE_DPH * math.sin(math.radians(48.0)))
     assert dataclasses.asdict(nz)["bias_instability_dph"] == truth["bias_instability_dph"]
+
+
+def test_pickoff_noise_reaches_the_rate_output_as_white_angle_noise():
+    """docs/noise_model.md: in whole-angle mode the pickoffs' white noise sigma is a white angle
+    noise of the output, sigma(tau) = sqrt(3) Q / tau with Q = sigma / (2 a K sqrt(dec)) for block
+    means of dec samples, not an angle random walk (no drift noise, no table here)."""
+    from drivers.fpga import protocol as p
+    from simulators.fpga.firmware import FpgaFirmware
+
+    params = preset("hrg-wa", noise_sigma=1e-4)
+    world = World(params, seed=2)
+    world.resonator.set_state(state_from_elements(1.0, 0.0, 0.3))
+    fw = FpgaFirmware(world)
+    world.attach(fw)
+    for name, value in {"REF_FREQ_HZ": params.f0_hz, "AGC_SETPOINT": 1.0, "PRECESSION_RATE_DPS": 0.0}.items():
+        fw.write(p.register(name), value)
+    fw.write(p.register("CTRL"), p.DRIVE_EN | p.AGC_EN | p.PLL_EN | p.QUAD_EN | p.WHOLE_ANGLE)
+    world.advance(20.0)
+    means: list[np.ndarray] = []
+    world.add_listener(lambda w: means.append(w.last_block.q_meas.mean(axis=0)))
+    world.advance(600.0)
+    q = np.array(means)  # 50 ms blocks of 50 samples
+    theta = np.unwrap(4 * orbit_elements(q)["theta_rad"]) / 4
+    rate_dph = -np.degrees(np.diff(theta) / 0.05 / params.bryan_factor) * 3600
+    curve = allan_deviation(rate_dph, 20.0)
+    q_deg = math.degrees(1e-4 / (2 * 1.0 * params.bryan_factor * math.sqrt(50)))
+    expected = math.sqrt(3) * q_deg * 3600 / curve.tau_s
+    sel = curve.tau_s <= 10.0
+    ratio = curve.adev[sel] / expected[sel]
+    assert np.all(np.abs(ratio - 1) < 0.15), np.round(ratio, 3)
