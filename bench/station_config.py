@@ -19,14 +19,20 @@ STATION_KEYS = {
     "runs_dir": Key(str, "runs", doc="folder of the raw files"),
     "description": Key(str, "", doc="one line for people"),
     "kind": Key(str, "", choices=("", "hrg", "mems-ring"), doc="gyro held: hrg, mems-ring ('' = not said)"),
+    # where the sensitive axis points, for Earth's rate on it (docs/noise_model.md)
+    "latitude_deg": Key(float, 0.0, -90.0, 90.0, doc="the station's latitude (north > 0)", unit="deg"),
+    "axis_elevation_deg": Key(float, 90.0, -90.0, 90.0, doc="sensitive axis above the horizontal (90 = up)",
+                              unit="deg"),
+    "axis_azimuth_deg": Key(float, 0.0, 0.0, 360.0, doc="sensitive axis from north toward east", unit="deg"),
 }
 #: the kind of gyro a simulated station holds when its file does not say
-PRESET_KINDS = {"hrg": "hrg", "mems": "mems-ring"}
+PRESET_KINDS = {"hrg": "hrg", "hrg-wa": "hrg", "mems": "mems-ring"}
 SIM_KEYS = {
-    "preset": Key(str, "hrg", choices=("hrg", "mems"), doc="simulated resonator"),
+    "preset": Key(str, "hrg", choices=("hrg", "hrg-wa", "mems"), doc="simulated resonator (and its noise)"),
     "seed": Key(int, 0, 0, 2**63 - 1, doc="random seed of the simulation"),
     "speed": Key(float, 0.0, 0.0, 1e6, doc="0 = lockstep, else x real time"),
     "sample_period_s": Key(float, 1e-3, 1e-5, 0.1, doc="simulated sample period", unit="s"),
+    "earth_rate": Key(bool, False, doc="simulate Earth's rate on the axis ([station] latitude and axis)"),
 }
 
 

@@ -137,7 +137,7 @@ def station_cases() -> list[Case]:
         ("seed-fraction", sim("seed = 0", "seed = 1.5"), ["seed=1.5 is not an integer"]),
         ("seed-huge", sim("seed = 0", "seed = 18446744073709551615"), ["seed=18446744073709551615", "above"]),
         ("speed-negative-in-file", sim("seed = 0", "seed = 0\nspeed = -1.0"), ["speed=-1 is below the limit 0"]),
-        ("preset-unknown", sim('preset = "hrg"', 'preset = "fog"'), ["preset='fog' is not one of hrg, mems"]),
+        ("preset-unknown", sim('preset = "hrg"', 'preset = "fog"'), ["preset='fog' is not one of hrg, hrg-wa, mems"]),
         ("sample-period-above", sim("seed = 0", "seed = 0\nsample_period_s = 1.0"),
          ["sample_period_s=1 s is above the limit 0.1 s"]),
         ("results-not-text", sim('id = "audit"', 'id = "audit"\nresults = 5'), ["results=5 is not text"]),

@@ -47,10 +47,17 @@ class SimStation(Station):
         if preset is not None:
             sim["preset"] = SIM_KEYS["preset"].check("", "preset", preset)
         config = StationConfig(config.source, config.station, sim, config.devices)
+        from simulators.physics.noise import NOISE_PRESETS, earth_rate_dph
         from simulators.physics.params import preset as make_preset
         from simulators.world import World
 
-        self.world = World(make_preset(sim["preset"]), seed=sim["seed"], sample_period_s=sim["sample_period_s"])
+        st = config.station
+        earth = 0.0
+        if sim.get("earth_rate"):
+            earth = earth_rate_dph(st.get("latitude_deg", 0.0), st.get("axis_elevation_deg", 90.0),
+                                   st.get("axis_azimuth_deg", 0.0))
+        self.world = World(make_preset(sim["preset"]), seed=sim["seed"], sample_period_s=sim["sample_period_s"],
+                           noise=NOISE_PRESETS.get(sim["preset"]), earth_rate_dph=earth)
         self.handles: dict[str, Any] = {}
         self.addresses: dict[str, dict[str, Any]] = {}
         self.faults = FaultScheduler(self.inject)

@@ -19,7 +19,11 @@ from typing import Any, Protocol
 import numpy as np
 
 from .physics.averaged import Resonator, use_single_thread_blas
+from .physics.noise import Environment, NoiseParams
 from .physics.params import ResonatorParams
+
+#: the force source whose coming on is a turn-on of the gyro (the FPGA firmware's drive)
+TURN_ON_SOURCE = "fpga"
 
 
 class WorldBlock:
@@ -112,6 +116,8 @@ class World:
         seed: int = 0,
         sample_period_s: float = 1e-3,
         max_block_s: float = 0.1,
+        noise: NoiseParams | None = None,
+        earth_rate_dph: float = 0.0,
     ) -> None:
         if not (math.isfinite(sample_period_s) and sample_period_s > 0):
             raise ValueError(f"sample_period_s={sample_period_s!r} must be > 0")
@@ -134,6 +140,13 @@ class World:
         self._forces: dict[str, np.ndarray] = {}
         self.last_block: WorldBlock | None = None
         self._listeners: list[Any] = []
+        # noise and environment (simulators.physics.noise): None for a noise-free world, whose
+        # arithmetic and random draws are then those of the world before the noise model
+        self.environment: Environment | None = None
+        if noise is not None or earth_rate_dph != 0.0:
+            self.environment = Environment(
+                noise, seed=seed, sample_period_s=self.sample_period_s, earth_rate_dph=earth_rate_dph
+            )
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -166,6 +179,8 @@ class World:
             if force is None:
                 self._forces.pop(source, None)
             else:
+                if source == TURN_ON_SOURCE and source not in self._forces and self.environment is not None:
+                    self.environment.turn_on()  # the drive comes on: a new turn-on bias
                 self._forces[source] = np.asarray(force, dtype=float).reshape(4)
 
     @property
@@ -216,14 +231,25 @@ class World:
             force = next(iter(forces.values()))
         else:
             force = self.total_force
+        rate_rad_s = math.radians(rate)
+        env = self.environment
+        if env is not None:
+            rate_rad_s += env.block_rate_rad_s(n)  # Earth, turn-on bias and drift noise: an input rate
+            if env.has_slow_drifts:
+                d, th = env.damping(t0, self.params.delta_inv_tau_per_s, self.params.theta_tau_deg)
+                self.resonator.set_damping_anisotropy(d, th)
         q_true, q_meas = self.resonator.step_and_measure(
             n,
             dt,
-            rate_rad_s=math.radians(rate),
+            rate_rad_s=rate_rad_s,
             force=force,
             ref_freq_hz=self.ref_freq_hz,
             ripple_angle_rad=self.ripple_angle_rad,
         )
+        if env is not None and env.has_slow_drifts:
+            gx, gy = env.gains(t0)
+            q_meas[:, :2] *= gx  # the X pickoff electrodes (cx, sx)
+            q_meas[:, 2:] *= gy
         angle0 = self.case_angle_deg
         block = WorldBlock(i0 + 1, q_true, q_meas, rate, angle0, dt, self.ripple_angle_rad)
         self.sample_index = i0 + n
@@ -237,7 +263,10 @@ class World:
     # --- truth -----------------------------------------------------------------------------
     def truth(self) -> dict[str, float]:
         """Ground truth for reports and tests; never travels over a device protocol."""
-        return self.params.truth()
+        truth = self.params.truth()
+        if self.environment is not None:
+            truth |= self.environment.truth()
+        return truth
 
     def state(self) -> np.ndarray:
         with self.lock:

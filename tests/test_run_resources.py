@@ -24,6 +24,7 @@ SHORT = {
     "hrg-free-decay": ("sim-hrg", {"rate_dps": 20.0, "record_s": 2.0}),
     "mems-sweep": ("sim-mems", {"n_points": 5}),
     "table-spin": ("sim-hrg", {"hold_s": 0.5}),
+    "cvg-allan": ("sim-hrg-wa", {"record_s": 60.0, "settle_s": 1.0}),
 }
 
 

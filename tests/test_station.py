@@ -49,10 +49,10 @@ def test_real_station_file_is_checked_not_connected(tmp_path):
         (('driver = "modbus-table"', 'driver = "fpga-link"'), ["(it is a fpga driver)"]),
         (('host = "10.0.0.5"', 'hots = "10.0.0.5"'), ["hots: unknown key (allowed: device_id, driver, host,"]),
         (("[devices.table]", "[devices.turntable]"), ["unknown role 'turntable'"]),
-        (('id = "lab-1"', 'name = "lab-1"'), ["[station] name: unknown key (allowed: description,"]),
+        (('id = "lab-1"', 'name = "lab-1"'), ["[station] name: unknown key (allowed: axis_azimuth_deg,"]),
         (("[station]", "[station\n"), ["not valid TOML"]),
         (("[station]", "[simulation]\nseed = -3\n[station]"), ["[simulation] seed=-3 is below the limit 0"]),
-        (("[station]", "[simulation]\npreset = 'fog'\n[station]"), ["preset='fog' is not one of hrg, mems"]),
+        (("[station]", "[simulation]\npreset = 'fog'\n[station]"), ["preset='fog' is not one of hrg, hrg-wa, mems"]),
     ],
 )
 def test_bad_station_files_name_file_key_value_and_range(tmp_path, change, expect):

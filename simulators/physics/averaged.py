@@ -11,6 +11,8 @@ is accurate to O(D x ripple angle).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.integrate import solve_ivp
 from threadpoolctl import threadpool_limits
@@ -69,6 +71,12 @@ class Resonator:
     def set_state(self, q: np.ndarray) -> None:
         self._q = np.asarray(q, dtype=float).copy()
         self._psi = 0.0
+
+    def set_damping_anisotropy(self, d_per_s: float, theta_tau_deg: float) -> None:
+        """Change Delta(1/tau) and its axis (the slow drift of simulators.physics.noise) in the
+        linear step's parameters."""
+        th = math.radians(theta_tau_deg)
+        self._zg[2], self._zg[3] = d_per_s * math.cos(4.0 * th), d_per_s * math.sin(4.0 * th)
 
     @property
     def is_linear(self) -> bool:
