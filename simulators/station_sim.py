@@ -30,6 +30,7 @@ class SimStation(Station):
         seed: int | None = None,
         speed: float | None = None,
         preset: str | None = None,
+        resonator: Any = None,
     ) -> None:
         if not isinstance(config, StationConfig):
             config = load_config(config)
@@ -50,7 +51,9 @@ class SimStation(Station):
         from simulators.physics.params import preset as make_preset
         from simulators.world import World
 
-        self.world = World(make_preset(sim["preset"]), seed=sim["seed"], sample_period_s=sim["sample_period_s"])
+        # resonator: a drawn unit's ResonatorParams (a simulated production lot) instead of the preset
+        params = make_preset(sim["preset"]) if resonator is None else resonator
+        self.world = World(params, seed=sim["seed"], sample_period_s=sim["sample_period_s"])
         self.handles: dict[str, Any] = {}
         self.addresses: dict[str, dict[str, Any]] = {}
         self.faults = FaultScheduler(self.inject)
