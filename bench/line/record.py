@@ -149,10 +149,10 @@ def to_openhtf(record: dict[str, Any]) -> dict[str, Any]:
             iv = m["interval"]
             doc = f"{m['outcome']} by rule {m['rule'] or 'none'}; unit {m['unit'] or '-'}; 95% interval " + (
                 "none" if iv is None else f"[{iv[0]}, {iv[1]}]")
-            entry = {"name": m["name"], "outcome": HTF_MEAS_OUTCOME[m["outcome"]], "validators": _validator_text(m),
-                     "docstring": doc}
-            if m["outcome"] == MARGINAL:
-                entry["marginal"] = True
+            entry = {"name": m["name"], "outcome": HTF_MEAS_OUTCOME[m["outcome"]]}
+            if _validator_text(m):
+                entry["validators"] = _validator_text(m)
+            entry["docstring"] = doc  # OpenHTF keeps a measurement's marginal flag out of its JSON
             if m["value"] is not None:
                 entry["measured_value"] = m["value"]
             meas[m["name"]] = entry
