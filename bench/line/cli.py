@@ -134,7 +134,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     url = args.db or str(Path(args.runs_dir) / "results.sqlite")
     db = LineDB(url)
     try:
-        paths = write_line_report(db, lot=args.lot, output=args.output, pdf=args.pdf)
+        paths = write_line_report(db, lot=args.lot, output=args.output, pdf=args.pdf, runs_dir=args.runs_dir)
     finally:
         db.close()
     print("\n".join(str(p) for p in paths))
