@@ -52,10 +52,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     seq = load_sequence(args.sequence)
     station_name = _station_of(args, seq.station)
     overrides = {} if args.seed is None else {"seed": args.seed}
-    Station.load(station_name, **overrides)  # checked before anything else opens
+    station_id = Station.load(station_name, **overrides).id  # the file checked before anything opens
     operator = make_operator(serial=args.dut, assume_yes=args.yes, interactive=stdin_is_terminal())
     serial = operator.scan_serial()
-    ctx = _context(args, station_name=Path(station_name).stem, operator=args.operator, db_url=args.db)
+    ctx = _context(args, station_name=station_id, operator=args.operator, db_url=args.db)
     if not operator.confirm(f"unit {serial} is in the fixture of station {station_name!r}?"):
         raise LineError(f"unit {serial}: the fixture was not confirmed; nothing was run")
     records = []
@@ -187,7 +187,7 @@ def add_line_subcommand(sub: Any) -> None:
     run.add_argument("--dut", default=None, metavar="SERIAL", help="the unit's serial (else it is scanned)")
     run.add_argument("--operator", required=True, metavar="NAME")
     run.add_argument("--station", default=None, help="built-in station name or station TOML (default: the sequence's)")
-    run.add_argument("--limits", default=None, help="product limits (shipped name or TOML file; default: the sequence's)")
+    run.add_argument("--limits", default=None, help="product limits (shipped name or TOML; default: the sequence's)")
     run.add_argument("--lot", default="")
     run.add_argument("--yes", action="store_true", help="answer yes to the fixture and table-spin questions")
     run.add_argument("--seed", type=int, default=None, help="simulation seed (simulated stations)")

@@ -81,8 +81,9 @@ def summary(record: dict[str, Any]) -> str:
     words = []
     for m in bad[:4]:
         lim = m["limits"] or {}
-        words.append(f"{m['name']}={m['value']} {m['unit']} {m['outcome']} (limits {lim.get('low')}..{lim.get('high')}, "
-                     f"{m['rule']})")
+        value = "-" if m["value"] is None else f"{m['value']:.6g}"
+        words.append(f"{m['name']}={value} {m['unit']} {m['outcome']} (limits {lim.get('low')}..{lim.get('high')}, "
+                     f"rule {m['rule']})")
     return f"{record['outcome']}: " + "; ".join(words) + (f"; +{len(bad) - 4} more" if len(bad) > 4 else "")
 
 

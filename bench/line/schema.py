@@ -6,7 +6,7 @@ table, so the line's schema changes never interleave with the run store's chain.
 
 from __future__ import annotations
 
-from sqlalchemy import JSON, Column, Float, ForeignKey, Index, Integer, MetaData, String, Table, Text, UniqueConstraint
+from sqlalchemy import JSON, Column, Float, ForeignKey, Index, Integer, MetaData, String, Table, UniqueConstraint
 
 VERSION_TABLE = "line_alembic_version"
 metadata = MetaData()
