@@ -94,29 +94,37 @@ class LineDB:
                                     ) from None
             time.sleep(random.uniform(0.01, 0.1))
 
-    def _insert(self, rec: dict[str, Any]) -> int:
+    def save_many(self, records: list[dict[str, Any]]) -> None:
+        """Insert many records in one transaction (an import, a benchmark's fill): all or none."""
         with self.engine.begin() as conn:
-            exists = conn.execute(select(line_units.c.serial).where(line_units.c.serial == rec["serial"])).first()
-            if exists is None:
-                conn.execute(insert(line_units), [{"serial": rec["serial"], "lot": rec["lot"],
-                                                   "first_seen_at": rec["started_at"]}])
-            row = {k: rec[k] for k in ("serial", "attempt", "lot", "station", "operator", "sequence",
-                                       "software_version", "started_at", "ended_at", "outcome")}
-            row["product"] = rec.get("product", "")
-            row["record"] = rec
-            attempt_id = conn.execute(insert(line_attempts).returning(line_attempts.c.id), [row]).scalar_one()
-            rows = []
-            for m in rec["measurements"]:
-                iv = m.get("interval") or [None, None]
-                lim = m.get("limits") or {}
-                rows.append({"attempt_id": attempt_id, "serial": rec["serial"], "name": m["name"],
-                             "procedure": m.get("procedure") or "", "run_id": m.get("run_id"),
-                             "value": _num(m.get("value")), "unit": m.get("unit") or "",
-                             "interval_low": _num(iv[0]), "interval_high": _num(iv[1]),
-                             "low": _num(lim.get("low")), "high": _num(lim.get("high")), "rule": m.get("rule"),
-                             "outcome": m["outcome"], "ended_at": rec["ended_at"]})
-            if rows:
-                conn.execute(insert(line_measurements), rows)
+            for rec in records:
+                self._insert(rec, conn)
+
+    def _insert(self, rec: dict[str, Any], conn: Any = None) -> int:
+        if conn is None:
+            with self.engine.begin() as conn:
+                return self._insert(rec, conn)
+        exists = conn.execute(select(line_units.c.serial).where(line_units.c.serial == rec["serial"])).first()
+        if exists is None:
+            conn.execute(insert(line_units), [{"serial": rec["serial"], "lot": rec["lot"],
+                                               "first_seen_at": rec["started_at"]}])
+        row = {k: rec[k] for k in ("serial", "attempt", "lot", "station", "operator", "sequence",
+                                   "software_version", "started_at", "ended_at", "outcome")}
+        row["product"] = rec.get("product", "")
+        row["record"] = rec
+        attempt_id = conn.execute(insert(line_attempts).returning(line_attempts.c.id), [row]).scalar_one()
+        rows = []
+        for m in rec["measurements"]:
+            iv = m.get("interval") or [None, None]
+            lim = m.get("limits") or {}
+            rows.append({"attempt_id": attempt_id, "serial": rec["serial"], "name": m["name"],
+                         "procedure": m.get("procedure") or "", "run_id": m.get("run_id"),
+                         "value": _num(m.get("value")), "unit": m.get("unit") or "",
+                         "interval_low": _num(iv[0]), "interval_high": _num(iv[1]),
+                         "low": _num(lim.get("low")), "high": _num(lim.get("high")), "rule": m.get("rule"),
+                         "outcome": m["outcome"], "ended_at": rec["ended_at"]})
+        if rows:
+            conn.execute(insert(line_measurements), rows)
         return int(attempt_id)
 
     # --- reading -----------------------------------------------------------------------------
