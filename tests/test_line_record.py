@@ -130,3 +130,32 @@ def test_openhtf_layout_is_what_openhtf_writes(spin_record):
     m = phase["measurements"]["table_rate_dps"]
     assert m["validators"] == ["99.5 <= x <= Marginal:99.9 <= 100.5"] and m["outcome"] == "PASS"
     assert ours["outcome"] == "ERROR" and ours["dut_id"] == "SN-1" and ours["station_id"] == "sim-hrg"
+
+
+def test_a_run_that_errors_is_recorded_and_retested(tmp_path):
+    """The table's emergency stop in the first attempt: the run ends ERROR in the safe state, the
+    unit's record says ERROR (its limited measurement never measured), and the retest policy runs a
+    second attempt, which passes; both records are kept."""
+    from bench.station import Station
+
+    seq = tmp_path / "retest.toml"
+    seq.write_text('[sequence]\nname="retest"\n[retest]\nmax_attempts=2\non=["ERROR"]\n'
+                   '[[step]]\nprocedure="table-spin"\n[step.params]\nhold_s=2.0\n')
+    lim = tmp_path / "limits.toml"
+    lim.write_text('[product]\nname="p"\n[limits.table_rate_dps]\nlow=99.5\nhigh=100.5\n')
+    ctx = LineContext(load_sequence(seq), load_limits(lim), "sim-hrg", "ann", tmp_path, lot="L8")
+    opened = []
+
+    def open_station():
+        st = Station.load("sim-hrg")
+        if not opened:
+            st.schedule_fault("table-estop", 1.0)
+        opened.append(st)
+        return st
+
+    first, second = run_unit(ctx, open_station, "SN-2", Yes())
+    assert first["outcome"] == "ERROR" and first["runs"][0]["outcome"] == "ERROR"
+    assert first["runs"][0]["safe_state"] is True and "safety trip" in first["runs"][0]["end_reason"]
+    assert [m["outcome"] for m in first["measurements"]] == ["ERROR"]
+    assert second["outcome"] == "PASS" and (first["attempt"], second["attempt"]) == (1, 2)
+    assert all(Path(r["record_file"]).is_file() for r in (first, second))

@@ -52,10 +52,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     seq = load_sequence(args.sequence)
     station_name = _station_of(args, seq.station)
     overrides = {} if args.seed is None else {"seed": args.seed}
-    station_id = Station.load(station_name, **overrides).id  # the file checked before anything opens
+    station = Station.load(station_name, **overrides)  # the file checked before anything opens
+    if args.runs_dir is None:  # the station's folder and store, as `gyrobench run` uses them
+        args.runs_dir = station.runs_dir
+    db_url = args.db or (station.results_url if args.runs_dir == station.runs_dir else None)
     operator = make_operator(serial=args.dut, assume_yes=args.yes, interactive=stdin_is_terminal())
     serial = operator.scan_serial()
-    ctx = _context(args, station_name=station_id, operator=args.operator, db_url=args.db)
+    ctx = _context(args, station_name=station.id, operator=args.operator, db_url=db_url)
     if not operator.confirm(f"unit {serial} is in the fixture of station {station_name!r}?"):
         raise LineError(f"unit {serial}: the fixture was not confirmed; nothing was run")
     records = []
@@ -91,6 +94,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if preset not in SPREADS:
         raise LineError(f"preset {preset!r} has no spread to draw units from (known: {', '.join(SPREADS)})")
     args.lot = args.lot or f"sim-{args.seed}"
+    args.runs_dir = args.runs_dir or cfg.station["runs_dir"]
+    args.db = args.db or (cfg.station["results"] if args.runs_dir == cfg.station["runs_dir"] else None)
     ctx = _context(args, station_name=cfg.id, operator=args.operator or "simulator", db_url=args.db)
     units = draw_units(preset, args.units, args.seed, args.lot)
     operator = make_operator(serial=None, assume_yes=True, interactive=False)
@@ -131,6 +136,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     from .db import LineDB
     from .report import write_line_report
 
+    args.runs_dir = args.runs_dir or "runs"
     url = args.db or str(Path(args.runs_dir) / "results.sqlite")
     db = LineDB(url)
     try:
@@ -172,9 +178,10 @@ def _print_records(records: list[dict[str, Any]], as_json: bool) -> None:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--db", default=None, help="line database / results store URL or SQLite file "
-                   "(default: RUNS_DIR/results.sqlite)")
-    p.add_argument("--runs-dir", default="runs", help="raw files, records (RUNS_DIR/line/LOT/) and spool")
+    p.add_argument("--db", default=None, help="line database (= results store) URL or SQLite file "
+                   "(default: the station's results store, else RUNS_DIR/results.sqlite)")
+    p.add_argument("--runs-dir", default=None, help="raw files, records (RUNS_DIR/line/LOT/) and spool "
+                   "(default: the station's, runs)")
 
 
 def add_line_subcommand(sub: Any) -> None:
