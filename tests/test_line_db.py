@@ -65,3 +65,24 @@ def test_attempts_are_numbered_per_unit(tmp_path):
     db.save(again)
     assert again["attempt"] == 2 and [a["attempt"] for a in db.attempts(serial="U1")] == [1, 2]
     db.close()
+
+
+def test_line_schema_matches_declared_beside_the_results_store(store_url):
+    from sqlalchemy import inspect, text
+
+    from bench.line.schema import VERSION_TABLE, metadata
+    from bench.results import ResultsStore
+
+    store = ResultsStore(store_url)  # the results store's own chain, then the line's beside it
+    db = LineDB(store_url)
+    insp = inspect(db.engine)
+    for table in metadata.sorted_tables:
+        assert {c["name"] for c in insp.get_columns(table.name)} == {c.name for c in table.columns}, table.name
+        indexes = {i["name"] for i in insp.get_indexes(table.name) if not i.get("duplicates_constraint")}
+        assert indexes == {i.name for i in table.indexes}, table.name  # PostgreSQL lists UNIQUE as an index too
+    with db.engine.connect() as conn:
+        assert conn.execute(text(f"SELECT version_num FROM {VERSION_TABLE}")).scalar_one() == "line0001"
+    assert store.revision() == ResultsStore.head()  # the run store's chain is untouched
+    LineDB(store_url).close()  # re-opening an up-to-date database is a no-op
+    db.close()
+    store.close()
