@@ -159,3 +159,29 @@ def test_a_run_that_errors_is_recorded_and_retested(tmp_path):
     assert [m["outcome"] for m in first["measurements"]] == ["ERROR"]
     assert second["outcome"] == "PASS" and (first["attempt"], second["attempt"]) == (1, 2)
     assert all(Path(r["record_file"]).is_file() for r in (first, second))
+
+
+def test_a_record_the_database_refuses_is_kept_and_imported_later(tmp_path, capsys):
+    from bench.cli import main
+    from bench.line import LineError
+    from bench.line.db import LineDB
+    from bench.station import Station
+
+    class Down:
+        def save(self, record):
+            raise LineError("line database postgresql://line/db: connection refused")
+
+    lim = tmp_path / "limits.toml"
+    lim.write_text('[product]\nname="p"\n[limits.table_rate_dps]\nlow=99.5\nhigh=100.5\n')
+    ctx = LineContext(load_sequence("ci-spin"), load_limits(lim), "sim-hrg", "ann", tmp_path, db=Down(), lot="L9")
+    (rec,) = run_unit(ctx, lambda: Station.load("sim-hrg"), "SN-3", Yes())
+    on_disk = json.loads(Path(rec["record_file"]).read_text())
+    assert "connection refused" in on_disk["db_error"] and on_disk["outcome"] == "PASS"
+    jsonschema.validate(on_disk, json.loads(SCHEMA_PATH.read_text()))
+    url = str(tmp_path / "line.sqlite")
+    for added in (1, 0):  # imported once; a second import finds it there
+        assert main(["line", "import", rec["record_file"], "--db", url]) == 0
+        assert f"imported {added} record(s)" in capsys.readouterr().out
+    db = LineDB(url)
+    assert [(a["serial"], a["outcome"]) for a in db.attempts()] == [("SN-3", "PASS")]
+    db.close()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -71,6 +72,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         ctx.store.close()
         ctx.db.close()
     _print_records(records, args.json)
+    for r in records:
+        if r.get("db_error"):
+            print(f"gyrobench: {r['db_error']}", file=sys.stderr)
+            return EXIT_BAD
     final = records[-1]["outcome"] if records else "ERROR"
     return EXIT_OK if final == "PASS" else EXIT_BAD
 
@@ -159,6 +164,29 @@ def cmd_export(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_import(args: argparse.Namespace) -> int:
+    """Unit records (JSON files) into the line database; those already there are left alone."""
+    from .db import LineDB
+
+    args.runs_dir = args.runs_dir or "runs"
+    db = LineDB(args.db or str(Path(args.runs_dir) / "results.sqlite"))
+    added = 0
+    try:
+        for f in args.records:
+            try:
+                record = json.loads(Path(f).read_text())
+            except (OSError, ValueError) as exc:
+                raise LineError(f"{f}: not a readable unit record ({exc})") from None
+            if not db.has(record):
+                record.pop("db_error", None)
+                db.save(record)
+                added += 1
+    finally:
+        db.close()
+    print(f"imported {added} record(s); {len(args.records) - added} already in the line database")
+    return EXIT_OK
+
+
 def _print_records(records: list[dict[str, Any]], as_json: bool) -> None:
     if as_json:
         print(json.dumps(records))
@@ -221,6 +249,11 @@ def add_line_subcommand(sub: Any) -> None:
     rep.add_argument("--pdf", action="store_true", help="the PDF too")
     _common(rep)
     rep.set_defaults(func=cmd_report)
+
+    imp = lsub.add_parser("import", help="unit records (JSON) the line database did not take, into it")
+    imp.add_argument("records", nargs="+")
+    _common(imp)
+    imp.set_defaults(func=cmd_import)
 
     exp = lsub.add_parser("export", help="a unit record in OpenHTF's JSON test-record layout")
     exp.add_argument("record", help="a unit record JSON file")

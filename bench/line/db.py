@@ -94,6 +94,13 @@ class LineDB:
                                     ) from None
             time.sleep(random.uniform(0.01, 0.1))
 
+    def has(self, record: dict[str, Any]) -> bool:
+        """Whether this record (its serial and start time) is already stored."""
+        q = select(line_attempts.c.id).where(line_attempts.c.serial == record["serial"],
+                                             line_attempts.c.started_at == record["started_at"])
+        with self.engine.connect() as conn:
+            return conn.execute(q).first() is not None
+
     def save_many(self, records: list[dict[str, Any]]) -> None:
         """Insert many records in one transaction (an import, a benchmark's fill): all or none."""
         with self.engine.begin() as conn:

@@ -132,9 +132,14 @@ def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, opera
         "runs": runs,
     }
     record["summary"] = summary(record)
-    record["record_file"] = str(write_record(record, ctx.runs_dir / "line" / (ctx.lot or "no-lot")))
+    folder = ctx.runs_dir / "line" / (ctx.lot or "no-lot")
+    record["record_file"] = str(write_record(record, folder))  # on disk first: nothing is lost
     if ctx.db is not None:
-        ctx.db.save(record)
+        try:
+            ctx.db.save(record)
+        except LineError as exc:  # the database is down or refused it: the file waits for `line import`
+            record["db_error"] = f"{exc}; `gyrobench line import {record['record_file']}` submits it later"
+            write_record(record, folder)
     if ctx.on_record is not None:
         ctx.on_record(record)
     return record
