@@ -70,6 +70,7 @@ def main() -> int:
     engine = "PostgreSQL" if url.startswith("postgres") else "SQLite"
     print(f"{args.sequence}: {args.units} units ({len(records)} attempts) on {engine}; outcomes {js['counts']}")
     print(f"  wrong outcomes for the drawn truth: {len(js['wrong'])}" + "".join(f"\n    {w}" for w in js["wrong"]))
+    print(f"  final outcome decided by a measurement without a true value: {js['undecided_by_truth']}")
     print(f"  bench time {bench_s:.0f} s = {3600 * args.units / bench_s:.2f} units/h; "
           f"wall {wall_s:.0f} s = {3600 * args.units / wall_s:.0f} units/h (lockstep, {bench_s / wall_s:.0f}x)")
     missing = [r["serial"] for r in records if not Path(r["record_file"]).is_file()

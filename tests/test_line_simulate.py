@@ -88,3 +88,23 @@ def test_line_report_command(lot, capsys):
     assert main(["line", "report", "--runs-dir", str(tmp), "--lot", js["lot"]]) == 0
     path = Path(capsys.readouterr().out.strip())
     assert path.is_file() and "Yield by station" in path.read_text()
+
+
+def _m(name, value, truth, iv, low, high, outcome, rule="guard-band"):
+    return {"name": name, "value": value, "truth": truth, "interval": iv, "limits": {"low": low, "high": high},
+            "rule": rule, "outcome": outcome, "u_low": None if iv is None else value - iv[0],
+            "u_high": None if iv is None else iv[1] - value}
+
+
+def test_expected_outcome_from_truth():
+    inside = _m("tau_s", 300.0, 300.0, [299.0, 301.0], 250.0, 400.0, "PASS")
+    near = _m("tau_s", 251.0, 251.5, [250.0, 252.0], 250.0, 400.0, "PASS")  # 1.5 inside, width 2: may be anything
+    out = _m("tau_s", 200.0, 200.0, [199.0, 201.0], 250.0, 400.0, "FAIL")
+    untruthed = _m("drift_after_dph", 6.0, None, None, None, 8.0, "MARGINAL", rule="value")
+    assert expected_outcome({"measurements": [inside]})[0] == "PASS"
+    assert expected_outcome({"measurements": [near]})[0] is None
+    assert expected_outcome({"measurements": [inside, out]})[0] == "FAIL"
+    assert expected_outcome({"measurements": [inside, untruthed]})[0] is None  # truth cannot say
+    wrong = check_lot([{"serial": "A", "attempt": 1, "outcome": "FAIL", "measurements": [inside]},
+                       {"serial": "B", "attempt": 1, "outcome": "MARGINAL", "measurements": [near]}])
+    assert len(wrong) == 1 and wrong[0].startswith("A: FAIL, expected PASS")

@@ -86,7 +86,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     from .prompts import make_operator
     from .sequence import load_sequence
-    from .simulate import SPREADS, check_lot, draw_units, simulate_lot
+    from .simulate import SPREADS, check_lot, draw_units, simulate_lot, undecided
 
     if args.units < 1:
         raise LineError(f"--units={args.units} is below the limit 1")
@@ -115,14 +115,18 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         ctx.db.close()
     wrong = check_lot(records)
     counts = _counts(records)
+    untruthed = undecided(records)
     if args.json:
         print(json.dumps({"lot": args.lot, "units": len(units), "attempts": len(records), "counts": counts,
-                          "wrong": wrong, "records": [r["record_file"] for r in records]}))
+                          "wrong": wrong, "undecided_by_truth": untruthed,
+                          "records": [r["record_file"] for r in records]}))
     else:
         print(f"lot {args.lot}: {len(units)} units, {len(records)} attempts; final outcomes "
               + ", ".join(f"{k} {v}" for k, v in counts.items()))
         for w in wrong:
             print(f"  WRONG {w}")
+        if untruthed:
+            print(f"  decided by a measurement without a true value: {', '.join(untruthed)}")
         print("  every outcome is right for its drawn truth" if not wrong else f"  {len(wrong)} wrong outcome(s)")
     return EXIT_OK if not wrong else EXIT_BAD
 

@@ -92,6 +92,7 @@ def write_record(record: dict[str, Any], folder: str | Path) -> Path:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{_safe(record['serial'])}-a{record['attempt']}.json"
+    record["record_file"] = str(path)  # the record names its own file
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(record, indent=1))
     tmp.replace(path)

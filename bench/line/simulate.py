@@ -5,7 +5,9 @@ and the check that every outcome is right for the unit's drawn truth.
 The check, per limited measurement with a true value: a truth inside the limits by more than its
 interval's width (U below + U above: an interval that covers the truth reaches at most that far
 from it) must PASS; a truth outside by more than that width must FAIL; the rest may be MARGINAL.
-A unit must PASS when all its truths must, and FAIL when any must."""
+A unit must PASS when all its truths must, and FAIL when any must.  A limited measurement without a
+true value (the drift left after compensation) that FAILs or is MARGINAL leaves the unit's outcome
+to the line: truth cannot say what it must be (`undecided` counts those units)."""
 
 from __future__ import annotations
 
@@ -56,6 +58,9 @@ def expected_outcome(record: dict[str, Any]) -> tuple[str | None, list[str]]:
     or either); and why, per measurement."""
     must_fail, all_pass, why = False, True, []
     for m in record["measurements"]:
+        if m.get("rule") and m.get("truth") is None and m["outcome"] in (FAIL, MARGINAL):
+            all_pass = False  # decided by a measurement without a true value: truth cannot say
+            why.append(f"{m['name']} {m['outcome']} has no true value")
         if not m.get("rule") or m.get("truth") is None:
             continue
         lim = m["limits"] or {}
@@ -89,6 +94,16 @@ def check_lot(records: list[dict[str, Any]]) -> list[str]:
         if not ok:
             wrong.append(f"{serial}: {got}, expected {want or 'PASS/FAIL/MARGINAL'} ({'; '.join(why) or 'in spec'})")
     return wrong
+
+
+def undecided(records: list[dict[str, Any]]) -> list[str]:
+    """Serials whose final outcome was decided by a limited measurement that has no true value."""
+    last: dict[str, dict[str, Any]] = {}
+    for r in records:
+        last[r["serial"]] = r
+    return [s for s, r in last.items() if any(m.get("rule") and m.get("truth") is None and m["outcome"] in
+                                              (FAIL, MARGINAL) and m["outcome"] == r["outcome"]
+                                              for m in r["measurements"])]
 
 
 def simulate_lot(ctx: Any, station_file: str, units: list[DrawnUnit], seed: int, operator: Any) -> list[dict]:
