@@ -44,3 +44,9 @@ def test_line_run_refuses_what_it_cannot_ask(tmp_path, capsys, monkeypatch):
     code, err = _err(capsys, ["line", "run", "ci-spin", "--operator", "a", "--dut", "X", "--yes",
                               "--limits", str(tmp_path / "none.toml")])
     assert code == 2 and "no such limits file" in err
+
+
+def test_line_run_refuses_a_station_that_does_not_fit(tmp_path, capsys):
+    code, err = _err(capsys, ["line", "run", "eol-mems", "--station", "sim-hrg", "--operator", "a", "--dut", "X",
+                              "--yes", "--runs-dir", str(tmp_path)])
+    assert code == 2 and "[[step]] #1 mems-sweep" in err and "sim-hrg" in err

@@ -41,6 +41,23 @@ def _station_of(args: argparse.Namespace, seq_station: str) -> str:
     return name
 
 
+def check_steps(seq: Any, station: Any) -> None:
+    """Every step's procedure fits the station (its device roles, the kind of gyro, the limits),
+    before a unit is scanned; LineError names the step and why."""
+    from bench.engine.demands import StationMismatch, check_station
+
+    for i, step in enumerate(seq.steps, 1):
+        proc = step.make()
+        missing = [r for r in proc.requires if r not in station.config.devices]
+        if missing:
+            raise LineError(f"{seq.source}: [[step]] #{i} {step.procedure} needs device role(s) {missing}; "
+                            f"station {station.id!r} has {sorted(station.config.devices)}")
+        try:
+            check_station(proc, station)
+        except StationMismatch as exc:
+            raise LineError(f"{seq.source}: [[step]] #{i} {step.procedure}: {exc}") from None
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     """One unit (scanned or --dut) through a sequence; its record(s); exit 0 on PASS."""
     from bench.station import Station
@@ -54,18 +71,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     station_name = _station_of(args, seq.station)
     overrides = {} if args.seed is None else {"seed": args.seed}
     station = Station.load(station_name, **overrides)  # the file checked before anything opens
+    check_steps(seq, station)
     if args.runs_dir is None:  # the station's folder and store, as `gyrobench run` uses them
         args.runs_dir = station.runs_dir
     db_url = args.db or (station.results_url if args.runs_dir == station.runs_dir else None)
     operator = make_operator(serial=args.dut, assume_yes=args.yes, interactive=stdin_is_terminal())
     serial = operator.scan_serial()
     ctx = _context(args, station_name=station.id, operator=args.operator, db_url=db_url)
-    if not operator.confirm(f"unit {serial} is in the fixture of station {station_name!r}?"):
-        raise LineError(f"unit {serial}: the fixture was not confirmed; nothing was run")
     records = []
     try:
         from .run import run_unit
 
+        if not operator.confirm(f"unit {serial} is in the fixture of station {station_name!r}?"):
+            raise LineError(f"unit {serial}: the fixture was not confirmed; nothing was run")
         records = run_unit(ctx, lambda: Station.load(station_name, **overrides), serial, operator,
                            first_attempt=ctx.db.next_attempt(serial))
     finally:
