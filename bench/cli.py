@@ -619,6 +619,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--fault", action="append", default=[], metavar="KIND@SECONDS")
     sim.set_defaults(func=_cmd_sim)
     _add_gui(sub)
+    from bench.line.cli import add_line_subcommand  # the production line's commands
+
+    add_line_subcommand(sub)
     return parser
 
 

@@ -30,6 +30,7 @@ class SimStation(Station):
         seed: int | None = None,
         speed: float | None = None,
         preset: str | None = None,
+        resonator: Any = None,
     ) -> None:
         if not isinstance(config, StationConfig):
             config = load_config(config)
@@ -56,7 +57,9 @@ class SimStation(Station):
         if sim.get("earth_rate"):
             earth = earth_rate_dph(st.get("latitude_deg", 0.0), st.get("axis_elevation_deg", 90.0),
                                    st.get("axis_azimuth_deg", 0.0))
-        self.world = World(make_preset(sim["preset"]), seed=sim["seed"], sample_period_s=sim["sample_period_s"],
+        # resonator: a drawn unit's ResonatorParams (a simulated production lot) instead of the preset
+        params = make_preset(sim["preset"]) if resonator is None else resonator
+        self.world = World(params, seed=sim["seed"], sample_period_s=sim["sample_period_s"],
                            noise=NOISE_PRESETS.get(sim["preset"]), earth_rate_dph=earth)
         self.handles: dict[str, Any] = {}
         self.addresses: dict[str, dict[str, Any]] = {}

@@ -1,0 +1,172 @@
+"""The line database: one row per unit, per attempt (with its whole JSON record) and per judged
+measurement; SQLite by default, PostgreSQL for a line of several stations (the same URL as the
+results store: `line_*` tables under their own migration chain).
+
+Several stations write at once: each record is one transaction; a SQLite writer that finds the
+file locked, or two stations that drew the same attempt number, retry (bounded), so nothing is lost.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+from pathlib import Path
+from typing import Any
+
+from alembic import command
+from alembic.config import Config
+from sqlalchemy import event, func, insert, select
+from sqlalchemy.exc import IntegrityError, OperationalError, SQLAlchemyError
+
+from bench.results.locks import migrating_connection
+from bench.results.store import describe_error, to_url
+
+from . import LineError
+from .schema import line_attempts, line_measurements, line_units
+
+MIGRATIONS = Path(__file__).resolve().parent / "migrations"
+RETRY_S = 30.0  # how long a record waits for a busy database before the error is reported
+
+
+def _alembic_config() -> Config:
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS))
+    return cfg
+
+
+def _sqlite_pragmas(dbapi_conn, _record) -> None:
+    cur = dbapi_conn.cursor()
+    cur.execute("PRAGMA foreign_keys=ON")
+    cur.execute("PRAGMA busy_timeout=10000")
+    cur.close()
+
+
+def _num(x: Any) -> float | None:
+    return None if x is None else float(x)
+
+
+class LineDB:
+    """Records of units on one database URL (or SQLite file path)."""
+
+    def __init__(self, url: str | Path | None = None) -> None:
+        from sqlalchemy import create_engine
+
+        self.url = to_url(url)
+        try:
+            self.engine = create_engine(self.url)
+        except ImportError as exc:
+            raise LineError(f"line database {self.url}: its driver is not installed ({exc})") from None
+        if self.engine.dialect.name == "sqlite":
+            event.listen(self.engine, "connect", _sqlite_pragmas)
+        try:
+            self.upgrade()
+        except SQLAlchemyError as exc:
+            raise LineError(f"line database {self.url}: cannot be opened: {describe_error(exc)}") from None
+
+    def upgrade(self) -> None:
+        cfg = _alembic_config()
+        with migrating_connection(self.engine) as conn:
+            cfg.attributes["connection"] = conn
+            command.upgrade(cfg, "head")
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    # --- writing -----------------------------------------------------------------------------
+    def next_attempt(self, serial: str) -> int:
+        with self.engine.connect() as conn:
+            n = conn.execute(select(func.max(line_attempts.c.attempt)).where(line_attempts.c.serial == serial)).scalar()
+        return int(n or 0) + 1
+
+    def save(self, record: dict[str, Any]) -> int:
+        """Insert one record (its unit, attempt and measurements) in one transaction; its attempt id.
+        An attempt number another station took meanwhile becomes the next free one."""
+        deadline = time.monotonic() + RETRY_S
+        while True:
+            try:
+                return self._insert(record)
+            except IntegrityError:
+                record["attempt"] = self.next_attempt(record["serial"])
+            except OperationalError as exc:  # SQLite: the file is locked by another writer
+                if time.monotonic() > deadline:
+                    raise LineError(f"line database {self.url}: record of {record['serial']} not saved: "
+                                    f"{describe_error(exc)} (the JSON record is kept: {record.get('record_file')})"
+                                    ) from None
+            time.sleep(random.uniform(0.01, 0.1))
+
+    def has(self, record: dict[str, Any]) -> bool:
+        """Whether this record (its serial and start time) is already stored."""
+        q = select(line_attempts.c.id).where(line_attempts.c.serial == record["serial"],
+                                             line_attempts.c.started_at == record["started_at"])
+        with self.engine.connect() as conn:
+            return conn.execute(q).first() is not None
+
+    def save_many(self, records: list[dict[str, Any]]) -> None:
+        """Insert many records in one transaction (an import, a benchmark's fill): all or none."""
+        with self.engine.begin() as conn:
+            for rec in records:
+                self._insert(rec, conn)
+
+    def _insert(self, rec: dict[str, Any], conn: Any = None) -> int:
+        if conn is None:
+            with self.engine.begin() as conn:
+                return self._insert(rec, conn)
+        exists = conn.execute(select(line_units.c.serial).where(line_units.c.serial == rec["serial"])).first()
+        if exists is None:
+            conn.execute(insert(line_units), [{"serial": rec["serial"], "lot": rec["lot"],
+                                               "first_seen_at": rec["started_at"]}])
+        row = {k: rec[k] for k in ("serial", "attempt", "lot", "station", "operator", "sequence",
+                                   "software_version", "started_at", "ended_at", "outcome")}
+        row["product"] = rec.get("product", "")
+        row["record"] = rec
+        attempt_id = conn.execute(insert(line_attempts).returning(line_attempts.c.id), [row]).scalar_one()
+        rows = []
+        for m in rec["measurements"]:
+            iv = m.get("interval") or [None, None]
+            lim = m.get("limits") or {}
+            rows.append({"attempt_id": attempt_id, "serial": rec["serial"], "name": m["name"],
+                         "procedure": m.get("procedure") or "", "run_id": m.get("run_id"),
+                         "value": _num(m.get("value")), "unit": m.get("unit") or "",
+                         "interval_low": _num(iv[0]), "interval_high": _num(iv[1]),
+                         "low": _num(lim.get("low")), "high": _num(lim.get("high")), "rule": m.get("rule"),
+                         "outcome": m["outcome"], "ended_at": rec["ended_at"]})
+        if rows:
+            conn.execute(insert(line_measurements), rows)
+        return int(attempt_id)
+
+    # --- reading -----------------------------------------------------------------------------
+    def attempts(self, *, lot: str | None = None, serial: str | None = None) -> list[dict[str, Any]]:
+        """Attempts (without their JSON records), oldest first."""
+        cols = [c for c in line_attempts.c if c.name != "record"]
+        q = select(*cols).order_by(line_attempts.c.ended_at, line_attempts.c.id)
+        if lot is not None:
+            q = q.where(line_attempts.c.lot == lot)
+        if serial is not None:
+            q = q.where(line_attempts.c.serial == serial)
+        with self.engine.connect() as conn:
+            return [dict(r._mapping) for r in conn.execute(q)]
+
+    def records(self, *, lot: str | None = None) -> list[dict[str, Any]]:
+        q = select(line_attempts.c.record).order_by(line_attempts.c.ended_at, line_attempts.c.id)
+        if lot is not None:
+            q = q.where(line_attempts.c.lot == lot)
+        with self.engine.connect() as conn:
+            return [r[0] for r in conn.execute(q)]
+
+    def measurements(self, *, lot: str | None = None) -> list[dict[str, Any]]:
+        """Judged measurements with limits (their attempt's lot, station and time), oldest first."""
+        m, a = line_measurements, line_attempts
+        q = (select(m.c.name, m.c.serial, m.c.value, m.c.unit, m.c.low, m.c.high, m.c.rule, m.c.outcome,
+                    m.c.ended_at, a.c.lot, a.c.station, a.c.attempt)
+             .join(a, a.c.id == m.c.attempt_id).where(m.c.rule.is_not(None))
+             .order_by(m.c.ended_at, m.c.id))
+        if lot is not None:
+            q = q.where(a.c.lot == lot)
+        with self.engine.connect() as conn:
+            return [dict(r._mapping) for r in conn.execute(q)]
+
+    def count(self) -> tuple[int, int]:
+        """(attempts, measurements) stored."""
+        with self.engine.connect() as conn:
+            return (conn.execute(select(func.count()).select_from(line_attempts)).scalar_one(),
+                    conn.execute(select(func.count()).select_from(line_measurements)).scalar_one())

@@ -1,0 +1,195 @@
+"""One unit through a sequence: its procedures run by the engine on one station, each measurement
+judged against the product limits, one record per attempt (retested per the sequence's policy)."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from . import LineError
+from .limits import ProductLimits
+from .record import SCHEMA_VERSION, judged, now_iso, sha256_of, summary, write_record
+from .sequence import Sequence
+from .verdict import ABORTED, ERROR, FAIL, SKIPPED, worst
+
+STOP_OUTCOMES = (FAIL, ERROR, ABORTED)
+
+
+@dataclass
+class LineContext:
+    """What every unit of one `line run` / `line simulate` shares."""
+
+    sequence: Sequence
+    limits: ProductLimits
+    station_name: str
+    operator_name: str
+    runs_dir: Path
+    store: Any = None  # bench.results.ResultsStore for the runs (or None)
+    db: Any = None  # bench.line.db.LineDB for the records (or None)
+    lot: str = ""
+    on_record: Callable[[dict[str, Any]], None] | None = None
+    aborted: list[str] = field(default_factory=list)
+
+
+def _table_question(station: Any) -> str:
+    return f"the rate table of station {station.id!r} will spin: is the fixture closed and the area clear?"
+
+
+def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, operator: Any) -> dict[str, Any]:
+    """One attempt of one unit on an opened station: its record (written and stored)."""
+    from bench.engine import Runner
+    from bench.engine.runner import software_version
+    from procedures import find_procedure
+
+    seq, limits = ctx.sequence, ctx.limits
+    started = now_iso()
+    runs, measurements = [], []
+    matched: set[tuple[str, str | None]] = set()
+    stopped_by: str | None = None
+    asked_spin = False
+    runner = Runner(station, runs_dir=ctx.runs_dir, store=ctx.store, operator=ctx.operator_name, duts=[serial])
+    previous = _abort_on_signals(runner, ctx)
+    try:
+        for step in seq.steps:
+            cls = find_procedure(step.procedure)
+            declared = {m.name for m in cls.measurements}
+            step_limits = limits.for_procedure(cls.name, declared)
+            if stopped_by is not None or ctx.aborted:
+                for lim in step_limits:
+                    matched.add((lim.name, lim.procedure))
+                    measurements.append(judged(lim.name, cls.name, None, None, lim, skipped=True))
+                continue
+            if "table" in cls.requires and not asked_spin:
+                asked_spin = True
+                if not operator.confirm(_table_question(station)):
+                    ctx.aborted.append("the operator did not confirm the table spin")
+                    for lim in step_limits:
+                        matched.add((lim.name, lim.procedure))
+                        measurements.append(judged(lim.name, cls.name, None, None, lim, skipped=True))
+                    stopped_by = ABORTED
+                    continue
+            t0 = now_iso()
+            rec = runner.run(step.make())
+            js = rec.as_json()
+            truth = cls.truth_for(js.get("truth")) if js.get("truth") else {}
+            runs.append({"run_id": rec.run_id, "procedure": cls.name, "step": step.label, "outcome": rec.outcome,
+                         "end_reason": rec.end_reason, "safe_state": bool(rec.safe_state),
+                         "raw_file": rec.raw_file, "sha256": sha256_of(rec.raw_file), "started_at": t0,
+                         "ended_at": now_iso(), "simulated_s": float(rec.simulated_s), "wall_s": float(rec.wall_s),
+                         "params": _plain(rec.params), "store_error": rec.store_error})
+            by_name = {lim.name: lim for lim in step_limits}
+            step_outcomes = []
+            for name, m in js["measurements"].items():
+                lim = by_name.get(name)
+                if lim is None and m.get("outcome") == "NOT_MEASURED":
+                    continue
+                entry = judged(name, cls.name, rec.run_id, m, lim, truth.get(name))
+                measurements.append(entry)
+                step_outcomes.append(entry["outcome"])
+            for lim in step_limits:
+                matched.add((lim.name, lim.procedure))
+                if lim.name not in js["measurements"]:
+                    entry = judged(lim.name, cls.name, rec.run_id, None, lim)
+                    measurements.append(entry)
+                    step_outcomes.append(entry["outcome"])
+            if rec.outcome in (ERROR, ABORTED):
+                step_outcomes.append(rec.outcome)
+            if step.stop_on_fail and step_outcomes and worst(step_outcomes) in STOP_OUTCOMES:
+                stopped_by = worst(step_outcomes)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    for lim in limits.limits:  # named by the limits file, measured by no step of the sequence
+        if not any(name == lim.name for name, _ in matched):
+            measurements.append(judged(lim.name, lim.procedure or "", None, None, lim))
+    decided = [m["outcome"] for m in measurements if m["rule"]] + [
+        r["outcome"] for r in runs if r["outcome"] in (ERROR, ABORTED)]
+    if ctx.aborted:
+        decided.append(ABORTED)
+    record = {
+        "schema_version": SCHEMA_VERSION,
+        "serial": serial,
+        "lot": ctx.lot,
+        "station": ctx.station_name,
+        "operator": ctx.operator_name,
+        "software_version": software_version(),
+        "sequence": seq.name,
+        "sequence_file": seq.source,
+        "limits_file": limits.source,
+        "product": limits.name,
+        "attempt": attempt,
+        "started_at": started,
+        "ended_at": now_iso(),
+        "outcome": worst(decided),
+        "stopped_by": stopped_by,
+        "abort_reason": "; ".join(ctx.aborted) or None,
+        "simulated": bool(getattr(station, "simulated", False)),
+        "measurements": measurements,
+        "runs": runs,
+    }
+    record["summary"] = summary(record)
+    folder = ctx.runs_dir / "line" / (ctx.lot or "no-lot")
+    record["record_file"] = str(write_record(record, folder))  # on disk first: nothing is lost
+    if ctx.db is not None:
+        try:
+            ctx.db.save(record)
+        except LineError as exc:  # the database is down or refused it: the file waits for `line import`
+            record["db_error"] = f"{exc}; `gyrobench line import {record['record_file']}` submits it later"
+            write_record(record, folder)
+    if ctx.on_record is not None:
+        ctx.on_record(record)
+    return record
+
+
+def run_unit(ctx: LineContext, open_station: Callable[[], Any], serial: str, operator: Any,
+             first_attempt: int = 1) -> list[dict[str, Any]]:
+    """A unit's attempts: the first, then a retest while its outcome is one the sequence retests
+    (up to max_attempts); the station opened for each attempt and closed after it, whatever happens."""
+    records = []
+    seq = ctx.sequence
+    for k in range(seq.max_attempts):
+        station = open_station()
+        try:
+            try:
+                station.open()
+            except Exception as exc:  # noqa: BLE001 - a station that does not open is one line
+                raise LineError(f"station {station.id!r} did not open: {type(exc).__name__}: {exc}") from None
+            rec = run_attempt(ctx, station, serial, first_attempt + k, operator)
+        finally:
+            station.close()
+        records.append(rec)
+        operator.show_outcome(serial, rec["outcome"], rec["summary"])
+        if rec["outcome"] not in seq.retest_on or ctx.aborted:
+            break
+    return records
+
+
+def _abort_on_signals(runner: Any, ctx: LineContext) -> dict:
+    """SIGINT / SIGTERM abort the running procedure (the engine makes the station safe) and stop
+    the sequence; the handlers are put back after the attempt."""
+    previous: dict = {}
+    if threading.current_thread() is not threading.main_thread():
+        return previous
+
+    def on_signal(signum, _frame):
+        name = signal.Signals(signum).name
+        ctx.aborted.append(f"aborted: {name}")
+        runner.abort(name)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, on_signal)
+    return previous
+
+
+def _plain(params: dict[str, Any]) -> dict[str, Any]:
+    out = {}
+    for k, v in params.items():
+        out[k] = v if isinstance(v, (int, float, str, bool)) or v is None else str(v)
+    return out
+
+
+__all__ = ["LineContext", "SKIPPED", "run_attempt", "run_unit"]
