@@ -240,7 +240,8 @@ def _pick(candidates: Iterable[dict[str, Any]], serial: str, **kw: Any) -> Compe
         if c.run_id and c.run_id not in runs:
             runs.append(c.run_id)
     if not coeffs:
-        raise CompensationError(f"unit {serial}: no calibration coefficient measured (need one of {', '.join(COEFFICIENTS)})")
+        need = ", ".join(COEFFICIENTS)
+        raise CompensationError(f"unit {serial}: no calibration coefficient measured (need one of {need})")
     return Compensation(serial=serial, coefficients=coeffs, source_runs=runs, **kw)
 
 
@@ -254,9 +255,12 @@ def from_record(record: Mapping[str, Any]) -> Compensation:
     )  # fmt: skip
 
 
-def from_runs(serial: str, runs: Iterable[Mapping[str, Any]], *, software_version: str = "", sequence: str = "") -> Compensation:
+def from_runs(
+    serial: str, runs: Iterable[Mapping[str, Any]], *, software_version: str = "", sequence: str = ""
+) -> Compensation:
     """The compensation from run rows (`ResultsStore.get_run`: run_id, procedure, measurements
     with value, unit, ci95_low, ci95_high), the later runs of a procedure preferred."""
+    runs = list(runs)
     cands = []
     for run in runs:
         for m in run.get("measurements") or ():
