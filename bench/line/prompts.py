@@ -1,0 +1,118 @@
+"""The line operator's prompts on the command line: scan the serial, confirm the fixture and a
+table spin, show the unit's outcome as one big coloured line (rich).
+
+Headless runs are pre-answered by flags (`--dut SERIAL`, `--yes`); a prompt that is needed with
+neither a terminal nor a pre-answer is one clear error naming the flag to pass (OperatorError).
+
+A serial is 3 to 40 characters of letters, digits, '.', '_' and '-', starting with a letter or
+digit (SERIAL_PATTERN; what a barcode scanner types); it is upper-cased and stripped of spaces."""
+
+from __future__ import annotations
+
+import re
+import sys
+from typing import Protocol, TextIO
+
+from rich.markup import escape
+
+from bench.validation import ValidationError
+
+SERIAL_PATTERN = re.compile(r"[A-Z0-9][A-Z0-9._-]{2,39}")
+SERIAL_RULE = "3 to 40 letters, digits, '.', '_' or '-', starting with a letter or digit"
+OUTCOME_STYLES = {"PASS": "bold white on green", "FAIL": "bold white on red", "MARGINAL": "bold black on yellow"}
+
+
+class OperatorError(ValidationError):
+    """A prompt that cannot be answered (no terminal, no flag) or a serial that is not valid."""
+
+
+class Operator(Protocol):
+    """What a line sequence asks of its operator."""
+
+    def scan_serial(self) -> str: ...
+
+    def confirm(self, question: str) -> bool: ...
+
+    def show_outcome(self, serial: str, outcome: str, summary: str) -> None: ...
+
+
+def check_serial(text: str) -> str:
+    """The serial, normalised (stripped, upper case); OperatorError names it and the rule."""
+    serial = str(text).strip().upper()
+    if not SERIAL_PATTERN.fullmatch(serial):
+        raise OperatorError(f"serial {str(text).strip()!r} is not valid: {SERIAL_RULE}")
+    return serial
+
+
+class CliOperator:
+    """The operator at a terminal, or none (headless: only pre-answers)."""
+
+    def __init__(self, *, serial: str | None, assume_yes: bool, interactive: bool,
+                 stdin: TextIO | None = None, stdout: TextIO | None = None) -> None:
+        self.serial = None if serial is None else check_serial(serial)  # a bad --dut is refused at once
+        self.assume_yes = bool(assume_yes)
+        self.stdin = stdin or sys.stdin
+        self.stdout = stdout or sys.stdout
+        self.interactive = bool(interactive) and _isatty(self.stdin) and _isatty(self.stdout)
+        from rich.console import Console
+
+        self.console = Console(file=self.stdout, force_terminal=self.interactive or None, highlight=False)
+
+    def scan_serial(self) -> str:
+        if self.serial is not None:
+            return self.serial
+        if not self.interactive:
+            raise OperatorError("no serial to test: pass --dut SERIAL (no terminal to scan it on)")
+        while True:
+            self.console.print("[bold]Scan the unit's serial:[/bold] ", end="")
+            line = self.stdin.readline()
+            if not line:  # end of input: nobody is there
+                raise OperatorError("no serial scanned (input closed): pass --dut SERIAL")
+            try:
+                self.serial = check_serial(line)
+                return self.serial
+            except OperatorError as exc:
+                self.console.print(f"[red]{escape(str(exc))}[/red]")
+
+    def confirm(self, question: str) -> bool:
+        if self.assume_yes:
+            return True
+        if not self.interactive:
+            raise OperatorError(f"{question!r} needs an answer: pass --yes (no terminal to ask on)")
+        while True:
+            self.console.print(f"[bold]{escape(question)}[/bold] {escape('[y/n]')} ", end="")
+            line = self.stdin.readline()
+            if not line:
+                raise OperatorError(f"{question!r} was not answered (input closed): pass --yes")
+            answer = line.strip().lower()
+            if answer in ("y", "yes"):
+                return True
+            if answer in ("n", "no"):
+                return False
+            self.console.print("[red]answer y or n[/red]")
+
+    def show_outcome(self, serial: str, outcome: str, summary: str) -> None:
+        if not self.interactive:
+            print(f"{outcome} {serial}" + (f"  {summary}" if summary else ""), file=self.stdout, flush=True)
+            return
+        from rich.panel import Panel
+        from rich.text import Text
+
+        style = OUTCOME_STYLES.get(outcome, "bold white on blue")
+        big = Text(f"  {outcome}  ", style=style, justify="center")
+        body = Text.assemble(big, "\n", (serial, "bold"), ("\n" + summary if summary else ""))
+        body.justify = "center"
+        self.console.print(Panel(body, border_style=style.split(" on ")[-1], expand=True))
+
+
+def _isatty(stream: TextIO) -> bool:
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def make_operator(*, serial: str | None, assume_yes: bool, interactive: bool) -> Operator:
+    """The line's operator: pre-answered by `serial` (--dut) and `assume_yes` (--yes); asks on the
+    terminal only when `interactive` and stdin/stdout are one."""
+    return CliOperator(serial=serial, assume_yes=assume_yes, interactive=interactive)
