@@ -1,0 +1,93 @@
+"""The unit's calibration certificate (bench/line/certificate.py): every identified coefficient
+with its expanded uncertainty (each side when asymmetric), the limits, rule and outcome of every
+measurement, the traceability and signature lines; the page in headless Chromium and as a PDF."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+from cert_record import RECORD
+from needs import need
+
+from bench.line.certificate import certificate_section, expanded_u, render_html, write_certificate
+
+DOCS = Path(__file__).resolve().parent.parent / "docs"
+
+
+def _text(html: str) -> str:
+    return re.sub(r"\s+", " ", re.sub(r"<[^>]+>", " ", html))
+
+
+def test_expanded_uncertainty_is_given_each_side_when_asymmetric():
+    assert expanded_u(9.1e-5, [8.9e-5, 9.4e-5]) == "− 2.0e-6 / + 3.0e-6"
+    assert expanded_u(25.2, [24.9, 25.5]) == "± 0.30"
+    assert expanded_u(10.3, None) == "—"
+
+
+def test_certificate_lists_coefficients_limits_rules_outcomes_and_traceability():
+    html = render_html(RECORD)
+    text = _text(html)
+    assert "Calibration certificate" in text and "HRG-2611-0042" in text and "L2611" in text
+    # the identified coefficients with U, the register they load
+    for name, u, reg in (("delta_inv_tau_per_s", "− 2.0e-6 / + 3.0e-6", "TRIM_DRIFT_D_PER_S"),
+                         ("theta_tau_deg", "− 0.30 / + 0.40", "TRIM_DRIFT_THETA_TAU_DEG"),
+                         ("split_hz", "− 2.0e-4 / + 3.0e-4", "TRIM_SPLIT_HZ"),
+                         ("theta_w_deg", "—", "TRIM_SPLIT_THETA_DEG")):
+        row = re.search(rf"<tr><td>{name}<br>.*?</tr>", html, re.S).group(0)
+        assert u in _text(row) and reg in row, (name, _text(row))
+    # every measurement with its limits, rule and outcome (the marginal one straddles 0.5)
+    for m in RECORD["measurements"]:
+        assert f"<td>{m['name']}<br>" in html
+    row = _text(re.search(r"<tr><td>drift_after_dph<br>.*?</tr>", html, re.S).group(0))
+    assert "≤ 0.5" in row and "ilac-g8" in row and "MARGINAL" in row and "[0.31, 0.62]" in row
+    assert "ILAC G8: PASS when the whole 95 % interval lies inside the limits" in text
+    assert "value only" in text
+    assert "7 pass, 1 marginal, 0 fail" in text
+    # traceability and signatures
+    for run in RECORD["runs"]:
+        assert run["run_id"] in text and run["sha256"] in text and run["raw_file"] in text
+    assert "gyrobench 0.1.0" in text and "Tested by (signature) ada, operator" in text
+    assert "Approved by" in text and "calibrated 2026-11-23" in text
+
+
+def test_section_for_the_run_report_is_the_body_alone():
+    part = certificate_section(RECORD)
+    assert part.lstrip().startswith("<section class=\"certificate\">") and "<html" not in part
+
+
+def test_certificate_pdf(tmp_path):
+    html, pdf = write_certificate(RECORD, tmp_path / "cert.html", pdf=True)
+    assert html.read_text().startswith("\n<!doctype html>") or "<!doctype html>" in html.read_text()[:40]
+    data = pdf.read_bytes()
+    assert data[:5] == b"%PDF-" and len(data) > 5_000
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def test_certificate_in_headless_chromium(tmp_path):
+    """No console message and every table in the DOM.  With GYROBENCH_DOCS_SCREENSHOTS=1 a
+    screenshot replaces docs/certificate.png."""
+    need(_chromium() is not None, "Debian's chromium is not installed (apt-get install chromium)")
+    page = write_certificate(RECORD, tmp_path / "cert.html")[0]
+    flags = [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+             "--disable-background-networking", "--disable-component-update", "--disable-sync",
+             f"--user-data-dir={tmp_path / 'profile'}", "--enable-logging=stderr", "--v=0", "--hide-scrollbars"]
+    run = subprocess.run(flags + ["--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert [line for line in run.stderr.splitlines() if ":CONSOLE" in line] == []
+    dom = run.stdout
+    for cls in ("identity", "coefficients", "measurements", "runs"):
+        assert f'<table class="{cls}">' in dom
+    assert dom.count('class="MARGINAL"') >= 1 and "Approved by" in dom
+    if os.environ.get("GYROBENCH_DOCS_SCREENSHOTS") == "1":
+        shot = tmp_path / "certificate.png"
+        r = subprocess.run(flags + [f"--screenshot={shot}", "--window-size=1100,1500", page.as_uri()],
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0 and shot.is_file(), r.stderr[-2000:]
+        shutil.copy(shot, DOCS / "certificate.png")
