@@ -220,3 +220,32 @@ def test_cli_load_then_show_in_a_new_session(tmp_path, capsys):
     assert main(["fpga", "load", str(bad), "--station", str(station)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"gyrobench: error: {bad}: compensation: split_hz=11 Hz is above the limit 10 of TRIM_SPLIT_HZ"]
+
+
+def test_an_identification_on_a_trimmed_unit_runs_untrimmed_and_restores_the_trims():
+    """A retest: the HRG procedures' loop start writes TRIM_EN = 0 (RAM) and defers the NVM reload."""
+    import logging
+    from types import SimpleNamespace
+
+    from procedures.hrg_excitation import HrgExcitation
+
+    world = World(preset("hrg"), seed=1)
+    server = serve_fpga(world)
+    link = _link(server)
+    deferred = []
+    try:
+        trims = from_record(RECORD).trims()
+        load_trims(link, trims)
+        ctx = SimpleNamespace(devices=SimpleNamespace(fpga=link), defer=lambda fn, what="": deferred.append(fn),
+                              log=logging.getLogger("test"))
+        proc = HrgExcitation()
+        proc.amplitude = 1.0
+        proc._start_loops(ctx)
+        assert link.read_register("TRIM_EN") == 0 and len(deferred) == 1
+        assert link.nvm_status()["valid"] and not link.nvm_status()["match"]
+        deferred[0]()
+        assert link.read_register("TRIM_EN") == trims["TRIM_EN"] and link.nvm_status()["match"]
+        link.safe_state()
+    finally:
+        link.close()
+        server.stop()

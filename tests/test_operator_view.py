@@ -94,6 +94,7 @@ def test_gui_operator_answers_a_sequence_in_another_thread(view, qtbot):
     t.join(5)
     assert answers == {"serial": "U-77", "fixture": True, "done": True}
     assert v.verdict.text() == "MARGINAL" and v.unit_label.text() == "U-77"
+    assert v.fixture_button.text() == "Unit is in the fixture, clamped and connected"
 
 
 def test_worst_outcome():

@@ -276,10 +276,16 @@ class GuiOperator:
             view.serial_field.clear()
             view.serial_field.setFocus()
             return
-        # a confirmation: the fixture button, relabelled with the question
+        # a confirmation: the fixture button, relabelled with the question while it is asked
+        label = view.fixture_button.text()
+
+        def confirmed(value: Any) -> None:
+            view.fixture_button.setText(label)
+            answer(value)
+
         view.prompt.setText(args[0])
         view.fixture_button.setText(args[0])
-        view._confirm_waiter = answer
+        view._confirm_waiter = confirmed
         view.fixture_button.setEnabled(True)
 
     def scan_serial(self) -> str:
