@@ -249,3 +249,39 @@ def test_an_identification_on_a_trimmed_unit_runs_untrimmed_and_restores_the_tri
     finally:
         link.close()
         server.stop()
+
+
+def test_a_trim_read_back_unequal_is_one_message_naming_both_values():
+    from bench.line.fpga_cli import TrimMismatch
+
+    class Flaky:
+        def write_trims(self, values):
+            self.values = dict(values)
+
+        def commit_trims(self):
+            return 0x1234
+
+        def reload_trims(self):
+            pass
+
+        def read_trims(self):
+            return {**self.values, "TRIM_SPLIT_HZ": 0.0}  # a register the NVM did not keep
+
+        def nvm_status(self):
+            return {}
+
+    with pytest.raises(TrimMismatch) as err:
+        load_trims(Flaky(), from_record(RECORD).trims())
+    assert str(err.value) == "TRIM_SPLIT_HZ read back 0.0 after the NVM commit, written 0.0049"
+
+
+def test_cli_load_on_a_station_without_fpga_says_so(tmp_path, capsys):
+    from bench.cli import main
+
+    comp = from_record(RECORD).write(tmp_path / "comp.toml")
+    text = open("bench/stations/sim-hrg.toml").read()
+    station = tmp_path / "nofpga.toml"
+    station.write_text(text[: text.index("[devices.fpga]")].replace('id = "sim-hrg"', 'id = "no-fpga"'))
+    assert main(["fpga", "load", str(comp), "--station", str(station)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "gyrobench: error: station 'no-fpga' has no FPGA ([devices.fpga]) to hold trims; it has: frontend, table")

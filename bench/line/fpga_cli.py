@@ -62,7 +62,8 @@ def _open(station_name: str):
 
     station = Station.load(station_name)
     if "fpga" not in station.config.devices:
-        raise CompensationError(f"station {station.id!r} has no fpga device (roles: {sorted(station.config.devices)})")
+        roles = ", ".join(sorted(station.config.devices))
+        raise CompensationError(f"station {station.id!r} has no FPGA ([devices.fpga]) to hold trims; it has: {roles}")
     station.open()
     return station
 
@@ -71,10 +72,10 @@ def cmd_load(args: argparse.Namespace) -> int:
     try:
         comp = load(args.file)
         trims = comp.trims()
+        station = _open(args.station)
     except CompensationError as exc:
         _err(str(exc))
         return EXIT_USAGE
-    station = _open(args.station)
     try:
         out = load_trims(station.devices["fpga"], trims)
     except TrimMismatch as exc:
@@ -88,11 +89,22 @@ def cmd_load(args: argparse.Namespace) -> int:
         print(f"loaded {args.file} (unit {comp.serial}) into the FPGA of station {station.id}; "
               f"NVM committed, CRC {out['crc']:#06x}, read back equal")
         _print_trims(out["trims"])
+        if _sim_without_nvm_file(station):
+            print("  note: a simulated station's NVM lives with this command's World; set nvm_file in its "
+                  "[devices.fpga] to keep it for the next command")
     return EXIT_OK
 
 
+def _sim_without_nvm_file(station: Any) -> bool:
+    return station.config.simulation is not None and not station.config.devices["fpga"].get("nvm_file")
+
+
 def cmd_show(args: argparse.Namespace) -> int:
-    station = _open(args.station)
+    try:
+        station = _open(args.station)
+    except CompensationError as exc:
+        _err(str(exc))
+        return EXIT_USAGE
     try:
         link = station.devices["fpga"]
         trims, nvm = link.read_trims(), link.nvm_status()
