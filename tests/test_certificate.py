@@ -91,3 +91,17 @@ def test_certificate_in_headless_chromium(tmp_path):
                            capture_output=True, text=True, timeout=120)
         assert r.returncode == 0 and shot.is_file(), r.stderr[-2000:]
         shutil.copy(shot, DOCS / "certificate.png")
+
+
+def test_unit_documents_certificate_and_compensation_file(tmp_path):
+    from bench.line.certificate import write_unit_documents
+    from bench.line.compensation import load
+
+    out = write_unit_documents(RECORD, tmp_path / "units")
+    assert sorted(p.name for p in out.values()) == ["HRG-2611-0042-a1.certificate.html",
+                                                     "HRG-2611-0042-a1.compensation.toml"]
+    comp = load(out["compensation"])
+    assert f"Compensation file id {comp.file_id():012x}" in out["certificate"].read_text()
+    only_q = [m for m in RECORD["measurements"] if m["name"] == "q_factor"]
+    mems = {**RECORD, "serial": "MEMS-1", "measurements": only_q}
+    assert list(write_unit_documents(mems, tmp_path / "units")) == ["certificate"]  # no trims: no compensation file

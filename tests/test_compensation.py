@@ -285,3 +285,34 @@ def test_cli_load_on_a_station_without_fpga_says_so(tmp_path, capsys):
     assert main(["fpga", "load", str(comp), "--station", str(station)]) == 2
     assert capsys.readouterr().err.strip() == (
         "gyrobench: error: station 'no-fpga' has no FPGA ([devices.fpga]) to hold trims; it has: frontend, table")
+
+
+def test_gain_trims_scale_the_pickoffs_the_loops_and_stream_see():
+    """TRIM_GAIN with TRIM_GAIN_X = 1.25: the streamed x pickoff is 1.25 x the untrimmed one (a
+    free decay of tau 300 s moves it 3e-4 over the 0.1 s between the two records); y stays."""
+    world = World(preset("hrg-ideal"), seed=1)
+    world.resonator.set_state(state_from_elements(1.0, 0.2, math.radians(30.0)))
+    clock = SimClock(world)
+    server = serve_fpga(world)
+    link = _link(server, clock)
+    blocks: list[np.ndarray] = []
+    link.subscribe(blocks.append)
+    try:
+        link.start_stream(10)
+        clock.sleep(0.05)
+        link.sync()
+        before = np.vstack(blocks)[-1]
+        link.write_trims({"TRIM_GAIN_X": 1.25, "TRIM_EN": p.TRIM_GAIN})
+        clock.sleep(0.05)
+        link.sync()
+        after = np.vstack(blocks)[-1]
+        link.stop_stream()
+    finally:
+        link.close()
+        server.stop()
+        clock.close()
+    cx, sx, cy, sy = (p.STREAM_COLUMNS.index(c) for c in ("cx", "sx", "cy", "sy"))
+    x0, x1 = math.hypot(before[cx], before[sx]), math.hypot(after[cx], after[sx])
+    y0, y1 = math.hypot(before[cy], before[sy]), math.hypot(after[cy], after[sy])
+    assert x0 > 0.3 and y0 > 0.3
+    assert x1 / x0 == pytest.approx(1.25, rel=1e-3) and y1 / y0 == pytest.approx(1.0, rel=1e-3)

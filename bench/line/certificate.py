@@ -156,3 +156,23 @@ def write_certificate(record: dict[str, Any], path: str | Path, *, pdf: bool = F
     if pdf:
         out.append(write_pdf(html, path.with_suffix(".pdf")))
     return out
+
+
+def write_unit_documents(record: dict[str, Any], directory: str | Path, *, pdf: bool = False) -> dict[str, Path]:
+    """A unit's certificate (HTML, and PDF with pdf) and, when it has trim coefficients, its
+    compensation file, named SERIAL-aATTEMPT.certificate.html / .compensation.toml in directory."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    stem = f"{record.get('serial', 'unit')}-a{record.get('attempt', 1)}"
+    try:
+        comp = from_record(record)
+    except CompensationError:
+        comp = None
+    out: dict[str, Path] = {}
+    paths = write_certificate(record, directory / f"{stem}.certificate.html", pdf=pdf, compensation=comp)
+    out["certificate"] = paths[0]
+    if pdf:
+        out["certificate_pdf"] = paths[1]
+    if comp is not None:
+        out["compensation"] = comp.write(directory / f"{stem}.compensation.toml")
+    return out
