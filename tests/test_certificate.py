@@ -105,3 +105,34 @@ def test_unit_documents_certificate_and_compensation_file(tmp_path):
     only_q = [m for m in RECORD["measurements"] if m["name"] == "q_factor"]
     mems = {**RECORD, "serial": "MEMS-1", "measurements": only_q}
     assert list(write_unit_documents(mems, tmp_path / "units")) == ["certificate"]  # no trims: no compensation file
+
+
+def test_the_run_report_with_the_certificate_as_its_first_page(tmp_path):
+    """A short table-spin run's report with the unit's certificate in the report's `certificate`
+    block: the certificate comes before the report's heading, the report follows unchanged, and
+    the PDF has the certificate on a page of its own."""
+    from bench.engine import Runner
+    from bench.line.certificate import report_with_certificate
+    from bench.recorder import open_run
+    from bench.reporting import render_html as report_html
+    from bench.station import SimStation
+    from procedures import find_procedure
+
+    station = SimStation("sim-hrg", seed=3).open()
+    try:
+        rec = Runner(station, runs_dir=tmp_path / "runs", duts=["HRG-2611-0042"]).run(
+            find_procedure("table-spin"), {"rate_dps": 50.0, "hold_s": 0.5})
+    finally:
+        station.close()
+    with open_run(rec.raw_file) as data:
+        page = report_with_certificate(data, RECORD)
+        plain = report_html(data)
+    assert page.index('<section class="certificate">') < page.index("<h1>table-spin")
+    assert page.count("<h1>") == plain.count("<h1>") + 1 and "Calibration certificate" in page
+    assert "&lt;style&gt;" not in page and "<style>" in page.split('<section class="certificate">')[1]  # not escaped
+    import weasyprint
+
+    doc = weasyprint.HTML(string=page).render()
+    first = doc.pages[0]._page_box.descendants()
+    text = " ".join(getattr(b, "text", "") for b in first if getattr(b, "text", ""))
+    assert "Calibration certificate" in text and "table-spin — run" not in text and len(doc.pages) >= 2
