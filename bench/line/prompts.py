@@ -4,7 +4,7 @@ table spin, show the unit's outcome as one big coloured line (rich).
 Headless runs are pre-answered by flags (`--dut SERIAL`, `--yes`); a prompt that is needed with
 neither a terminal nor a pre-answer is one clear error naming the flag to pass (OperatorError).
 
-A serial is 3 to 40 characters of letters, digits, '.', '_' and '-', starting with a letter or
+A serial is 1 to 40 characters of letters, digits, '.', '_' and '-', starting with a letter or
 digit (SERIAL_PATTERN; what a barcode scanner types); it is upper-cased and stripped of spaces."""
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from rich.markup import escape
 
 from bench.validation import ValidationError
 
-SERIAL_PATTERN = re.compile(r"[A-Z0-9][A-Z0-9._-]{2,39}")
-SERIAL_RULE = "3 to 40 letters, digits, '.', '_' or '-', starting with a letter or digit"
+SERIAL_PATTERN = re.compile(r"[A-Z0-9][A-Z0-9._-]{0,39}")
+SERIAL_RULE = "1 to 40 letters, digits, '.', '_' or '-', starting with a letter or digit"
 OUTCOME_STYLES = {"PASS": "bold white on green", "FAIL": "bold white on red", "MARGINAL": "bold black on yellow"}
 
 
@@ -62,12 +62,12 @@ class CliOperator:
         if self.serial is not None:
             return self.serial
         if not self.interactive:
-            raise OperatorError("no serial to test: pass --dut SERIAL (no terminal to scan it on)")
+            raise OperatorError("no serial to test: give --dut SERIAL (no terminal to scan it on)")
         while True:
             self.console.print("[bold]Scan the unit's serial:[/bold] ", end="")
             line = self.stdin.readline()
             if not line:  # end of input: nobody is there
-                raise OperatorError("no serial scanned (input closed): pass --dut SERIAL")
+                raise OperatorError("no serial scanned (input closed): give --dut SERIAL")
             try:
                 self.serial = check_serial(line)
                 return self.serial
@@ -78,12 +78,12 @@ class CliOperator:
         if self.assume_yes:
             return True
         if not self.interactive:
-            raise OperatorError(f"{question!r} needs an answer: pass --yes (no terminal to ask on)")
+            raise OperatorError(f"{question!r} needs an answer: give --yes (no terminal to ask on)")
         while True:
             self.console.print(f"[bold]{escape(question)}[/bold] {escape('[y/n]')} ", end="")
             line = self.stdin.readline()
             if not line:
-                raise OperatorError(f"{question!r} was not answered (input closed): pass --yes")
+                raise OperatorError(f"{question!r} was not answered (input closed): give --yes")
             answer = line.strip().lower()
             if answer in ("y", "yes"):
                 return True
@@ -103,6 +103,11 @@ class CliOperator:
         body = Text.assemble(big, "\n", (serial, "bold"), ("\n" + summary if summary else ""))
         body.justify = "center"
         self.console.print(Panel(body, border_style=style.split(" on ")[-1], expand=True))
+
+
+def stdin_is_terminal() -> bool:
+    """Whether standard input is a terminal (an operator could answer there)."""
+    return _isatty(sys.stdin)
 
 
 def _isatty(stream: TextIO) -> bool:
