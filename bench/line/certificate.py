@@ -20,7 +20,7 @@ from .compensation import COEFFICIENTS, Compensation, CompensationError, from_re
 
 TEMPLATES = Path(__file__).with_name("templates")
 RULE_WORDS = {
-    "ilac-g8": "ILAC G8: PASS when the whole 95 % interval lies inside the limits, FAIL when it lies wholly "
+    "guard-band": "ILAC G8: PASS when the whole 95 % interval lies inside the limits, FAIL when it lies wholly "
                "outside, MARGINAL when it straddles a limit",
     "value": "value only: PASS when the value lies inside the limits (MARGINAL inside a marginal band near "
              "them); applies to a measurement without an interval",
@@ -60,7 +60,7 @@ def _u_sides(lo: float | None, hi: float | None) -> str:
 def _rule_key(rule: Any) -> str:
     text = str(rule or "").lower()
     if "g8" in text or "ilac" in text or "interval" in text or "guard" in text:
-        return "ilac-g8"
+        return "guard-band"
     return "value" if text else ""
 
 

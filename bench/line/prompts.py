@@ -92,8 +92,8 @@ class CliOperator:
             self.console.print("[red]answer y or n[/red]")
 
     def show_outcome(self, serial: str, outcome: str, summary: str) -> None:
-        if not self.interactive:
-            print(f"{outcome} {serial}" + (f"  {summary}" if summary else ""), file=self.stdout, flush=True)
+        if not self.interactive:  # headless: one line on stderr (stdout may carry --json)
+            print(f"{outcome} {serial}" + (f"  {summary}" if summary else ""), file=sys.stderr, flush=True)
             return
         from rich.panel import Panel
         from rich.text import Text
