@@ -136,3 +136,13 @@ def test_the_run_report_with_the_certificate_as_its_first_page(tmp_path):
     first = doc.pages[0]._page_box.descendants()
     text = " ".join(getattr(b, "text", "") for b in first if getattr(b, "text", ""))
     assert "Calibration certificate" in text and "table-spin — run" not in text and len(doc.pages) >= 2
+
+
+def test_measurements_without_limits_are_listed_apart():
+    extra = {"name": "drift_before_dph", "procedure": "hrg-damping", "run_id": "r-damp", "value": 29.4,
+             "unit": "deg/h", "interval": [28.2, 30.6], "limits": {"low": None, "high": None}, "rule": None,
+             "outcome": "COMPLETE"}
+    html = render_html({**RECORD, "measurements": RECORD["measurements"] + [extra]})
+    decided, informative = html.split('<table class="informative">')
+    assert "<td>drift_before_dph<br>" not in decided and "<td>drift_before_dph</td>" in informative
+    assert "± 1.2" in _text(informative.split("</table>")[0])

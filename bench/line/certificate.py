@@ -27,6 +27,9 @@ RULE_WORDS = {
 }  # fmt: skip
 
 
+DECIDING = ("PASS", "FAIL", "MARGINAL", "ERROR")  # outcomes a limit gave; COMPLETE: measured, no limit
+
+
 def _f(x: Any) -> float | None:
     try:
         v = float(x)
@@ -92,6 +95,7 @@ def context(record: dict[str, Any], compensation: Compensation | None = None) ->
             "u": expanded_u(value, interval), "unit": m.get("unit", ""),
             "limits": limits(lim.get("low"), lim.get("high")), "rule": m.get("rule") or DASH,
             "outcome": m.get("outcome") or DASH, "run_id": m.get("run_id", ""),
+            "decided": m.get("outcome") in DECIDING or lim.get("low") is not None or lim.get("high") is not None,
         })  # fmt: skip
     coeffs = []
     if compensation is not None:
@@ -113,7 +117,8 @@ def context(record: dict[str, Any], compensation: Compensation | None = None) ->
             ("Started", record.get("started_at") or DASH), ("Ended", record.get("ended_at") or DASH),
         ],  # fmt: skip
         "software_version": record.get("software_version", ""),
-        "measurements": rows,
+        "measurements": [r for r in rows if r["decided"]],
+        "informative": [r for r in rows if not r["decided"]],
         "counts": counts,
         "coefficients": coeffs,
         "compensation_id": f"{compensation.file_id():012x}" if compensation is not None else "",
