@@ -611,6 +611,9 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--figures", default=None, metavar="DIR", help="also write the report's figures (SVG)")
         p.set_defaults(func=func)
 
+    from bench.line.fpga_cli import add_fpga_subcommand
+
+    add_fpga_subcommand(sub)  # fpga load|show: trims in NVM (bench/line/fpga_cli.py)
     sim = sub.add_parser("sim", help="serve the simulated devices standalone in real time; print their addresses")
     sim.add_argument("--station", default="sim-hrg")
     sim.add_argument("--speed", type=float, default=1.0, help="x real time")

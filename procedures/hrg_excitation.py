@@ -44,6 +44,11 @@ class HrgExcitation:
     def _start_loops(self, ctx) -> None:
         """AGC (at the amplitude setpoint), PLL and quadrature loop on, drive on."""
         fpga = ctx.devices.fpga
+        if hasattr(fpga, "reload_trims") and fpga.read_register("TRIM_EN"):
+            # a trimmed unit (a retest): identify the raw resonator; its trims come back from NVM at the end
+            fpga.write_register("TRIM_EN", 0)
+            ctx.defer(fpga.reload_trims, "FPGA trims back from NVM")
+            ctx.log.info("FPGA trims off for the identification (NVM keeps them; reloaded at the run's end)")
         fpga.set_whole_angle(False)
         fpga.set_drift_compensation(False)
         fpga.set_pll(True)

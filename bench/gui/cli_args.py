@@ -18,6 +18,7 @@ def add_gui_subcommand(sub) -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="a procedure parameter (repeatable)")
     p.add_argument("--open", dest="open_run", default=None, metavar="RUN.h5", help="replay a recorded run")
+    p.add_argument("--operator", action="store_true", help="the line operator's window (big verdict, serial scan)")
     p.set_defaults(func=cmd_gui)
     return p
 
@@ -29,5 +30,9 @@ def cmd_gui(args: argparse.Namespace) -> int:
     from bench.validation import parse_assignment
 
     params = dict(parse_assignment(item) for item in args.set)  # the same reading as `gyrobench run --set`
+    if args.operator:
+        from .operator_view import run_operator
+
+        return run_operator(args.station, run=args.run, params=params, seed=args.seed, screenshot=args.screenshot)
     return run_gui(args.station, run=args.run, screenshot=args.screenshot, at_s=args.at_s, seed=args.seed,
                    speed=speed, open_run=args.open_run, params=params)

@@ -199,6 +199,44 @@ class FpgaLink:
         if self._link_error is not None:
             raise LinkLostError(f"FPGA link {self.url} lost: {self._link_error} ({what})")
 
+    # --- trims in NVM (docs/fpga_link.md) ------------------------------------------------------
+    def write_trims(self, values: dict[str, float]) -> dict[str, float]:
+        """Write trim registers (names of protocol.TRIM_BLOCK); every value is checked before the
+        first write.  Returns what the device stored.  Not in NVM until `commit_trims()`."""
+        for name, value in values.items():
+            if name not in p.TRIM_BLOCK:
+                raise DeviceError(f"{name} is not a trim register (one of {', '.join(p.TRIM_BLOCK)})")
+            _check_register(p.BY_NAME[name], value)
+        return {name: self.write_register(name, value) for name, value in values.items()}
+
+    def read_trims(self) -> dict[str, float]:
+        """Every trim register as the firmware applies it now."""
+        return {name: self.read_register(name) for name in p.TRIM_BLOCK}
+
+    def commit_trims(self) -> int:
+        """Commit the trim registers to NVM; returns the stored block's CRC once NVM_STATUS says
+        valid and equal to the registers (DeviceError otherwise)."""
+        self.write_register("NVM_CMD", p.NVM_COMMIT)
+        status = int(self.read_register("NVM_STATUS"))
+        if status & (p.NVM_VALID | p.NVM_MATCH) != p.NVM_VALID | p.NVM_MATCH:
+            raise DeviceError(f"FPGA NVM commit not confirmed: NVM_STATUS={status:#x} (expected valid and matching)")
+        return int(self.read_register("NVM_CRC"))
+
+    def reload_trims(self) -> None:
+        """Trim registers back from NVM (as at power-up)."""
+        self.write_register("NVM_CMD", p.NVM_RELOAD)
+
+    def nvm_status(self) -> dict[str, Any]:
+        """NVM state: valid, matching the registers, CRC bad, its CRC and commit count."""
+        status = int(self.read_register("NVM_STATUS"))
+        return {
+            "valid": bool(status & p.NVM_VALID),
+            "match": bool(status & p.NVM_MATCH),
+            "crc_bad": bool(status & p.NVM_CRC_BAD),
+            "crc": int(self.read_register("NVM_CRC")),
+            "commits": int(self.read_register("NVM_COMMITS")),
+        }
+
     # --- typed helpers -------------------------------------------------------------------------
     def _set_bits(self, bits: int, on: bool) -> None:
         self.write_register("CTRL_SET" if on else "CTRL_CLR", bits)

@@ -68,6 +68,7 @@ SPEC = register_driver(
         keys={
             "driver": Key(str, required=True),
             "url": Key(str, "", doc="serial port or pyserial URL"),
+            "nvm_file": Key(str, "", doc="simulated FPGA only: file of its NVM (empty: kept with the World)"),
             "timeout_s": Key(float, 1.0, 0.01, 30.0, doc="wall time allowed for a reply", unit="s"),
             "decimation": Key(int, 1, 1, 100000, doc="stream every Nth sample"),
         },

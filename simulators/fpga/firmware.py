@@ -15,6 +15,8 @@ along the wave of the block before moves the wave itself):
     cancels the damping drift dtheta/dt = (D/4) sin 4(theta - theta_tau);
   * frequency modulation: the reference gets + A sin(2 pi f_m t) (held per block).
 Clearing DRIVE_EN removes every force at the next block ("cut drive").
+Trims held in NVM (0x40-0x4F, docs/fpga_link.md "Trims in NVM") are loaded at power-up and applied
+whenever TRIM_EN says so; the safe state (CTRL_CLR) leaves them alone.
 """
 
 from __future__ import annotations
@@ -28,6 +30,9 @@ import numpy as np
 from drivers.fpga import protocol as p
 
 from . import kernels as k
+from .nvm import Nvm, decode_block, encode_block
+
+OBS_PRIOR_WEIGHT = 2000 * 0.05**3  # the split trim's weight in the observer: ~100 s of 50 ms blocks
 
 StreamSink = Callable[[bytes, int], None]  # (encoded frames, frame count)
 
@@ -35,8 +40,9 @@ StreamSink = Callable[[bytes, int], None]  # (encoded frames, frame count)
 class FpgaFirmware:
     """Registers and loops of the simulated FPGA; attach it to a World with `world.attach`."""
 
-    def __init__(self, world) -> None:
+    def __init__(self, world, nvm: Nvm | None = None) -> None:
         self.world = world
+        self.nvm = nvm if nvm is not None else Nvm()
         self.lock = threading.RLock()
         self.regs: dict[str, float] = {r.name: int(r.default) if r.kind == "u" else r.default for r in p.REGISTERS}
         self.regs["ID"] = p.FPGA_ID
@@ -50,12 +56,19 @@ class FpgaFirmware:
         self._dec_sum, self._dec_n = np.zeros(4), 0  # boxcar decimator's carry between blocks
         self._frames = p.stream_frame_buffer(128)  # encoded frames of a block, reused
         self._reset_loops()
+        self._nvm_reload()  # power-up: the trims come from NVM
 
     # --- registers (called by the server's command thread) ----------------------------------------
     def read(self, reg: p.Register) -> float:
         with self.lock:
             if reg.name == "STATUS":
                 return self._status()
+            if reg.name == "NVM_STATUS":
+                return self._nvm_status()
+            if reg.name == "NVM_CRC":
+                return self.nvm.crc
+            if reg.name == "NVM_COMMITS":
+                return self.nvm.commits
             return self.regs[reg.name]
 
     def write(self, reg: p.Register, value: float) -> float:
@@ -69,6 +82,9 @@ class FpgaFirmware:
                 return value
             if reg.name == "CTRL":
                 self._set_ctrl(int(value))
+                return value
+            if reg.name == "NVM_CMD":
+                self._nvm_command(int(value))
                 return value
             self.regs[reg.name] = int(value) if reg.kind == "u" else float(value)
             self._prm = None  # repacked for the loop kernel at the next block
@@ -95,9 +111,64 @@ class FpgaFirmware:
         if rising & p.QUAD_EN:  # the split observer starts afresh (kept over a drive cut: the split stays)
             st[k.S_QUAD_INT] = 0.0
             st[k.S_M_CC : k.S_H_S + 1] = 0.0
+            self._seed_split_observer()
         if not new & p.DRIVE_EN:
             st[k.S_AGC_INT] = st[k.S_QUAD_INT] = 0.0
         self.regs["CTRL"] = new
+        self._prm = None  # the drift term's source (run registers or trims) follows DRIFT_COMP_EN
+
+    # --- trims in NVM ---------------------------------------------------------------------------
+    def _nvm_reload(self) -> None:
+        """Trim registers from NVM (power-up, NVM_CMD=RELOAD); defaults, trims off, when NVM is not valid."""
+        block = self.nvm.block()
+        values = decode_block(block) if block is not None else {n: p.BY_NAME[n].default for n in p.TRIM_BLOCK}
+        for name, value in values.items():
+            self.regs[name] = int(value) if p.BY_NAME[name].kind == "u" else float(value)
+        self._prm = None
+
+    def _nvm_command(self, cmd: int) -> None:
+        if cmd == p.NVM_COMMIT:
+            self.nvm.commit(encode_block(self.regs))
+        elif cmd == p.NVM_RELOAD:
+            self._nvm_reload()
+        elif cmd == p.NVM_ERASE:
+            self.nvm.erase()
+
+    def _nvm_status(self) -> int:
+        nvm = self.nvm
+        if nvm.data is None:
+            return 0
+        if not nvm.valid:
+            return p.NVM_CRC_BAD
+        return p.NVM_VALID | (p.NVM_MATCH if nvm.block() == encode_block(self.regs) else 0)
+
+    def _ctrl(self) -> int:
+        """CTRL as the loops see it: the drift trim switches the compensation on when the bench's own is off."""
+        ctrl = int(self.regs["CTRL"])
+        if int(self.regs["TRIM_EN"]) & p.TRIM_DRIFT:
+            ctrl |= p.DRIFT_COMP_EN
+        return ctrl
+
+    def _seed_split_observer(self) -> None:
+        """With the split trim on, the observer starts from the trimmed split (as a prior of ~100 s
+        of data that fresh data refines) instead of from zero.  Its pattern is the pumping of k/a:
+        (h_c, h_s)_obs = (Dw/2) (-sin 4 theta_w, cos 4 theta_w), Dw = 2 pi split."""
+        if not int(self.regs["TRIM_EN"]) & p.TRIM_SPLIT:
+            return
+        half_dw = math.pi * float(self.regs["TRIM_SPLIT_HZ"])
+        four_th = 4.0 * math.radians(float(self.regs["TRIM_SPLIT_THETA_DEG"]))
+        h_c, h_s = -half_dw * math.sin(four_th), half_dw * math.cos(four_th)
+        st, w = self._st, OBS_PRIOR_WEIGHT
+        st[k.S_M_CC] = st[k.S_M_SS] = w
+        st[k.S_V_C], st[k.S_V_S] = w * h_c, w * h_s
+        st[k.S_H_C], st[k.S_H_S] = w * h_c / (w + k.OBS_RIDGE), w * h_s / (w + k.OBS_RIDGE)
+
+    def _gains(self) -> np.ndarray | None:
+        """The pickoff gain trims (cx, sx, cy, sy), None when off or unity."""
+        if not int(self.regs["TRIM_EN"]) & p.TRIM_GAIN:
+            return None
+        gx, gy = float(self.regs["TRIM_GAIN_X"]), float(self.regs["TRIM_GAIN_Y"])
+        return None if gx == gy == 1.0 else np.array([gx, gx, gy, gy])
 
     def _status(self) -> int:
         ctrl = int(self.regs["CTRL"])
@@ -125,6 +196,9 @@ class FpgaFirmware:
         prm = self._prm
         if prm is None:
             prm = self._prm = np.array([float(self.regs[name]) for name in k.PARAM_REGS])
+            if not int(self.regs["CTRL"]) & p.DRIFT_COMP_EN and int(self.regs["TRIM_EN"]) & p.TRIM_DRIFT:
+                prm[k.P_DRIFT_D_PER_S] = float(self.regs["TRIM_DRIFT_D_PER_S"])
+                prm[k.P_DRIFT_THETA_TAU_DEG] = float(self.regs["TRIM_DRIFT_THETA_TAU_DEG"])
         return prm
 
     def max_block_samples(self, world) -> int | None:
@@ -138,7 +212,7 @@ class FpgaFirmware:
     def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
         with self.lock:
             regs = self.regs
-            ctrl = int(regs["CTRL"])
+            ctrl = self._ctrl()
             fm = 0.0
             fm_on = bool(regs["FM_AMPLITUDE_HZ"] and regs["FM_RATE_HZ"])
             if fm_on:
@@ -168,24 +242,25 @@ class FpgaFirmware:
         with self.lock:
             regs = self.regs
             regs["SAMPLE_INDEX"] = block.first_index + block.n - 1
-            ctrl = int(regs["CTRL"])
+            ctrl = self._ctrl()
+            gains = self._gains()
+            q_meas = block.q_meas if gains is None else block.q_meas * gains
             if ctrl & (p.DRIVE_EN | p.PLL_EN):  # nothing to update with the drive and PLL off
                 st = self._st
                 st[k.S_PLL_FREQ_HZ] = regs["PLL_FREQ_HZ"]
                 dt = world.sample_period_s
                 t_end = (block.first_index + block.n - 1) * dt
-                k.update_loops(block.q_meas, t_end, dt, world.ref_freq_hz, ctrl, self._params(), st)
+                k.update_loops(q_meas, t_end, dt, world.ref_freq_hz, ctrl, self._params(), st)
                 regs["PLL_FREQ_HZ"] = float(st[k.S_PLL_FREQ_HZ])
             if ctrl & p.STREAM_EN:
-                self._emit(block)
+                self._emit(block, q_meas)
 
     # --- stream ---------------------------------------------------------------------------------
-    def _emit(self, block) -> None:
+    def _emit(self, block, q: np.ndarray) -> None:
         """Stream the block, decimated by a boxcar (CIC-1) filter as the real firmware does: each
         frame carries the mean of the `dec` samples ending at its index, so decimating keeps the
         information (noise falls by sqrt(dec)) instead of throwing samples away."""
         dec = int(self.regs["STREAM_DECIMATION"])
-        q = block.q_meas
         if len(q) > len(self._frames):
             self._frames = p.stream_frame_buffer(max(len(q), 2 * len(self._frames)))
         n, self._dec_n = k.emit_frames(

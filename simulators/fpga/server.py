@@ -21,6 +21,7 @@ import numpy as np
 from drivers.fpga import protocol as p
 
 from .firmware import FpgaFirmware
+from .nvm import Nvm, world_nvm
 
 FAULT_KINDS = ("corrupt", "drop", "stall", "link-drop")
 
@@ -131,13 +132,15 @@ class _PtyPort(_Port):
 class FpgaServer:
     """The simulated FPGA on a transport; `serve_fpga` builds and starts one."""
 
-    def __init__(self, world, *, transport: str = "socket", seed: int = 0, write_timeout_s: float = 5.0) -> None:
+    def __init__(
+        self, world, *, transport: str = "socket", seed: int = 0, write_timeout_s: float = 5.0, nvm: Nvm | None = None
+    ) -> None:
         if transport not in ("socket", "pty"):
             raise ValueError(f"transport={transport!r} must be 'socket' or 'pty'")
         self.world = world
         self.transport = transport
         self.write_timeout_s = float(write_timeout_s)
-        self.firmware = FpgaFirmware(world)
+        self.firmware = FpgaFirmware(world, nvm if nvm is not None else world_nvm(world))  # the unit's NVM
         self.firmware.sink = self._send_stream
         self.rng = np.random.default_rng(seed)
         self._write_lock = threading.Lock()
@@ -322,13 +325,16 @@ class FpgaServer:
         return p.encode_frame(p.NACK, frame.seq, frame.addr, code.to_bytes(8, "little"))
 
 
-def serve_fpga(world, *, transport: str = "socket", seed: int = 0, write_timeout_s: float = 5.0) -> FpgaServer:
+def serve_fpga(
+    world, *, transport: str = "socket", seed: int = 0, write_timeout_s: float = 5.0, nvm: Nvm | None = None
+) -> FpgaServer:
     """Start the simulated FPGA on `world`; the handle has `.url`, `.stop()`, `.inject(kind)`,
-    `.clear_faults()`, `.firmware` and the fault counters."""
-    return FpgaServer(world, transport=transport, seed=seed, write_timeout_s=write_timeout_s).start()
+    `.clear_faults()`, `.firmware` and the fault counters.  Its NVM is the World's (`nvm` to
+    give another): a restart on the same World finds the trims committed before."""
+    return FpgaServer(world, transport=transport, seed=seed, write_timeout_s=write_timeout_s, nvm=nvm).start()
 
 
 def serve_station(world: Any, cfg: dict[str, Any]) -> tuple[FpgaServer, dict[str, Any]]:
     """A simulated station's `fpga-link` (seeded by the world); (handle, the link's URL)."""
-    handle = serve_fpga(world, seed=world.seed)
+    handle = serve_fpga(world, seed=world.seed, nvm=world_nvm(world, cfg.get("nvm_file") or None))
     return handle, {"url": handle.url}

@@ -1,0 +1,30 @@
+"""An example unit record in the line's schema (tests of the compensation file and the certificate)."""
+
+RECORD = {
+    "serial": "HRG-2611-0042", "lot": "L2611", "station": "sim-hrg", "operator": "ada", "software_version": "0.1.0",
+    "sequence": "eol-hrg", "attempt": 1, "started_at": "2026-11-23T20:00:00+00:00",
+    "ended_at": "2026-11-23T20:40:00+00:00", "outcome": "MARGINAL",
+    "measurements": [
+        {"name": "delta_inv_tau_per_s", "procedure": "hrg-damping", "run_id": "r-damp", "value": 9.1e-5,
+         "unit": "1/s", "interval": [8.9e-5, 9.4e-5], "limits": {"low": 0.0, "high": 2e-4}, "rule": "guard-band",
+         "outcome": "PASS"},
+        {"name": "theta_tau_deg", "procedure": "hrg-damping", "run_id": "r-damp", "value": 25.2, "unit": "deg",
+         "interval": [24.9, 25.6], "limits": {"low": None, "high": None}, "rule": "guard-band", "outcome": "PASS"},
+        {"name": "theta_tau_deg", "procedure": "hrg-free-decay", "run_id": "r-fd", "value": 24.0, "unit": "deg",
+         "interval": [22.0, 26.0], "limits": {"low": None, "high": None}, "rule": "guard-band", "outcome": "PASS"},
+        {"name": "split_hz", "procedure": "hrg-free-decay", "run_id": "r-fd", "value": 0.0049, "unit": "Hz",
+         "interval": [0.0047, 0.0052], "limits": {"low": 0.0, "high": 0.01}, "rule": "guard-band", "outcome": "PASS"},
+        {"name": "theta_w_deg", "procedure": "hrg-free-decay", "run_id": "r-fd", "value": 10.3, "unit": "deg",
+         "interval": None, "limits": {"low": None, "high": None}, "rule": "value", "outcome": "PASS"},
+        {"name": "drift_after_dph", "procedure": "hrg-damping", "run_id": "r-damp", "value": 0.45, "unit": "deg/h",
+         "interval": [0.31, 0.62], "limits": {"low": None, "high": 0.5}, "rule": "guard-band", "outcome": "MARGINAL"},
+        {"name": "q_factor", "procedure": "hrg-free-decay", "run_id": "r-fd", "value": 5.18e6, "unit": "",
+         "interval": None, "limits": {"low": 2e6, "high": None}, "rule": "value", "outcome": "PASS"},
+        {"name": "tau_s", "procedure": "hrg-damping", "run_id": "r-damp", "value": 300.0, "unit": "s",
+         "interval": [299.0, 301.0], "limits": {"low": 100.0, "high": None}, "rule": "guard-band", "outcome": "PASS"},
+    ],
+    "runs": [{"run_id": "r-damp", "procedure": "hrg-damping", "outcome": "PASS", "raw_file": "runs/a.h5",
+              "sha256": "0" * 64},
+             {"run_id": "r-fd", "procedure": "hrg-free-decay", "outcome": "PASS", "raw_file": "runs/b.h5",
+              "sha256": "1" * 64}],
+}  # fmt: skip
