@@ -134,6 +134,13 @@ def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, opera
     record["summary"] = summary(record)
     folder = ctx.runs_dir / "line" / (ctx.lot or "no-lot")
     record["record_file"] = str(write_record(record, folder))  # on disk first: nothing is lost
+    try:  # the unit's certificate and, when it has trims, its compensation file beside the record
+        from .certificate import write_unit_documents
+
+        record["documents"] = {k: str(v) for k, v in write_unit_documents(record, folder).items()}
+    except Exception as exc:  # noqa: BLE001 - a document that cannot be written must not lose the record
+        record["documents_error"] = f"{type(exc).__name__}: {exc}"
+    write_record(record, folder)
     if ctx.db is not None:
         try:
             ctx.db.save(record)
