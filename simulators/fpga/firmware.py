@@ -13,7 +13,10 @@ along the wave of the block before moves the wave itself):
   * whole-angle mode: a precession force along d q / d theta, F_p = 4 a Omega_cmd turns the wave
     at Omega_cmd; with drift compensation it adds -a D sin 4(theta - theta_tau), the force that
     cancels the damping drift dtheta/dt = (D/4) sin 4(theta - theta_tau);
-  * frequency modulation: the reference gets + A sin(2 pi f_m t) (held per block).
+  * frequency modulation: the reference gets + A sin(2 pi f_m t) (held per block);
+  * output modes (OUTPUT_MODE): whole-angle streams the wave angle (angle_out_deg, unwrapped);
+    force-to-rebalance holds the wave at FTR_ANGLE_DEG with a PI on the angle error whose force
+    F_p is the rate output rate_out_dps = FTR_GAIN degrees(F_p / (4 AGC_SETPOINT)).
 Clearing DRIVE_EN removes every force at the next block ("cut drive").
 """
 
@@ -30,6 +33,27 @@ from drivers.fpga import protocol as p
 from . import kernels as k
 
 StreamSink = Callable[[bytes, int], None]  # (encoded frames, frame count)
+
+
+def output_truth(params, regs: dict[str, float]) -> dict[str, float]:
+    """The gyro outputs' true scale factor and bias for a resonator (`ResonatorParams`) and the
+    FPGA's registers now (docs/fpga_link.md, "Output modes"): force-to-rebalance holds the wave
+    at FTR_ANGLE_DEG and outputs G degrees(F_p / (4 a_set)), so its scale factor is G K; whole-angle
+    outputs the angle, which turns at -K per unit input rate.  The bias (input-referred, deg/h) of
+    a static record is the zero-rate term plus the damping drift at the wave's angle,
+    -(D / 4K) sin 4 (theta - theta_tau): at FTR_ANGLE_DEG, or in whole-angle at 0 (a turn-on
+    starts the wave on the x pickoff axis); its mean over the angle is the zero-rate term alone."""
+    k_bryan = params.bryan_factor
+    ftr = int(regs["OUTPUT_MODE"]) == p.MODE_FORCE_TO_REBALANCE
+    theta_deg = float(regs["FTR_ANGLE_DEG"]) if ftr else 0.0
+    zero_rate_dph = math.degrees(params.nu_offset_per_s / (4.0 * k_bryan)) * 3600.0
+    drift = params.delta_inv_tau_per_s / (4.0 * k_bryan) * math.sin(4.0 * math.radians(theta_deg - params.theta_tau_deg))
+    return {
+        "cvg_output_mode": float(int(regs["OUTPUT_MODE"])),
+        "cvg_scale_factor": float(regs["FTR_GAIN"]) * k_bryan if ftr else -k_bryan,
+        "cvg_bias_dph": zero_rate_dph - math.degrees(drift) * 3600.0,
+        "cvg_bias_mean_dph": zero_rate_dph,
+    }
 
 
 class FpgaFirmware:
@@ -50,6 +74,11 @@ class FpgaFirmware:
         self._dec_sum, self._dec_n = np.zeros(4), 0  # boxcar decimator's carry between blocks
         self._frames = p.stream_frame_buffer(128)  # encoded frames of a block, reused
         self._reset_loops()
+
+    def truth(self) -> dict[str, float]:
+        """The outputs' true scale factor and bias for the registers now (`output_truth`)."""
+        with self.lock:
+            return output_truth(self.world.params, self.regs)
 
     # --- registers (called by the server's command thread) ----------------------------------------
     def read(self, reg: p.Register) -> float:
@@ -74,6 +103,8 @@ class FpgaFirmware:
             self._prm = None  # repacked for the loop kernel at the next block
             if reg.name == "STREAM_DECIMATION":
                 self._dec_sum, self._dec_n = np.zeros(4), 0
+            if reg.name == "OUTPUT_MODE":  # the rebalance loop starts afresh in its mode
+                self._st[k.S_FTR_INT] = 0.0
             if reg.name == "REF_FREQ_HZ" and not int(self.regs["CTRL"]) & p.PLL_EN:
                 self.regs["PLL_FREQ_HZ"] = float(value)
             return self.regs[reg.name]
@@ -87,6 +118,7 @@ class FpgaFirmware:
             self._dec_sum, self._dec_n = np.zeros(4), 0
             self.regs["FRAMES_SENT"] = 0
             self.regs["STREAM_START_INDEX"] = self.regs["SAMPLE_INDEX"]
+            self._st[k.S_ANGLE_OK] = 0.0  # the angle output's unwrapping starts with the stream
         st = self._st
         if rising & p.PLL_EN:
             st[k.S_PLL_INT_HZ] = float(self.regs["PLL_FREQ_HZ"])
@@ -96,7 +128,7 @@ class FpgaFirmware:
             st[k.S_QUAD_INT] = 0.0
             st[k.S_M_CC : k.S_H_S + 1] = 0.0
         if not new & p.DRIVE_EN:
-            st[k.S_AGC_INT] = st[k.S_QUAD_INT] = 0.0
+            st[k.S_AGC_INT] = st[k.S_QUAD_INT] = st[k.S_FTR_INT] = 0.0
         self.regs["CTRL"] = new
 
     def _status(self) -> int:
@@ -161,7 +193,7 @@ class FpgaFirmware:
                 self._u_on = False
                 st[k.S_U : k.S_U + 4] = 0.0
                 st[k.S_F_A] = st[k.S_F_Q_P] = st[k.S_F_P] = 0.0  # no force until the loops update again
-                st[k.S_OUT] = st[k.S_OUT + 2] = st[k.S_OUT + 3] = 0.0
+                st[k.S_OUT] = st[k.S_OUT + 2] = st[k.S_OUT + 3] = st[k.S_RATE_OUT] = 0.0
                 world.set_force("fpga", None)
 
     def after_block(self, world, block) -> None:
@@ -190,7 +222,7 @@ class FpgaFirmware:
             self._frames = p.stream_frame_buffer(max(len(q), 2 * len(self._frames)))
         n, self._dec_n = k.emit_frames(
             q, block.first_index, self.world.sample_period_s, dec, self._dec_sum, self._dec_n,
-            self._st[k.S_OUT : k.S_OUT + 4], self._stream_seq, self._frames, p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
+            self._st, self._stream_seq, self._frames, p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
         )  # fmt: skip
         if n == 0:
             return

@@ -191,6 +191,10 @@ class FpgaServer:
         self._threads.append(t)
         t.start()
 
+    def truth(self) -> dict[str, float]:
+        """The gyro outputs' true scale factor and bias (simulators.fpga.firmware.output_truth)."""
+        return self.firmware.truth()
+
     # --- faults ---------------------------------------------------------------------------------
     def inject(self, kind: str, rate: float = 0.01) -> None:
         """'corrupt' (one byte of a frame altered, at a per-frame rate), 'drop' (stream frames
