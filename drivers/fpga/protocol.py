@@ -312,8 +312,9 @@ def _stream_template(n: int) -> np.ndarray:
 def put_stream_frame(
     frame: np.ndarray, seq: int, index: int, t_s: float, ch: np.ndarray, table: np.ndarray, crc_zeros: int
 ) -> None:
-    """Write one stream frame's seq, index, t_s, channels (10: eight as float32, the angle as float64,
-    the rate output as float32) and CRC into `frame` (72 uint8) whose sync, type, length and address are set (STREAM_DTYPE's layout, little-endian).
+    """Write one stream frame's seq, index, t_s, channels (10: eight as float32, the angle as
+    float64, the rate output as float32) and CRC into `frame` (72 uint8) whose sync, type, length
+    and address are set (STREAM_DTYPE's layout, little-endian).
     Compiled, so the simulated FPGA's block kernel writes its frames without a Python step."""
     seq &= 0xFFFFFFFF
     for j in range(4):

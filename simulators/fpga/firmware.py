@@ -35,26 +35,6 @@ from . import kernels as k
 StreamSink = Callable[[bytes, int], None]  # (encoded frames, frame count)
 
 
-def output_truth(params, regs: dict[str, float]) -> dict[str, float]:
-    """The gyro outputs' true scale factor and bias for a resonator (`ResonatorParams`) and the
-    FPGA's registers now (docs/fpga_link.md, "Output modes"): force-to-rebalance holds the wave
-    at FTR_ANGLE_DEG and outputs G degrees(F_p / (4 a_set)), so its scale factor is G K; whole-angle
-    outputs the angle, which turns at -K per unit input rate.  The bias (input-referred, deg/h) of
-    a static record is the zero-rate term plus the damping drift at the wave's angle,
-    -(D / 4K) sin 4 (theta - theta_tau): at FTR_ANGLE_DEG, or in whole-angle at 0 (a turn-on
-    starts the wave on the x pickoff axis); its mean over the angle is the zero-rate term alone."""
-    k_bryan = params.bryan_factor
-    ftr = int(regs["OUTPUT_MODE"]) == p.MODE_FORCE_TO_REBALANCE
-    theta_deg = float(regs["FTR_ANGLE_DEG"]) if ftr else 0.0
-    zero_rate_dph = math.degrees(params.nu_offset_per_s / (4.0 * k_bryan)) * 3600.0
-    drift = params.delta_inv_tau_per_s / (4.0 * k_bryan) * math.sin(4.0 * math.radians(theta_deg - params.theta_tau_deg))
-    return {
-        "cvg_output_mode": float(int(regs["OUTPUT_MODE"])),
-        "cvg_scale_factor": float(regs["FTR_GAIN"]) * k_bryan if ftr else -k_bryan,
-        "cvg_bias_dph": zero_rate_dph - math.degrees(drift) * 3600.0,
-        "cvg_bias_mean_dph": zero_rate_dph,
-    }
-
 
 class FpgaFirmware:
     """Registers and loops of the simulated FPGA; attach it to a World with `world.attach`."""
@@ -76,9 +56,18 @@ class FpgaFirmware:
         self._reset_loops()
 
     def truth(self) -> dict[str, float]:
-        """The outputs' true scale factor and bias for the registers now (`output_truth`)."""
+        """The registers the outputs' truth needs beyond the resonator's (procedures.cvg_output):
+        in force-to-rebalance its mode, hold angle and gain; nothing in whole-angle, whose scale
+        factor (-K) and bias follow from the resonator alone (so a whole-angle station's truth is
+        the resonator's)."""
         with self.lock:
-            return output_truth(self.world.params, self.regs)
+            if int(self.regs["OUTPUT_MODE"]) != p.MODE_FORCE_TO_REBALANCE:
+                return {}
+            return {
+                "cvg_output_mode": float(p.MODE_FORCE_TO_REBALANCE),
+                "ftr_angle_deg": float(self.regs["FTR_ANGLE_DEG"]),
+                "ftr_gain": float(self.regs["FTR_GAIN"]),
+            }
 
     # --- registers (called by the server's command thread) ----------------------------------------
     def read(self, reg: p.Register) -> float:

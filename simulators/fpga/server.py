@@ -192,7 +192,7 @@ class FpgaServer:
         t.start()
 
     def truth(self) -> dict[str, float]:
-        """The gyro outputs' true scale factor and bias (simulators.fpga.firmware.output_truth)."""
+        """What the outputs' truth needs from the FPGA's registers (FpgaFirmware.truth)."""
         return self.firmware.truth()
 
     # --- faults ---------------------------------------------------------------------------------
