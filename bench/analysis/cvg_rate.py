@@ -66,6 +66,28 @@ def _interval(value: float, sd: float, t: float) -> tuple[float, float]:
     return (value - t * sd, value + t * sd)
 
 
+def nonlinearity_ppm(rate: np.ndarray, res: np.ndarray, full_scale: float, sigma_fit: float,
+                     dof_fit: int) -> tuple[float, tuple[float, float]]:
+    """Largest |mean residual| over the rate levels in ppm of full scale, and a 95 % interval for
+    the largest true deviation: |r_g| -/+ t sd(r_g) jointly over the G levels (Bonferroni), sd from
+    the pure error within levels when a rate repeats (else the fit's residual scatter)."""
+    levels, inverse, counts = np.unique(np.round(rate, 9), return_inverse=True, return_counts=True)
+    mean_res = np.bincount(inverse, weights=res) / counts
+    dof_pure = int(np.sum(counts - 1))
+    if dof_pure >= 2:
+        sigma = math.sqrt(float(np.sum((res - mean_res[inverse]) ** 2)) / dof_pure)
+        dof = dof_pure
+    else:
+        sigma, dof = sigma_fit, dof_fit
+    sd = sigma / np.sqrt(counts)
+    t_joint = float(stats.t.ppf(1.0 - (1.0 - LEVEL) / (2 * len(levels)), dof))
+    abs_r = np.abs(mean_res)
+    scale = 1e6 / full_scale
+    lo = float(np.max(np.clip(abs_r - t_joint * sd, 0.0, None))) * scale
+    hi = float(np.max(abs_r + t_joint * sd)) * scale
+    return float(np.max(abs_r)) * scale, (lo, hi)
+
+
 def fit_scale_factor(
     rate_dps: np.ndarray, output: np.ndarray, *, drift_basis: np.ndarray | None = None, earth_rate_dph: float = 0.0
 ) -> ScaleFactorFit:
@@ -75,8 +97,8 @@ def fit_scale_factor(
     variance; drift_basis (m, 2) holds C_i, S_i, the means of cos 4 theta and sin 4 theta over point
     i's window (whole-angle: the damping drift turns with the wave; leave it None when the wave is
     held, where it is one constant with the bias).  Asymmetry: the same model with separate slopes
-    for positive and negative rates.  Nonlinearity: max_i |r_i| / (|S| R), R = max |rate|; its
-    interval bounds max |true deviation| by |r_i| -/+ t sd(r_i) jointly over the points (Bonferroni)."""
+    for positive and negative rates.  Nonlinearity: `nonlinearity_ppm` of the residuals, full scale
+    |S| R with R = max |rate|."""
     rate = np.asarray(rate_dps, dtype=float)
     y = np.asarray(output, dtype=float)
     m = len(rate)
@@ -94,14 +116,11 @@ def fit_scale_factor(
     var_ratio = float(grad @ cov[:2, :2] @ grad)
     bias_dps = b / s - earth_rate_dph / 3600.0
     bias_ci = tuple(3600.0 * v for v in _interval(bias_dps, math.sqrt(var_ratio), t))
-    # nonlinearity
+    # nonlinearity: the residuals averaged over the windows at each rate (both directions), with the
+    # scatter within those groups (pure error: a deviation from the line that the rate sets cancels
+    # in it) when rates repeat, else the fit's residual scatter
     full_scale = abs(s) * float(np.max(np.abs(rate)))
-    h = np.einsum("ij,jk,ik->i", x, np.linalg.inv(x.T @ x), x)
-    sd_r = sigma * np.sqrt(np.clip(1.0 - h, 0.0, None))
-    t_joint = float(stats.t.ppf(1.0 - (1.0 - LEVEL) / (2 * m), dof))
-    nl = float(np.max(np.abs(res))) / full_scale * 1e6
-    nl_ci = (float(np.max(np.clip(np.abs(res) - t_joint * sd_r, 0.0, None))) / full_scale * 1e6,
-             float(np.max(np.abs(res) + t_joint * sd_r)) / full_scale * 1e6)
+    nl, nl_ci = nonlinearity_ppm(rate, res, full_scale, sigma, dof)
     # asymmetry: separate slopes above and below zero rate
     xa = np.column_stack([np.ones(m), np.clip(rate, 0.0, None), np.clip(rate, None, 0.0), *cols[2:]])
     asym, asym_ci = float("nan"), (float("nan"), float("nan"))

@@ -1,0 +1,92 @@
+"""cvg-scale-factor and cvg-bias end to end through the real transports (Modbus table, FPGA link on
+loopback, lockstep clock) in both output modes: whole-angle on `sim-hrg`, force-to-rebalance on
+`sim-hrg-ftr`.  Each measurement with a truth must hold it within its own 95 % interval (the
+intervals' coverage is checked by Monte Carlo in test_cvg_rate.py; these runs are seeded, so the
+check is deterministic).  Kept short for CI: 10 rate windows of 4 s, 3 turn-ons with 20 s records."""
+
+from __future__ import annotations
+
+import pytest
+
+from procedures import find_procedure
+from procedures.cvg_bias import CvgBias
+from procedures.cvg_scale_factor import CvgScaleFactor, rate_series
+
+SF_PARAMS = {"max_rate_dps": 20.0, "steps": 2, "average_s": 4.0, "settle_s": 3.0}
+BIAS_PARAMS = {"record_s": 20.0, "turn_ons": 3, "quench_s": 6.0, "settle_s": 8.0}
+
+
+def _run(station_name: str, procedure, params, tmp):
+    from bench.engine import Runner
+    from bench.results import ResultsStore
+    from bench.station import SimStation
+
+    station = SimStation(station_name, seed=0).open()
+    store = ResultsStore(tmp / "results.sqlite")
+    try:
+        record = Runner(station, runs_dir=tmp / "runs", store=store).run(procedure, params)
+        return record, procedure.truth_for(station.truth())
+    finally:
+        store.close()
+        station.close()
+
+
+@pytest.fixture(scope="module", params=["sim-hrg", "sim-hrg-ftr"])
+def sf_run(request, tmp_path_factory):
+    return _run(request.param, CvgScaleFactor, SF_PARAMS, tmp_path_factory.mktemp("cvg_sf")) + (request.param,)
+
+
+@pytest.fixture(scope="module", params=["sim-hrg", "sim-hrg-ftr"])
+def bias_run(request, tmp_path_factory):
+    return _run(request.param, CvgBias, BIAS_PARAMS, tmp_path_factory.mktemp("cvg_bias")) + (request.param,)
+
+
+def _check_truths(record, truth, names):
+    assert record.outcome == "COMPLETE", record.end_reason
+    assert record.safe_state
+    got = {r.name: r for r in record.measurements}
+    for name in names:
+        res = got[name]
+        lo, hi = res.ci95
+        assert lo <= truth[name] <= hi, f"{name}: {res.value:.7g} [{lo:.7g}, {hi:.7g}], truth {truth[name]:.7g}"
+
+
+def test_registered():
+    assert find_procedure("cvg-scale-factor") is CvgScaleFactor
+    assert find_procedure("cvg-bias") is CvgBias
+    assert rate_series(20.0, 2).tolist() == [-20, -10, 0, 10, 20, 20, 10, 0, -10, -20]
+
+
+def test_scale_factor_series_recovers_the_truth(sf_run):
+    """Scale factor G K = 0.9972 (force-to-rebalance) or -K = -0.277 (whole-angle), the bias (at the
+    held angle: 29.33 deg/h; whole-angle, the mean over the angle: 0), zero nonlinearity and asymmetry."""
+    record, truth, station = sf_run
+    assert truth["scale_factor"] == pytest.approx(0.9972 if station == "sim-hrg-ftr" else -0.277)
+    _check_truths(record, truth, ("scale_factor", "bias_dph", "asymmetry_ppm"))
+    nl = next(r for r in record.measurements if r.name == "nonlinearity_ppm")
+    assert nl.ci95[0] <= 0.0  # a linear gyro: the interval reaches zero
+
+
+def test_bias_and_repeatability_recover_the_truth(bias_run):
+    """Bias at rest: the damping drift at the wave's angle (29.33 deg/h at angle 0 in both modes);
+    no turn-on spread in this World, so the repeatability's interval reaches zero."""
+    record, truth, _ = bias_run
+    assert truth["bias_dph"] == pytest.approx(29.333, abs=1e-3)
+    _check_truths(record, truth, ("bias_dph", "bias_first_dph"))
+    rep = next(r for r in record.measurements if r.name == "bias_repeatability_dph")
+    assert rep.ci95[0] <= truth["bias_repeatability_dph"] == 0.0
+
+
+def test_analysis_of_the_raw_file_gives_the_live_results_and_figures(sf_run, bias_run):
+    """`gyrobench analyze` re-fits from the raw file with the same code; the report's figures draw."""
+    from bench.recorder import RunData
+
+    for (record, _, _), cls in ((sf_run, CvgScaleFactor), (bias_run, CvgBias)):
+        proc = cls(record.params)
+        with RunData(record.raw_file) as data:
+            again = {r.name: r.value for r in proc.analysis(data)}
+            figs = proc.figures(data)
+        live = {r.name: r.value for r in record.measurements}
+        for name, value in again.items():
+            assert value == pytest.approx(live[name], rel=1e-9, abs=1e-12), name
+        assert figs and all(f.svg().startswith("<svg") for f in figs)
