@@ -3,8 +3,8 @@ output mode (force-to-rebalance or whole-angle).
 
 Steps: excite and hold the amplitude; then for each table rate of a series from -R to +R and back
 (both directions) set the rate, wait until it is stable, settle, and average the output over a
-window; fit by least squares (bench.analysis.cvg_rate.fit_scale_factor): the scale factor, the
-bias (input-referred, Earth's rate removed), the nonlinearity in ppm of full scale and the
+window (by default whole turns of the table, so its angle-dependent ripple averages out); fit
+by least squares (bench.analysis.cvg_rate.fit_scale_factor): the scale factor, the bias (input-referred, Earth's rate removed), the nonlinearity in ppm of full scale and the
 asymmetry of the positive and negative rates' scale factors, each with a 95 % interval.  In
 whole-angle mode the output of a window is the slope of the wave angle, and the damping drift
 that turns with the wave (a 90-degree period in its angle) is fitted beside the line.  The windows
@@ -12,6 +12,8 @@ go to the `cvg_sf_windows` stream, so `analysis(data)` re-fits a recorded run wi
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -33,6 +35,16 @@ def rate_series(max_rate_dps: float, steps: int) -> np.ndarray:
     return np.concatenate([up, up[::-1]])
 
 
+def window_s(rate_dps: float, average_s: float, whole_turns: bool) -> float:
+    """The averaging window at a rate: average_s, or with whole_turns the shortest whole number of
+    table turns at least that long (a table's angle-dependent rate ripple integrates to zero over
+    a turn; over part of one it biases the window's mean by up to ripple x rate / window)."""
+    if not whole_turns or rate_dps == 0.0:
+        return average_s
+    turn_s = 360.0 / abs(rate_dps)
+    return turn_s * max(1, math.ceil(average_s / turn_s - 1e-9))
+
+
 class CvgScaleFactor(CvgOutput, Procedure):
     """Scale factor, bias, nonlinearity and asymmetry from a rate series in both directions."""
 
@@ -42,7 +54,9 @@ class CvgScaleFactor(CvgOutput, Procedure):
 
     max_rate_dps = Param(20.0, unit="deg/s", low=0.01, high=1000.0, doc="full-scale rate R of the series")
     steps = Param(4, low=1, high=50, doc="rate levels on each side of zero (2 steps + 1 levels, up then down)")
-    average_s = Param(10.0, unit="s", low=0.1, high=3600.0, doc="averaging window at each rate")
+    average_s = Param(10.0, unit="s", low=0.1, high=3600.0, doc="averaging window at each rate (at least)")
+    whole_turns = Param(True, doc="lengthen each window to whole turns of the table (its angle ripple then averages "
+                                  "out of the rate)")
     accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
 
     measurements = (
@@ -80,7 +94,7 @@ class CvgScaleFactor(CvgOutput, Procedure):
             table.set_rate(float(rate), self.accel_dps2)
             table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
             ctx.sleep(self.settle_s)
-            t0, t1 = self._record_window(ctx, self.average_s)
+            t0, t1 = self._record_window(ctx, window_s(float(rate), self.average_s, self.whole_turns))
             ctx.record(WINDOWS, WINDOWS.names, np.array([[t0, t1, rate, code]]))
             ctx.progress((i + 1) / len(rates), f"rate {i + 1} / {len(rates)}: {rate:+.3g} deg/s")
         table.set_rate(0.0, self.accel_dps2)

@@ -2,7 +2,8 @@
 loopback, lockstep clock) in both output modes: whole-angle on `sim-hrg`, force-to-rebalance on
 `sim-hrg-ftr`.  Each measurement with a truth must hold it within its own 95 % interval (the
 intervals' coverage is checked by Monte Carlo in test_cvg_rate.py; these runs are seeded, so the
-check is deterministic).  Kept short for CI: 10 rate windows of 4 s, 3 turn-ons with 20 s records."""
+check is deterministic).  Kept short for CI: 10 rate windows (one or two table turns at +-18 and
++-36 deg/s, 4 s at rest), 3 turn-ons with 20 s records."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from procedures import find_procedure
 from procedures.cvg_bias import CvgBias
 from procedures.cvg_scale_factor import CvgScaleFactor, rate_series
 
-SF_PARAMS = {"max_rate_dps": 20.0, "steps": 2, "average_s": 4.0, "settle_s": 3.0}
+SF_PARAMS = {"max_rate_dps": 36.0, "steps": 2, "average_s": 4.0, "settle_s": 3.0}  # windows of 1 or 2 table turns
 BIAS_PARAMS = {"record_s": 20.0, "turn_ons": 3, "quench_s": 6.0, "settle_s": 8.0}
 
 
@@ -55,6 +56,10 @@ def test_registered():
     assert find_procedure("cvg-scale-factor") is CvgScaleFactor
     assert find_procedure("cvg-bias") is CvgBias
     assert rate_series(20.0, 2).tolist() == [-20, -10, 0, 10, 20, 20, 10, 0, -10, -20]
+    from procedures.cvg_scale_factor import window_s
+
+    assert window_s(18.0, 4.0, True) == pytest.approx(20.0) and window_s(36.0, 12.0, True) == pytest.approx(20.0)
+    assert window_s(0.0, 4.0, True) == 4.0 and window_s(18.0, 4.0, False) == 4.0
 
 
 def test_scale_factor_series_recovers_the_truth(sf_run):
