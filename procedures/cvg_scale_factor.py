@@ -4,11 +4,12 @@ output mode (force-to-rebalance or whole-angle).
 Steps: excite and hold the amplitude; then for each table rate of a series from -R to +R and back
 (both directions) set the rate, wait until it is stable, settle, and average the output over a
 window (by default whole turns of the table, so its angle-dependent ripple averages out); fit
-by least squares (bench.analysis.cvg_rate.fit_scale_factor): the scale factor, the bias (input-referred, Earth's rate removed), the nonlinearity in ppm of full scale and the
-asymmetry of the positive and negative rates' scale factors, each with a 95 % interval.  In
-whole-angle mode the output of a window is the slope of the wave angle, and the damping drift
-that turns with the wave (a 90-degree period in its angle) is fitted beside the line.  The windows
-go to the `cvg_sf_windows` stream, so `analysis(data)` re-fits a recorded run with the same code.
+by least squares (bench.analysis.cvg_rate.fit_scale_factor): the scale factor, the bias
+(input-referred, Earth's rate removed), the nonlinearity in ppm of full scale and the asymmetry
+of the positive and negative rates' scale factors, each with a 95 % interval.  In whole-angle
+mode the output of a window is the slope of the wave angle, and the damping drift that turns
+with the wave (a 90-degree period in its angle) is fitted beside the line.  The windows go to
+the `cvg_sf_windows` stream, so `analysis(data)` re-fits a recorded run with the same code.
 """
 
 from __future__ import annotations
