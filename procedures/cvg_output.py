@@ -71,6 +71,7 @@ class CvgOutput(HrgExcitation):
     settle_s = Param(5.0, unit="s", low=0.0, high=3600.0, doc="wait after the rate is stable, before averaging")
 
     _mode: str = "whole-angle"
+    _ki_restore: bool = False
 
     def _start_output(self, ctx) -> str:
         """Read the FPGA's output mode (the station's `output_mode`) and stream at stream_hz for the
@@ -107,6 +108,9 @@ class CvgOutput(HrgExcitation):
         amplitude is held at the setpoint."""
         fpga = ctx.devices.fpga
         ki = float(fpga.read_register("AGC_KI"))
+        if not self._ki_restore:  # whatever ends the run, the amplitude loop gets its integral gain back
+            self._ki_restore = True
+            ctx.defer(lambda: fpga.write_register("AGC_KI", ki) if fpga.connected else None, "restore AGC_KI")
         fpga.set_pll(False)
         fpga.set_quadrature_loop(False)
         fpga.set_agc(False)
