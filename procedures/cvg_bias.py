@@ -5,7 +5,8 @@ Steps: excite; then N times: a turn-on (the resonator quenched, the drive cut an
 again, the amplitude held), settle, record the output at rest.  Each record's bias
 (bench.analysis.cvg_rate.static_bias: batch means of the rate output, or batch slopes of the wave
 angle in whole-angle mode, divided by the scale factor) has a 95 % interval; the bias reported is
-the mean over the turn-ons (Student's t on their scatter, so a turn-on spread widens it), the
+the mean over the turn-ons (Student's t on their scatter, so a turn-on spread widens it, never
+narrower than the records' own noise allows), the
 repeatability their spread with each record's own noise removed.  The scale factor that refers
 the output to the input is the `scale_factor` parameter (from a cvg-scale-factor run), or the
 mode's nominal one (1 in force-to-rebalance, -bryan_factor in whole-angle).
@@ -42,7 +43,8 @@ class CvgBias(CvgOutput, Procedure):
     batches = Param(10, low=2, high=1000, doc="batches of each record for its bias interval")
     scale_factor = Param(0.0, low=-1e6, high=1e6,
                          doc="output per input rate (from cvg-scale-factor); 0: the mode's nominal one")
-    settle_s = Param(10.0, unit="s", low=0.0, high=3600.0, doc="wait after a turn-on holds the amplitude")
+    settle_s = Param(30.0, unit="s", low=0.0, high=3600.0,
+                     doc="warm-up after a turn-on holds the amplitude (the quadrature settles over tens of s)")
     bryan_factor = Param(0.277, low=0.01, high=1.0, doc="nominal K: whole-angle's nominal scale factor is -K")
 
     measurements = (

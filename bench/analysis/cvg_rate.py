@@ -209,7 +209,8 @@ class Repeatability:
 def turn_on_repeatability(bias_dph: np.ndarray, sigma_dph: np.ndarray) -> Repeatability:
     """Turn-on biases b_i with their standard errors s_i: var(b) = spread^2 + mean(s_i^2), so the
     spread is sqrt(var - mean s^2) with var's chi-square interval (n - 1 degrees of freedom) shifted
-    the same way and clipped at zero.  The mean's interval is Student's t on the biases' scatter."""
+    the same way and clipped at zero.  The mean's interval is Student's t on the biases' scatter, or
+    the records' own noise when that is larger."""
     b = np.asarray(bias_dph, dtype=float)
     s = np.asarray(sigma_dph, dtype=float)
     n = len(b)
@@ -223,9 +224,14 @@ def turn_on_repeatability(bias_dph: np.ndarray, sigma_dph: np.ndarray) -> Repeat
     spread = math.sqrt(max(var - noise, 0.0))
     ci = (math.sqrt(max(lo_var - noise, 0.0)), math.sqrt(max(hi_var - noise, 0.0)))
     mean = float(b.mean())
-    tq = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
-    se = math.sqrt(var / n)
-    return Repeatability(spread, ci, math.sqrt(var), mean, _interval(mean, se, tq), n)
+    # the mean's standard error: the turn-ons' scatter (Student's t, n - 1 degrees of freedom), but
+    # never below the records' own noise (a few turn-ons can agree by chance far closer than that)
+    se_scatter, se_noise = math.sqrt(var / n), math.sqrt(noise / n)
+    if se_scatter >= se_noise:
+        half = float(stats.t.ppf(0.5 + LEVEL / 2, dof)) * se_scatter
+    else:
+        half = float(stats.norm.ppf(0.5 + LEVEL / 2)) * se_noise
+    return Repeatability(spread, ci, math.sqrt(var), mean, (mean - half, mean + half), n)
 
 
 def earth_rate_projection_dph(latitude_deg: float, azimuth_deg: float = 0.0, elevation_deg: float = 90.0) -> float:
