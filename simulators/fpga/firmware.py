@@ -35,7 +35,6 @@ from . import kernels as k
 StreamSink = Callable[[bytes, int], None]  # (encoded frames, frame count)
 
 
-
 class FpgaFirmware:
     """Registers and loops of the simulated FPGA; attach it to a World with `world.attach`."""
 
