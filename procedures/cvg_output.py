@@ -127,14 +127,15 @@ class CvgOutput(HrgExcitation):
 
 
 def window_outputs(data: Any, windows: dict[str, np.ndarray], mode: str) -> np.ndarray:
-    """(m, 3): each window's output (mean rate output, or slope of the angle) and the means of
-    cos 4 theta and sin 4 theta over it, from the recorded `fpga` stream."""
+    """(m, 3): each window's output (mean rate output, or rate of the angle) and the means of
+    cos 4 theta and sin 4 theta over it weighted alike (`window_output`), from the `fpga` stream."""
     fpga = data.table("fpga")
     t = fpga["t_s"]
+    boxes = windows.get("box_s", np.zeros(len(windows["t_start_s"])))
     out = []
-    for t0, t1 in zip(windows["t_start_s"], windows["t_end_s"], strict=True):
+    for t0, t1, box_s in zip(windows["t_start_s"], windows["t_end_s"], boxes, strict=True):
         sel = (t > t0) & (t <= t1)
         if sel.sum() < 3:
             raise RuntimeError(f"the window {t0:.2f}-{t1:.2f} s holds {int(sel.sum())} stream samples; 3 are needed")
-        out.append(window_output(t[sel], fpga["rate_out_dps"][sel], fpga["angle_out_deg"][sel], mode))
+        out.append(window_output(t[sel], fpga["rate_out_dps"][sel], fpga["angle_out_deg"][sel], mode, float(box_s)))
     return np.array(out)

@@ -27,6 +27,7 @@ from .cvg_output import MODES, CvgOutput, mean_bias_truth, scale_factor_truth, w
 WINDOWS = declare(StreamSchema("cvg_sf_windows", "cvg-scale-factor", (
     Column("t_start_s", "s"), Column("t_end_s", "s"), Column("rate_dps", "deg/s", doc="table rate commanded"),
     Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
+    Column("box_s", "s", doc="whole-angle: the boxes at the window's ends whose mean angles give its rate (0: slope)"),
 )))
 
 
@@ -36,14 +37,18 @@ def rate_series(max_rate_dps: float, steps: int) -> np.ndarray:
     return np.concatenate([up, up[::-1]])
 
 
-def window_s(rate_dps: float, average_s: float, whole_turns: bool) -> float:
-    """The averaging window at a rate: average_s, or with whole_turns the shortest whole number of
-    table turns at least that long (a table's angle-dependent rate ripple integrates to zero over
-    a turn; over part of one it biases the window's mean by up to ripple x rate / window)."""
+def window_s(rate_dps: float, average_s: float, whole_turns: bool) -> tuple[float, float]:
+    """The averaging window at a rate and the boxes at its ends (whole-angle reads the rate off the
+    change of the angle's mean from the first box to the last): average_s and no boxes, or with
+    whole_turns the shortest whole number of table turns at least average_s long plus one box
+    (1 s, at most a quarter turn), so the boxes lie whole turns apart.  The table's angle-dependent
+    rate ripple integrates to zero over a turn; over part of one it biases the window's mean by up
+    to ripple x rate / window, which scales with the rate like a scale factor error."""
     if not whole_turns or rate_dps == 0.0:
-        return average_s
+        return average_s, 0.0
     turn_s = 360.0 / abs(rate_dps)
-    return turn_s * max(1, math.ceil(average_s / turn_s - 1e-9))
+    box_s = min(1.0, 0.25 * turn_s)
+    return turn_s * max(1, math.ceil(average_s / turn_s - 1e-9)) + box_s, box_s
 
 
 class CvgScaleFactor(CvgOutput, Procedure):
@@ -95,8 +100,9 @@ class CvgScaleFactor(CvgOutput, Procedure):
             table.set_rate(float(rate), self.accel_dps2)
             table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
             ctx.sleep(self.settle_s)
-            t0, t1 = self._record_window(ctx, window_s(float(rate), self.average_s, self.whole_turns))
-            ctx.record(WINDOWS, WINDOWS.names, np.array([[t0, t1, rate, code]]))
+            length_s, box_s = window_s(float(rate), self.average_s, self.whole_turns)
+            t0, t1 = self._record_window(ctx, length_s)
+            ctx.record(WINDOWS, WINDOWS.names, np.array([[t0, t1, rate, code, box_s]]))
             ctx.progress((i + 1) / len(rates), f"rate {i + 1} / {len(rates)}: {rate:+.3g} deg/s")
         table.set_rate(0.0, self.accel_dps2)
 

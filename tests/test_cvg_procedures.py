@@ -45,14 +45,23 @@ def bias_run(request, tmp_path_factory):
     return _run(request.param, CvgBias, params, tmp_path_factory.mktemp("cvg_bias")) + (request.param,)
 
 
-def _check_truths(record, truth, names):
+#: what the whole-angle loops add with the 5 mHz split of `sim-hrg` in this series (rates to +-36 deg/s,
+#: the wave turning at up to 10 deg/s): the split observer's residual lag leaves a scale error of -5.8 ppm
+#: and a bias of +0.75 deg/h, the same over 8 seeds, and nothing with the split set to 0 (measured;
+#: docs/cvg_rate_tests.md).  The truth rules assume ideal loops, so these are allowed on top of the intervals.
+LOOP_RESIDUAL = {"scale_factor": 10e-6 * 0.277, "bias_dph": 1.2}
+
+
+def _check_truths(record, truth, names, allowance=None):
     assert record.outcome == "COMPLETE", record.end_reason
     assert record.safe_state
     got = {r.name: r for r in record.measurements}
     for name in names:
         res = got[name]
         lo, hi = res.ci95
-        assert lo <= truth[name] <= hi, f"{name}: {res.value:.7g} [{lo:.7g}, {hi:.7g}], truth {truth[name]:.7g}"
+        extra = (allowance or {}).get(name, 0.0)
+        assert lo - extra <= truth[name] <= hi + extra, (
+            f"{name}: {res.value:.7g} [{lo:.7g}, {hi:.7g}], truth {truth[name]:.7g} (allowed beyond: {extra:g})")
 
 
 def test_registered():
@@ -61,16 +70,19 @@ def test_registered():
     assert rate_series(20.0, 2).tolist() == [-20, -10, 0, 10, 20, 20, 10, 0, -10, -20]
     from procedures.cvg_scale_factor import window_s
 
-    assert window_s(18.0, 4.0, True) == pytest.approx(20.0) and window_s(36.0, 12.0, True) == pytest.approx(20.0)
-    assert window_s(0.0, 4.0, True) == 4.0 and window_s(18.0, 4.0, False) == 4.0
+    assert window_s(18.0, 4.0, True) == pytest.approx((21.0, 1.0))  # one turn (20 s) and a box
+    assert window_s(36.0, 12.0, True)[0] == pytest.approx(21.0)  # two turns
+    assert window_s(0.0, 4.0, True) == (4.0, 0.0) and window_s(18.0, 4.0, False) == (4.0, 0.0)
 
 
 def test_scale_factor_series_recovers_the_truth(sf_run):
     """Scale factor G K = 0.9972 (force-to-rebalance) or -K = -0.277 (whole-angle), the bias (at the
-    held angle: 29.33 deg/h; whole-angle, the mean over the angle: 0), zero nonlinearity and asymmetry."""
+    held angle: 29.33 deg/h; whole-angle, the mean over the angle: 0), zero nonlinearity and asymmetry.
+    Whole-angle: within the intervals plus the loops' own residual with the split (LOOP_RESIDUAL)."""
     record, truth, station = sf_run
     assert truth["scale_factor"] == pytest.approx(0.9972 if station == "sim-hrg-ftr" else -0.277)
-    _check_truths(record, truth, ("scale_factor", "bias_dph", "asymmetry_ppm"))
+    _check_truths(record, truth, ("scale_factor", "bias_dph", "asymmetry_ppm"),
+                  LOOP_RESIDUAL if station == "sim-hrg" else None)
     nl = next(r for r in record.measurements if r.name == "nonlinearity_ppm")
     assert nl.ci95[0] <= 0.0  # a linear gyro: the interval reaches zero
 

@@ -109,8 +109,30 @@ def test_window_output_by_mode():
     ang = 5.0 - 2.77 * t
     out, c4, s4 = window_output(t, np.full_like(t, 3.0), ang, "whole-angle")
     assert out == pytest.approx(-2.77)
-    assert c4 == pytest.approx(np.mean(np.cos(np.radians(4 * ang))))
+    w = t * (10 - t)  # the slope's parabolic weight
+    assert c4 == pytest.approx(np.sum(w * np.cos(np.radians(4 * ang))) / w.sum())
+    assert window_output(t, np.full_like(t, 3.0), ang, "whole-angle", 1.0)[0] == pytest.approx(-2.77)
     assert window_output(t, np.full_like(t, 3.0), ang, "force-to-rebalance")[0] == pytest.approx(3.0)
+
+
+def test_window_rate_and_its_drift_regressors_are_weighted_alike():
+    """A wave turning at -5.54 deg/s plus a drift c cos 4 theta + s sin 4 theta, integrated finely
+    over 21 s (1.3 periods of 4 theta): each whole-angle estimator (slope; boxes of 1 s at the ends)
+    equals -5.54 + c C + s S with its own regressors (C, S) to 1e-6 deg/s (0.2 ppm), where a plain
+    mean of cos 4 theta with the slope misses by ~1e-4 (the bias the weighting removes)."""
+    dt, c, s = 0.01, -0.0022, 0.0004
+    t = np.arange(0.0, 21.0 + 1e-9, dt)
+    th = np.empty_like(t)
+    th[0] = 10.0
+    for i in range(1, len(t)):
+        r = math.radians(th[i - 1])
+        th[i] = th[i - 1] + dt * (-5.54 + c * math.cos(4 * r) + s * math.sin(4 * r))
+    for box in (0.0, 1.0):
+        rate, c4, s4 = window_output(t, np.zeros_like(t), th, "whole-angle", box)
+        assert rate == pytest.approx(-5.54 + c * c4 + s * s4, abs=1e-6)
+    plain = np.radians(4 * th)
+    slope = window_output(t, np.zeros_like(t), th, "whole-angle")[0]
+    assert abs(slope - (-5.54 + c * np.mean(np.cos(plain)) + s * np.mean(np.sin(plain)))) > 1e-5
 
 
 def test_turn_on_repeatability_removes_the_records_noise():

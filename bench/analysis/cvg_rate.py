@@ -142,16 +142,38 @@ def fit_scale_factor(
     )
 
 
-def window_output(t_s: np.ndarray, rate_out_dps: np.ndarray, angle_out_deg: np.ndarray, mode: str) -> tuple[
-        float, float, float]:
-    """One window's output and the means of cos 4 theta, sin 4 theta over it: force-to-rebalance,
-    the mean rate output; whole-angle, the least-squares slope of the angle (deg/s of wave angle)."""
+def window_output(t_s: np.ndarray, rate_out_dps: np.ndarray, angle_out_deg: np.ndarray, mode: str,
+                  box_s: float = 0.0) -> tuple[float, float, float]:
+    """One window's output and the means of cos 4 theta, sin 4 theta over it, each weighted as the
+    output weighs the rate along the window, so an angle-dependent drift enters both alike:
+    * force-to-rebalance: the mean rate output (uniform weights);
+    * whole-angle, box_s > 0: the change of the angle's mean over the first and the last box_s of
+      the window divided by the time between them (a trapezoid weight on the angle's rate); when
+      that time is whole table turns the table's angle ripple, the same in both boxes, cancels;
+    * whole-angle, box_s = 0: the least-squares slope of the angle, a mean of its rate with the
+      parabolic weight (t - t_0)(t_end - t) (summation by parts)."""
     theta = np.radians(np.asarray(angle_out_deg, dtype=float))
-    c4, s4 = float(np.mean(np.cos(4 * theta))), float(np.mean(np.sin(4 * theta)))
-    if mode == "force-to-rebalance":
-        return float(np.mean(rate_out_dps)), c4, s4
     t = np.asarray(t_s, dtype=float)
-    return float(np.polyfit(t - t.mean(), np.asarray(angle_out_deg, dtype=float), 1)[0]), c4, s4
+    ang = np.asarray(angle_out_deg, dtype=float)
+    if mode == "force-to-rebalance":
+        return float(np.mean(rate_out_dps)), float(np.mean(np.cos(4 * theta))), float(np.mean(np.sin(4 * theta)))
+    nb = int(np.sum(t <= t[0] + box_s - 1e-9)) if box_s > 0 else 0
+    if 1 <= nb <= len(t) // 2:
+        # m2 - m1 = sum_k c_k (theta_k+1 - theta_k), c_k = (#box-2 samples after k - #box-1 samples after k) / nb
+        idx = np.arange(len(t) - 1)
+        after1 = np.clip(nb - 1 - idx, 0, None)
+        after2 = np.clip(len(t) - 1 - np.maximum(idx, len(t) - 1 - nb), 0, nb)
+        c = (after2 - after1) / nb
+        dt = np.diff(t)
+        span = float(c @ dt)
+        rate = float(ang[-nb:].mean() - ang[:nb].mean()) / span
+        mid = 0.5 * (theta[1:] + theta[:-1])
+        w = c * dt / span
+        return rate, float(w @ np.cos(4 * mid)), float(w @ np.sin(4 * mid))
+    w = (t - t[0]) * (t[-1] - t)
+    w = w / w.sum()
+    slope = float(np.polyfit(t - t.mean(), ang, 1)[0])
+    return slope, float(w @ np.cos(4 * theta)), float(w @ np.sin(4 * theta))
 
 
 @dataclass(frozen=True)
