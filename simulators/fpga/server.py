@@ -13,7 +13,6 @@ import os
 import select
 import socket
 import threading
-import time
 import tty
 from typing import Any
 
@@ -53,16 +52,6 @@ class _SocketPort(_Port):
             return True
         except OSError:
             self.close()
-            return False
-
-    def alive(self) -> bool:
-        """Open and not at end of file (peeks; the command thread reads)."""
-        if self.closed:
-            return False
-        try:
-            ready, _, _ = select.select([self.conn], [], [], 0)
-            return not ready or self.conn.recv(1, socket.MSG_PEEK) != b""
-        except (OSError, ValueError):
             return False
 
     def recv(self, timeout_s: float) -> bytes | None:
@@ -164,7 +153,6 @@ class FpgaServer:
         self.frames_corrupted = 0
         self.frames_dropped = 0
         self.frames_lost = 0  # frames produced while no client, stalled or after a write timeout
-        self.clients_refused = 0  # connections refused while the driver's was open
         self.url = ""
 
     # --- lifecycle ------------------------------------------------------------------------------
@@ -241,29 +229,11 @@ class FpgaServer:
             except OSError:
                 return
             old = self._port
-            if isinstance(old, _SocketPort) and self._still_served(old):
-                # one client at a time, as on a serial port: while the driver's connection lives, a
-                # second one (a stray client, e.g. another process's reconnect timer that found this
-                # port number reused) is refused instead of cutting the driver off
-                conn.close()
-                self.clients_refused += 1
-                continue
             port = _SocketPort(conn)
             self._port = port
             if old is not None:
                 old.close()
             self._spawn(lambda port=port: self._command_loop(port), "fpga-commands")
-
-    def _still_served(self, port: _SocketPort, grace_s: float = 0.3) -> bool:
-        """Whether a client's connection is still open after grace_s (a driver that reconnects has
-        just closed its old one: its end of file may need a moment to be seen)."""
-        deadline = time.monotonic() + grace_s
-        while True:
-            if not port.alive():
-                return False
-            if time.monotonic() >= deadline:
-                return True
-            time.sleep(0.02)
 
     def _write(self, data: bytes) -> bool:
         port = self._port
