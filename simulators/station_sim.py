@@ -115,7 +115,13 @@ class SimStation(Station):
         self.clock.close()
 
     def truth(self) -> dict[str, float]:
-        return self.world.truth()
+        """The world's truth and what a simulator adds (the FPGA's output modes' scale factor and bias)."""
+        out = self.world.truth()
+        for handle in self.handles.values():
+            extra = getattr(handle, "truth", None)
+            if callable(extra):
+                out.update(extra())
+        return out
 
     def describe(self) -> dict[str, Any]:
         d = super().describe()

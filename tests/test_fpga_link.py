@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from bench.clock import SimClock
-from drivers.errors import DeviceError, LimitError, LinkLostError
+from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
 from drivers.fpga import FpgaLink
 from drivers.fpga import protocol as p
 from simulators.fpga import serve_fpga
@@ -313,3 +313,32 @@ def test_reconnect_after_a_link_drop():
     finally:
         link.close()
         server.stop()
+
+
+def test_a_protocol_version_mismatch_is_one_clear_message():
+    """A device of another protocol version (its stream frame differs) is refused at connect, with
+    the two versions named, and the port is closed."""
+    world = World(preset("hrg"), seed=0)
+    clock = SimClock(world)
+    server = serve_fpga(world, seed=1)
+    try:
+        server.firmware.regs["VERSION"] = 1
+        link = FpgaLink(server.url, clock=clock, timeout_s=0.5)
+        with pytest.raises(ProtocolError, match=r"protocol VERSION is 1, this driver speaks 2") as err:
+            link.connect()
+        assert "\n" not in str(err.value) and not link.connected
+    finally:
+        server.stop()
+        clock.close()
+
+
+def test_output_mode_values_are_checked_before_anything_is_written(bench):
+    _, _, server, link = bench
+    with pytest.raises(LimitError, match="output_mode='rate' is not one of whole-angle, force-to-rebalance"):
+        link.set_output_mode("rate")
+    with pytest.raises(LimitError, match="FTR_ANGLE_DEG"):
+        link.set_output_mode("force-to-rebalance", ftr_angle_deg=60.0, ftr_gain=2.0)
+    assert server.firmware.regs["FTR_GAIN"] == 1.0 and server.firmware.regs["OUTPUT_MODE"] == 0
+    link.set_output_mode("force-to-rebalance", ftr_angle_deg=10.0, ftr_gain=2.0)
+    assert link.output_mode() == "force-to-rebalance"
+    assert server.truth() == {"cvg_output_mode": 1.0, "ftr_angle_deg": 10.0, "ftr_gain": 2.0}

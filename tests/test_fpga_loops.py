@@ -187,3 +187,60 @@ def test_drift_compensation_cancels_the_damping_drift():
     d_dps = math.degrees(preset("hrg").delta_inv_tau_per_s / 4)
     assert _drift_rate_dps(False) == pytest.approx(d_dps, rel=0.1)
     assert abs(_drift_rate_dps(True)) < 0.05 * d_dps
+
+
+def test_force_to_rebalance_holds_the_wave_and_its_rate_output_is_g_k_omega():
+    """Force-to-rebalance at 0 and +-10 deg/s of case rate: the wave stays at the held angle
+    (within 0.01 deg, noise ~1e-3 deg), and the rate output averages G K (Omega - (D/4K) sin
+    4 (theta_h - theta_tau)) (docs/fpga_link.md "Output modes"): G = 3.6, K = 0.277, the drift term
+    29.33 deg/h at theta_h = 0.  Tolerance 2e-4 deg/s: the 8 s mean's noise is ~2e-5 deg/s and the
+    split's residual quadrature drift a few 1e-5."""
+    params = preset("hrg")
+    world, clock, server, link, blocks = _bench(params, state=state_from_elements(1.0, 0.0, 0.0))
+    try:
+        link.set_agc(True, 1.0)
+        link.set_quadrature_loop(True)
+        link.set_pll(True, params.f0_hz)
+        link.set_output_mode("force-to-rebalance", ftr_angle_deg=0.0, ftr_gain=3.6)
+        assert link.output_mode() == "force-to-rebalance"
+        link.set_drive_enabled(True)
+        link.start_stream(10)
+        k = params.bryan_factor
+        d_term = params.delta_inv_tau_per_s / (4 * k) * math.sin(4 * math.radians(0.0 - params.theta_tau_deg))
+        for rate in (0.0, 10.0, -10.0):
+            world.case_rate_dps = rate
+            t0 = clock.now()
+            clock.sleep(15.0)
+            rows = _rows(link, clock, blocks, t0_s=t0 + 7.0)
+            assert abs(np.mean(rows[:, 10]) % 90.0 - 0.0) < 0.01 or abs(np.mean(rows[:, 10]) % 90.0 - 90.0) < 0.01
+            want = 3.6 * k * (rate - math.degrees(d_term))
+            assert np.mean(rows[:, 11]) == pytest.approx(want, abs=2e-4)
+    finally:
+        _close(clock, server, link)
+
+
+def test_whole_angle_output_is_the_unwrapped_wave_angle():
+    """Whole-angle at 20 deg/s of case rate: angle_out_deg turns at -K Omega (-5.54 deg/s) through
+    several quarter turns without a jump (unwrapped), and agrees with the angle of the streamed
+    pickoffs; the rate output is 0 outside force-to-rebalance."""
+    params = preset("hrg")
+    world, clock, server, link, blocks = _bench(params, state=state_from_elements(1.0, 0.0, 0.0))
+    try:
+        link.set_agc(True, 1.0)
+        link.set_quadrature_loop(True)
+        link.set_drive_enabled(True)
+        link.start_stream(10)
+        world.case_rate_dps = 20.0
+        clock.sleep(40.0)
+        rows = _rows(link, clock, blocks, t0_s=10.0)
+        angle = rows[:, 10]
+        assert np.max(np.abs(np.diff(angle))) < 0.2  # 0.055 deg a frame, no 90-deg jumps
+        assert angle[0] - angle[-1] > 90.0
+        slope = np.polyfit(rows[:, 1], angle, 1)[0]
+        assert slope == pytest.approx(-params.bryan_factor * 20.0, rel=2e-3)
+        wrapped = np.degrees(orbit_elements(rows[:, 2:6])["theta_rad"])
+        # the same angle, up to the float32 rounding of the streamed pickoffs (~1e-5 deg)
+        assert np.allclose((angle - wrapped + 45.0) % 90.0 - 45.0, 0.0, atol=1e-4)
+        assert np.all(rows[:, 11] == 0.0)
+    finally:
+        _close(clock, server, link)

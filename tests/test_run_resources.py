@@ -25,6 +25,9 @@ SHORT = {
     "mems-sweep": ("sim-mems", {"n_points": 5}),
     "table-spin": ("sim-hrg", {"hold_s": 0.5}),
     "cvg-allan": ("sim-hrg-wa", {"record_s": 60.0, "settle_s": 1.0}),
+    "cvg-scale-factor": ("sim-hrg", {"max_rate_dps": 10.0, "steps": 1, "average_s": 0.5, "settle_s": 0.2,
+                                     "whole_turns": False}),
+    "cvg-bias": ("sim-hrg-ftr", {"record_s": 2.0, "turn_ons": 2, "quench_s": 1.0, "settle_s": 0.5, "batches": 2}),
 }
 
 

@@ -163,3 +163,34 @@ def test_opening_an_open_station_keeps_its_devices_and_simulators():
         assert station.open() is station
         assert station.devices == devices and station.handles == handles
     assert not station.devices and not devices["table"].heartbeat.running
+
+
+@pytest.mark.parametrize(
+    "extra, expect",
+    [
+        ('output_mode = "rate"', "output_mode='rate' is not one of whole-angle, force-to-rebalance"),
+        ("ftr_angle_deg = 50.0", "ftr_angle_deg=50 deg is above the limit 45"),
+    ],
+)
+def test_the_fpga_output_mode_keys_are_checked(tmp_path, extra, expect):
+    path = _write(tmp_path, GOOD + f'\n[devices.fpga]\ndriver = "fpga-link"\nurl = "socket://127.0.0.1:1"\n{extra}\n')
+    with pytest.raises(StationError) as info:
+        load_config(path)
+    assert str(path) in str(info.value) and "[devices.fpga]" in str(info.value)
+    assert expect in str(info.value), str(info.value)
+
+
+def test_the_force_to_rebalance_station_sets_the_fpga_at_connect():
+    """sim-hrg-ftr: its output mode, hold angle and gain reach the FPGA when the link connects; its
+    truth carries them (the scale factor G K follows), sim-hrg's truth has none of them."""
+    from bench.station import SimStation
+
+    cfg = load_config("sim-hrg-ftr")
+    assert cfg.devices["fpga"]["output_mode"] == "force-to-rebalance" and cfg.devices["fpga"]["ftr_gain"] == 3.6
+    assert load_config("sim-hrg").devices["fpga"]["output_mode"] == "whole-angle"
+    with SimStation("sim-hrg-ftr", seed=0) as st:
+        assert st.devices["fpga"].output_mode() == "force-to-rebalance"
+        truth = st.truth()
+        assert (truth["cvg_output_mode"], truth["ftr_gain"], truth["ftr_angle_deg"]) == (1.0, 3.6, 0.0)
+    with SimStation("sim-hrg", seed=0) as st:
+        assert "ftr_gain" not in st.truth()

@@ -103,6 +103,12 @@ class FpgaLink:
             ident = self.read_register("ID")
             if ident != p.FPGA_ID:
                 raise ProtocolError(f"FPGA link {self.url}: ID register is {ident:#x}, expected {p.FPGA_ID:#x}")
+            version = int(self.read_register("VERSION"))
+            if version != p.PROTOCOL_VERSION:
+                raise ProtocolError(
+                    f"FPGA link {self.url}: protocol VERSION is {version}, this driver speaks {p.PROTOCOL_VERSION} "
+                    f"(stream frames of {p.STREAM_FRAME_SIZE} bytes); update the FPGA image or the bench software"
+                )
             self.sample_period_s = float(self.read_register("SAMPLE_PERIOD_S"))
         except BaseException:
             self.close()
@@ -285,6 +291,25 @@ class FpgaLink:
         self.write_register("DRIFT_THETA_TAU_DEG", theta_tau_deg)
         self._set_bits(p.DRIFT_COMP_EN, enabled)
 
+    def set_output_mode(self, mode: str, *, ftr_angle_deg: float | None = None, ftr_gain: float | None = None) -> None:
+        """Output mode: "whole-angle" (the wave turns freely; the output is its angle) or
+        "force-to-rebalance" (the wave is held at ftr_angle_deg; the output is the rebalance force
+        through the gain ftr_gain).  Every value is checked before anything is written."""
+        if mode not in p.OUTPUT_MODES:
+            raise LimitError("output_mode", mode, "choices",
+                             message=f"output_mode={mode!r} is not one of {', '.join(p.OUTPUT_MODES)}")
+        writes = [(n, v) for n, v in (("FTR_ANGLE_DEG", ftr_angle_deg), ("FTR_GAIN", ftr_gain)) if v is not None]
+        for name, value in writes:
+            _check_register(p.BY_NAME[name], value)
+        for name, value in writes:
+            self.write_register(name, value)
+        self.write_register("OUTPUT_MODE", p.OUTPUT_MODES[mode])
+
+    def output_mode(self) -> str:
+        """The output mode the FPGA runs ("whole-angle" or "force-to-rebalance")."""
+        code = int(self.read_register("OUTPUT_MODE"))
+        return {v: k for k, v in p.OUTPUT_MODES.items()}[code]
+
     def safe_state(self) -> bool:
         """Cut drive and switch every loop off; True only when the read-back confirms it."""
         try:
@@ -318,7 +343,7 @@ class FpgaLink:
         self._streaming = False
 
     def subscribe(self, callback: StreamCallback) -> Callable[[], None]:
-        """callback(block) for every parsed block, shape (n, 10) in STREAM_COLUMNS order;
+        """callback(block) for every parsed block, shape (n, 12) in STREAM_COLUMNS order;
         returns the function that unsubscribes it."""
         with self._cond:
             self._subscribers.append(callback)

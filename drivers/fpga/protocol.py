@@ -11,8 +11,10 @@ Every frame, little-endian:
     crc   u16  CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor)
                over type..payload (everything after the sync word)
 Register values travel as 8 bytes: uint64 for integer registers, float64 for real ones.
-A stream frame's payload (48 bytes) is the sample index (u64), its time (f64) and eight float32:
-cx, sx, cy, sy, amp_ctrl, freq_ctrl, quad_ctrl, prec_ctrl.
+A stream frame's payload (60 bytes, protocol version 2) is the sample index (u64), its time (f64),
+eight float32: cx, sx, cy, sy, amp_ctrl, freq_ctrl, quad_ctrl, prec_ctrl, then the gyro's outputs:
+the wave angle angle_out_deg (f64, unwrapped: the whole-angle output) and the force-to-rebalance
+rate output rate_out_dps (f32).
 """
 
 from __future__ import annotations
@@ -70,7 +72,13 @@ ST_PLL_LOCKED = 0x04  # phase error under 0.05 rad
 ST_STREAMING = 0x08
 
 FPGA_ID = 0x46504741  # "FPGA"
-PROTOCOL_VERSION = 1
+#: 2: the stream frame gained the gyro's outputs (angle_out_deg, rate_out_dps); 72 bytes (was 60)
+PROTOCOL_VERSION = 2
+
+# --- output modes (register OUTPUT_MODE, docs/fpga_link.md "Output modes") --------------------
+MODE_WHOLE_ANGLE = 0  # rate-integrating: the wave turns freely (WHOLE_ANGLE adds a precession command)
+MODE_FORCE_TO_REBALANCE = 1  # rate: a rebalance loop holds the wave at FTR_ANGLE_DEG; its force is the output
+OUTPUT_MODES = {"whole-angle": MODE_WHOLE_ANGLE, "force-to-rebalance": MODE_FORCE_TO_REBALANCE}
 
 
 @dataclass(frozen=True)
@@ -124,6 +132,15 @@ REGISTERS: tuple[Register, ...] = (
     Register("ERR_CRC", 0x20, "u", "ro", doc="command frames the FPGA rejected (CRC or malformed)"),
     Register("ERR_CMD", 0x21, "u", "ro", doc="NACKs sent"),
     Register("FRAMES_SENT", 0x22, "u", "ro", doc="stream frames produced since the stream was enabled"),
+    # output modes (0x30-0x3F)
+    Register("OUTPUT_MODE", 0x30, "u", "rw", 0, 1, default=MODE_WHOLE_ANGLE,
+             doc="0 whole-angle (rate-integrating), 1 force-to-rebalance (rate)"),
+    Register("FTR_ANGLE_DEG", 0x31, "f", "rw", -45.0, 45.0, "deg", 0.0,
+             "force-to-rebalance: the wave angle the rebalance loop holds"),
+    Register("FTR_KP", 0x32, "f", "rw", 0.0, 1e3, "1/s", 4.0, "rebalance loop proportional gain"),
+    Register("FTR_KI", 0x33, "f", "rw", 0.0, 1e4, "1/s^2", 4.0, "rebalance loop integral gain"),
+    Register("FTR_GAIN", 0x34, "f", "rw", -1e6, 1e6, "", 1.0,
+             "rate output gain G: rate_out_dps = G degrees(F_p / (4 AGC_SETPOINT))"),
 )
 
 # --- trims held in non-volatile memory (0x40-0x4F; docs/fpga_link.md "Trims in NVM") ----------
@@ -226,13 +243,13 @@ def _crc_position_table(length: int) -> tuple[np.ndarray, int]:
     return table, crc_hqx(bytes(length), CRC_INIT)
 
 
-_CRC_BODY = 56  # a stream frame's CRC covers type..payload (STREAM_FRAME_SIZE - sync - crc)
+_CRC_BODY = 68  # a stream frame's CRC covers type..payload (STREAM_FRAME_SIZE - sync - crc)
 STREAM_CRC_TABLE, STREAM_CRC_ZEROS = _crc_position_table(_CRC_BODY)
 
 
 @njit(cache=True)
 def _frame_crc(frame: np.ndarray, table: np.ndarray, crc_zeros: int) -> int:
-    """CRC-16/CCITT-FALSE of a stream frame's bytes 2..57 (the position table of its length)."""
+    """CRC-16/CCITT-FALSE of a stream frame's bytes 2..69 (the position table of its length)."""
     crc = np.uint16(crc_zeros)
     for j in range(table.shape[0]):
         crc ^= table[j, frame[2 + j]]
@@ -274,10 +291,16 @@ STREAM_SCHEMA = declare(StreamSchema("fpga", "fpga", (
     Column("amp_ctrl", "1/s", "f4", doc="amplitude (AGC) force", quantity="amplitude control"),
     Column("freq_ctrl", "Hz", "f4", doc="reference frequency minus REF_FREQ_HZ", quantity="frequency control"),
     Column("quad_ctrl", "1/s", "f4", doc="quadrature force", quantity="quadrature control"),
-    Column("prec_ctrl", "1/s", "f4", doc="whole-angle precession force", quantity="precession control"),
+    Column("prec_ctrl", "1/s", "f4", doc="whole-angle precession force (the rebalance force in force-to-rebalance)",
+           quantity="precession control"),
+    Column("angle_out_deg", "deg", "f8", doc="wave angle in the case frame, unwrapped (whole-angle output)",
+           quantity="wave angle output"),
+    Column("rate_out_dps", "deg/s", "f4", doc="force-to-rebalance rate output G degrees(F_p / (4 a_set)); 0 otherwise",
+           quantity="rate output"),
 )))
 STREAM_COLUMNS = STREAM_SCHEMA.names
-STREAM_PAYLOAD = 48
+STREAM_PAYLOAD = 60
+N_CHANNELS = 10  # 8 float32 channels, the angle (f64) and the rate output (f32)
 STREAM_DTYPE = np.dtype(
     [
         ("sync", "<u2"),
@@ -288,10 +311,12 @@ STREAM_DTYPE = np.dtype(
         ("index", "<u8"),
         ("t_s", "<f8"),
         ("ch", "<f4", (8,)),
+        ("angle_out_deg", "<f8"),
+        ("rate_out_dps", "<f4"),
         ("crc", "<u2"),
     ]
 )
-STREAM_FRAME_SIZE = STREAM_DTYPE.itemsize  # 60
+STREAM_FRAME_SIZE = STREAM_DTYPE.itemsize  # 72
 assert STREAM_FRAME_SIZE == HEADER_SIZE + STREAM_PAYLOAD + CRC_SIZE == _CRC_BODY + 4
 
 
@@ -314,8 +339,9 @@ def _stream_template(n: int) -> np.ndarray:
 def put_stream_frame(
     frame: np.ndarray, seq: int, index: int, t_s: float, ch: np.ndarray, table: np.ndarray, crc_zeros: int
 ) -> None:
-    """Write one stream frame's seq, index, t_s, channels (8, as float32) and CRC into `frame`
-    (60 uint8) whose sync, type, length and address are set (STREAM_DTYPE's layout, little-endian).
+    """Write one stream frame's seq, index, t_s, channels (10: eight as float32, the angle as
+    float64, the rate output as float32) and CRC into `frame` (72 uint8) whose sync, type, length
+    and address are set (STREAM_DTYPE's layout, little-endian).
     Compiled, so the simulated FPGA's block kernel writes its frames without a Python step."""
     seq &= 0xFFFFFFFF
     for j in range(4):
@@ -329,18 +355,24 @@ def put_stream_frame(
         bits = np.float32(ch[c]).view(np.uint32)
         for j in range(4):
             frame[26 + 4 * c + j] = (bits >> np.uint32(8 * j)) & np.uint32(0xFF)
+    a_bits = np.float64(ch[8]).view(np.uint64)
+    for j in range(8):
+        frame[58 + j] = (a_bits >> np.uint64(8 * j)) & np.uint64(0xFF)
+    r_bits = np.float32(ch[9]).view(np.uint32)
+    for j in range(4):
+        frame[66 + j] = (r_bits >> np.uint32(8 * j)) & np.uint32(0xFF)
     crc = _frame_crc(frame, table, crc_zeros)
-    frame[58] = crc & 0xFF
-    frame[59] = crc >> 8
+    frame[70] = crc & 0xFF
+    frame[71] = crc >> 8
 
 
 @njit(cache=True)
 def _encode_frames(
     frames: np.ndarray, seq0: int, index: np.ndarray, t_s: np.ndarray, ch: np.ndarray, table: np.ndarray, crc0: int
 ) -> None:
-    row = np.empty(8)
+    row = np.zeros(N_CHANNELS)
     for i in range(frames.shape[0]):
-        for c in range(8):
+        for c in range(ch.shape[1]):
             row[c] = ch[i, c]
         put_stream_frame(frames[i], seq0 + i, index[i], t_s[i], row, table, crc0)
 
@@ -351,7 +383,8 @@ def stream_frame_buffer(n: int) -> np.ndarray:
 
 
 def encode_stream(seq0: int, index: np.ndarray, t_s: np.ndarray, channels: np.ndarray) -> bytes:
-    """Encode n stream frames at once (one compiled pass, CRC per frame): channels is (n, 8)."""
+    """Encode n stream frames at once (one compiled pass, CRC per frame): channels is (n, 10) in
+    stream order after t_s, or (n, 8) with the outputs (angle, rate) zero."""
     frames = stream_frame_buffer(len(index))
     _encode_frames(frames, int(seq0) % SEQ_MOD, np.asarray(index, np.int64), np.asarray(t_s, float),
                    np.asarray(channels, float), STREAM_CRC_TABLE, STREAM_CRC_ZEROS)  # fmt: skip
@@ -359,11 +392,13 @@ def encode_stream(seq0: int, index: np.ndarray, t_s: np.ndarray, channels: np.nd
 
 
 def stream_rows(arr: np.ndarray) -> np.ndarray:
-    """Decoded stream frames -> (n, 10) float64 block in STREAM_COLUMNS order."""
+    """Decoded stream frames -> (n, 12) float64 block in STREAM_COLUMNS order."""
     out = np.empty((len(arr), len(STREAM_COLUMNS)))
     out[:, 0] = arr["index"]
     out[:, 1] = arr["t_s"]
-    out[:, 2:] = arr["ch"]
+    out[:, 2:10] = arr["ch"]
+    out[:, 10] = arr["angle_out_deg"]
+    out[:, 11] = arr["rate_out_dps"]
     return out
 
 

@@ -9,7 +9,7 @@ from typing import Any
 from bench.devices import DriverSpec, Key, StreamSpec, register_driver
 from drivers.errors import DeviceError, LinkLostError
 
-from .protocol import STREAM_COLUMNS
+from .protocol import OUTPUT_MODES, STREAM_COLUMNS
 
 
 def _build(cfg: dict[str, Any], clock: Any) -> Any:
@@ -17,6 +17,11 @@ def _build(cfg: dict[str, Any], clock: Any) -> Any:
 
     link = FpgaLink(cfg["url"], clock=clock, timeout_s=cfg["timeout_s"])
     link.connect()
+    try:  # the station's output mode, hold angle and rate-output gain, written at connect
+        link.set_output_mode(cfg["output_mode"], ftr_angle_deg=cfg["ftr_angle_deg"], ftr_gain=cfg["ftr_gain"])
+    except BaseException:
+        link.close()
+        raise
     return link
 
 
@@ -71,6 +76,13 @@ SPEC = register_driver(
             "nvm_file": Key(str, "", doc="simulated FPGA only: file of its NVM (empty: kept with the World)"),
             "timeout_s": Key(float, 1.0, 0.01, 30.0, doc="wall time allowed for a reply", unit="s"),
             "decimation": Key(int, 1, 1, 100000, doc="stream every Nth sample"),
+            "output_mode": Key(str, "whole-angle", choices=tuple(OUTPUT_MODES),
+                               doc="whole-angle (rate-integrating: the output is the wave angle) or "
+                                   "force-to-rebalance (rate: the wave held, the rebalance force is the output)"),
+            "ftr_angle_deg": Key(float, 0.0, -45.0, 45.0, unit="deg",
+                                 doc="force-to-rebalance: the wave angle the rebalance loop holds"),
+            "ftr_gain": Key(float, 1.0, -1e6, 1e6,
+                            doc="force-to-rebalance rate-output gain G (scale factor G K, K the Bryan factor)"),
         },
         build=_build,
         serve="simulators.fpga.server:serve_station",

@@ -13,7 +13,10 @@ along the wave of the block before moves the wave itself):
   * whole-angle mode: a precession force along d q / d theta, F_p = 4 a Omega_cmd turns the wave
     at Omega_cmd; with drift compensation it adds -a D sin 4(theta - theta_tau), the force that
     cancels the damping drift dtheta/dt = (D/4) sin 4(theta - theta_tau);
-  * frequency modulation: the reference gets + A sin(2 pi f_m t) (held per block).
+  * frequency modulation: the reference gets + A sin(2 pi f_m t) (held per block);
+  * output modes (OUTPUT_MODE): whole-angle streams the wave angle (angle_out_deg, unwrapped);
+    force-to-rebalance holds the wave at FTR_ANGLE_DEG with a PI on the angle error whose force
+    F_p is the rate output rate_out_dps = FTR_GAIN degrees(F_p / (4 AGC_SETPOINT)).
 Clearing DRIVE_EN removes every force at the next block ("cut drive").
 Trims held in NVM (0x40-0x4F, docs/fpga_link.md "Trims in NVM") are loaded at power-up and applied
 whenever TRIM_EN says so; the safe state (CTRL_CLR) leaves them alone.
@@ -58,6 +61,20 @@ class FpgaFirmware:
         self._reset_loops()
         self._nvm_reload()  # power-up: the trims come from NVM
 
+    def truth(self) -> dict[str, float]:
+        """The registers the outputs' truth needs beyond the resonator's (procedures.cvg_output):
+        in force-to-rebalance its mode, hold angle and gain; nothing in whole-angle, whose scale
+        factor (-K) and bias follow from the resonator alone (so a whole-angle station's truth is
+        the resonator's)."""
+        with self.lock:
+            if int(self.regs["OUTPUT_MODE"]) != p.MODE_FORCE_TO_REBALANCE:
+                return {}
+            return {
+                "cvg_output_mode": float(p.MODE_FORCE_TO_REBALANCE),
+                "ftr_angle_deg": float(self.regs["FTR_ANGLE_DEG"]),
+                "ftr_gain": float(self.regs["FTR_GAIN"]),
+            }
+
     # --- registers (called by the server's command thread) ----------------------------------------
     def read(self, reg: p.Register) -> float:
         with self.lock:
@@ -90,6 +107,8 @@ class FpgaFirmware:
             self._prm = None  # repacked for the loop kernel at the next block
             if reg.name == "STREAM_DECIMATION":
                 self._dec_sum, self._dec_n = np.zeros(4), 0
+            if reg.name == "OUTPUT_MODE":  # the rebalance loop starts afresh in its mode
+                self._st[k.S_FTR_INT] = 0.0
             if reg.name == "REF_FREQ_HZ" and not int(self.regs["CTRL"]) & p.PLL_EN:
                 self.regs["PLL_FREQ_HZ"] = float(value)
             return self.regs[reg.name]
@@ -103,6 +122,7 @@ class FpgaFirmware:
             self._dec_sum, self._dec_n = np.zeros(4), 0
             self.regs["FRAMES_SENT"] = 0
             self.regs["STREAM_START_INDEX"] = self.regs["SAMPLE_INDEX"]
+            self._st[k.S_ANGLE_OK] = 0.0  # the angle output's unwrapping starts with the stream
         st = self._st
         if rising & p.PLL_EN:
             st[k.S_PLL_INT_HZ] = float(self.regs["PLL_FREQ_HZ"])
@@ -113,7 +133,7 @@ class FpgaFirmware:
             st[k.S_M_CC : k.S_H_S + 1] = 0.0
             self._seed_split_observer()
         if not new & p.DRIVE_EN:
-            st[k.S_AGC_INT] = st[k.S_QUAD_INT] = 0.0
+            st[k.S_AGC_INT] = st[k.S_QUAD_INT] = st[k.S_FTR_INT] = 0.0
         self.regs["CTRL"] = new
         self._prm = None  # the drift term's source (run registers or trims) follows DRIFT_COMP_EN
 
@@ -235,7 +255,7 @@ class FpgaFirmware:
                 self._u_on = False
                 st[k.S_U : k.S_U + 4] = 0.0
                 st[k.S_F_A] = st[k.S_F_Q_P] = st[k.S_F_P] = 0.0  # no force until the loops update again
-                st[k.S_OUT] = st[k.S_OUT + 2] = st[k.S_OUT + 3] = 0.0
+                st[k.S_OUT] = st[k.S_OUT + 2] = st[k.S_OUT + 3] = st[k.S_RATE_OUT] = 0.0
                 world.set_force("fpga", None)
 
     def after_block(self, world, block) -> None:
@@ -265,7 +285,7 @@ class FpgaFirmware:
             self._frames = p.stream_frame_buffer(max(len(q), 2 * len(self._frames)))
         n, self._dec_n = k.emit_frames(
             q, block.first_index, self.world.sample_period_s, dec, self._dec_sum, self._dec_n,
-            self._st[k.S_OUT : k.S_OUT + 4], self._stream_seq, self._frames, p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
+            self._st, self._stream_seq, self._frames, p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
         )  # fmt: skip
         if n == 0:
             return

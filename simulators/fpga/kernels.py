@@ -35,9 +35,11 @@ from drivers.fpga.protocol import put_stream_frame
 # loop parameters (registers), packed by FpgaFirmware when a register is written
 P_AGC_SETPOINT, P_PLL_KI, P_PLL_KP, P_FORCE_LIMIT, P_AGC_KP, P_AGC_KI, P_DRIVE_FORCE = range(7)
 P_QUAD_KP, P_QUAD_KI, P_PRECESSION_RATE_DPS, P_DRIFT_D_PER_S, P_DRIFT_THETA_TAU_DEG = range(7, 12)
+P_OUTPUT_MODE, P_FTR_ANGLE_DEG, P_FTR_KP, P_FTR_KI, P_FTR_GAIN = range(12, 17)
 PARAM_REGS = (
     "AGC_SETPOINT", "PLL_KI", "PLL_KP", "FORCE_LIMIT", "AGC_KP", "AGC_KI", "DRIVE_FORCE",
     "QUAD_KP", "QUAD_KI", "PRECESSION_RATE_DPS", "DRIFT_D_PER_S", "DRIFT_THETA_TAU_DEG",
+    "OUTPUT_MODE", "FTR_ANGLE_DEG", "FTR_KP", "FTR_KI", "FTR_GAIN",
 )  # fmt: skip
 # loop state
 S_AGC_INT, S_QUAD_INT, S_PLL_INT_HZ, S_A, S_PHASE_ERR, S_PLL_FREQ_HZ = range(6)
@@ -51,7 +53,11 @@ S_WEAK, S_F_A, S_F_Q_P, S_F_P = range(22, 26)
 # the split observer (case frame): the last block's k, applied f_q and length, whether it learned,
 # the information matrix (m_cc, m_cs, m_ss), its right-hand side (v_c, v_s) and the estimate (h_c, h_s)
 S_OBS_K, S_OBS_FQ, S_OBS_N, S_OBS_OK, S_M_CC, S_M_CS, S_M_SS, S_V_C, S_V_S, S_H_C, S_H_S = range(26, 37)
-N_STATE = 37
+# the gyro's outputs: the rate output of the block (force-to-rebalance), the last frame's unwrapped
+# angle and whether there is one (the unwrapping restarts with the stream), the rebalance integrator
+S_RATE_OUT, S_ANGLE_OUT, S_ANGLE_OK, S_FTR_INT = range(37, 41)
+N_STATE = 41
+MODE_FTR = 1  # OUTPUT_MODE's force-to-rebalance (drivers.fpga.protocol.MODE_FORCE_TO_REBALANCE)
 OBS_MEMORY_S = 100.0  # the observer forgets data older than this (exponential weight)
 OBS_RIDGE = 0.05**3  # prior weight of a zero pattern: one 50 ms block's (weights are span^3: 1/variance)
 
@@ -180,7 +186,14 @@ def update_loops(
             st[S_QUAD_INT] += prm[P_QUAD_KI] * k * t_block_s
         f_q = _clamp(f_q, limit)
     f_p = 0.0
-    if ctrl & _WHOLE_ANGLE and not weak:
+    if prm[P_OUTPUT_MODE] == MODE_FTR:
+        if not weak:  # rebalance: a PI on the angle error commands the wave's rate u; F_p = 4 a u
+            err = _wrap(theta - math.radians(prm[P_FTR_ANGLE_DEG]), 0.5 * math.pi)
+            f_p = -4.0 * a * (prm[P_FTR_KP] * err + st[S_FTR_INT])
+            if abs(f_p) < limit or f_p * err > 0:  # anti-windup: integrate only off the stop
+                st[S_FTR_INT] += prm[P_FTR_KI] * err * t_block_s
+            f_p = _clamp(f_p, limit)
+    elif ctrl & _WHOLE_ANGLE and not weak:
         f_p = 4.0 * a * math.radians(prm[P_PRECESSION_RATE_DPS])
     st[S_F_A] = f_a
     st[S_F_Q_P] = f_q
@@ -197,10 +210,12 @@ def wave_force(
     compensation evaluated there too; the outputs amp, quad, prec (S_OUT) are these forces."""
     limit = prm[P_FORCE_LIMIT]
     f_a, f_q, f_p = st[S_F_A], st[S_F_Q_P], st[S_F_P]
+    st[S_RATE_OUT] = 0.0
     if abs(st[S_T_END] - t_start_s) >= 0.5 * dt_s:  # no update from the block just before (a drive cut)
         st[S_U : S_U + 4] = 0.0
         st[S_OUT + 0] = st[S_OUT + 2] = st[S_OUT + 3] = 0.0
         return
+    ftr = prm[P_OUTPUT_MODE] == MODE_FTR
     if st[S_WEAK] > 0 or st[S_EST] <= 0:  # no wave to lock onto yet: excite along the x pickoff axis, in phase
         theta, chi, f_q, f_p = 0.0, 0.0, 0.0, 0.0
     else:
@@ -211,7 +226,7 @@ def wave_force(
         chi = st[S_CHI] + st[S_CHI_RATE] * (t_mid - st[S_T_EST]) + 2.0 * math.pi * (st[S_REF_HZ] - ref_hz) * (
             t_mid - t_start_s
         )
-        if ctrl & _WHOLE_ANGLE and ctrl & _DRIFT_COMP_EN:
+        if ctrl & _WHOLE_ANGLE and ctrl & _DRIFT_COMP_EN and not ftr:
             th_tau = math.radians(prm[P_DRIFT_THETA_TAU_DEG])
             f_p -= st[S_A] * prm[P_DRIFT_D_PER_S] * math.sin(4.0 * (theta - th_tau))
         # a turning wave: the block mean shrinks the amplitude estimate by s1 and a force held in
@@ -220,7 +235,8 @@ def wave_force(
         n_est = st[S_OBS_N]
         s1 = math.sin(n_est * x) / (n_est * math.sin(x)) if x != 0.0 and n_est > 0 else 1.0
         s2 = math.sin(n * x) / (n * x) if x != 0.0 else 1.0
-        f_p = _clamp(f_p / (s1 * s2), limit)
+        if not ftr:  # the rebalance force is the loop's own (its integrator absorbs any such factor)
+            f_p = _clamp(f_p / (s1 * s2), limit)
         if ctrl & _QUAD_EN:  # cancel the split's quadrature pumping at the predicted angle
             c4, s4 = math.cos(4.0 * theta), math.sin(4.0 * theta)
             f_q = _clamp(f_q - 2.0 * st[S_A] * (st[S_H_C] * c4 + st[S_H_S] * s4), limit)
@@ -234,6 +250,21 @@ def wave_force(
     st[S_OUT + 0] = f_a
     st[S_OUT + 2] = f_q
     st[S_OUT + 3] = f_p
+    if ftr and prm[P_AGC_SETPOINT] > 0:  # the rate output: G degrees(F_p / (4 a_set)), ratiometric
+        st[S_RATE_OUT] = prm[P_FTR_GAIN] * math.degrees(f_p / (4.0 * prm[P_AGC_SETPOINT]))
+
+
+@njit(cache=True)
+def _angle_out(row: np.ndarray, st: np.ndarray) -> None:
+    """row[8] = the wave angle (deg) of the frame's pickoffs row[0:4], unwrapped against the last
+    frame's (a quarter turn of the wave is one period of 4 theta: it must turn under 45 deg a frame)."""
+    cx, sx, cy, sy = row[0], row[1], row[2], row[3]
+    th = math.degrees(0.25 * math.atan2(2.0 * (cx * cy + sx * sy), cx * cx + sx * sx - cy * cy - sy * sy))
+    if st[S_ANGLE_OK] > 0:
+        th = st[S_ANGLE_OUT] + _wrap(th - st[S_ANGLE_OUT], 90.0)
+    st[S_ANGLE_OUT] = th
+    st[S_ANGLE_OK] = 1.0
+    row[8] = th
 
 
 @njit(cache=True)
@@ -244,25 +275,29 @@ def emit_frames(
     dec: int,
     carry: np.ndarray,
     carry_n: int,
-    outputs: np.ndarray,
+    st: np.ndarray,
     seq0: int,
     frames: np.ndarray,
     crc_table: np.ndarray,
     crc_zeros: int,
 ) -> tuple:
-    """Encode a block's stream frames into `frames` (rows of 60 bytes, constant fields preset):
+    """Encode a block's stream frames into `frames` (rows of 72 bytes, constant fields preset):
     samples i0, i0 + 1, ... (n, 4) decimated by `dec` with a boxcar (CIC-1) filter, i.e. a frame
     at every sample index divisible by dec carrying the mean of the `dec` samples ending there
     (the first frame also counts the `carry_n` samples summed in `carry` (4,) by the last block),
-    and the loop outputs (4,).  Returns (frames written, new carry_n) and updates carry."""
+    the loop outputs (S_OUT of the loop state `st`), the wave angle of the frame's pickoffs unwrapped
+    against the last frame's (S_ANGLE_OUT) and the rate output (S_RATE_OUT).  Returns (frames
+    written, new carry_n) and updates carry."""
     n = q_meas.shape[0]
-    row = np.empty(8)
+    row = np.empty(10)
     for c in range(4):
-        row[4 + c] = outputs[c]
+        row[4 + c] = st[S_OUT + c]
+    row[9] = st[S_RATE_OUT]
     if dec <= 1:
         for i in range(n):
             for c in range(4):
                 row[c] = q_meas[i, c]
+            _angle_out(row, st)
             put_stream_frame(frames[i], seq0 + i, i0 + i, float(i0 + i) * dt_s, row, crc_table, crc_zeros)
         return n, carry_n
     c0, c1, c2, c3 = 0.0, 0.0, 0.0, 0.0
@@ -283,6 +318,7 @@ def emit_frames(
             row[1] = (e1 - p1) / count
             row[2] = (e2 - p2) / count
             row[3] = (e3 - p3) / count
+            _angle_out(row, st)
             put_stream_frame(frames[nf], seq0 + nf, i0 + i, float(i0 + i) * dt_s, row, crc_table, crc_zeros)
             p0, p1, p2, p3 = e0, e1, e2, e3
             last = i

@@ -194,6 +194,10 @@ class FpgaServer:
         self._threads.append(t)
         t.start()
 
+    def truth(self) -> dict[str, float]:
+        """What the outputs' truth needs from the FPGA's registers (FpgaFirmware.truth)."""
+        return self.firmware.truth()
+
     # --- faults ---------------------------------------------------------------------------------
     def inject(self, kind: str, rate: float = 0.01) -> None:
         """'corrupt' (one byte of a frame altered, at a per-frame rate), 'drop' (stream frames

@@ -1,0 +1,141 @@
+"""What the rate-sensor (CVG) procedures share: the FPGA's output mode, the stream at the rate
+asked for, windows of the output recorded by their start and end, a turn-on of the resonator, and
+the true values of the outputs.  A parameter mixin (not a Procedure, so it is never listed) on
+top of `HrgExcitation` (excite, hold the amplitude)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from bench.analysis.cvg_rate import window_output
+from bench.engine import Param
+
+from .hrg_excitation import HrgExcitation
+
+MODES = ("whole-angle", "force-to-rebalance")
+
+
+#: the truth key of the bias's turn-on to turn-on spread (1 sigma, deg/h); absent: the World has none
+TURN_ON_SIGMA_KEY = "turn_on_bias_sigma_dph"
+
+
+def _ftr(truth: dict[str, float]) -> bool:
+    return truth.get("cvg_output_mode", 0.0) == 1.0
+
+
+def scale_factor_truth(truth: dict[str, float]) -> float:
+    """The output mode's true scale factor (docs/fpga_link.md, "Output modes"): G K in
+    force-to-rebalance (the rate output G degrees(F_p / (4 a_set)), F_p = 4 a K Omega), -K in
+    whole-angle (the wave angle turns at -K Omega)."""
+    k = truth["bryan_factor"]
+    return truth["ftr_gain"] * k if _ftr(truth) else -k
+
+
+def bias_at_dph(truth: dict[str, float], theta_deg: float) -> float:
+    """The true input-referred bias with the wave at theta: the zero-rate term minus the damping
+    drift referred to the input, (D / 4K) sin 4 (theta - theta_tau), in deg/h."""
+    import math
+
+    k = truth["bryan_factor"]
+    drift = truth["delta_inv_tau_per_s"] / (4.0 * k) * math.sin(4.0 * math.radians(theta_deg - truth["theta_tau_deg"]))
+    return 3600.0 * (truth["zero_rate_dps"] - math.degrees(drift))
+
+
+def static_bias_truth(truth: dict[str, float]) -> float:
+    """The bias of a static record after a turn-on: at the held angle in force-to-rebalance; in
+    whole-angle at 0, where a turn-on starts the wave (on the x pickoff axis)."""
+    return bias_at_dph(truth, truth["ftr_angle_deg"] if _ftr(truth) else 0.0)
+
+
+def mean_bias_truth(truth: dict[str, float]) -> float:
+    """The bias a scale-factor series measures: at the held angle in force-to-rebalance, the mean
+    over the angle in whole-angle (where the drift that turns with the wave is fitted apart)."""
+    return static_bias_truth(truth) if _ftr(truth) else 3600.0 * truth["zero_rate_dps"]
+
+
+def turn_on_sigma_truth(truth: dict[str, float]) -> float:
+    """The true turn-on to turn-on spread of the bias (0 when the World has no such process)."""
+    return truth.get(TURN_ON_SIGMA_KEY, 0.0)
+
+
+class CvgOutput(HrgExcitation):
+    """Params and helpers of the rate-sensor procedures; the procedure declares its window stream
+    (`WINDOWS`, with at least t_start_s and t_end_s) and calls these from its steps."""
+
+    stream_hz = Param(100.0, unit="Hz", low=0.01, high=1e6, doc="FPGA stream rate during the run (boxcar-decimated)")
+    earth_rate_dph = Param(0.0, unit="deg/h", low=-20.0, high=20.0,
+                           doc="Earth's rate on the sensitive axis, removed from the bias "
+                               "(bench.analysis.cvg_rate.earth_rate_projection_dph from latitude and axis)")
+    settle_s = Param(5.0, unit="s", low=0.0, high=3600.0, doc="wait after the rate is stable, before averaging")
+
+    _mode: str = "whole-angle"
+    _ki_restore: bool = False
+
+    def _start_output(self, ctx) -> str:
+        """Read the FPGA's output mode (the station's `output_mode`) and stream at stream_hz for the
+        rest of the run (the station's decimation is restored at its end)."""
+        fpga = ctx.devices.fpga
+        mode = fpga.output_mode()
+        if mode not in MODES:
+            raise RuntimeError(f"FPGA output mode {mode!r} is not one of {MODES}")
+        self._mode = mode
+        dec = max(1, int(round(1.0 / (self.stream_hz * fpga.sample_period_s))))
+        old = int(fpga.read_register("STREAM_DECIMATION"))
+        if dec != old:
+            fpga.start_stream(dec)
+            ctx.defer(lambda: fpga.start_stream(old) if fpga.connected else None, "restore the stream decimation")
+        ctx.log.info(f"output mode {mode}; streaming at {1.0 / (dec * fpga.sample_period_s):g} Hz")
+        return mode
+
+    def _record_window(self, ctx, seconds: float) -> tuple[float, float]:
+        """Let the bench clock run `seconds` (in slices, for progress and abort); (t_start, t_end)."""
+        fpga = ctx.devices.fpga
+        fpga.sync()
+        t0 = ctx.clock.now()
+        n = max(1, int(np.ceil(seconds / 10.0)))
+        for _ in range(n):
+            ctx.sleep(seconds / n)
+        fpga.sync()
+        return t0, ctx.clock.now()
+
+    def _turn_on(self, ctx, quench_s: float) -> None:
+        """A turn-on from a quiet resonator, as a cold start: the amplitude loop alone, proportional
+        only and set to zero, damps the wave (at AGC_KP / 2 per s; the PLL and the quadrature loop
+        are off meanwhile, so neither chases a vanishing wave), the drive is cut, then the loops
+        start again: the FPGA excites along the x pickoff axis (the wave starts at angle 0) and the
+        amplitude is held at the setpoint."""
+        fpga = ctx.devices.fpga
+        ki = float(fpga.read_register("AGC_KI"))
+        if not self._ki_restore:  # whatever ends the run, the amplitude loop gets its integral gain back
+            self._ki_restore = True
+            ctx.defer(lambda: fpga.write_register("AGC_KI", ki) if fpga.connected else None, "restore AGC_KI")
+        fpga.set_pll(False)
+        fpga.set_quadrature_loop(False)
+        fpga.set_agc(False)
+        fpga.write_register("AGC_KI", 0.0)
+        try:
+            fpga.set_agc(True, 0.0)  # rising AGC_EN clears the integrator: a force -AGC_KP a
+            ctx.sleep(quench_s)
+            fpga.set_drive_enabled(False)
+        finally:
+            fpga.write_register("AGC_KI", ki)
+        ctx.sleep(0.5)
+        self._start_loops(ctx)
+        self._hold_amplitude(ctx)
+
+
+def window_outputs(data: Any, windows: dict[str, np.ndarray], mode: str) -> np.ndarray:
+    """(m, 3): each window's output (mean rate output, or rate of the angle) and the means of
+    cos 4 theta and sin 4 theta over it weighted alike (`window_output`), from the `fpga` stream."""
+    fpga = data.table("fpga")
+    t = fpga["t_s"]
+    boxes = windows.get("box_s", np.zeros(len(windows["t_start_s"])))
+    out = []
+    for t0, t1, box_s in zip(windows["t_start_s"], windows["t_end_s"], boxes, strict=True):
+        sel = (t > t0) & (t <= t1)
+        if sel.sum() < 3:
+            raise RuntimeError(f"the window {t0:.2f}-{t1:.2f} s holds {int(sel.sum())} stream samples; 3 are needed")
+        out.append(window_output(t[sel], fpga["rate_out_dps"][sel], fpga["angle_out_deg"][sel], mode, float(box_s)))
+    return np.array(out)
