@@ -198,6 +198,7 @@ class Station:
             "simulated": self.simulated,
             "simulation": self.config.simulation,
             "devices": self.config.devices,
+            "keys": self.config.station,  # [station]: kind, latitude and sensitive axis, ...
         }
 
     def check_links(self) -> None:

@@ -93,12 +93,13 @@ class CvgBias(CvgOutput, Procedure):
         win = data.table(WINDOWS.name)
         fpga = data.table("fpga")
         t = fpga["t_s"]
+        earth_dph = self.earth_rate_on_axis_dph(data)
         out = []
         for t0, t1, mode, sf in zip(win["t_start_s"], win["t_end_s"], win["mode"], win["scale_factor"], strict=True):
             sel = (t > t0) & (t <= t1)
             name = MODES[int(mode)]
             y = fpga["rate_out_dps"][sel] if name == "force-to-rebalance" else fpga["angle_out_deg"][sel]
-            out.append(static_bias(t[sel], y, mode=name, scale_factor=float(sf), earth_rate_dph=self.earth_rate_dph,
+            out.append(static_bias(t[sel], y, mode=name, scale_factor=float(sf), earth_rate_dph=earth_dph,
                                    n_batches=self.batches))
         return out
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.analysis.cvg_rate import window_output
+from bench.analysis.cvg_rate import earth_rate_projection_dph, window_output
 from bench.engine import Param
 
 from .hrg_excitation import HrgExcitation
@@ -18,7 +18,7 @@ MODES = ("whole-angle", "force-to-rebalance")
 
 
 #: the truth key of the bias's turn-on to turn-on spread (1 sigma, deg/h); absent: the World has none
-TURN_ON_SIGMA_KEY = "turn_on_bias_sigma_dph"
+TURN_ON_SIGMA_KEY = "turn_on_bias_sd_dph"  # simulators/physics/noise.py
 
 
 def _ftr(truth: dict[str, float]) -> bool:
@@ -45,14 +45,17 @@ def bias_at_dph(truth: dict[str, float], theta_deg: float) -> float:
 
 def static_bias_truth(truth: dict[str, float]) -> float:
     """The bias of a static record after a turn-on: at the held angle in force-to-rebalance; in
-    whole-angle at 0, where a turn-on starts the wave (on the x pickoff axis)."""
-    return bias_at_dph(truth, truth["ftr_angle_deg"] if _ftr(truth) else 0.0)
+    whole-angle at 0, where a turn-on starts the wave (on the x pickoff axis); plus the mean of the
+    turn-on bias the World draws (its spread is the repeatability's truth)."""
+    return bias_at_dph(truth, truth["ftr_angle_deg"] if _ftr(truth) else 0.0) + truth.get("turn_on_bias_mean_dph", 0.0)
 
 
 def mean_bias_truth(truth: dict[str, float]) -> float:
     """The bias a scale-factor series measures: at the held angle in force-to-rebalance, the mean
     over the angle in whole-angle (where the drift that turns with the wave is fitted apart)."""
-    return static_bias_truth(truth) if _ftr(truth) else 3600.0 * truth["zero_rate_dps"]
+    if _ftr(truth):
+        return static_bias_truth(truth)
+    return 3600.0 * truth["zero_rate_dps"] + truth.get("turn_on_bias_mean_dph", 0.0)
 
 
 def turn_on_sigma_truth(truth: dict[str, float]) -> float:
@@ -66,11 +69,24 @@ class CvgOutput(HrgExcitation):
 
     stream_hz = Param(100.0, unit="Hz", low=0.01, high=1e6, doc="FPGA stream rate during the run (boxcar-decimated)")
     earth_rate_dph = Param(0.0, unit="deg/h", low=-20.0, high=20.0,
-                           doc="Earth's rate on the sensitive axis, removed from the bias "
-                               "(bench.analysis.cvg_rate.earth_rate_projection_dph from latitude and axis)")
+                           doc="Earth's rate on the sensitive axis, removed from the bias; 0 = from the station "
+                               "file's latitude_deg and axis (earth_rate_projection_dph), 0 when it gives none")
     settle_s = Param(5.0, unit="s", low=0.0, high=3600.0, doc="wait after the rate is stable, before averaging")
 
     _mode: str = "whole-angle"
+
+    def earth_rate_on_axis_dph(self, data) -> float:
+        """Earth's rate to remove: the parameter when set, else the projection on the sensitive
+        axis from the recorded station's latitude_deg, axis_elevation_deg, axis_azimuth_deg (its
+        file's [station] keys; a run's raw file keeps them, so `analyze` gives the same)."""
+        if self.earth_rate_dph:
+            return float(self.earth_rate_dph)
+        station = data.attrs.get("station") if hasattr(data, "attrs") else None
+        st = station.get("keys", {}) if isinstance(station, dict) else {}
+        if "latitude_deg" not in st:
+            return 0.0
+        return earth_rate_projection_dph(st["latitude_deg"], azimuth_deg=st.get("axis_azimuth_deg", 0.0),
+                                         elevation_deg=st.get("axis_elevation_deg", 90.0))
     _ki_restore: bool = False
 
     def _start_output(self, ctx) -> str:

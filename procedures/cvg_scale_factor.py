@@ -121,7 +121,8 @@ class CvgScaleFactor(CvgOutput, Procedure):
         mode = MODES[int(win["mode"][-1])]
         out = window_outputs(data, win, mode)
         basis = out[:, 1:3] if mode == "whole-angle" else None
-        return fit_scale_factor(win["rate_dps"], out[:, 0], drift_basis=basis, earth_rate_dph=self.earth_rate_dph)
+        return fit_scale_factor(win["rate_dps"], out[:, 0], drift_basis=basis,
+                                earth_rate_dph=self.earth_rate_on_axis_dph(data))
 
     @staticmethod
     def _results(fit) -> list[Result]:

@@ -14,11 +14,11 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
+from bench.analysis.cvg_rate import EARTH_RATE_DPH  # noqa: F401 - Earth's sidereal rate, deg/h
+
 from .kernels import drift_noise_fill
 
 DEG = math.pi / 180.0
-#: Earth's sidereal rate, deg/h (7.2921150e-5 rad/s)
-EARTH_RATE_DPH = math.degrees(7.2921150e-5) * 3600.0
 #: each process's stream of random numbers: SeedSequence(world seed, spawn_key=(id,)) (the turn-on
 #: bias: spawn_key=(4, turn-on number)); the pickoff noise keeps the world seed itself (its draws are
 #: those of sim-hrg before the noise model)
@@ -125,8 +125,9 @@ def earth_rate_dph(latitude_deg: float, axis_elevation_deg: float = 90.0, axis_a
     """Earth's rate on a sensitive axis at a latitude: the axis at an elevation above the local
     horizontal (90 = up) and an azimuth from north toward east.  Earth's rate vector in (north,
     east, up) is W (cos phi, 0, sin phi): up gives W sin phi, north W cos phi, east 0."""
-    phi, el, az = (math.radians(v) for v in (latitude_deg, axis_elevation_deg, axis_azimuth_deg))
-    return EARTH_RATE_DPH * (math.cos(phi) * math.cos(el) * math.cos(az) + math.sin(phi) * math.sin(el))
+    from bench.analysis.cvg_rate import earth_rate_projection_dph  # one formula for the world and the analysis
+
+    return earth_rate_projection_dph(latitude_deg, azimuth_deg=axis_azimuth_deg, elevation_deg=axis_elevation_deg)
 
 
 def process_rng(seed: int, process: str) -> np.random.Generator:
