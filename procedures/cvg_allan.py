@@ -17,7 +17,6 @@ from typing import Any
 import numpy as np
 
 from bench.analysis.allan import NoiseTerms, adev_band, allan_deviation, read_noise_terms
-from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, step
 from bench.engine.streams import Column, StreamSchema, declare
 
@@ -41,14 +40,11 @@ def _truth_or_zero(key: str):
     return lambda truth: truth.get(key, 0.0)
 
 
-def rate_from_stream(t_s: np.ndarray, cx: np.ndarray, sx: np.ndarray, cy: np.ndarray, sy: np.ndarray,
-                     bryan_factor: float) -> tuple[np.ndarray, np.ndarray]:
-    """The gyro's rate output in whole-angle mode (deg/h) between stream samples: the wave angle's
-    derivative divided by -K (the wave lags the case), at the midpoints.  The one place the rate is
-    taken from the stream: an output-mode column would replace this."""
-    theta = np.unwrap(4.0 * orbit_elements(np.column_stack([cx, sx, cy, sy]))["theta_rad"]) / 4.0
-    rate_rad_s = -np.diff(theta) / np.diff(t_s) / bryan_factor
-    return 0.5 * (t_s[1:] + t_s[:-1]), np.degrees(rate_rad_s) * 3600.0
+def rate_from_stream(t_s: np.ndarray, angle_out_deg: np.ndarray, bryan_factor: float) -> tuple[np.ndarray, np.ndarray]:
+    """The gyro's rate output in whole-angle mode (deg/h) between stream samples: the FPGA's
+    wave-angle output's derivative divided by -K (the wave lags the case), at the midpoints."""
+    rate_dps = -np.diff(np.asarray(angle_out_deg, dtype=float)) / np.diff(t_s) / bryan_factor
+    return 0.5 * (t_s[1:] + t_s[:-1]), rate_dps * 3600.0
 
 
 class CvgAllan(HrgExcitation, Procedure):
@@ -79,7 +75,7 @@ class CvgAllan(HrgExcitation, Procedure):
 
     def __init__(self, params: dict[str, Any] | None = None) -> None:
         super().__init__(params)
-        self._tap = _StreamTap()
+        self._tap = _StreamTap(("t_s", "angle_out_deg"))
         self._rows: np.ndarray | None = None
 
     def demands(self) -> list:
@@ -139,7 +135,7 @@ class CvgAllan(HrgExcitation, Procedure):
         win = data.table(WINDOW)
         t0, t1, hz = win["t_start_s"][-1], win["t_end_s"][-1], win["stream_hz"][-1]
         fpga = data.table("fpga")
-        rows = np.column_stack([fpga[c] for c in ("t_s", "cx", "sx", "cy", "sy")])
+        rows = np.column_stack([fpga[c] for c in ("t_s", "angle_out_deg")])
         rows = rows[(rows[:, 0] > t0) & (rows[:, 0] <= t1)]
         return _analyse(rows, float(hz), self.bryan_factor, self.confidence)[0]
 

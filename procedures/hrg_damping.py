@@ -50,10 +50,11 @@ _MAX_CURVE_POINTS = 2000
 
 
 class _StreamTap:
-    """Keeps the FPGA stream rows (t_s, cx, sx, cy, sy) while `on` (runs on the link's reader
-    thread: appends only)."""
+    """Keeps the FPGA stream's named columns (t_s, cx, sx, cy, sy unless told) while `on` (runs on
+    the link's reader thread: appends only)."""
 
-    def __init__(self) -> None:
+    def __init__(self, columns: tuple[str, ...] = _TAP) -> None:
+        self.columns = tuple(columns)
         self.on = False
         self._rows: list[np.ndarray] = []
         self._lock = threading.Lock()
@@ -61,7 +62,7 @@ class _StreamTap:
     def __call__(self, block: np.ndarray) -> None:
         if self.on:
             with self._lock:
-                self._rows.append(FPGA.columns_of(block, *_TAP))
+                self._rows.append(FPGA.columns_of(block, *self.columns))
 
     def stop(self) -> None:
         """Keep nothing more and drop what is kept (the run has ended)."""
@@ -71,7 +72,7 @@ class _StreamTap:
 
     def take(self, t_start_s: float, t_end_s: float) -> np.ndarray:
         with self._lock:
-            rows = np.vstack(self._rows) if self._rows else np.empty((0, 5))
+            rows = np.vstack(self._rows) if self._rows else np.empty((0, len(self.columns)))
             self._rows.clear()
         return rows[(rows[:, 0] > t_start_s) & (rows[:, 0] <= t_end_s)]
 
