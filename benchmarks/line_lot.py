@@ -76,6 +76,9 @@ def main() -> int:
     missing = [r["serial"] for r in records if not Path(r["record_file"]).is_file()
                or any(run["sha256"] is None for run in r["runs"])]
     print(f"  records with a missing file or raw-file checksum: {len(missing)}")
+    no_docs = [r["serial"] for r in records if not Path(r.get("documents", {}).get("certificate", "")).is_file()]
+    comps = sum(Path(r.get("documents", {}).get("compensation", "")).is_file() for r in records)
+    print(f"  attempts without a certificate: {len(no_docs)}; with a compensation file: {comps} of {len(records)}")
     db = LineDB(url)
     t1 = time.perf_counter()
     s = summarize(db, lot=js["lot"])

@@ -44,14 +44,16 @@ def write_raw(path, run_id: str = "r1", n: int = 4321, outcome: str | None = "CO
     rows = np.column_stack([np.arange(n) * 1e-3, rng.normal(size=(n, 4)) * 1e-3 + [1.0, 0.0, 0.0, 0.0]])
     rec = Recorder(path, {"run_id": run_id, "procedure": "hrg-free-decay", "station_id": "sim-hrg",
                           "params": {"record_s": 3.0, "rate_dps": 200.0}, "simulated": True,
-                          "station": {"id": "sim-hrg", "devices": {"table": {"driver": "modbus-table"}}}},
+                          "station": {"id": "sim-hrg", "devices": {"table": {"driver": "modbus-table"}}},
+                          "truth": {"tau_s": 300.0}},
                    {"record_s": "s", "rate_dps": "deg/s"})
     for i in range(0, n, 1000):
         rec.on_event(ev.SampleBlock(run_id, rows[min(i + 999, n - 1), 0], stream="fpga", columns=Q_COLS,
                                     data=rows[i:i + 1000]))
     rec.on_event(ev.SampleBlock(run_id, 1.0, stream="table", columns=("t_s", "rate_dps"),
                                 data=np.array([[0.0, 0.0], [1.0, 200.0]])))
-    rec.on_event(ev.Measurement(run_id, 1.0, name="tau_s", value=299.5, unit="s", outcome="COMPLETE"))
+    rec.on_event(ev.Measurement(run_id, 1.0, name="tau_s", value=299.5, unit="s", outcome="COMPLETE",
+                                ci95=(298.0, 301.0)))
     rec.close()
     if outcome is not None:
         with h5py.File(path, "a") as f:
@@ -239,3 +241,19 @@ def test_history_browser_on_a_store_that_is_down_says_so_in_one_line(qtbot):
     text = win.count.text()
     assert text.startswith("results store postgresql+psycopg://nobody@127.0.0.1:9/nothing") and "\n" not in text
     assert "Traceback" not in text and win.model.rowCount() == 0 and "c00000" in win.count.styleSheet()
+
+
+def test_replay_shows_the_recorded_interval_and_the_declared_truth(tmp_path, qtbot):
+    """The replay's results table holds what the live one showed: the 95 % interval from the file and
+    the truth its procedure declares, from the truth the file recorded."""
+    from bench.gui.replay_view import ReplayWindow
+
+    raw = tmp_path / "run.h5"
+    write_raw(raw)
+    win = ReplayWindow(raw)
+    qtbot.addWidget(win)
+    t = win.results.table
+    heads = [t.horizontalHeaderItem(c).text() for c in range(t.columnCount())]
+    row = {h: (t.item(0, c).text() if t.item(0, c) else "") for c, h in enumerate(heads)}
+    assert row["measurement"] == "tau_s" and "298" in row["95% interval"] and "301" in row["95% interval"]
+    assert row["truth"].startswith("300"), row

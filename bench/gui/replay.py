@@ -148,9 +148,19 @@ def replay_events(path: str | Path) -> list[ev.Event]:
         out.append(ev.Measurement(run_id, float(row.get("t_sim_s", t_end)), name=str(row.get("name", "?")),
                                   value=float(row.get("value", float("nan"))), unit=str(row.get("unit", "")),
                                   low=row.get("low"), high=row.get("high"),
-                                  outcome=str(row.get("outcome", "COMPLETE")), dut=row.get("dut")))
+                                  outcome=str(row.get("outcome", "COMPLETE")), dut=row.get("dut"),
+                                  ci95=_interval(row.get("ci95"))))
     out.append(ev.StepFinished(run_id, t_end, name="replay", index=0))
     out.append(ev.RunFinished(run_id, t_end, outcome=_text(attrs.get("outcome", "COMPLETE")),
                               end_reason=f"replay of {path.name}", safe_state=bool(attrs.get("safe_state", False)),
                               raw_file=str(path)))
     return out
+
+
+def _interval(value: Any) -> tuple[float, float] | None:
+    """A recorded 95 % interval as (low, high), or None when the row has none."""
+    try:
+        lo, hi = value
+        return float(lo), float(hi)
+    except (TypeError, ValueError):
+        return None

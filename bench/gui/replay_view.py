@@ -238,6 +238,7 @@ class ReplayWindow(QMainWindow):
         self.station.expandToDepth(0)
         self.station.resizeColumnToContents(0)
         self.params.resizeRowsToContents()
+        self.results.set_truth(_recorded_truths(a))
         self._apply(rec.events)
         self.results.set_report(str(rec.path))
         self.statusBar().showMessage(f"replay of {rec.path}")
@@ -256,7 +257,7 @@ class ReplayWindow(QMainWindow):
             elif isinstance(e, ev.FitUpdate):
                 self.plots.set_fit(e.name, e.curves)
             elif isinstance(e, ev.Measurement):
-                self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut)
+                self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut, ci95=e.ci95)
             elif isinstance(e, ev.Log):
                 self.log.add(e.t_sim_s, e.level, e.message)
             elif isinstance(e, ev.RunFinished):
@@ -294,3 +295,16 @@ class ReplayWindow(QMainWindow):
         self.plots.shutdown()
         super().closeEvent(event)
 
+
+def _recorded_truths(attrs: dict[str, Any]) -> dict[str, float]:
+    """The true value of each declared measurement from the truth the file recorded (a simulated
+    run; a real one has none), by the procedure's declarations, as the live window shows it."""
+    truth = attrs.get("truth")
+    if not isinstance(truth, dict):
+        return {}
+    try:
+        from procedures import find_procedure
+
+        return find_procedure(str(attrs.get("procedure", ""))).truth_for(truth)
+    except Exception:  # noqa: BLE001 - an unknown or renamed procedure: no truth column
+        return {}
