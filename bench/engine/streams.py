@@ -66,14 +66,17 @@ class StreamSchema:
         if len(set(names)) != len(names):
             raise ValueError(f"stream {self.name!r}: a column name repeats in {names}")
         self._index.update({n: i for i, n in enumerate(names)})
+        # computed once: every block on the stream path compares its columns with them
+        object.__setattr__(self, "_names", tuple(names))
+        object.__setattr__(self, "_units", tuple(c.unit for c in self.columns))
 
     @property
     def names(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.columns)
+        return self._names  # type: ignore[attr-defined]
 
     @property
     def units(self) -> tuple[str, ...]:
-        return tuple(c.unit for c in self.columns)
+        return self._units  # type: ignore[attr-defined]
 
     def index(self, name: str) -> int:
         """Position of a column (KeyError naming the stream's columns if there is none)."""
