@@ -96,6 +96,15 @@ class StreamSchema:
         """Some columns of a block by name, in the order given."""
         return np.asarray(block)[..., self.indices(*names)]
 
+    def row(self, **values: float) -> np.ndarray:
+        """One row (float64, in the declared order) from values by column name; every column
+        must be given, and only those."""
+        missing = [n for n in self.names if n not in values]
+        extra = sorted(set(values) - set(self.names))
+        if missing or extra:
+            raise ValueError(f"stream {self.name!r}: row misses {missing} / has unknown columns {extra}")
+        return np.array([float(values[n]) for n in self.names])
+
     def legends(self) -> dict[str, dict[int, str]]:
         return {c.name: dict(c.legend) for c in self.columns if c.legend}
 
