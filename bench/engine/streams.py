@@ -109,9 +109,11 @@ class StreamSchema:
         return {c.name: dict(c.legend) for c in self.columns if c.legend}
 
 
-def schema_from_attrs(name: str, columns: tuple[str, ...], attrs: Mapping) -> StreamSchema | None:
+def schema_from_attrs(name: str, columns: tuple[str, ...], attrs: Mapping,
+                      legends: Mapping[str, Mapping[int, str]] | None = None) -> StreamSchema | None:
     """The declaration a raw file stored with a stream (its dataset's `units`, `dtypes`,
-    `source`, `legend_<column>` attributes); None for a file written before declarations."""
+    `source` attributes; `legends` as bench.recorder.stored_legends reads them, else the
+    `legend_<column>` attributes of older files); None for a file written before declarations."""
     import json
 
     def text(v) -> str:
@@ -124,8 +126,11 @@ def schema_from_attrs(name: str, columns: tuple[str, ...], attrs: Mapping) -> St
     dtypes = [text(d) for d in dtypes] if dtypes is not None and len(dtypes) == len(columns) else ["f8"] * len(columns)
     cols = []
     for c, u, d in zip(columns, units, dtypes, strict=True):
-        legend = attrs.get(f"legend_{c}")
-        legend = {int(k): v for k, v in json.loads(text(legend)).items()} if legend is not None else None
+        if legends is not None:
+            legend = legends.get(c)
+        else:
+            legend = attrs.get(f"legend_{c}")
+            legend = {int(k): v for k, v in json.loads(text(legend)).items()} if legend is not None else None
         cols.append(Column(c, text(u), d, legend=legend))
     return StreamSchema(name, text(attrs.get("source", name)), tuple(cols))
 
