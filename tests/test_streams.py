@@ -54,6 +54,9 @@ def test_schema_by_name():
     with pytest.raises(KeyError, match="not declared"):
         schema_of("no_such_stream")
     assert [unit_from_name(n) for n in ("tau_s", "drift_dph", "f0_hz", "energy")] == ["s", "deg/h", "Hz", "1"]
+    np.testing.assert_array_equal(s.row(k=2, t_s=0.5, v=1.5), [0.5, 1.5, 2.0])  # a row built by name
+    with pytest.raises(ValueError, match=r"misses \['v'\]"):
+        s.row(t_s=0.5, k=2)
 
 
 def test_every_stream_is_declared_before_its_first_block(damping_run):
