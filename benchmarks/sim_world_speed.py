@@ -10,13 +10,23 @@ per wall second (the target) and per CPU second of this process (less sensitive 
 Run: .venv/bin/python benchmarks/sim_world_speed.py [--only a,b,c] [--repeat 3] [--device-s 120]
 
 Measured 2026-11-23 on 2 shared cores, load average 8-10 from other jobs, 4 interleaved rounds
-(the tree before issue 14 item 6 against after; medians, x real time per wall s / per CPU s):
+(the tree before issue 14 item 6 against after the compiled kernels; medians, x real time per wall s / per CPU s):
   (a) free-decay World        1,375 / 4,750   ->  3,100 /  9,450
   (b) device world               34 /   115   ->    650 /  2,050  (another round, load 8-10: 1,770 / 2,700)
   (c) hrg-damping, 1108 s        63 /   113   ->    108 /    216
-(c) is now dominated by the engine's link health checks (a table status, a SCPI query and an
-FPGA read every 0.35 simulated s, ~0.84 ms wall each here: ~2/3 of its time) and the stream path
-(link reader thread, recorder); the simulated devices are ~10 % of it.
+Then (same day, a quiet moment, load 0.7-2.0; this script run on d4c1594 and on the tree after
+the stream/grid/worker changes, alternately, twice each, medians of 3 rounds):
+  (a)  12,868 / 12,883  ->  13,059 / 13,117            (per wall s, two processes each; ~13,000 per CPU s both)
+  (b)   2,911 /  3,016  ->   3,098 /  3,049            (~3,000 per CPU s both)
+  (c)       302 /    237  ->     372 /    319  (the script of d4c1594, which imported the simulators
+        at its top, so `ctx.compute`'s worker paid numba's import: ~0.4 s a run)
+  (c)       339 /    436  ->     453 /    410  (this script on both trees; per CPU s 302 / 438 -> 453 / 404)
+(c) is still far from 1000x: the link checks at every 0.4 s grid point (a Modbus status read and a
+SCPI *IDN? through the simulators' asyncio servers) cost about as much CPU as everything else
+together (switching them off, for diagnosis only, gave 1.25 instead of 3.1-3.7 CPU s a run under
+load), then the stream path (link reader, bus, writer thread, HDF5 recorder: ~0.5 CPU s) and the
+1 kHz stream outside the decay record (~200 k frames).  The compute worker (fork + fit, ~0.1-0.3 s
+wall) is not in the per-CPU-s figures (another process).
 """
 
 from __future__ import annotations
