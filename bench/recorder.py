@@ -1,12 +1,13 @@
 """Raw data of a run: one HDF5 file, written as the events arrive, readable after a crash.
 
 Layout: `/streams/<name>` (rows x columns float64, chunked; attributes `columns`, `units`,
-`dtypes`, `source` and `legend_<column>` from the stream's declaration, bench.engine.streams),
-`/parameters/<name>` (scalars with `units`), `/log` and
-`/measurements` (one JSON string a row, appended as they happen), `/fits/<name>/<curve>` (with
-`units`, from the curve's name), and the
-run's attributes on the root (params, station, software_version, truth when simulated,
-procedure, run_id, ...; outcome, end_reason and safe_state once the run ends).  The file is
+`dtypes` and `source` from the stream's declaration, bench.engine.streams),
+`/legends/<stream>/<column>` (a coded column's legend as a named HDF5 enum type, which h5dump
+shows with its meanings; files written before these hold `legend_<column>` JSON attributes,
+still read), `/parameters/<name>` (scalars with `units`), `/log` and `/measurements` (one JSON
+string a row, appended as they happen), `/fits/<name>/<curve>` (with `units`, from the curve's
+name), and the run's attributes on the root (params, station, software_version, truth when
+simulated, procedure, run_id, ...; outcome, end_reason and safe_state once the run ends).  The file is
 flushed whenever a second of data (bench-clock time) or a second of wall time has passed since
 the last flush, so a process killed mid-run leaves a readable file with all but the last second.
 
@@ -272,8 +273,8 @@ class Recorder:
 
     def _describe(self, ds: h5py.Dataset, stream: str, columns: tuple[str, ...]) -> None:
         """A stream's declaration in its dataset's attributes: `columns`, `units`, `dtypes` (each
-        column's own type; the table is stored as float64), `source` and a `legend_<column>`
-        (JSON, code -> meaning) for each coded column.  A stream announced by no StreamDeclared
+        column's own type; the table is stored as float64) and `source`; each coded column's legend
+        is the enum type /legends/<stream>/<column> (code -> meaning).  A stream announced by no StreamDeclared
         event takes the schema declared under its name if the columns agree, or else units from
         its column names (a file written outside a run)."""
         schema = self._schemas.get(stream)
@@ -293,8 +294,12 @@ class Recorder:
         ds.attrs["units"] = np.array(schema.units, dtype=_STR)
         ds.attrs["quantities"] = np.array(schema.quantities, dtype=_STR)
         ds.attrs["dtypes"] = np.array([c.dtype for c in schema.columns], dtype=_STR)
-        for col, legend in schema.legends().items():
-            ds.attrs[f"legend_{col}"] = _json({str(k): v for k, v in legend.items()})
+        for col in schema.columns:  # a coded column's legend is an HDF5 enum type: /legends/<stream>/<column>
+            if col.legend:
+                grp = self._f.require_group(f"legends/{stream}")
+                if col.name not in grp:
+                    base = np.dtype(col.dtype) if np.dtype(col.dtype).kind in "iu" else np.dtype("i8")
+                    grp[col.name] = h5py.enum_dtype({meaning: code for code, meaning in col.legend}, basetype=base)
 
     def _write_parameters(self, params: dict[str, Any], units: dict[str, str]) -> None:
         """The run's parameters as `/parameters/<name>` scalars, each with its `units`."""
@@ -624,9 +629,7 @@ class RunData:
 
     def legends(self, stream: str) -> dict[str, dict[int, str]]:
         """The coded columns' legends (code -> meaning), from the stream's declaration."""
-        attrs = self._stream(stream).attrs
-        return {c: {int(k): v for k, v in json.loads(attrs[f"legend_{c}"]).items()}
-                for c in self.columns(stream) if f"legend_{c}" in attrs}
+        return stored_legends(self.f, stream, self._stream(stream).attrs)
 
     def array(self, stream: str) -> np.ndarray:
         return self._stream(stream)[...]
@@ -666,6 +669,24 @@ def _fit_columns(name: str) -> dict[str, Any]:
         return {c.name: c for c in schema_of(name).columns}
     except KeyError:
         return {}
+
+
+def stored_legends(f: h5py.File, stream: str, attrs: Any) -> dict[str, dict[int, str]]:
+    """A stream's legends (column -> code -> meaning) from the enum types under /legends/<stream>,
+    or, in a file written before those, from its dataset's `legend_<column>` JSON attributes."""
+    out: dict[str, dict[int, str]] = {}
+    grp = f.get("legends")
+    if grp is not None and stream in grp:
+        for col, typ in grp[stream].items():
+            mapping = h5py.check_enum_dtype(typ.dtype)
+            if mapping:
+                out[col] = {int(code): meaning for meaning, code in sorted(mapping.items(), key=lambda kv: kv[1])}
+    for key in attrs:
+        if key.startswith("legend_") and key[len("legend_"):] not in out:
+            value = attrs[key]
+            value = value.decode() if isinstance(value, bytes) else str(value)
+            out[key[len("legend_"):]] = {int(k): v for k, v in json.loads(value).items()}
+    return out
 
 
 def open_run(path: str | Path) -> RunData:

@@ -83,9 +83,9 @@ def __getattr__(name: str) -> Any:
 class Station:
     """Devices by role, the bench clock, the safe state and the link checks of one station."""
 
-    # a fault is found within 0.5 simulated s: checks come at clock-slice ends (<= 0.1 s apart) once
-    # 0.35 s have passed, so at most 0.45 s after the fault (every 4th 0.1 s slice; each check is
-    # three device round trips, the largest cost of a lockstep run after the world itself)
+    # a fault is found within 0.5 simulated s: in lockstep the checks run at every point of the
+    # clock's grid (GuardedClock.LOCKSTEP_GRID_S = 0.4 s, where its waits stop), in real time at
+    # clock-slice ends (<= 0.1 s apart) once 0.35 s or 0.5 wall s have passed
     HEALTH_EVERY_SIM_S = 0.35
     HEALTH_EVERY_WALL_S = 0.5
 
@@ -207,8 +207,11 @@ class Station:
         bench clock counts, so a seeded run makes the same device reads and the same arrays."""
         now_sim, now_wall = self.clock.now(), time.monotonic()
         last_sim, last_wall = self._last_health
-        wall_due = now_wall - last_wall >= self.HEALTH_EVERY_WALL_S and not getattr(self.clock, "lockstep", False)
-        if now_sim - last_sim < self.HEALTH_EVERY_SIM_S and not wall_due:
+        if getattr(self.clock, "lockstep", False):  # once per grid point (the clock's waits stop there)
+            grid = self.clock.LOCKSTEP_GRID_S
+            if last_sim > -math.inf and math.floor(now_sim / grid + 1e-9) <= math.floor(last_sim / grid + 1e-9):
+                return
+        elif now_sim - last_sim < self.HEALTH_EVERY_SIM_S and now_wall - last_wall < self.HEALTH_EVERY_WALL_S:
             return
         self._last_health = (now_sim, now_wall)
         for role in self._ordered_roles():

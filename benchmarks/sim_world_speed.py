@@ -10,13 +10,23 @@ per wall second (the target) and per CPU second of this process (less sensitive 
 Run: .venv/bin/python benchmarks/sim_world_speed.py [--only a,b,c] [--repeat 3] [--device-s 120]
 
 Measured 2026-11-23 on 2 shared cores, load average 8-10 from other jobs, 4 interleaved rounds
-(the tree before issue 14 item 6 against after; medians, x real time per wall s / per CPU s):
+(the tree before issue 14 item 6 against after the compiled kernels; medians, x real time per wall s / per CPU s):
   (a) free-decay World        1,375 / 4,750   ->  3,100 /  9,450
   (b) device world               34 /   115   ->    650 /  2,050  (another round, load 8-10: 1,770 / 2,700)
   (c) hrg-damping, 1108 s        63 /   113   ->    108 /    216
-(c) is now dominated by the engine's link health checks (a table status, a SCPI query and an
-FPGA read every 0.35 simulated s, ~0.84 ms wall each here: ~2/3 of its time) and the stream path
-(link reader thread, recorder); the simulated devices are ~10 % of it.
+Then (same day, a quiet moment, load 0.7-2.0; this script run on d4c1594 and on the tree after
+the stream/grid/worker changes, alternately, twice each, medians of 3 rounds):
+  (a)  12,868 / 12,883  ->  13,059 / 13,117            (per wall s, two processes each; ~13,000 per CPU s both)
+  (b)   2,911 /  3,016  ->   3,098 /  3,049            (~3,000 per CPU s both)
+  (c)       302 /    237  ->     372 /    319  (the script of d4c1594, which imported the simulators
+        at its top, so `ctx.compute`'s worker paid numba's import: ~0.4 s a run)
+  (c)       339 /    436  ->     453 /    410  (this script on both trees; per CPU s 302 / 438 -> 453 / 404)
+(c) is still far from 1000x: the link checks at every 0.4 s grid point (a Modbus status read and a
+SCPI *IDN? through the simulators' asyncio servers) cost about as much CPU as everything else
+together (switching them off, for diagnosis only, gave 1.25 instead of 3.1-3.7 CPU s a run under
+load), then the stream path (link reader, bus, writer thread, HDF5 recorder: ~0.5 CPU s) and the
+1 kHz stream outside the decay record (~200 k frames).  The compute worker (fork + fit, ~0.1-0.3 s
+wall) is not in the per-CPU-s figures (another process).
 """
 
 from __future__ import annotations
@@ -27,9 +37,8 @@ import statistics
 import tempfile
 import time
 
-from bench.analysis.slow_model import state_from_elements
-from simulators.physics.params import preset
-from simulators.world import World
+# the simulators are imported in the functions: `ctx.compute`'s worker imports this module as its
+# __main__, and should not pay numba's import and kernel loading there (as the `gyrobench` CLI does not)
 
 
 class _Spin:
@@ -47,6 +56,10 @@ class _Spin:
 
 def free_decay_world(duration_s: float = 300.0) -> tuple[float, float]:
     """(a) x real time of the World alone over a free decay."""
+    from bench.analysis.slow_model import state_from_elements
+    from simulators.physics.params import preset
+    from simulators.world import World
+
     world = World(preset("hrg"), seed=1, sample_period_s=1e-3)
     world.resonator.set_state(state_from_elements(1.0, 0.0, 0.0))
     world.attach(_Spin(500.0))
@@ -59,10 +72,13 @@ def free_decay_world(duration_s: float = 300.0) -> tuple[float, float]:
 
 def device_world(duration_s: float = 120.0, seed: int = 1) -> tuple[float, float]:
     """(b) x real time of the World with the FPGA firmware and the table attached, loops on."""
+    from bench.analysis.slow_model import state_from_elements
     from drivers.fpga import protocol as p
     from drivers.rate_table import modbus_protocol as mp
     from simulators.fpga.firmware import FpgaFirmware
+    from simulators.physics.params import preset
     from simulators.rate_table.mechanics import TableMechanics
+    from simulators.world import World
 
     params = preset("hrg")
     world = World(params, seed=seed, sample_period_s=1e-3)
@@ -134,6 +150,11 @@ def main() -> None:
     t0 = time.perf_counter()
     free_decay_world(1.0)  # warm-up, untimed: imports, first calls (loading numba's compiled kernels)
     device_world(0.5)
+    import numpy as np
+
+    from drivers.fpga import protocol
+
+    protocol.crc16_frames(np.frombuffer(bytes(protocol.STREAM_FRAME_SIZE), np.uint8).reshape(1, -1))  # the link's CRC
     print(f"warm-up (first calls in this process): {time.perf_counter() - t0:.2f} s")
     load0 = os.getloadavg()[0]
     print(f"load average {load0:.1f} on {os.cpu_count()} cores; {args.repeat} interleaved runs of {','.join(cases)}")

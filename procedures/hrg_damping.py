@@ -46,6 +46,9 @@ for _name in ("before", "after"):
     declare(StreamSchema(f"hrg-damping drift {_name}", "hrg-damping", (
         _THETA, Column("drift_dph", "deg/h", quantity="drift, output-referred"))))
 _TAP = ("t_s", "cx", "sx", "cy", "sy")  # the FPGA stream's columns a tap keeps, in this order
+#: the rows a tap keeps (not a recorded stream: read by name, as the FPGA stream they come from)
+TAP = StreamSchema("hrg_damping_tap", "fpga", tuple(FPGA.columns[FPGA.index(c)] for c in _TAP))
+_Q = ("cx", "sx", "cy", "sy")
 _MAX_CURVE_POINTS = 2000
 
 
@@ -74,7 +77,13 @@ class _StreamTap:
         with self._lock:
             rows = np.vstack(self._rows) if self._rows else np.empty((0, len(self.columns)))
             self._rows.clear()
-        return rows[(rows[:, 0] > t_start_s) & (rows[:, 0] <= t_end_s)]
+        t_s = TAP.column(rows, "t_s")
+        return rows[(t_s > t_start_s) & (t_s <= t_end_s)]
+
+
+def _decay_columns(rows: np.ndarray) -> list[np.ndarray]:
+    """fit_free_decay's arguments (t_s, cx, sx, cy, sy) from tap rows, by name."""
+    return [TAP.column(rows, c) for c in ("t_s", *_Q)]
 
 
 def _thin(*arrays: np.ndarray) -> list[np.ndarray]:
@@ -178,7 +187,7 @@ class HrgDamping(HrgExcitation, Procedure):
 
     def _decimate(self, rows: np.ndarray, period_s: float) -> np.ndarray:
         dec = max(1, int(round(1.0 / (self.stream_hz * period_s))))
-        idx = np.rint(rows[:, 0] / period_s).astype(np.int64)
+        idx = np.rint(TAP.column(rows, "t_s") / period_s).astype(np.int64)
         return rows[idx % dec == 0]
 
     def _record(self, ctx, kind: float, duration_s: float, label: str) -> np.ndarray:
@@ -242,8 +251,9 @@ class HrgDamping(HrgExcitation, Procedure):
         d = self._decay
         if d is None or len(d) < 8:
             raise RuntimeError(f"the decay record holds {0 if d is None else len(d)} samples; at least 8 are needed")
-        el = orbit_elements(d[:, 1:5])
-        t, th, k = _thin(d[:, 0], np.unwrap(4 * el["theta_rad"]) / 4, el["k"] / np.maximum(el["a"], 1e-300))
+        el = orbit_elements(TAP.columns_of(d, *_Q))
+        t_s = TAP.column(d, "t_s")
+        t, th, k = _thin(t_s, np.unwrap(4 * el["theta_rad"]) / 4, el["k"] / np.maximum(el["a"], 1e-300))
         ctx.fit("hrg-damping theta", t_s=t, theta_deg=np.degrees(th))
         ctx.fit("hrg-damping quadrature", t_s=t, quadrature_rel=k)
         ctx.measure("quadrature_rel_max", float(np.max(np.abs(el["k"] / np.maximum(el["a"], 1e-300)))))
@@ -251,7 +261,7 @@ class HrgDamping(HrgExcitation, Procedure):
     @step("Fit the free-decay model")
     def fit(self, ctx):
         d = self._decay
-        fit = ctx.compute(fit_free_decay, d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4],  # abortable at once
+        fit = ctx.compute(fit_free_decay, *_decay_columns(d),  # abortable at once
                           method=self.fit_method, model=self.fit_model)
         self._fit = fit
         t, e, ef, r = _thin(fit.t_s, fit.energy, fit.energy_fit, fit.residuals_ln_e)
@@ -323,8 +333,8 @@ class HrgDamping(HrgExcitation, Procedure):
         to_dph = math.degrees(1.0 / k) * 3600
         results, curves, amps = [], {}, {}
         for name, rows in (("before", off), ("after", on)):
-            th = orbit_elements(rows[:, 1:5])["theta_rad"]
-            mids, rate = block_drift(rows[:, 0], th, self.drift_block_s)
+            th = orbit_elements(TAP.columns_of(rows, *_Q))["theta_rad"]
+            mids, rate = block_drift(TAP.column(rows, "t_s"), th, self.drift_block_s)
             drift = rate - math.radians(self.verify_rate_dps)
             fit = fit_angle_drift(mids, drift)
             amps[name] = fit.amplitude_rad_s * to_dph
@@ -372,10 +382,11 @@ class HrgDamping(HrgExcitation, Procedure):
             if not sel.any():
                 return None
             t0, t1 = win["t_start_s"][sel][-1], win["t_end_s"][sel][-1]
-            return rows[(rows[:, 0] > t0) & (rows[:, 0] <= t1)]  # as the live tap: after t0, up to t1
+            t_s = TAP.column(rows, "t_s")
+            return rows[(t_s > t0) & (t_s <= t1)]  # as the live tap: after t0, up to t1
 
         decay = self._decimate(window(DECAY), period)
-        fit = fit_free_decay(*decay.T, method=self.fit_method, model=self.fit_model)
+        fit = fit_free_decay(*_decay_columns(decay), method=self.fit_method, model=self.fit_model)
         f0_hz = float(data.table(REF)["f0_hz"][-1]) if REF in data else None
         if f0_hz is None:
             data.notes.append(f"no {REF} stream: the reference frequency is unknown, so is q_factor")

@@ -21,8 +21,13 @@ from bench.analysis.maslov import derived_ci95, free_param_names, identify_free_
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, step
 from bench.engine.streams import Column, StreamSchema, declare
+from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
 from .hrg_excitation import HrgExcitation
+
+#: the FPGA stream's columns the decay is identified from (read by name, as the stream declares them)
+FPGA_TAP = StreamSchema("hrg_free_decay_rows", "fpga",
+                        tuple(FPGA.columns[FPGA.index(c)] for c in ("t_s", "cx", "sx", "cy", "sy")))
 
 WINDOW = "decay_window"
 WINDOW_COLUMNS = declare(StreamSchema(WINDOW, "hrg-free-decay", (
@@ -226,8 +231,8 @@ class HrgFreeDecay(HrgExcitation, Procedure):
         sel = (fpga["t_s"] >= win["t_start_s"]) & (fpga["t_s"] <= win["t_end_s"])
         period = float(np.median(np.diff(fpga["t_s"][sel])))
         dec = max(1, int(round(1.0 / (self.stream_hz * period))))
-        rows = boxcar(np.column_stack([fpga[c][sel] for c in ("t_s", "cx", "sx", "cy", "sy")]), dec)
-        t_s, q = rows[:, 0], rows[:, 1:5]
+        rows = boxcar(np.column_stack([fpga[c][sel] for c in FPGA_TAP.names]), dec)
+        t_s, q = FPGA_TAP.column(rows, "t_s"), FPGA_TAP.columns_of(rows, "cx", "sx", "cy", "sy")
         run = compute or (lambda fn, *a, **kw: fn(*a, **kw))
         results, fit = run(decay_results, t_s, q, rate_dps=float(win["rate_dps"]),
                            ref_freq_hz=float(win["ref_freq_hz"]), natural_freq_hz=self.natural_freq_hz,

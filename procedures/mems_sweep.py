@@ -42,6 +42,10 @@ SWEEP = declare(StreamSchema("sweep", "mems-sweep", (
     Column("amplitude_y", "1", quantity="amplitude B"), Column("phase_y_deg", "deg", quantity="phase ψ"),
     Column("settled", "1", "u1", legend={0: "not settled", 1: "settled"}))))
 SWEEP_COLUMNS = SWEEP.names
+#: a steady state of both pickoffs (lock-in X1, Y1, X2, Y2 over the pickoff gain; the model's
+#: q1, p1, q2, p2): the sweep's columns of that name, the lock-in reads and a model's response
+STATE = StreamSchema("mems_sweep_state", "frontend",
+                     tuple(SWEEP.columns[SWEEP.index(c)] for c in ("q1", "p1", "q2", "p2")))
 MODEL_ORDER = {"linear": 1, "cubic": 3, "quintic": 5}
 #: the derived quantities of the chosen model: unit, what it is
 DERIVED = {
@@ -125,7 +129,7 @@ def sweep_analysis(
             lo_hi = (math.degrees(lo_hi[0]), math.degrees(lo_hi[1]))
         results.append(Result(name, best.derived[name], ci95=lo_hi))
     # hysteresis: largest amplitude difference between the up and down sweeps at one frequency
-    amp = np.hypot(q[:, 0], q[:, 1])
+    amp = np.hypot(STATE.column(q, "q1"), STATE.column(q, "p1"))
     up, down = direction > 0, direction < 0
     if up.any() and down.any():
         common = np.intersect1d(np.round(freq_hz[up], 9), np.round(freq_hz[down], 9))
@@ -145,13 +149,13 @@ def sweep_analysis(
             "amplitude_y": r.amp_y,
             "phase_y_deg": np.degrees(r.phase_y_rad),
         }
-        curves[f"polar_ch1_model_{m}"] = {"q1": r.q[:, 0], "p1": r.q[:, 1]}
-        curves[f"polar_ch2_model_{m}"] = {"q2": r.q[:, 2], "p2": r.q[:, 3]}
+        curves[f"polar_ch1_model_{m}"] = {c: STATE.column(r.q, c) for c in ("q1", "p1")}
+        curves[f"polar_ch2_model_{m}"] = {c: STATE.column(r.q, c) for c in ("q2", "p2")}
     curves["sweep_model"] = curves[f"sweep_model_{chosen}"]  # the one the live plot overlays
     order = np.argsort(freq_hz[up] if up.any() else freq_hz)
     sel = q[up][order] if up.any() else q[order]
-    curves["polar_ch1_measured"] = {"q1": sel[:, 0], "p1": sel[:, 1]}
-    curves["polar_ch2_measured"] = {"q2": sel[:, 2], "p2": sel[:, 3]}
+    curves["polar_ch1_measured"] = {c: STATE.column(sel, c) for c in ("q1", "p1")}
+    curves["polar_ch2_measured"] = {c: STATE.column(sel, c) for c in ("q2", "p2")}
     return results, curves, {"fits": fits, "chosen": chosen}
 
 
@@ -190,7 +194,7 @@ class MemsSweep(Procedure):
 
             message = not_above("stop_hz", self.stop_hz, self.start_hz, "Hz") + " (start_hz)"
             raise ParamError("stop_hz", self.stop_hz, f"above start_hz = {self.start_hz}", message)
-        self.rows: list[list[float]] = []
+        self.rows: list[np.ndarray] = []
         self.chosen_model = "linear"  # set by the identification; the declared parameters follow it
 
     def demands(self) -> list[Demand]:
@@ -271,10 +275,12 @@ class MemsSweep(Procedure):
                 ctx.sleep(2.0 * self.tau_s)
             if not settled:
                 ctx.log.warning("%.4f Hz: not settled after 3 extra waits (drift %s)", f, np.array2string(drift))
-            q = win.mean(axis=0)
-            amp_x, amp_y = math.hypot(q[0], q[1]), math.hypot(q[2], q[3])
-            row = [ctx.clock.now(), float(f), direction, *q, amp_x, math.degrees(math.atan2(q[1], q[0])),
-                   amp_y, math.degrees(math.atan2(q[3], q[2])), float(settled)]
+            q1, p1, q2, p2 = (float(v) for v in STATE.columns_of(win.mean(axis=0), "q1", "p1", "q2", "p2"))
+            amp_x = math.hypot(q1, p1)
+            row = SWEEP.row(t_s=ctx.clock.now(), freq_hz=float(f), direction=direction, q1=q1, p1=p1, q2=q2, p2=p2,
+                            amplitude=amp_x, phase_deg=math.degrees(math.atan2(p1, q1)),
+                            amplitude_y=math.hypot(q2, p2), phase_y_deg=math.degrees(math.atan2(p2, q2)),
+                            settled=float(settled))
             self.rows.append(row)
             ctx.record("sweep", SWEEP_COLUMNS, np.array(row))
             ctx.progress((j + 1) / len(freqs), f"{'up' if direction > 0 else 'down'} {f:.3f} Hz  A={amp_x:.4f}")

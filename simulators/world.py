@@ -147,6 +147,7 @@ class World:
             self.environment = Environment(
                 noise, seed=seed, sample_period_s=self.sample_period_s, earth_rate_dph=earth_rate_dph
             )
+        self._advance_listeners: list[Any] = []
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -171,6 +172,16 @@ class World:
     def add_listener(self, callback: Any) -> None:
         """callback(world) after every block: clocks waiting in real-time mode use it."""
         self._listeners.append(callback)
+
+    def add_advance_listener(self, callback: Any) -> None:
+        """callback(world) at the end of every `advance` (under the world lock): a simulated link
+        sends what the blocks of one advance produced in one write, not one per block."""
+        self._advance_listeners.append(callback)
+
+    def remove_advance_listener(self, callback: Any) -> None:
+        with self.lock:
+            if callback in self._advance_listeners:
+                self._advance_listeners.remove(callback)
 
     # --- inputs ----------------------------------------------------------------------------
     def set_force(self, source: str, force: np.ndarray | None) -> None:
@@ -205,6 +216,8 @@ class World:
                 n = min(n_total - done, self._block_limit())
                 self._run_block(n)
                 done += n
+            for cb in self._advance_listeners:
+                cb(self)
             return n_total
 
     def advance_samples(self, n_samples: int) -> None:

@@ -120,3 +120,14 @@ def test_abort_while_paused_is_honoured(station):
     t0 = time.monotonic()
     rec = runner.run(proc)
     assert rec.outcome == "ABORTED" and rec.safe_state and time.monotonic() - t0 < 30.0
+
+
+def test_a_worker_runs_blas_on_one_thread():
+    """A freshly forked worker's threaded BLAS cost more to start than the estimators' small
+    matrices gain (a 900 s decay fit: 0.2-0.5 s against 0.09 s on one thread)."""
+    from threadpoolctl import threadpool_info
+
+    from bench.engine.compute import run_in_worker
+
+    blas = [lib for lib in run_in_worker(threadpool_info, (), {}, lambda: None) if lib["user_api"] == "blas"]
+    assert blas and all(lib["num_threads"] == 1 for lib in blas), blas

@@ -178,7 +178,8 @@ def test_list_json(capsys):
 
 def _start_long_run(tmp_path):
     proc = subprocess.Popen(
-        GYROBENCH + ["run", "table-spin", "--set", "hold_s=600", "--json"],
+        # 100x real time: a lockstep 600 s hold now runs in about a second, gone before the signal
+        GYROBENCH + ["run", "table-spin", "--set", "hold_s=600", "--speed", "100", "--json"],
         cwd=tmp_path,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,

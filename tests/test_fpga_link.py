@@ -342,3 +342,26 @@ def test_output_mode_values_are_checked_before_anything_is_written(bench):
     link.set_output_mode("force-to-rebalance", ftr_angle_deg=10.0, ftr_gain=2.0)
     assert link.output_mode() == "force-to-rebalance"
     assert server.truth() == {"cvg_output_mode": 1.0, "ftr_angle_deg": 10.0, "ftr_gain": 2.0}
+
+
+def test_an_advance_streams_in_one_write_and_a_reply_comes_after_its_frames(bench):
+    """The simulated FPGA writes the frames of one World.advance in one piece (one reader wake-up
+    and one delivery per advance, not one per 50 ms block: issue 14 item 6), and a reply still
+    follows every frame produced before it."""
+    world, clock, server, link = bench
+    blocks = _collect(link)
+    link.set_pll(True)  # the loops cut the world into their 50 ms blocks
+    link.start_stream(1)
+    link.sync()
+    blocks.clear()
+    port, writes = server._port, []
+    send = port.send
+    port.send = lambda data, timeout_s: writes.append(len(data)) or send(data, timeout_s)
+    clock.sleep(1.0)  # one advance: 20 blocks of 50 ms
+    link.sync()
+    rows = np.concatenate(blocks)
+    assert len(rows) == 1000 and np.all(np.diff(rows[:, 0]) == 1)
+    assert writes == [1000 * p.STREAM_FRAME_SIZE], f"{len(writes)} writes for one advance"
+    clock.sleep(0.25)
+    link.read_register("STATUS")  # no sync: the reply came after the 250 frames streamed before it
+    assert link.last_index == world.sample_index

@@ -42,3 +42,14 @@ def test_minmax_history_keeps_peaks_and_bounds_the_points():
     win = MinMaxHistory(1, max_points=100, history_s=10.0)
     win.append(t[:30_000], y[:30_000, None])
     assert win.curve(0)[0][0] >= t[30_000 - 1] - 10.0 - win.bucket_rows * 1e-3
+
+
+def test_buffers_read_columns_by_name():
+    """The live buffers are built with their columns' names and read by them (issue 14 item 3)."""
+    rb = RingBuffer(4, ("freq_hz", "amplitude"))
+    rb.append(np.array([[1.0, 10.0], [2.0, 20.0]]))
+    assert np.array_equal(rb.column("amplitude"), [10.0, 20.0])
+    h = MinMaxHistory(("rate_dps", "angle_deg"), max_points=100)
+    h.append(np.arange(3.0), np.array([[1.0, 5.0], [2.0, 6.0], [3.0, 7.0]]))
+    assert np.array_equal(h.curve("angle_deg")[1], [5.0, 6.0, 7.0])
+    assert np.array_equal(h.curve("angle_deg")[1], h.curve(1)[1])

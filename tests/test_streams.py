@@ -54,6 +54,9 @@ def test_schema_by_name():
     with pytest.raises(KeyError, match="not declared"):
         schema_of("no_such_stream")
     assert [unit_from_name(n) for n in ("tau_s", "drift_dph", "f0_hz", "energy")] == ["s", "deg/h", "Hz", "1"]
+    np.testing.assert_array_equal(s.row(k=2, t_s=0.5, v=1.5), [0.5, 1.5, 2.0])  # a row built by name
+    with pytest.raises(ValueError, match=r"misses \['v'\]"):
+        s.row(t_s=0.5, k=2)
 
 
 def test_every_stream_is_declared_before_its_first_block(damping_run):
@@ -91,7 +94,10 @@ def test_every_column_of_every_dataset_has_units_and_coded_columns_a_legend(damp
     with h5py.File(record.raw_file, "r") as f:
         f.visititems(visit)
         win = f["streams/damping_windows"]
-        assert json.loads(win.attrs["legend_kind"]) == {"0": "decay", "1": "verify_off", "2": "verify_on"}
+        # the legend is an HDF5 enum type (not a JSON attribute): /legends/<stream>/<column>
+        assert "legend_kind" not in win.attrs
+        assert h5py.check_enum_dtype(f["legends/damping_windows/kind"].dtype) == {
+            "decay": 0, "verify_off": 1, "verify_on": 2}
         assert [u.decode() if isinstance(u, bytes) else u for u in win.attrs["units"]] == ["1", "s", "s"]
         fpga = f["streams/fpga"]
         assert list(fpga.attrs["units"])[:3] == ["1", "s", "1"] and fpga.attrs["source"] == "fpga"
@@ -108,7 +114,7 @@ def test_h5dump_shows_units_and_legends(damping_run):
             pytest.fail("h5dump (the HDF5 tools) is missing on CI")
         pytest.skip("h5dump is not installed")
     out = subprocess.run([h5dump, "-A", record.raw_file], capture_output=True, text=True, timeout=60, check=True).stdout
-    assert 'ATTRIBUTE "legend_kind"' in out and "verify_off" in out
+    assert 'DATATYPE "kind"' in out and "H5T_ENUM" in out and '"verify_off"' in out
     assert 'ATTRIBUTE "units"' in out and '"deg/s"' in out
 
 
@@ -123,3 +129,24 @@ def test_reader_and_report_show_declared_units_and_meanings(damping_run):
         assert d.units("table")["rate_dps"] == "deg/s" and d.legends("fpga") == {}
         fig = stream_figure(d, "fpga", ["freq_ctrl", "quad_ctrl"])
     assert [a.get_ylabel() for a in fig.figure.axes] == ["frequency control (Hz)", "quadrature control (1/s)"]
+
+
+def test_legends_of_a_file_written_before_enum_types_are_still_read(tmp_path):
+    """An older raw file kept each legend as a `legend_<column>` JSON attribute: the reader and
+    the window's replay still find it; a new file's legend is the enum type alone."""
+    from bench.engine.streams import schema_from_attrs
+    from bench.recorder import open_run, stored_legends
+
+    path = tmp_path / "old.h5"
+    with h5py.File(path, "w") as f:
+        for name in ("log", "measurements", "fits"):
+            f.create_group(name) if name == "fits" else f.create_dataset(name, shape=(0,), dtype=h5py.string_dtype())
+        ds = f.create_group("streams").create_dataset("sweep_old", data=np.array([[0.0, 1.0], [1.0, -1.0]]))
+        ds.attrs["columns"] = json.dumps(["t_s", "direction"])
+        ds.attrs["units"] = ["s", "1"]
+        ds.attrs["legend_direction"] = json.dumps({"1": "up", "-1": "down"})
+    with open_run(path) as d:
+        assert d.legends("sweep_old") == {"direction": {1: "up", -1: "down"}}
+        legends = stored_legends(d.f, "sweep_old", d.f["streams/sweep_old"].attrs)
+        schema = schema_from_attrs("sweep_old", ("t_s", "direction"), d.f["streams/sweep_old"].attrs, legends)
+    assert schema is not None and dict(schema.columns[1].legend) == {-1: "down", 1: "up"}

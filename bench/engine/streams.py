@@ -68,14 +68,17 @@ class StreamSchema:
         if len(set(names)) != len(names):
             raise ValueError(f"stream {self.name!r}: a column name repeats in {names}")
         self._index.update({n: i for i, n in enumerate(names)})
+        # computed once: every block on the stream path compares its columns with them
+        object.__setattr__(self, "_names", tuple(names))
+        object.__setattr__(self, "_units", tuple(c.unit for c in self.columns))
 
     @property
     def names(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.columns)
+        return self._names  # type: ignore[attr-defined]
 
     @property
     def units(self) -> tuple[str, ...]:
-        return tuple(c.unit for c in self.columns)
+        return self._units  # type: ignore[attr-defined]
 
     @property
     def quantities(self) -> tuple[str, ...]:
@@ -100,13 +103,24 @@ class StreamSchema:
         """Some columns of a block by name, in the order given."""
         return np.asarray(block)[..., self.indices(*names)]
 
+    def row(self, **values: float) -> np.ndarray:
+        """One row (float64, in the declared order) from values by column name; every column
+        must be given, and only those."""
+        missing = [n for n in self.names if n not in values]
+        extra = sorted(set(values) - set(self.names))
+        if missing or extra:
+            raise ValueError(f"stream {self.name!r}: row misses {missing} / has unknown columns {extra}")
+        return np.array([float(values[n]) for n in self.names])
+
     def legends(self) -> dict[str, dict[int, str]]:
         return {c.name: dict(c.legend) for c in self.columns if c.legend}
 
 
-def schema_from_attrs(name: str, columns: tuple[str, ...], attrs: Mapping) -> StreamSchema | None:
+def schema_from_attrs(name: str, columns: tuple[str, ...], attrs: Mapping,
+                      legends: Mapping[str, Mapping[int, str]] | None = None) -> StreamSchema | None:
     """The declaration a raw file stored with a stream (its dataset's `units`, `dtypes`,
-    `source`, `legend_<column>` attributes); None for a file written before declarations."""
+    `source` attributes; `legends` as bench.recorder.stored_legends reads them, else the
+    `legend_<column>` attributes of older files); None for a file written before declarations."""
     import json
 
     def text(v) -> str:
@@ -122,8 +136,11 @@ def schema_from_attrs(name: str, columns: tuple[str, ...], attrs: Mapping) -> St
         ""] * len(columns)
     cols = []
     for c, u, d, q in zip(columns, units, dtypes, quantities, strict=True):
-        legend = attrs.get(f"legend_{c}")
-        legend = {int(k): v for k, v in json.loads(text(legend)).items()} if legend is not None else None
+        if legends is not None:
+            legend = legends.get(c)
+        else:
+            legend = attrs.get(f"legend_{c}")
+            legend = {int(k): v for k, v in json.loads(text(legend)).items()} if legend is not None else None
         cols.append(Column(c, text(u), d, legend=legend, quantity=q if q != c else ""))
     return StreamSchema(name, text(attrs.get("source", name)), tuple(cols))
 

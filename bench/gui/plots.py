@@ -60,10 +60,10 @@ class LivePlots(QWidget):
         pg.setConfigOptions(antialias=False, background="w", foreground="k")
         # the whole run (or its last history_s), decimated as it arrives (drawn), and the last
         # recent_s at full rate
-        self.fpga = MinMaxHistory(len(FPGA_COLS) - 1, max_points, history_s)
-        self.table = MinMaxHistory(len(TABLE_COLS) - 1, max_points, history_s)
-        self.recent = RingBuffer(int(recent_s * rate_hz), len(FPGA_COLS))
-        self.sweep = RingBuffer(100_000, len(SWEEP_COLS))
+        self.fpga = MinMaxHistory(FPGA_COLS[1:], max_points, history_s)
+        self.table = MinMaxHistory(TABLE_COLS[1:], max_points, history_s)
+        self.recent = RingBuffer(int(recent_s * rate_hz), FPGA_COLS)
+        self.sweep = RingBuffer(100_000, SWEEP_COLS)
         self.max_points = max_points
         self.fits: dict[str, dict[str, np.ndarray]] = {}
         self.refresh_count = 0
@@ -186,21 +186,22 @@ class LivePlots(QWidget):
         if self.t0_s and "t_s" in columns:
             data = data.copy()
             data[:, columns.index("t_s")] -= self.t0_s
-        q = _columns(columns, data, ("t_s", "cx", "sx", "cy", "sy"))
-        if q is not None:
-            el = orbit_elements(q[:, 1:5])
+        t = _columns(columns, data, ("t_s",))
+        q = _columns(columns, data, ("cx", "sx", "cy", "sy"))
+        if t is not None and q is not None:
+            el = orbit_elements(q)
             # the angle means something when the quadrature is small against the amplitude
             defined = bool(np.median(np.abs(el["k"]) / np.maximum(el["a"], 1e-300)) < 0.3)
             theta_deg = self._unwrapped_theta_deg(el["theta_rad"], defined)
-            rows = np.column_stack((q, el["E"], theta_deg))
-            self.fpga.append(rows[:, 0], rows[:, 1:])
-            self.recent.append(rows)
+            values = np.column_stack((q, el["E"], theta_deg))  # FPGA_COLS after t_s
+            self.fpga.append(t[:, 0], values)
+            self.recent.append(np.column_stack((t, values)))
             self._dirty = True
-        rate = _columns(columns, data, ("t_s", "rate_dps"))
-        if rate is not None:
+        rate = _columns(columns, data, ("rate_dps",))
+        if t is not None and rate is not None:
             angle = _columns(columns, data, ("angle_deg",))
             angle = np.full((len(data), 1), np.nan) if angle is None else angle
-            self.table.append(rate[:, 0], np.column_stack((rate[:, 1], angle[:, 0])))
+            self.table.append(t[:, 0], np.column_stack((rate, angle)))  # TABLE_COLS[1:]
             self._dirty = True
         sweep = _columns(columns, data, ("freq_hz", "amplitude"))
         if sweep is not None:
@@ -256,20 +257,20 @@ class LivePlots(QWidget):
         self._dirty = False
         self._update_x_range()
         if len(self.fpga):
-            for i, curve in enumerate(self.c_q):
-                curve.setData(*self.fpga.curve(i))
-            e_t, e_v = self.fpga.curve(4, positive_only=True)
+            for name, curve in zip(("cx", "sx", "cy", "sy"), self.c_q, strict=True):
+                curve.setData(*self.fpga.curve(name))
+            e_t, e_v = self.fpga.curve("E", positive_only=True)
             self.c_e.setData(e_t, e_v)
             self._choose_e_scale(e_v)
-            self.c_theta.setData(*self.fpga.curve(5))
+            self.c_theta.setData(*self.fpga.curve("theta_deg"))
         if len(self.table):
-            self.c_rate.setData(*self.table.curve(0))
-        sw = self.sweep.view()
-        if len(sw):
-            order = np.argsort(sw[:, 0], kind="stable")
-            self.c_amp.setData(sw[order, 0], sw[order, 1])
-            if np.isfinite(sw[:, 2]).any():
-                self.c_phase.setData(sw[order, 0], sw[order, 2])
+            self.c_rate.setData(*self.table.curve("rate_dps"))
+        if len(self.sweep):
+            f, amp, phase = (self.sweep.column(c) for c in SWEEP_COLS)
+            order = np.argsort(f, kind="stable")
+            self.c_amp.setData(f[order], amp[order])
+            if np.isfinite(phase).any():
+                self.c_phase.setData(f[order], phase[order])
         e_fit = self._pick_fit("t_s", E_FIT_KEYS)
         if e_fit is not None:
             x, y = e_fit

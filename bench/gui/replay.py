@@ -19,6 +19,7 @@ import numpy as np
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import events as ev
 from bench.engine.streams import StreamSchema, schema_from_attrs
+from bench.recorder import stored_legends
 
 CHUNK_ROWS = 20_000
 
@@ -73,7 +74,8 @@ def _streams(f: h5py.File) -> list[tuple[str, tuple[str, ...], np.ndarray, Strea
         parts = name.split("/")
         stream = parts[-1] if parts[-1] not in ("data", "rows") or len(parts) == 1 else parts[-2]
         stream = _text(obj.attrs.get("stream", stream))
-        found.append((stream, cols, np.asarray(data, dtype=float), schema_from_attrs(stream, cols, obj.attrs)))
+        legends = stored_legends(f, stream, obj.attrs)
+        found.append((stream, cols, np.asarray(data, dtype=float), schema_from_attrs(stream, cols, obj.attrs, legends)))
 
     f.visititems(visit)
     return found

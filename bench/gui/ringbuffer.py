@@ -8,10 +8,19 @@ from __future__ import annotations
 import numpy as np
 
 
-class RingBuffer:
-    """The last `capacity` rows of an (n, n_cols) float stream; `view()` returns them in order."""
+def _named(n_cols: int | tuple[str, ...]) -> tuple[int, tuple[str, ...]]:
+    """(number of columns, their names): a buffer is built with its columns' names (or a count)."""
+    if isinstance(n_cols, int):
+        return n_cols, tuple(str(i) for i in range(n_cols))
+    return len(n_cols), tuple(n_cols)
 
-    def __init__(self, capacity: int, n_cols: int) -> None:
+
+class RingBuffer:
+    """The last `capacity` rows of an (n, n_cols) float stream; `view()` returns them in order,
+    `column(name)` one column of them by name."""
+
+    def __init__(self, capacity: int, n_cols: int | tuple[str, ...]) -> None:
+        n_cols, self.columns = _named(n_cols)
         if capacity < 1 or n_cols < 1:
             raise ValueError(f"RingBuffer capacity={capacity} and n_cols={n_cols} must be >= 1")
         self.capacity = int(capacity)
@@ -57,6 +66,10 @@ class RingBuffer:
             return self._data[self._start:self._start + self._size]
         return np.concatenate((self._data[self._start:], self._data[: (self._start + self._size) % self.capacity]))
 
+    def column(self, name: str) -> np.ndarray:
+        """One column of `view()` by name."""
+        return self.view()[:, self.columns.index(name)]
+
 
 class MinMaxHistory:
     """A whole stream's history for drawing, at most ~max_points per column, kept incrementally.
@@ -66,7 +79,8 @@ class MinMaxHistory:
     doubles.  Drawing costs O(max_points) however long the run, and a one-sample spike stays
     visible.  `history_s` drops buckets older than that (None keeps everything)."""
 
-    def __init__(self, n_cols: int, max_points: int = 2000, history_s: float | None = None) -> None:
+    def __init__(self, n_cols: int | tuple[str, ...], max_points: int = 2000, history_s: float | None = None) -> None:
+        n_cols, self.columns = _named(n_cols)
         if n_cols < 1 or max_points < 8:
             raise ValueError(f"MinMaxHistory n_cols={n_cols} must be >= 1 and max_points={max_points} >= 8")
         self.n_cols = int(n_cols)
@@ -158,8 +172,10 @@ class MinMaxHistory:
         self._v_max = np.concatenate((v_max, self._v_max[rest]))
         self.bucket_rows *= 2
 
-    def curve(self, col: int, positive_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """(x, y) to draw for one column, in time order."""
+    def curve(self, col: int | str, positive_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y) to draw for one column (by name, or position), in time order."""
+        if isinstance(col, str):
+            col = self.columns.index(col)
         if self.bucket_rows == 1:
             x = np.concatenate((self._t_min[:, col], self._pend_t))
             y = np.concatenate((self._v_min[:, col], self._pend_v[:, col]))

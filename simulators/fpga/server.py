@@ -157,6 +157,15 @@ class FpgaServer:
         self.frames_dropped = 0
         self.frames_lost = 0  # frames produced while no client, stalled or after a write timeout
         self.url = ""
+        # stream frames of the current World.advance, written in one piece at its end (or once
+        # STREAM_FLUSH_BYTES are waiting, or before a reply): one write and one wake-up of the
+        # driver's reader per advance instead of one per 50 ms block
+        self._stream_pending: list[bytes] = []
+        self._stream_pending_n = 0
+        self._stream_pending_bytes = 0
+
+    #: stream bytes held back at most before they are written (64 KiB: ~1000 frames)
+    STREAM_FLUSH_BYTES = 1 << 16
 
     # --- lifecycle ------------------------------------------------------------------------------
     def start(self) -> FpgaServer:
@@ -174,11 +183,13 @@ class FpgaServer:
             self.url = port.path
             self._spawn(lambda: self._command_loop(port), "fpga-commands")
         self.world.attach(self.firmware)
+        self.world.add_advance_listener(self._flush_stream)
         return self
 
     def stop(self) -> None:
         self._stop.set()
         self.world.detach(self.firmware)
+        self.world.remove_advance_listener(self._flush_stream)
         with self.world.lock:
             self.world.set_force("fpga", None)
         if self._listener is not None:
@@ -213,6 +224,7 @@ class FpgaServer:
         elif kind == "stall":
             self.stalled = True
         else:
+            self._flush_stream()  # what was produced before the drop still goes out
             port = self._port
             if port is not None:
                 port.close()
@@ -239,11 +251,30 @@ class FpgaServer:
             self._spawn(lambda port=port: self._command_loop(port), "fpga-commands")
 
     def _write(self, data: bytes) -> bool:
+        """Write a reply: after the stream frames produced before it (the driver relies on a
+        reply coming after every frame that came before it)."""
         port = self._port
         if port is None or getattr(port, "closed", False):
             return False
         with self._write_lock:
+            if self._stream_pending:
+                self._send_pending(port)
             return port.send(data, self.write_timeout_s)
+
+    def _flush_stream(self, _world: object = None) -> None:
+        """Write the stream frames held back (World thread, end of an advance)."""
+        if self._stream_pending:
+            with self._write_lock:
+                if self._stream_pending:
+                    self._send_pending(self._port)
+
+    def _send_pending(self, port: _Port | None) -> None:
+        """(under _write_lock) one write of the held-back frames; lost ones are counted."""
+        pending, n = self._stream_pending, self._stream_pending_n
+        self._stream_pending, self._stream_pending_n, self._stream_pending_bytes = [], 0, 0
+        data = pending[0] if len(pending) == 1 else b"".join(pending)
+        if port is None or getattr(port, "closed", False) or not port.send(data, self.write_timeout_s):
+            self.frames_lost += n
 
     def _send_stream(self, data: bytes, n: int) -> None:
         """Stream sink of the firmware (World thread): apply faults, then a blocking write."""
@@ -259,8 +290,14 @@ class FpgaServer:
                 data, n = frames.tobytes(), int(keep.sum())
         if self.corrupt_rate > 0.0 and n:
             data = self._corrupt(data, n, size)
-        if not self._write(data):
-            self.frames_lost += n
+        if not n:
+            return
+        with self._write_lock:
+            self._stream_pending.append(bytes(data))
+            self._stream_pending_n += n
+            self._stream_pending_bytes += len(data)
+            if self._stream_pending_bytes >= self.STREAM_FLUSH_BYTES:
+                self._send_pending(self._port)
 
     def _corrupt(self, data: bytes, n: int, size: int) -> bytes:
         hit = np.flatnonzero(self.rng.random(n) < self.corrupt_rate)
