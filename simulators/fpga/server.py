@@ -164,8 +164,9 @@ class FpgaServer:
         self._stream_pending_n = 0
         self._stream_pending_bytes = 0
 
-    #: stream bytes held back at most before they are written (64 KiB: ~1000 frames)
-    STREAM_FLUSH_BYTES = 1 << 16
+    #: stream bytes held back at most before they are written: 2048 frames (147 KiB of 72-byte
+    #: frames), so a 1 s advance at 1 kHz goes out in one write whatever the frame's size
+    STREAM_FLUSH_BYTES = 2048 * p.STREAM_FRAME_SIZE
 
     # --- lifecycle ------------------------------------------------------------------------------
     def start(self) -> FpgaServer:
