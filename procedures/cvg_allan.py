@@ -56,20 +56,6 @@ def rate_from_ftr(t_s: np.ndarray, rate_out_dps: np.ndarray, scale_factor: float
     return np.asarray(t_s, dtype=float), np.asarray(rate_out_dps, dtype=float) * 3600.0 / scale_factor
 
 
-def ftr_loop_arw_deg_rth(truth: dict[str, float]) -> float:
-    """The rebalance loop's white rate noise (deg/sqrt(h), input-referred) from the white pickoff
-    noise (docs/noise_model.md, "Force-to-rebalance output"); 0 in whole-angle."""
-    from simulators.physics.noise import ftr_loop_arw_deg_rth as closed_form
-
-    return closed_form(truth) if truth.get("cvg_output_mode", 0.0) == 1.0 else 0.0
-
-
-def _arw_truth(truth: dict[str, float]) -> float:
-    """The output's angle random walk: the input-referred N, with the rebalance loop's electronic
-    term (independent of it) added in quadrature in force-to-rebalance."""
-    return math.hypot(truth.get("arw_deg_rth", 0.0), ftr_loop_arw_deg_rth(truth))
-
-
 class CvgAllan(HrgExcitation, Procedure):
     """CVG noise terms: angle random walk, bias instability and rate random walk from an Allan deviation."""
 
@@ -81,12 +67,16 @@ class CvgAllan(HrgExcitation, Procedure):
     settle_s = Param(30.0, unit="s", low=0.0, high=3600.0, doc="loops settling in whole-angle mode before the record")
     stream_hz = Param(10.0, unit="Hz", low=0.01, high=1000.0, doc="rate of the samples analysed (boxcar stream)")
     bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: the rate output is the wave's rate / -K")
+    ftr_min_tau_s = Param(1.6, unit="s", low=0.0, high=3600.0,
+                          doc="force-to-rebalance: the shortest tau read (the rebalance loop shapes the rate below ~3 "
+                              "of its time constants, 0.5 s at FTR_KP = FTR_KI = 4; docs/noise_model.md)")
     confidence = Param(0.95, unit="", low=0.5, high=0.999, doc="level of the read-offs' intervals")
 
     measurements = (
         Measurement("arw_deg_rth", "deg/sqrt(h)", "angle random walk N: sigma = N / sqrt(tau), the -1/2 slope "
-                    "line's value at tau = 1 h (60 N deg/h at tau = 1 s); in force-to-rebalance the "
-                    "input-referred N and the rebalance loop's electronic term in quadrature", truth=_arw_truth),
+                    "line's value at tau = 1 h (60 N deg/h at tau = 1 s), input-referred (the rebalance loop's "
+                    "pickoff-noise term, docs/noise_model.md, adds 0.25 % in quadrature)",
+                    truth=_truth_or_zero("arw_deg_rth")),
         Measurement("bias_instability_dph", "deg/h", "bias instability B: the flat minimum of the Allan "
                     "deviation / 0.664, the other terms' part removed", truth=_truth_or_zero("bias_instability_dph")),
         Measurement("rrw_dph_rth", "deg/h/sqrt(h)", "rate random walk K: sigma = K sqrt(tau / 3), the +1/2 "
@@ -153,7 +143,8 @@ class CvgAllan(HrgExcitation, Procedure):
 
     @step("Allan deviation and noise terms")
     def allan(self, ctx):
-        results, curve = ctx.compute(_analyse, self._rows, self._stream_hz, self._ftr, self._scale, self.confidence)
+        results, curve = ctx.compute(_analyse, self._rows, self._stream_hz, self._ftr, self._scale, self.confidence,
+                                     self.ftr_min_tau_s)
         ctx.record(CURVE, CURVE_COLUMNS, curve)
         for res in results:
             ctx.report(res)
@@ -170,7 +161,7 @@ class CvgAllan(HrgExcitation, Procedure):
         fpga = data.table("fpga")
         rows = np.column_stack([fpga[c] for c in ("t_s", "angle_out_deg", "rate_out_dps")])
         rows = rows[(rows[:, 0] > t0) & (rows[:, 0] <= t1)]
-        return _analyse(rows, float(hz), ftr, scale, self.confidence)[0]
+        return _analyse(rows, float(hz), ftr, scale, self.confidence, self.ftr_min_tau_s)[0]
 
     def figures(self, data) -> list:
         """The log-log Allan deviation with its band, the read-offs and the slope lines."""
@@ -180,10 +171,11 @@ class CvgAllan(HrgExcitation, Procedure):
 
 
 def _analyse(rows: np.ndarray, stream_hz: float, ftr: bool, scale_factor: float,
-             level: float) -> tuple[list[Result], np.ndarray]:
+             level: float, ftr_min_tau_s: float = 0.0) -> tuple[list[Result], np.ndarray]:
     """Rate, Allan deviation, read-offs: (results, the curve's rows for CURVE).  rows: t_s,
     angle_out_deg, rate_out_dps; the rate from the rate output in force-to-rebalance (a frame
-    carries the loop's last rate, not a boxcar mean), else from the wave angle (boxcar means)."""
+    carries the loop's last rate, not a boxcar mean; the read-offs from ftr_min_tau_s on, where the
+    loop passes the rate unshaped), else from the wave angle (boxcar means)."""
     if rows is None or len(rows) < 16:
         n = 0 if rows is None else len(rows)
         raise RuntimeError(f"the static record holds {n} samples; at least 16 are needed")
@@ -192,7 +184,8 @@ def _analyse(rows: np.ndarray, stream_hz: float, ftr: bool, scale_factor: float,
     else:
         _t, rate = rate_from_stream(rows[:, 0], rows[:, 1], -scale_factor)
     curve = allan_deviation(rate, stream_hz)
-    terms = read_noise_terms(curve, level=level, boxcar=not ftr)
+    min_cluster = max(8, int(math.ceil(ftr_min_tau_s * stream_hz - 1e-9))) if ftr else 8
+    terms = read_noise_terms(curve, level=level, boxcar=not ftr, min_cluster=min_cluster)
     lo, hi = adev_band(curve, terms)
     i_min = int(np.argmin(curve.adev))
     results = _term_results(terms) + [

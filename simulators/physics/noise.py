@@ -261,8 +261,3 @@ NOISE_PRESETS: dict[str, NoiseParams] = {
     ),
 }
 
-
-def ftr_loop_arw_deg_rth(truth: dict[str, float]) -> float:
-    """The force-to-rebalance output's white rate noise from the white pickoff noise, input-referred
-    (deg/sqrt(h)); docs/noise_model.md, "Force-to-rebalance output"."""
-    return 0.0
