@@ -260,4 +260,3 @@ NOISE_PRESETS: dict[str, NoiseParams] = {
         theta_tau_drift_deg_h=0.5,
     ),
 }
-
