@@ -26,7 +26,10 @@ from .hrg_excitation import HrgExcitation
 WINDOW = "cvg_allan_window"
 WINDOW_COLUMNS = declare(StreamSchema(WINDOW, "cvg-allan", (
     Column("t_start_s", "s", doc="start of the static record"), Column("t_end_s", "s", doc="its end"),
-    Column("stream_hz", "Hz", doc="rate of the samples analysed")))).names  # fmt: skip
+    Column("stream_hz", "Hz", doc="rate of the samples analysed"),
+    Column("output_mode", "1", doc="the FPGA's output mode: 0 whole-angle (angle_out_deg), 1 force-to-rebalance "
+                                   "(rate_out_dps)"),
+    Column("scale_factor", "1", doc="output per input rate: -K (wave angle) or G K (rate output)")))).names  # fmt: skip
 CURVE = "cvg_allan_curve"
 CURVE_COLUMNS = declare(StreamSchema(CURVE, "cvg-allan", (
     Column("tau_s", "s", doc="cluster time"), Column("adev_dph", "deg/h", doc="overlapping Allan deviation"),
@@ -47,6 +50,12 @@ def rate_from_stream(t_s: np.ndarray, angle_out_deg: np.ndarray, bryan_factor: f
     return 0.5 * (t_s[1:] + t_s[:-1]), rate_dps * 3600.0
 
 
+def rate_from_ftr(t_s: np.ndarray, rate_out_dps: np.ndarray, scale_factor: float) -> tuple[np.ndarray, np.ndarray]:
+    """The gyro's rate (deg/h) in force-to-rebalance: the FPGA's rate output divided by its scale
+    factor G K (docs/fpga_link.md, "Output modes"), at the frames' times."""
+    return np.asarray(t_s, dtype=float), np.asarray(rate_out_dps, dtype=float) * 3600.0 / scale_factor
+
+
 class CvgAllan(HrgExcitation, Procedure):
     """CVG noise terms: angle random walk, bias instability and rate random walk from an Allan deviation."""
 
@@ -58,11 +67,16 @@ class CvgAllan(HrgExcitation, Procedure):
     settle_s = Param(30.0, unit="s", low=0.0, high=3600.0, doc="loops settling in whole-angle mode before the record")
     stream_hz = Param(10.0, unit="Hz", low=0.01, high=1000.0, doc="rate of the samples analysed (boxcar stream)")
     bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: the rate output is the wave's rate / -K")
+    ftr_min_tau_s = Param(1.6, unit="s", low=0.0, high=3600.0,
+                          doc="force-to-rebalance: the shortest tau read (the rebalance loop shapes the rate below ~3 "
+                              "of its time constants, 0.5 s at FTR_KP = FTR_KI = 4; docs/noise_model.md)")
     confidence = Param(0.95, unit="", low=0.5, high=0.999, doc="level of the read-offs' intervals")
 
     measurements = (
         Measurement("arw_deg_rth", "deg/sqrt(h)", "angle random walk N: sigma = N / sqrt(tau), the -1/2 slope "
-                    "line's value at tau = 1 h (60 N deg/h at tau = 1 s)", truth=_truth_or_zero("arw_deg_rth")),
+                    "line's value at tau = 1 h (60 N deg/h at tau = 1 s), input-referred (the rebalance loop's "
+                    "pickoff-noise term, docs/noise_model.md, adds 0.25 % in quadrature)",
+                    truth=_truth_or_zero("arw_deg_rth")),
         Measurement("bias_instability_dph", "deg/h", "bias instability B: the flat minimum of the Allan "
                     "deviation / 0.664, the other terms' part removed", truth=_truth_or_zero("bias_instability_dph")),
         Measurement("rrw_dph_rth", "deg/h/sqrt(h)", "rate random walk K: sigma = K sqrt(tau / 3), the +1/2 "
@@ -75,22 +89,29 @@ class CvgAllan(HrgExcitation, Procedure):
 
     def __init__(self, params: dict[str, Any] | None = None) -> None:
         super().__init__(params)
-        self._tap = _StreamTap(("t_s", "angle_out_deg"))
+        self._tap = _StreamTap(("t_s", "angle_out_deg", "rate_out_dps"))
         self._rows: np.ndarray | None = None
 
     def demands(self) -> list:
         return []
 
-    @step("Whole-angle mode: excite and hold the amplitude")
+    @step("Read the output mode, excite and hold the amplitude")
     def excite(self, ctx):
         fpga = ctx.devices.fpga
+        self._mode = fpga.output_mode()
+        if self._mode not in ("whole-angle", "force-to-rebalance"):
+            raise RuntimeError(f"FPGA output mode {self._mode!r} is neither whole-angle nor force-to-rebalance")
+        self._ftr = self._mode == "force-to-rebalance"
+        k = self.bryan_factor
+        self._scale = float(fpga.read_register("FTR_GAIN")) * k if self._ftr else -k
         ctx.subscribe(fpga, self._tap)
         ctx.subscribe(fpga, self._keep_latest)
         ctx.defer(self._tap.stop)
         self._start_loops(ctx)
         fpga.set_whole_angle(True, 0.0)
         a = self._hold_amplitude(ctx)
-        ctx.log.info(f"amplitude {a:.4f} held (setpoint {self.amplitude:g}), whole-angle, no precession command")
+        ctx.log.info(f"amplitude {a:.4f} held (setpoint {self.amplitude:g}), {self._mode}, "
+                     f"scale factor {self._scale:g}, no precession command")
 
     @step("Let the loops settle")
     def settle(self, ctx):
@@ -115,14 +136,15 @@ class CvgAllan(HrgExcitation, Procedure):
         self._tap.on = False
         t1 = ctx.clock.now()
         stream_hz = 1.0 / (dec * period)
-        ctx.record(WINDOW, WINDOW_COLUMNS, np.array([[t0, t1, stream_hz]]))
+        ctx.record(WINDOW, WINDOW_COLUMNS, np.array([[t0, t1, stream_hz, float(self._ftr), self._scale]]))
         self._rows = self._tap.take(t0, t1)
         self._stream_hz = stream_hz
         ctx.log.info(f"recorded {len(self._rows)} samples over {(t1 - t0) / 3600:.3f} h at {stream_hz:g} Hz")
 
     @step("Allan deviation and noise terms")
     def allan(self, ctx):
-        results, curve = ctx.compute(_analyse, self._rows, self._stream_hz, self.bryan_factor, self.confidence)
+        results, curve = ctx.compute(_analyse, self._rows, self._stream_hz, self._ftr, self._scale, self.confidence,
+                                     self.ftr_min_tau_s)
         ctx.record(CURVE, CURVE_COLUMNS, curve)
         for res in results:
             ctx.report(res)
@@ -134,10 +156,12 @@ class CvgAllan(HrgExcitation, Procedure):
             raise ValueError(f"{data.path.name} holds no static record ({data.incomplete or 'no ' + WINDOW})")
         win = data.table(WINDOW)
         t0, t1, hz = win["t_start_s"][-1], win["t_end_s"][-1], win["stream_hz"][-1]
+        ftr = bool(win["output_mode"][-1]) if "output_mode" in win else False
+        scale = float(win["scale_factor"][-1]) if "scale_factor" in win else -self.bryan_factor
         fpga = data.table("fpga")
-        rows = np.column_stack([fpga[c] for c in ("t_s", "angle_out_deg")])
+        rows = np.column_stack([fpga[c] for c in ("t_s", "angle_out_deg", "rate_out_dps")])
         rows = rows[(rows[:, 0] > t0) & (rows[:, 0] <= t1)]
-        return _analyse(rows, float(hz), self.bryan_factor, self.confidence)[0]
+        return _analyse(rows, float(hz), ftr, scale, self.confidence, self.ftr_min_tau_s)[0]
 
     def figures(self, data) -> list:
         """The log-log Allan deviation with its band, the read-offs and the slope lines."""
@@ -146,15 +170,22 @@ class CvgAllan(HrgExcitation, Procedure):
         return figures(self, data)
 
 
-def _analyse(rows: np.ndarray, stream_hz: float, bryan_factor: float,
-             level: float) -> tuple[list[Result], np.ndarray]:
-    """Rate, Allan deviation, read-offs: (results, the curve's rows for CURVE)."""
+def _analyse(rows: np.ndarray, stream_hz: float, ftr: bool, scale_factor: float,
+             level: float, ftr_min_tau_s: float = 0.0) -> tuple[list[Result], np.ndarray]:
+    """Rate, Allan deviation, read-offs: (results, the curve's rows for CURVE).  rows: t_s,
+    angle_out_deg, rate_out_dps; the rate from the rate output in force-to-rebalance (a frame
+    carries the loop's last rate, not a boxcar mean; the read-offs from ftr_min_tau_s on, where the
+    loop passes the rate unshaped), else from the wave angle (boxcar means)."""
     if rows is None or len(rows) < 16:
         n = 0 if rows is None else len(rows)
         raise RuntimeError(f"the static record holds {n} samples; at least 16 are needed")
-    _t, rate = rate_from_stream(*rows.T, bryan_factor)
+    if ftr:
+        _t, rate = rate_from_ftr(rows[:, 0], rows[:, 2], scale_factor)
+    else:
+        _t, rate = rate_from_stream(rows[:, 0], rows[:, 1], -scale_factor)
     curve = allan_deviation(rate, stream_hz)
-    terms = read_noise_terms(curve, level=level, boxcar=True)  # the stream's frames are boxcar means
+    min_cluster = max(8, int(math.ceil(ftr_min_tau_s * stream_hz - 1e-9))) if ftr else 8
+    terms = read_noise_terms(curve, level=level, boxcar=not ftr, min_cluster=min_cluster)
     lo, hi = adev_band(curve, terms)
     i_min = int(np.argmin(curve.adev))
     results = _term_results(terms) + [
