@@ -4,40 +4,22 @@ exported to CSV, HDF5 and PNG, and the report opened.  Under CI=true a missing X
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
-from needs import need
+from xvfb import ROOT, run_under_xvfb
 
 pytest.importorskip("pyqtgraph")
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.xvfb
 def test_history_replay_and_export_on_a_real_x_server(tmp_path):
-    from test_gui_exit import _xcb_missing_libs
-
-    xvfb_run = shutil.which("xvfb-run")
-    need(xvfb_run is not None and shutil.which("Xvfb") is not None, "Xvfb is not installed")
-    missing = _xcb_missing_libs()
-    need(not missing, f"the Qt xcb plugin lacks {', '.join(missing)}")
-    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    env["QT_QPA_PLATFORM"] = "xcb"
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
     shots = tmp_path / "history.png", tmp_path / "replay.png"
     out = tmp_path / "export"
     out.mkdir()
-    cmd = [xvfb_run, "-a", "-s", "-screen 0 1600x1000x24", sys.executable,
-           str(ROOT / "tests" / "gui_history_script.py"), *map(str, shots), str(out)]
-    proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    seen = json.loads(proc.stdout.strip().splitlines()[-1])
+    seen = run_under_xvfb("gui_history_script.py", *map(str, shots), str(out), cwd=tmp_path)
     assert seen["platform"] == "xcb"
     assert seen["aborted"] == "ABORTED" and seen["completed"] == "COMPLETE"
     assert seen["history_all"] == 2 and seen["history_filtered"] == [seen["run_id"]] and seen["selected"]

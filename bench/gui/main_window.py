@@ -25,7 +25,6 @@ from PySide6.QtWidgets import (
     QScrollArea,
     QSizePolicy,
     QSplitter,
-    QTabWidget,
     QVBoxLayout,
     QWidget,
 )
@@ -34,7 +33,7 @@ from bench.engine import events as ev
 
 from .backend import GuiBackend
 from .bridge import EventBridge
-from .panels import LogPane, ResultsTable, StationPanel, StepList
+from .panels import LogPane, ResultsTable, StationPanel, StepList, plots_over_tabs
 from .param_form import ParameterForm
 from .plots import LivePlots
 
@@ -149,15 +148,7 @@ class MainWindow(QMainWindow):
         left.setMinimumWidth(320)
         left.setMaximumWidth(420)
 
-        tabs = QTabWidget()
-        tabs.addTab(self.results, "Results")
-        tabs.addTab(self.log, "Log")
-        self.tabs = tabs
-        right = QSplitter(Qt.Orientation.Vertical)
-        right.addWidget(self.plots)
-        right.addWidget(tabs)
-        right.setStretchFactor(0, 3)
-        right.setStretchFactor(1, 1)
+        right, self.tabs = plots_over_tabs(self.plots, self.results, self.log)
         central = QSplitter(Qt.Orientation.Horizontal)
         central.addWidget(left)
         central.addWidget(right)

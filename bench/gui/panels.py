@@ -18,6 +18,7 @@ from PySide6.QtWidgets import (
     QSplitter,
     QTableWidget,
     QTableWidgetItem,
+    QTabWidget,
     QTreeWidget,
     QTreeWidgetItem,
     QVBoxLayout,
@@ -323,3 +324,16 @@ def _truth(truth: float | None, ci95: tuple[float, float] | None) -> str:
         return f"{truth:.6g}"
     inside = ci95[0] <= truth <= ci95[1]
     return f"{truth:.6g} ({'in' if inside else 'OUTSIDE'} the interval)"
+
+
+def plots_over_tabs(plots: QWidget, results: QWidget, log: QWidget) -> tuple[QSplitter, QTabWidget]:
+    """The plots above a Results | Log tab pair (3:1), as the live and the replay windows lay them out."""
+    tabs = QTabWidget()
+    tabs.addTab(results, "Results")
+    tabs.addTab(log, "Log")
+    right = QSplitter(Qt.Orientation.Vertical)
+    right.addWidget(plots)
+    right.addWidget(tabs)
+    right.setStretchFactor(0, 3)
+    right.setStretchFactor(1, 1)
+    return right, tabs

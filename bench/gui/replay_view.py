@@ -22,7 +22,6 @@ from PySide6.QtWidgets import (
     QSplitter,
     QTableWidget,
     QTableWidgetItem,
-    QTabWidget,
     QTreeWidget,
     QTreeWidgetItem,
     QVBoxLayout,
@@ -31,7 +30,7 @@ from PySide6.QtWidgets import (
 
 from bench.engine import events as ev
 
-from .panels import LogPane, ResultsTable
+from .panels import LogPane, ResultsTable, plots_over_tabs
 from .plots import LivePlots
 
 BANNER_STYLES = {"red": "background: #f4c7c3; color: #8b0000; font-weight: bold; padding: 6px;",
@@ -172,15 +171,7 @@ class ReplayWindow(QMainWindow):
         lay.addWidget(st_box, 1)
         left.setMinimumWidth(370)
         left.setMaximumWidth(460)
-        tabs = QTabWidget()
-        tabs.addTab(self.results, "Results")
-        tabs.addTab(self.log, "Log")
-        self.tabs = tabs
-        right = QSplitter(Qt.Orientation.Vertical)
-        right.addWidget(self.plots)
-        right.addWidget(tabs)
-        right.setStretchFactor(0, 3)
-        right.setStretchFactor(1, 1)
+        right, self.tabs = plots_over_tabs(self.plots, self.results, self.log)
         right.setSizes([540, 260])  # the recorded results get room to read
         split = QSplitter(Qt.Orientation.Horizontal)
         split.addWidget(left)
