@@ -1,20 +1,20 @@
-"""The Modbus rate-table controller on loopback: a pymodbus server (TCP, or RTU framing over a
-TCP socket that a `socket://` serial URL reaches) in a background thread, backed by a
-`TableMechanics` attached to the World.  Register map: drivers/rate_table/modbus_protocol.py."""
+"""The Modbus rate-table controller on loopback: a small threaded Modbus server (TCP, MBAP
+framing, or RTU framing over a TCP socket that a `socket://` serial URL reaches), backed by a
+`TableMechanics` attached to the World.  Register map: drivers/rate_table/modbus_protocol.py.
+
+It answers the functions the controller has (FC3, FC4, FC6, FC16; any other: exception 1) as
+the Modbus application protocol specifies them, so any stock client talks to it; one blocking
+thread per connection answers a request in a few tens of microseconds (an asyncio server took
+several times that, which the lockstep link checks pay thousands of times a run)."""
 
 from __future__ import annotations
 
-import asyncio
+import socket
+import socketserver
+import struct
 import threading
 from dataclasses import dataclass, field
 from typing import Any
-
-from pymodbus import FramerType
-from pymodbus.constants import ExcCodes
-from pymodbus.exceptions import NoSuchIdException
-from pymodbus.server import ModbusTcpServer
-from pymodbus.simulator import DataType, SimData, SimDevice
-from pymodbus.simulator.simcore import SimCore
 
 from drivers.rate_table import modbus_protocol as mp
 
@@ -22,8 +22,31 @@ from .fault_controls import TableFaultControls
 from .mechanics import CommandRejected, TableMechanics
 from .pty_bridge import PtyBridge
 
-_READ_FCS = (3, 4)
-_WRITE_FCS = (6, 16)
+EXC_ILLEGAL_FUNCTION = 0x01
+EXC_GATEWAY_NO_RESPONSE = 0x0B
+_MAX_READ_REGS = 125  # Modbus application protocol: FC3/FC4 quantity 1..125
+_MAX_WRITE_REGS = 123  # FC16 quantity 1..123
+
+
+def _crc_table() -> list[int]:
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+        table.append(crc)
+    return table
+
+
+_CRC_TABLE = _crc_table()
+
+
+def crc16_modbus(data: bytes) -> bytes:
+    """The RTU frame check (CRC-16/MODBUS), low byte first as sent."""
+    crc = 0xFFFF
+    for b in data:
+        crc = (crc >> 8) ^ _CRC_TABLE[(crc ^ b) & 0xFF]
+    return struct.pack("<H", crc)
 
 
 @dataclass
@@ -49,31 +72,55 @@ class _LinkFaults:
         return b""  # drop
 
 
+def _exception(fc: int, code: int) -> bytes:
+    return bytes((fc | 0x80, code))
+
+
 class _TableRegisters:
-    """The pymodbus `action`: reads fill registers from the mechanics, writes command it."""
+    """Answers one request PDU: reads fill registers from the mechanics, writes command it."""
 
     def __init__(self, world, mech: TableMechanics) -> None:
         self.world, self.mech = world, mech
 
-    async def handle(self, fc, start_address, address, count, registers, set_values):
-        if fc not in _READ_FCS + _WRITE_FCS:
-            return ExcCodes.ILLEGAL_FUNCTION
-        if fc in _WRITE_FCS and set_values is None:
-            # pymodbus reads the written register back (FC6 echo) through the action: the write
-            # has already been applied and pymodbus stored the written values, so echo them
-            return None
-        if fc in _WRITE_FCS:
-            self.mech.feed()  # every write feeds the watchdog, without waiting for the world
-            if address == mp.HR_HEARTBEAT and count == 1:
-                return None
+    def answer(self, pdu: bytes) -> bytes:
+        """The reply PDU to a request PDU (an exception PDU for what the controller refuses)."""
+        fc = pdu[0]
+        if fc in (3, 4):
+            if len(pdu) != 5:
+                return _exception(fc, mp.EXC_ILLEGAL_VALUE)
+            address, count = struct.unpack_from(">HH", pdu, 1)
+            if not 1 <= count <= _MAX_READ_REGS:
+                return _exception(fc, mp.EXC_ILLEGAL_VALUE)
+            if address + count > (mp.HR_COUNT if fc == 3 else mp.IR_COUNT):
+                return _exception(fc, mp.EXC_ILLEGAL_ADDRESS)
             with self.world.lock:
-                return self._write(registers, start_address, address, list(set_values))
-        with self.world.lock:
-            if fc == 4:
-                registers[0 : mp.IR_COUNT] = mp.encode_status(*self.mech.status())
-            else:
-                registers[0 : mp.HR_COUNT] = self._holding()
-        return None
+                regs = self._holding() if fc == 3 else mp.encode_status(*self.mech.status())
+            values = regs[address : address + count]
+            return struct.pack(f">BB{count}H", fc, 2 * count, *values)
+        if fc == 6:
+            if len(pdu) != 5:
+                return _exception(fc, mp.EXC_ILLEGAL_VALUE)
+            address, value = struct.unpack_from(">HH", pdu, 1)
+            values = [value]
+        elif fc == 16:
+            if len(pdu) < 6:
+                return _exception(fc, mp.EXC_ILLEGAL_VALUE)
+            address, count, n_bytes = struct.unpack_from(">HHB", pdu, 1)
+            if not 1 <= count <= _MAX_WRITE_REGS or n_bytes != 2 * count or len(pdu) != 6 + n_bytes:
+                return _exception(fc, mp.EXC_ILLEGAL_VALUE)
+            values = list(struct.unpack_from(f">{count}H", pdu, 6))
+        else:
+            return _exception(fc, EXC_ILLEGAL_FUNCTION)
+        if address + len(values) > mp.HR_COUNT:
+            return _exception(fc, mp.EXC_ILLEGAL_ADDRESS)
+        self.mech.feed()  # every write feeds the watchdog, without waiting for the world
+        if not (address == mp.HR_HEARTBEAT and len(values) == 1):
+            with self.world.lock:
+                code = self._write(address, values)
+            if code is not None:
+                return _exception(fc, code)
+        # FC6 answers with the echo of its request; FC16 with the address and the quantity
+        return pdu if fc == 6 else struct.pack(">BHH", fc, address, len(values))
 
     def _holding(self) -> list[int]:
         m = self.mech
@@ -89,23 +136,22 @@ class _TableRegisters:
             min(65535, int(round(m.watchdog_s * 1000))),
         ]
 
-    def _write(self, registers, start_address, address, values) -> ExcCodes | None:
+    def _write(self, address: int, values: list[int]) -> int | None:
         m = self.mech
         regs = self._holding()
-        off = address - start_address
-        regs[off : off + len(values)] = values
+        regs[address : address + len(values)] = values
         touched = set(range(address, address + len(values)))
         try:
             if mp.HR_WATCHDOG_MS in touched:
                 m.set_watchdog_s(regs[mp.HR_WATCHDOG_MS] / 1000.0)
             if mp.HR_FAULT_RESET in touched:
                 if regs[mp.HR_FAULT_RESET] not in (0, 1):
-                    return ExcCodes.ILLEGAL_VALUE
+                    return mp.EXC_ILLEGAL_VALUE
                 if regs[mp.HR_FAULT_RESET] == 1:
                     m.fault_reset()
             if mp.HR_ENABLE in touched:
                 if regs[mp.HR_ENABLE] not in (0, 1):
-                    return ExcCodes.ILLEGAL_VALUE
+                    return mp.EXC_ILLEGAL_VALUE
                 m.set_enabled(bool(regs[mp.HR_ENABLE]))
             if touched & set(range(mp.CMD_BLOCK_START, mp.CMD_BLOCK_START + mp.CMD_BLOCK_COUNT)):
                 rate = mp.regs_to_float(regs[mp.HR_RATE_CMD : mp.HR_RATE_CMD + 2])
@@ -113,36 +159,39 @@ class _TableRegisters:
                 accel = mp.regs_to_float(regs[mp.HR_ACCEL : mp.HR_ACCEL + 2])
                 m.command(regs[mp.HR_MODE], rate, angle, accel)
         except CommandRejected as exc:
-            return ExcCodes.ILLEGAL_VALUE if exc.bad_value else ExcCodes.DEVICE_FAILURE
-        registers[0 : mp.HR_COUNT] = self._holding()
-        registers[mp.HR_FAULT_RESET] = 0
+            return mp.EXC_ILLEGAL_VALUE if exc.bad_value else mp.EXC_DEVICE_FAILURE
         return None
 
 
-class _OneUnitCore(SimCore):
-    """The server's datastore, answering only its own unit id (and 255 on TCP, the id the Modbus
-    TCP guide reserves for "this server"); any other id raises NoSuchIdException, which pymodbus
-    turns into silence (RTU) or exception 0x0B (TCP), see docs/rate_table_modbus.md."""
+def _read_exact(sock: socket.socket, n: int) -> bytes | None:
+    """n bytes from the socket, or None when the peer closed it."""
+    data = b""
+    while len(data) < n:
+        piece = sock.recv(n - len(data))
+        if not piece:
+            return None
+        data += piece
+    return data
 
-    def __init__(self, device: SimDevice, *, also: tuple[int, ...] = ()) -> None:
-        super().__init__(device)
-        self._runtime = self.devices[device.id]
-        self._ids = {device.id, *also}
 
-    def _unit(self, device_id: int):
-        if device_id not in self._ids:
-            raise NoSuchIdException(f"unit id {device_id} is not this controller's")
-        return self._runtime
-
-    async def async_getValues(self, device_id, func_code, address, count=1):
-        return await self._unit(device_id).async_getValues(func_code, address, count)
-
-    async def async_setValues(self, device_id, func_code, address, values):
-        return await self._unit(device_id).async_setValues(func_code, address, values)
+def _rtu_request_length(head: bytes) -> int | None:
+    """Bytes of a whole RTU request from its first 7 bytes (unit, fc, ...), CRC included; None
+    for a function whose request length this controller does not know."""
+    fc = head[1]
+    if fc in (1, 2, 3, 4, 5, 6):
+        return 8
+    if fc in (15, 16):
+        return 9 + head[6]
+    return None
 
 
 class ModbusTableServer(TableFaultControls):
-    """Handle of a running Modbus table: `.host`, `.port`, `.url`, `.mechanics`, `.stop()`."""
+    """Handle of a running Modbus table: `.host`, `.port`, `.url`, `.mechanics`, `.stop()`.
+
+    TCP: it answers its unit id and 255 (the id the Modbus TCP guide reserves for "this
+    server"); another unit id gets exception 0x0B, as a gateway to one unit answers.  RTU: only
+    its own address is answered; a request for another, or with a bad CRC, gets silence, as on a
+    serial line (docs/rate_table_modbus.md)."""
 
     def __init__(
         self, world, mechanics: TableMechanics, *, host: str, port: int, framer: str, device_id: int, use_pty=False
@@ -151,55 +200,102 @@ class ModbusTableServer(TableFaultControls):
             raise ValueError(f"framer={framer!r}: expected 'tcp' or 'rtu'")
         self.world, self.mechanics, self.framer, self.device_id = world, mechanics, framer, device_id
         self.link_faults = _LinkFaults()
-        device = SimDevice(
-            id=device_id,
-            simdata=(
-                [SimData(0, count=16, values=False, datatype=DataType.BITS)],
-                [SimData(0, count=16, values=False, datatype=DataType.BITS)],
-                [SimData(0, count=mp.HR_COUNT, values=0, datatype=DataType.REGISTERS)],
-                [SimData(0, count=mp.IR_COUNT, values=0, datatype=DataType.REGISTERS, readonly=True)],
-            ),
-            action=_TableRegisters(world, mechanics).handle,
+        self._registers = _TableRegisters(world, mechanics)
+        self._units = {device_id, 255} if framer == "tcp" else {device_id}
+        self._conns: set[socket.socket] = set()
+        self._conns_lock = threading.Lock()
+        self._stopping = threading.Event()
+        outer = self
+
+        class Handler(socketserver.BaseRequestHandler):
+            def handle(self) -> None:
+                outer._serve(self.request)
+
+        self._tcp = socketserver.ThreadingTCPServer((host, port), Handler, bind_and_activate=False)
+        self._tcp.daemon_threads = True
+        self._tcp.allow_reuse_address = True
+        self._tcp.server_bind()
+        self._tcp.server_activate()
+        self.host, self.port = self._tcp.server_address[:2]
+        self._thread = threading.Thread(
+            target=self._tcp.serve_forever, kwargs={"poll_interval": 0.05}, name="modbus-table", daemon=True
         )
-        self._server_args = dict(
-            framer=FramerType.SOCKET if framer == "tcp" else FramerType.RTU,
-            address=(host, port),
-            trace_packet=self.link_faults.apply,
-            # a slave on a serial line answers only its own address; a TCP server that is
-            # asked for another unit answers "gateway target device failed to respond" (0x0B)
-            ignore_missing_devices=framer == "rtu",
-        )
-        self._device = device
-        self._loop = asyncio.new_event_loop()
-        self._server: ModbusTcpServer | None = None
-        started = threading.Event()
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, args=(started,), name="modbus-table", daemon=True)
         self._thread.start()
-        if not started.wait(10.0) or self._error is not None:
-            raise RuntimeError(f"Modbus table server did not start: {self._error!r}")
-        sock = self._server.transport.sockets[0]
-        self.host, self.port = sock.getsockname()[:2]
         self._bridge = PtyBridge(self.host, self.port) if use_pty else None
 
-    async def _start(self) -> None:
-        self._server = ModbusTcpServer(self._device, **self._server_args)
-        # pymodbus's own SimCore falls back to unit 0 and fails with a KeyError inside the
-        # server for any unknown unit id: ours refuses it as a real controller does
-        self._server.context = _OneUnitCore(self._device, also=(255,) if self.framer == "tcp" else ())
-        await self._server.serve_forever(background=True)
-
-    def _run(self, started: threading.Event) -> None:
-        asyncio.set_event_loop(self._loop)
+    # --- one connection -------------------------------------------------------------------------
+    def _serve(self, sock: socket.socket) -> None:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        with self._conns_lock:
+            if self._stopping.is_set():
+                return
+            self._conns.add(sock)
         try:
-            self._loop.run_until_complete(self._start())
-        except BaseException as exc:  # reported to the constructor
-            self._error = exc
-            started.set()
+            while not self._stopping.is_set():
+                reply = self._serve_tcp(sock) if self.framer == "tcp" else self._serve_rtu(sock)
+                if reply is None:
+                    return
+                out = self.link_faults.apply(True, reply)
+                if out:
+                    sock.sendall(out)
+        except OSError:
             return
-        started.set()
-        self._loop.run_forever()
-        self._loop.close()
+        finally:
+            with self._conns_lock:
+                self._conns.discard(sock)
+
+    def _serve_tcp(self, sock: socket.socket) -> bytes | None:
+        """One MBAP request in, its reply frame out (b"": none); None when the peer has gone."""
+        head = _read_exact(sock, 7)
+        if head is None:
+            return None
+        tid, protocol, length, unit = struct.unpack(">HHHB", head)
+        if length < 2 or length > 254:
+            return None  # not Modbus TCP: drop the connection as a server does
+        pdu = _read_exact(sock, length - 1)
+        if pdu is None:
+            return None
+        if protocol != 0:
+            return b""
+        if unit not in self._units:
+            answer = _exception(pdu[0], EXC_GATEWAY_NO_RESPONSE)
+        else:
+            answer = self._registers.answer(pdu)
+        return struct.pack(">HHHB", tid, 0, len(answer) + 1, unit) + answer
+
+    def _serve_rtu(self, sock: socket.socket) -> bytes | None:
+        """One RTU request in, its reply frame out (b"": silence); None when the peer has gone."""
+        head = _read_exact(sock, 2)
+        if head is None:
+            return None
+        if head[1] in (15, 16):
+            rest = _read_exact(sock, 5)
+            if rest is None:
+                return None
+            head += rest
+        n = _rtu_request_length(head)
+        if n is None:
+            # a function this controller does not have: its length is unknown, so take what came
+            # with it and answer (if addressed to us) exception 1 as a slave does
+            sock.settimeout(0.01)
+            try:
+                head += sock.recv(256)
+            except TimeoutError:
+                pass
+            finally:
+                sock.settimeout(None)
+            if head[0] != self.device_id:
+                return b""
+            frame = bytes((head[0],)) + _exception(head[1], EXC_ILLEGAL_FUNCTION)
+            return frame + crc16_modbus(frame)
+        rest = _read_exact(sock, n - len(head))
+        if rest is None:
+            return None
+        frame = head + rest
+        if crc16_modbus(frame[:-2]) != frame[-2:] or frame[0] not in self._units:
+            return b""
+        answer = bytes((frame[0],)) + self._registers.answer(frame[1:-2])
+        return answer + crc16_modbus(answer)
 
     @property
     def url(self) -> str:
@@ -210,16 +306,20 @@ class ModbusTableServer(TableFaultControls):
         if self._bridge is not None:
             self._bridge.close()
             self._bridge = None
-        if not self._thread.is_alive():
-            return
-        fut = asyncio.run_coroutine_threadsafe(self._server.shutdown(), self._loop)
-        try:
-            fut.result(timeout=5.0)
-        finally:
-            self._loop.call_soon_threadsafe(self._loop.stop)
+        if not self._stopping.is_set():
+            self._stopping.set()
+            self._tcp.shutdown()
+            self._tcp.server_close()
             self._thread.join(timeout=5.0)
-        with self.world.lock:
-            self.world.detach(self.mechanics)
+            with self._conns_lock:
+                conns = list(self._conns)
+            for sock in conns:  # the clients see the link close, as when a controller goes away
+                try:
+                    sock.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+            with self.world.lock:
+                self.world.detach(self.mechanics)
 
     def __enter__(self) -> ModbusTableServer:
         return self
