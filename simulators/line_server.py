@@ -16,21 +16,35 @@ class LineServer:
     """Serve `reply(line) -> bytes | None` on a loopback port (0: a free one) until `stop()`."""
 
     def __init__(self, reply: Callable[[str], bytes | None], host: str = "127.0.0.1", port: int = 0,
-                 name: str = "line-server", max_line: int = 65536) -> None:
+                 name: str = "line-server", max_line: int = 65536, whole_lines: bool = False) -> None:
+        """whole_lines: a line without its LF (too long, or cut by the peer closing) ends the
+        connection unanswered instead of being answered as it is."""
         self._stop = threading.Event()
+        self._conns: set[socket.socket] = set()
+        self._conns_lock = threading.Lock()
         outer = self
         self.reply = reply
 
         class Handler(socketserver.StreamRequestHandler):
             def handle(self) -> None:
                 self.connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                while not outer._stop.is_set():
-                    raw = self.rfile.readline(max_line)
-                    if not raw:
+                with outer._conns_lock:
+                    if outer._stop.is_set():
                         return
-                    out = outer.reply(raw.decode("ascii", "replace"))
-                    if out is not None:
-                        self.wfile.write(out)
+                    outer._conns.add(self.connection)
+                try:
+                    while not outer._stop.is_set():
+                        raw = self.rfile.readline(max_line)
+                        if not raw or (whole_lines and not raw.endswith(b"\n")):
+                            return
+                        out = outer.reply(raw.decode("ascii", "replace"))
+                        if out is not None:
+                            self.wfile.write(out)
+                except OSError:
+                    return
+                finally:
+                    with outer._conns_lock:
+                        outer._conns.discard(self.connection)
 
         self._tcp = socketserver.ThreadingTCPServer((host, port), Handler, bind_and_activate=False)
         self._tcp.daemon_threads = True
@@ -43,16 +57,34 @@ class LineServer:
         )
         self._thread.start()
 
+    def send_all(self, data: bytes) -> None:
+        """Write `data` to every connected client now (an unsolicited message)."""
+        with self._conns_lock:
+            conns = list(self._conns)
+        for conn in conns:
+            try:
+                conn.sendall(data)
+            except OSError:
+                pass
+
     @property
     def resource_name(self) -> str:
         """The socket as a VISA resource (pyvisa-py)."""
         return f"TCPIP::{self.host}::{self.port}::SOCKET"
 
     def stop(self) -> None:
+        """Stop listening and close every connection (its client sees the link go)."""
         self._stop.set()
         self._tcp.shutdown()
         self._tcp.server_close()
         self._thread.join(timeout=5.0)
+        with self._conns_lock:
+            conns = list(self._conns)
+        for conn in conns:
+            try:
+                conn.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
 
 
 class TextLineServer(LineServer):
