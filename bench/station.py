@@ -88,6 +88,10 @@ class Station:
     # clock-slice ends (<= 0.1 s apart) once 0.35 s or 0.5 wall s have passed
     HEALTH_EVERY_SIM_S = 0.35
     HEALTH_EVERY_WALL_S = 0.5
+    #: the link checks' rows go to the run in blocks of at most this many rows or this much wall
+    #: time (in lockstep thousands of checks a run; each its own event cost more than the check)
+    HEALTH_BLOCK_ROWS = 32
+    HEALTH_BLOCK_WALL_S = 0.2
 
     def __init__(self, config: StationConfig) -> None:
         self.config = config
@@ -96,7 +100,8 @@ class Station:
         self.devices: dict[str, Any] = {}
         self.clock: GuardedClock = GuardedClock(self._make_clock())
         self._last_health = (-math.inf, -math.inf)
-        self._health_rows: list[np.ndarray] = []
+        self._health_rows: dict[str, tuple[tuple[str, ...], list[np.ndarray]]] = {}  # role: rows not yet recorded
+        self._health_sent_wall = -math.inf
         self._ctx: Any = None
         self._lock = threading.RLock()
         #: each streaming device's counters (lost/corrupt frames...) when this run's stream began, by role
@@ -214,7 +219,10 @@ class Station:
         elif now_sim - last_sim < self.HEALTH_EVERY_SIM_S and now_wall - last_wall < self.HEALTH_EVERY_WALL_S:
             return
         self._last_health = (now_sim, now_wall)
-        for role in self._ordered_roles():
+        # a streaming link's check waits for its reader to catch up with the clock: checked last,
+        # the reader works through the frames while the other links answer (a stable order)
+        roles = self._ordered_roles()
+        for role in [r for r in roles if self.spec(r).stream is None] + [r for r in roles if self.spec(r).stream]:
             spec = self.spec(role)
             if spec.health is None:
                 continue
@@ -222,7 +230,22 @@ class Station:
             rows = spec.health(device, self._stream_since.get(role))
             columns = spec.health_columns or getattr(device, "health_columns", ())  # an instrument's own
             if columns and rows is not None and self._ctx is not None:
-                self._ctx.record(role, ("t_s", *columns), np.column_stack([[now_sim], rows]))
+                pending = self._health_rows.setdefault(role, (("t_s", *columns), []))[1]
+                pending.append(np.column_stack([[now_sim], rows]))
+        if self._health_rows and (
+            now_wall - self._health_sent_wall >= self.HEALTH_BLOCK_WALL_S
+            or max(len(rows) for _, rows in self._health_rows.values()) >= self.HEALTH_BLOCK_ROWS
+        ):
+            self._send_health_rows()
+
+    def _send_health_rows(self) -> None:
+        """Record the link checks' rows not yet recorded, one block per device."""
+        pending, self._health_rows = self._health_rows, {}
+        self._health_sent_wall = time.monotonic()
+        if self._ctx is None:
+            return
+        for role, (columns, rows) in pending.items():
+            self._ctx.record(role, columns, np.concatenate(rows))
 
     def ensure_ready(self) -> None:
         """Before a run: ask every device for a sign of life; a device whose link was lost since
@@ -254,6 +277,7 @@ class Station:
         under its role; returns the function that stops them."""
         self._ctx = ctx
         self._last_health = (-math.inf, -math.inf)
+        self._health_rows = {}
         started: list[tuple[Any, StreamSpec, Callable[[], None]]] = []
         try:
             for role, dev in self.devices.items():
@@ -287,6 +311,10 @@ class Station:
             finally:
                 unsubscribe()
         started.clear()
+        try:
+            self._send_health_rows()
+        except BaseException as exc:  # noqa: BLE001 - raised below, after the streams are let go
+            first = first or exc
         self._ctx = None
         if first is not None:
             raise first

@@ -59,6 +59,10 @@ class CaptureState:
 
 
 _NODE = re.compile(r"^([A-Z*]+?)(\d*)$")
+#: headers already parsed (a pure function of the text): the link check's `*ESE n;*IDN?;*ESE?`
+#: is parsed thousands of times a run; bounded, since a client may send any text
+_HEADERS: dict[str, tuple[str, int]] = {}
+_HEADER_CACHE_SIZE = 4096
 
 
 class FrontEndModel:
@@ -192,7 +196,13 @@ class FrontEndModel:
         header, _, arg = unit.partition(" ")
         header, arg = header.upper(), arg.strip()
         query = header.endswith("?")
-        key, ch = self._parse_header(header.rstrip("?"))
+        bare = header.rstrip("?")
+        parsed = _HEADERS.get(bare)
+        if parsed is None:
+            parsed = self._parse_header(bare)  # raises for a header that is not the instrument's
+            if len(_HEADERS) < _HEADER_CACHE_SIZE:
+                _HEADERS[bare] = parsed
+        key, ch = parsed
         if key.startswith("*"):
             return self._common(key, query, arg)
         handler = self._SETTINGS.get(key)
