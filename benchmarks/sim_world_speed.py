@@ -21,6 +21,16 @@ the stream/grid/worker changes, alternately, twice each, medians of 3 rounds):
   (c)       302 /    237  ->     372 /    319  (the script of d4c1594, which imported the simulators
         at its top, so `ctx.compute`'s worker paid numba's import: ~0.4 s a run)
   (c)       339 /    436  ->     453 /    410  (this script on both trees; per CPU s 302 / 438 -> 453 / 404)
+Then (2026-11-26, load average 7-10 from other jobs; this script run on 2922767 and on the tree
+with its own Modbus server, the front end on the threaded line server and the link checks' rows
+recorded in blocks, alternately, 3 times each, each the median of 3 runs; per wall s / per CPU s):
+  (a)   3,471 / 8,260   2,443 / 5,772   3,141 / 7,878  ->  1,457 / 7,386   2,129 / 5,706   3,917 / 8,291
+  (b)     714 / 1,492     214 / 1,053     651 / 1,714  ->    736 / 1,487     473 / 1,195   1,070 / 1,752
+  (c)      79 /   169     127 /   192     147 /   231  ->    193 /   258     183 /   281     236 /   294
+  (c) medians of the three: 127 / 192 -> 193 / 281 (x1.52 per wall s, x1.46 per CPU s); (a), (b)
+  unchanged within the load's noise (their code did not change).  Per thread (CPU s a run, same
+  load): the Modbus server 0.6-1.0 -> 0.15-0.25; main thread ~2.7 (World.advance 1.1, link checks
+  0.7), FPGA link reader ~0.5-0.7, front-end server ~0.2-0.3, writer + recorder ~0.5.
 (c) is still far from 1000x: the link checks at every 0.4 s grid point (a Modbus status read and a
 SCPI *IDN? through the simulators' asyncio servers) cost about as much CPU as everything else
 together (switching them off, for diagnosis only, gave 1.25 instead of 3.1-3.7 CPU s a run under
