@@ -102,6 +102,7 @@ class Station:
         self._last_health = (-math.inf, -math.inf)
         self._health_rows: dict[str, tuple[tuple[str, ...], list[np.ndarray]]] = {}  # role: rows not yet recorded
         self._health_sent_wall = -math.inf
+        self._roles_cache: tuple[tuple[str, ...], list[str]] | None = None
         self._ctx: Any = None
         self._lock = threading.RLock()
         #: each streaming device's counters (lost/corrupt frames...) when this run's stream began, by role
@@ -130,8 +131,13 @@ class Station:
         return by_part({role: self.spec(role).part for role in self.devices})
 
     def _ordered_roles(self) -> list[str]:
-        """The open devices in safe-state order (also the order of the link checks)."""
-        return [role for _, roles in self.safe_state_plan() for role in roles]
+        """The open devices in safe-state order (also the order of the link checks; kept per set
+        of roles, as a lockstep run checks thousands of times)."""
+        key = tuple(self.devices)
+        cached = self._roles_cache
+        if cached is None or cached[0] != key:
+            cached = self._roles_cache = (key, [role for _, roles in self.safe_state_plan() for role in roles])
+        return list(cached[1])
 
     def _make_clock(self) -> Any:
         from bench.clock import RealClock
