@@ -31,12 +31,22 @@ recorded in blocks, alternately, 3 times each, each the median of 3 runs; per wa
   unchanged within the load's noise (their code did not change).  Per thread (CPU s a run, same
   load): the Modbus server 0.6-1.0 -> 0.15-0.25; main thread ~2.7 (World.advance 1.1, link checks
   0.7), FPGA link reader ~0.5-0.7, front-end server ~0.2-0.3, writer + recorder ~0.5.
-(c) is still far from 1000x: the link checks at every 0.4 s grid point (a Modbus status read and a
-SCPI *IDN? through the simulators' asyncio servers) cost about as much CPU as everything else
-together (switching them off, for diagnosis only, gave 1.25 instead of 3.1-3.7 CPU s a run under
-load), then the stream path (link reader, bus, writer thread, HDF5 recorder: ~0.5 CPU s) and the
-1 kHz stream outside the decay record (~200 k frames).  The compute worker (fork + fit, ~0.1-0.3 s
-wall) is not in the per-CPU-s figures (another process).
+(c) is still far from 1000x, which allows 1.1 s of wall (one core) for the 1108 s run.  Where a
+run's CPU goes now (thread CPU clocks, load 6-10, 2026-11-26; ~3.8-4.5 CPU s a run in all):
+  main thread ~2.5-3.0: World.advance 1.1-1.4 (13,872 blocks of the World, FPGA firmware with its
+    ~300 k stream frames at 1 kHz, table mechanics, the front end's lock-in: 80-100 us a block);
+    link checks 0.7-0.9 (2,771, one per 0.4 s grid point: the table's Modbus status read 0.33 s,
+    ~120 us client side in pymodbus; the front end's *IDN? 0.30 s, ~110 us in pyvisa-py; the FPGA
+    link's sync 0.07 s); engine checkpoints, clock and procedure ~0.7;
+  FPGA link reader 0.45-0.7 (parsing and delivering the frames in ~3,600 pieces);
+  writer thread and HDF5 recorder ~0.5 (925 flushes: one each simulated second, the raw file's
+    contract, docs/raw_data.md);
+  the simulators' servers: Modbus 0.15-0.25, front end 0.2-0.3.
+The World alone takes the whole 1.1 s budget, and the checks that find a fault within 0.5 s
+(two stock-client round trips per 0.4 s) another 0.65 s of client time.  The compute worker (fork
++ fit, ~0.1-0.3 s wall) is not in the per-CPU-s figures (another process); the raw file's
+compaction after the run (gzip, ~0.3-0.8 s) is in them but not in the wall figures (the run's
+wall time is taken before it).
 """
 
 from __future__ import annotations
