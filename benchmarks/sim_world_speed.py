@@ -28,7 +28,11 @@ recorded in blocks, alternately, 3 times each, each the median of 3 runs; per wa
   (b)     714 / 1,492     214 / 1,053     651 / 1,714  ->    736 / 1,487     473 / 1,195   1,070 / 1,752
   (c)      79 /   169     127 /   192     147 /   231  ->    193 /   258     183 /   281     236 /   294
   (c) medians of the three: 127 / 192 -> 193 / 281 (x1.52 per wall s, x1.46 per CPU s); (a), (b)
-  unchanged within the load's noise (their code did not change).  Per thread (CPU s a run, same
+  unchanged within the load's noise (their code did not change).  Again on the final tree (the
+  link checks' role order also kept), load 6-10:
+  (c)     161 /   233     221 /   222     219 /   209  ->    301 /   293     279 /   305     301 /   267
+  medians 219 / 222 -> 301 / 293 (x1.37 per wall s, x1.32 per CPU s); (a) and (b) came out 1.1-1.4x
+  faster "after" this time and slower the time before: the load's noise, not the code.  Per thread (CPU s a run, same
   load): the Modbus server 0.6-1.0 -> 0.15-0.25; main thread ~2.7 (World.advance 1.1, link checks
   0.7), FPGA link reader ~0.5-0.7, front-end server ~0.2-0.3, writer + recorder ~0.5.
 (c) is still far from 1000x, which allows 1.1 s of wall (one core) for the 1108 s run.  Where a
