@@ -179,7 +179,13 @@ class HrgSelfcal(HrgExcitation, Procedure):
             t = cols["t_s"]
             th = np.radians(cols["angle_out_deg"])
             cmd = np.sign(cols["prec_ctrl"]) * w
-            fit = sc.fit_cycle(t, th, np.gradient(th, t), cols["amp_ctrl"], cols["freq_ctrl"],
+            thdot = np.gradient(th, t)
+            # a frame's angle is the boxcar mean of its dt (centred dt/2 earlier), its loop outputs
+            # the values at the frame: put the angle at the frame's time; the cycle's first and
+            # last frames (the gain-trim step, the command's start) are left out of the fit
+            th_fit = th + thdot * self._dt / 2.0
+            e = slice(3, len(t) - 3)
+            fit = sc.fit_cycle(t[e], th_fit[e], thdot[e], cols["amp_ctrl"][e], cols["freq_ctrl"][e],
                                amplitude=self.amplitude, f0_hz=self._f0_hz, bin_s=self.bin_s,
                                fm_rate_hz=self.fm_rate_hz if self.fm_amplitude_hz > 0 else 0.0,
                                level=self.confidence)
