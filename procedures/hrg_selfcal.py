@@ -56,17 +56,17 @@ SPLIT_FLOOR_REL = 1e-3
 
 
 def _truth(key: str, scale: float = 1.0):
-    return lambda truth: None if key not in truth else truth[key] * scale
+    """The simulator's value of a noise term times scale; a station without that noise has none (0)."""
+    return lambda truth: truth.get(key, 0.0) * scale
 
 
 def _gain_truth(kind: str):
-    def rule(truth: dict[str, float]) -> float | None:
-        try:
-            if kind == "start":
-                return truth["noise_gain_x_ppm"] - truth["noise_gain_y_ppm"]
-            return truth["noise_gain_x_drift_ppm_h"] - truth["noise_gain_y_drift_ppm_h"]
-        except KeyError:
-            return None
+    """The true X/Y gain difference at clock time 0 ("start") or its drift (ppm, ppm/h); 0 on a
+    station whose pickoff gains have no error."""
+    def rule(truth: dict[str, float]) -> float:
+        if kind == "start":
+            return truth.get("noise_gain_x_ppm", 0.0) - truth.get("noise_gain_y_ppm", 0.0)
+        return truth.get("noise_gain_x_drift_ppm_h", 0.0) - truth.get("noise_gain_y_drift_ppm_h", 0.0)
     return rule
 
 
@@ -93,12 +93,12 @@ class HrgSelfcal(HrgExcitation, Procedure):
     confidence = Param(0.95, unit="", low=0.5, high=0.999, doc="level of the intervals")
 
     measurements = (
-        Measurement("q_factor", "", "Q = w0 / gamma, last cycle", truth=_truth("Q")),
+        Measurement("q_factor", "", "Q = w0 / gamma, last cycle", truth="Q"),
         Measurement("delta_inv_tau_per_s", "1/s", "damping anisotropy D = Delta(1/tau), last cycle",
-                    truth=_truth("delta_inv_tau_per_s")),
-        Measurement("theta_tau_deg", "deg", "damping axis, last cycle", truth=_truth("theta_tau_deg")),
-        Measurement("split_hz", "Hz", "frequency split, last cycle", truth=_truth("split_hz")),
-        Measurement("theta_w_deg", "deg", "stiffness axis, last cycle", truth=_truth("theta_w_deg")),
+                    truth="delta_inv_tau_per_s"),
+        Measurement("theta_tau_deg", "deg", "damping axis, last cycle", truth="theta_tau_deg"),
+        Measurement("split_hz", "Hz", "frequency split, last cycle", truth="split_hz"),
+        Measurement("theta_w_deg", "deg", "stiffness axis, last cycle", truth="theta_w_deg"),
         Measurement("gain_diff_start_ppm", "ppm", "X/Y gain difference g_x - g_y at clock time 0, from the straight "
                     "line through the cycles' identified values", truth=_gain_truth("start")),
         Measurement("gain_drift_ppm_h", "ppm/h", "drift of the X/Y gain difference (slope of that line)",
