@@ -8,7 +8,8 @@ needs N = 0.52 sqrt(100) / 60 = 0.0867 deg/sqrt(h).
 
 Run: .venv/bin/python benchmarks/selfcal_noise_floor.py [--hours 5] [--seed 1]
 
-Measured 2026-11-26 (5 h, seed 1, 180 windows): see docs/selfcal.md.
+Measured 2026-11-26: 5 h, seed 1: 0.534 deg/h [0.484, 0.596] over 179 windows (29 s wall);
+3 h: 0.480 [0.423, 0.554] over 107 windows; predicted 0.520.
 """
 
 from __future__ import annotations
