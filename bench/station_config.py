@@ -26,9 +26,10 @@ STATION_KEYS = {
     "axis_azimuth_deg": Key(float, 0.0, 0.0, 360.0, doc="sensitive axis from north toward east", unit="deg"),
 }
 #: the kind of gyro a simulated station holds when its file does not say
-PRESET_KINDS = {"hrg": "hrg", "hrg-wa": "hrg", "mems": "mems-ring"}
+PRESET_KINDS = {"hrg": "hrg", "hrg-wa": "hrg", "hrg-selfcal": "hrg", "mems": "mems-ring"}
 SIM_KEYS = {
-    "preset": Key(str, "hrg", choices=("hrg", "hrg-wa", "mems"), doc="simulated resonator (and its noise)"),
+    "preset": Key(str, "hrg", choices=("hrg", "hrg-wa", "hrg-selfcal", "mems"),
+                  doc="simulated resonator (and its noise)"),
     "seed": Key(int, 0, 0, 2**63 - 1, doc="random seed of the simulation"),
     "speed": Key(float, 0.0, 0.0, 1e6, doc="0 = lockstep, else x real time"),
     "sample_period_s": Key(float, 1e-3, 1e-5, 0.1, doc="simulated sample period", unit="s"),

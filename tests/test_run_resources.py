@@ -27,6 +27,8 @@ SHORT = {
     "cvg-allan": ("sim-hrg-wa", {"record_s": 60.0, "settle_s": 1.0}),
     "cvg-scale-factor": ("sim-hrg", {"max_rate_dps": 10.0, "steps": 1, "average_s": 0.5, "settle_s": 0.2,
                                      "whole_turns": False}),
+    "hrg-selfcal": ("sim-hrg-selfcal", {"cycles": 2, "precession_dps": 2.0, "settle_s": 1.0, "bin_s": 1.0,
+                                        "smooth_s": 10.0}),
     "cvg-bias": ("sim-hrg-ftr", {"record_s": 2.0, "turn_ons": 2, "quench_s": 1.0, "settle_s": 0.5, "batches": 2}),
 }
 

@@ -259,4 +259,14 @@ NOISE_PRESETS: dict[str, NoiseParams] = {
         damping_drift_per_s_h=1e-9,
         theta_tau_drift_deg_h=0.5,
     ),
+    # the CETC self-calibration paper's gyro (docs/selfcal.md): a white drift-rate noise whose 100 s
+    # bias stability is the paper's self-calibrated 0.52 deg/h (N = 0.52 sqrt(100 s) / 60 deg/sqrt(h)),
+    # a 0.15 % X/Y pickoff gain error growing by 20 ppm/h, damping anisotropy stable
+    "hrg-selfcal": NoiseParams(
+        arw_deg_rth=0.52 * 10.0 / 60.0,
+        gain_x_ppm=750.0,
+        gain_y_ppm=-750.0,
+        gain_x_drift_ppm_h=10.0,
+        gain_y_drift_ppm_h=-10.0,
+    ),
 }

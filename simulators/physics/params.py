@@ -265,6 +265,10 @@ PRESETS["hrg-ideal"] = replace(PRESETS["hrg"], delta_inv_tau_per_s=0.0, split_hz
 #: drift of 0.02 deg/h, quieter pickoffs (their white angle noise stays under the angle random walk
 #: at 0.1 s and up); its drift-rate noise and slow drifts are simulators.physics.noise.NOISE_PRESETS.
 PRESETS["hrg-wa"] = replace(PRESETS["hrg"], delta_inv_tau_per_s=1e-7, noise_sigma=1e-6)
+#: The CETC self-calibration paper's gyro (sim-hrg-selfcal, docs/selfcal.md): the hrg's Q 5.2e6 and
+#: damping anisotropy (58 deg/h drift peak to peak), quiet pickoffs; its noise floor and X/Y gain
+#: errors are simulators.physics.noise.NOISE_PRESETS["hrg-selfcal"].
+PRESETS["hrg-selfcal"] = replace(PRESETS["hrg"], noise_sigma=1e-6)
 
 
 def preset(name: str, **overrides: float) -> ResonatorParams:

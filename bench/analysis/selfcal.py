@@ -1,0 +1,229 @@
+"""Whole-angle self-calibration (CETC paper; docs/selfcal.md): least squares on the amplitude and
+frequency control channels over forced-precession cycles give the X/Y gain difference, the damping
+and stiffness anisotropy and Q; the precession channel's rate with the identified drift and gain
+terms removed is the compensated input rate.  Pure analysis: arrays in, results out."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+#: amplitude-channel regressors (docs/selfcal.md): 1, cos 4th, sin 4th, thdot sin 4th, thdot cos 4th
+AMP_TERMS = ("gamma", "beta_c", "beta_s", "two_dg", "nuisance_c")
+#: frequency-channel regressors: 1, cos 4th, sin 4th (the FM averages out over bins of whole FM periods)
+FREQ_TERMS = ("f_mean_hz", "h_c_hz", "h_s_hz")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A value with its standard error and the two-sided interval at the fit's level."""
+
+    value: float
+    se: float
+    ci: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class CycleFit:
+    """The parameters identified over one forced-precession cycle (docs/selfcal.md, section 3)."""
+
+    t_start_s: float
+    t_end_s: float
+    amp_coef: np.ndarray  # AMP_TERMS (1/s; two_dg dimensionless)
+    amp_cov: np.ndarray
+    freq_coef: np.ndarray  # FREQ_TERMS (Hz)
+    freq_cov: np.ndarray
+    dof: int
+    level: float
+    f0_hz: float
+
+    def _est(self, value: float, grad: np.ndarray, cov: np.ndarray) -> Estimate:
+        se = float(math.sqrt(max(0.0, grad @ cov @ grad)))
+        t = float(stats.t.ppf(0.5 + self.level / 2.0, self.dof))
+        return Estimate(float(value), se, (float(value - t * se), float(value + t * se)))
+
+    @property
+    def gain_diff(self) -> Estimate:
+        """Delta g = g_x - g_y, the X/Y pickoff gain difference (dimensionless)."""
+        g = np.zeros(len(AMP_TERMS))
+        g[3] = 0.5
+        return self._est(0.5 * self.amp_coef[3], g, self.amp_cov)
+
+    @property
+    def q_factor(self) -> Estimate:
+        """Q = w0 / gamma."""
+        gam = self.amp_coef[0]
+        g = np.zeros(len(AMP_TERMS))
+        g[0] = -2 * math.pi * self.f0_hz / gam**2
+        return self._est(2 * math.pi * self.f0_hz / gam, g, self.amp_cov)
+
+    def _b(self) -> tuple[float, float, np.ndarray, np.ndarray]:
+        """The damping anisotropy's (b_c, b_s) with the gain's share of the cos term put back:
+        b_c = beta_c + gamma Delta g / 2 (beta_c is the amplitude channel's 4 theta cos term)."""
+        gam, bc_app, bs, two_dg = self.amp_coef[:4]
+        bc = bc_app + gam * two_dg / 4.0
+        g_bc = np.array([two_dg / 4.0, 1.0, 0.0, gam / 4.0, 0.0])
+        g_bs = np.array([0.0, 0.0, 1.0, 0.0, 0.0])
+        return float(bc), float(bs), g_bc, g_bs
+
+    @property
+    def delta_inv_tau(self) -> Estimate:
+        """D = Delta(1/tau) = hypot(b_c, b_s) (1/s)."""
+        bc, bs, g_bc, g_bs = self._b()
+        d = math.hypot(bc, bs)
+        return self._est(d, (bc * g_bc + bs * g_bs) / d, self.amp_cov)
+
+    @property
+    def theta_tau_deg(self) -> Estimate:
+        """The damping axis: (1/4) atan2(b_s, b_c), degrees."""
+        bc, bs, g_bc, g_bs = self._b()
+        r2 = bc * bc + bs * bs
+        g = (bc * g_bs - bs * g_bc) / r2 * math.degrees(1.0) / 4.0
+        return self._est(math.degrees(math.atan2(bs, bc)) / 4.0, g, self.amp_cov)
+
+    @property
+    def split_hz(self) -> Estimate:
+        """Frequency split: the frequency channel's 4 theta term is (split/2) cos 4(theta - theta_w)."""
+        hc, hs = self.freq_coef[1:3]
+        r = math.hypot(hc, hs)
+        g = np.zeros(len(self.freq_coef))
+        g[1], g[2] = 2 * hc / r, 2 * hs / r
+        return self._est(2 * r, g, self.freq_cov)
+
+    @property
+    def theta_w_deg(self) -> Estimate:
+        hc, hs = self.freq_coef[1:3]
+        r2 = hc * hc + hs * hs
+        g = np.zeros(len(self.freq_coef))
+        g[1], g[2] = -hs / r2, hc / r2
+        return self._est(math.degrees(math.atan2(hs, hc)) / 4.0, g * math.degrees(1.0) / 4.0, self.freq_cov)
+
+    def drift_rad_s(self, theta_rad: np.ndarray, cmd_rad_s: np.ndarray, *, gain_removed: bool = False) -> np.ndarray:
+        """The wave's drift (rad/s of measured wave angle) these parameters predict at measured angle
+        theta under precession command cmd: (beta_c sin 4th - beta_s cos 4th) / 4 (damping, with the
+        amplitude force's gain tilt in it) - cmd (Delta g / 2) cos 4th (the gain's angle pattern).
+        gain_removed: the gain difference has since been trimmed out (FPGA gain trims): the damping
+        drift alone, (b_c sin 4th - b_s cos 4th) / 4."""
+        _gam, bc_app, bs, two_dg = self.amp_coef[:4]
+        s4, c4 = np.sin(4 * theta_rad), np.cos(4 * theta_rad)
+        if gain_removed:
+            bc, bs, _, _ = self._b()
+            return 0.25 * (bc * s4 - bs * c4) + 0.0 * cmd_rad_s
+        return 0.25 * (bc_app * s4 - bs * c4) - cmd_rad_s * (two_dg / 4.0) * c4
+
+
+def _ols(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Ordinary least squares: coefficients, their covariance s^2 (X'X)^-1, degrees of freedom."""
+    coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+    dof = len(y) - x.shape[1]
+    if dof < 1:
+        raise ValueError(f"{len(y)} points for {x.shape[1]} parameters: need more data in the cycle")
+    s2 = float(np.sum((y - x @ coef) ** 2) / dof)
+    return coef, s2 * np.linalg.inv(x.T @ x), dof
+
+
+def bin_means(t_s: np.ndarray, bin_s: float, *ys: np.ndarray) -> list[np.ndarray]:
+    """Means over consecutive bins of bin_s (the loops' filtered outputs are correlated over a few
+    seconds; bin means tens of seconds long are close to independent, so OLS intervals hold)."""
+    t = np.asarray(t_s, dtype=float)
+    idx = np.floor((t - t[0]) / bin_s).astype(int)
+    n = np.bincount(idx)
+    keep = n > 0
+    out = [np.bincount(idx, weights=np.asarray(y, dtype=float))[keep] / n[keep] for y in (t, *ys)]
+    return out
+
+
+def fit_cycle(t_s: np.ndarray, theta_rad: np.ndarray, thdot_rad_s: np.ndarray, amp_ctrl: np.ndarray,
+              freq_ctrl_hz: np.ndarray, *, amplitude: float, f0_hz: float, bin_s: float = 20.0,
+              fm_rate_hz: float = 0.0, level: float = 0.95) -> CycleFit:
+    """Identify one cycle: amp_ctrl / amplitude on (1, cos 4th, sin 4th, thdot sin 4th, thdot cos 4th),
+    freq_ctrl on (1, cos 4th, sin 4th) over bins of whole FM periods (which average the FM out);
+    theta the measured wave angle (rad), thdot its rate (rad/s).  Fits bin means of bin_s seconds."""
+    t_s = np.asarray(t_s, dtype=float)
+    if len(t_s) < 8:
+        raise ValueError(f"a cycle of {len(t_s)} samples is too short to identify")
+    f = np.asarray(freq_ctrl_hz, dtype=float)
+    s4, c4 = np.sin(4 * theta_rad), np.cos(4 * theta_rad)
+    tb, ab, c4b, s4b, tsb, tcb = bin_means(t_s, bin_s, np.asarray(amp_ctrl) / amplitude, c4, s4,
+                                           thdot_rad_s * s4, thdot_rad_s * c4)
+    one = np.ones_like(tb)
+    amp_coef, amp_cov, dof = _ols(np.column_stack([one, c4b, s4b, tsb, tcb]), ab)
+    if fm_rate_hz > 0:
+        # the FM's period is short against a bin: fit the frequency channel over bins of whole FM periods
+        fm_bin = max(1.0, round(bin_s * fm_rate_hz)) / fm_rate_hz
+        tf, fb, c4f, s4f = bin_means(t_s, fm_bin, f, c4, s4)
+        freq_coef, freq_cov, _ = _ols(np.column_stack([np.ones_like(tf), c4f, s4f]), fb)
+    else:
+        freq_coef, freq_cov, _ = _ols(np.column_stack([one, c4b, s4b]), bin_means(t_s, bin_s, f)[1])
+    return CycleFit(float(t_s[0]), float(t_s[-1]), amp_coef, amp_cov, freq_coef, freq_cov, dof, level, f0_hz)
+
+
+def cycle_bounds(cmd_dps: np.ndarray) -> list[tuple[int, int]]:
+    """Index ranges [i0, i1) of whole cycles (forward then back) in a precession command record:
+    a cycle starts where the command turns positive after being negative (or at the start)."""
+    sgn = np.sign(np.asarray(cmd_dps, dtype=float))
+    starts = [0] + [i for i in range(1, len(sgn)) if sgn[i] > 0 and sgn[i - 1] < 0]
+    return [(a, b) for a, b in zip(starts, starts[1:], strict=False)]
+
+
+def rate_dph(theta_rad: np.ndarray, t_s: np.ndarray, cmd_rad_s: np.ndarray, bryan_factor: float,
+             drift_rad_s: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Input rate (deg/h) between samples from the precession channel: -(thdot - cmd - drift) / K,
+    with the angle, command and drift taken at the midpoints; returns (t_mid, theta_mid, rate)."""
+    dt = np.diff(t_s)
+    thdot = np.diff(theta_rad) / dt
+    th_mid = 0.5 * (theta_rad[1:] + theta_rad[:-1])
+    cmd_mid = cmd_rad_s[1:]
+    d = 0.0 if drift_rad_s is None else drift_rad_s
+    rate = -(thdot - cmd_mid - d) / bryan_factor
+    return 0.5 * (t_s[1:] + t_s[:-1]), th_mid, np.degrees(rate) * 3600.0
+
+
+def bias_stability_dph(rate_dph_: np.ndarray, sample_s: float, smooth_s: float = 100.0) -> float:
+    """Bias stability: the standard deviation (1 sigma) of the rate's means over consecutive
+    smooth_s windows (the paper's 100 s smoothing)."""
+    m = max(1, int(round(smooth_s / sample_s)))
+    n = len(rate_dph_) // m
+    if n < 2:
+        raise ValueError(f"a record of {len(rate_dph_) * sample_s:.0f} s holds fewer than two {smooth_s:g} s windows")
+    means = np.asarray(rate_dph_[: n * m]).reshape(n, m).mean(axis=1)
+    return float(np.std(means, ddof=1))
+
+
+def bias_stability_interval(value: float, n_windows: int, level: float = 0.95) -> tuple[float, float]:
+    """Chi-squared interval of a standard deviation from n_windows independent means."""
+    k = n_windows - 1
+    lo = value * math.sqrt(k / stats.chi2.ppf(0.5 + level / 2, k))
+    hi = value * math.sqrt(k / stats.chi2.ppf(0.5 - level / 2, k))
+    return lo, hi
+
+
+def mean_since_start_dph(rate_dph_: np.ndarray) -> np.ndarray:
+    """The mean bias since the start at every sample (the paper's figure 7)."""
+    r = np.asarray(rate_dph_, dtype=float)
+    return np.cumsum(r) / np.arange(1, len(r) + 1)
+
+
+def integrated_angle_deg(rate_dph_: np.ndarray, sample_s: float, true_rate_dph: float = 0.0) -> np.ndarray:
+    """The integrated angle error (deg) of the rate against the true input rate."""
+    return np.cumsum(np.asarray(rate_dph_, dtype=float) - true_rate_dph) * sample_s / 3600.0
+
+
+def gain_trend(t_h: np.ndarray, values: np.ndarray, se: np.ndarray, level: float = 0.95) -> tuple[Estimate, Estimate]:
+    """Weighted straight line through the cycles' gain differences: (value at t = 0, slope per hour)."""
+    w = 1.0 / np.asarray(se, dtype=float) ** 2
+    x = np.column_stack([np.ones_like(t_h), t_h])
+    cov = np.linalg.inv(x.T @ (w[:, None] * x))
+    coef = cov @ (x.T @ (w * values))
+    dof = max(1, len(values) - 2)
+    chi2 = float(np.sum(w * (values - x @ coef) ** 2) / dof)
+    cov = cov * max(1.0, chi2)  # the scatter, if larger than the stated errors
+    t = float(stats.t.ppf(0.5 + level / 2, dof))
+    out = []
+    for j in range(2):
+        se_j = math.sqrt(cov[j, j])
+        out.append(Estimate(float(coef[j]), se_j, (float(coef[j] - t * se_j), float(coef[j] + t * se_j))))
+    return out[0], out[1]

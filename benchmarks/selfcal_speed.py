@@ -1,0 +1,51 @@
+"""Speed and targets of the whole-angle self-calibration (issue 20): `hrg-selfcal` on
+sim-hrg-selfcal through the real transports (lockstep), 20 forced-precession cycles of 1 h = 20
+simulated hours; prints simulated hours per wall minute (target: 20 h in <= 4 wall minutes, i.e.
+>= 5 sim h / wall min) and the measurements against the issue's targets.
+
+Run: nice -n 5 .venv/bin/python benchmarks/selfcal_speed.py [--cycles 20] [--seed 0]
+
+Measured 2026-11-26, 2 shared cores: see the numbers block in docs/selfcal.md section 6.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+
+
+def run(cycles: int, seed: int, runs_dir: str) -> tuple[float, float, dict]:
+    from bench.engine import Runner
+    from bench.station import SimStation
+    from procedures.hrg_selfcal import HrgSelfcal
+
+    station = SimStation("sim-hrg-selfcal", seed=seed).open()
+    try:
+        record = Runner(station, runs_dir=runs_dir).run(HrgSelfcal, {"cycles": cycles})
+    finally:
+        station.close()
+    assert record.outcome in ("PASS", "COMPLETE"), record.outcome
+    values = {m.name: (m.value, m.ci95) for m in record.measurements}
+    return record.simulated_s / 3600.0, record.wall_s / 60.0, values
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cycles", type=int, default=20)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    sim_h, wall_min, v = run(args.cycles, args.seed, tempfile.mkdtemp(prefix="gyrobench-selfcal-"))
+    print(f"hrg-selfcal, {args.cycles} cycles: {sim_h:.2f} sim h in {wall_min:.2f} wall min = "
+          f"{sim_h / wall_min:.2f} sim h / wall min (target >= 5)")
+    for name, (value, ci) in v.items():
+        print(f"  {name:28s} {value:.6g}  {ci}")
+    plain, comp = v["bias_stability_plain_dph"][0], v["bias_stability_selfcal_dph"][0]
+    print(f"targets: plain {plain:.2f} deg/h (paper 19.3, a third of the p-p); self-calibrated {comp:.3f} = "
+          f"{comp / 0.52:.3f} x the 0.52 floor (<= 1.1); mean bias after 10 h {v['mean_bias_10h_dph'][0]:.4f} "
+          f"(|.| < 0.018)")
+
+
+if __name__ == "__main__":
+    main()

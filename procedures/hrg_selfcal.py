@@ -1,0 +1,323 @@
+"""Whole-angle self-calibration of a rate-integrating HRG (CETC paper; issue 20; docs/selfcal.md):
+push the standing wave forward over a drift period and back (wave angle 0 -> 90 -> 0 deg, the
+paper's electrical 0 -> pi -> 0) again and again with frequency modulation on the frequency loop;
+after every cycle identify the X/Y gain difference, the damping anisotropy, the stiffness
+anisotropy and Q by least squares on the amplitude and frequency channels (bench.analysis.selfcal),
+trim the identified gain difference out in the FPGA's pickoff gain trims (RAM only: the NVM keeps
+its block), and compute the input rate from the precession channel with the identified drift
+removed (the previous cycle's identification applied to the next cycle: causal, as in real time).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from bench.analysis import selfcal as sc
+from bench.engine import Measurement, Param, Procedure, Result, step
+from bench.engine.streams import Column, StreamSchema, declare
+from drivers.fpga import protocol as fp
+
+from .hrg_damping import _StreamTap
+from .hrg_excitation import HrgExcitation
+
+TAP_COLUMNS = ("t_s", "angle_out_deg", "amp_ctrl", "freq_ctrl", "prec_ctrl")
+CYCLES = "hrg_selfcal_cycles"
+CYCLE_COLUMNS = declare(StreamSchema(CYCLES, "hrg-selfcal", (
+    Column("t_start_s", "s", doc="start of the cycle"), Column("t_end_s", "s", doc="its end"),
+    Column("gain_diff_ppm", "ppm", doc="identified X/Y pickoff gain difference g_x - g_y (trim in place + residual)"),
+    Column("gain_diff_se_ppm", "ppm", doc="its standard error"),
+    Column("trim_diff_ppm", "ppm", doc="gain difference trimmed out in the FPGA during the cycle"),
+    Column("delta_inv_tau_per_s", "1/s", doc="damping anisotropy D = Delta(1/tau)"),
+    Column("delta_inv_tau_se_per_s", "1/s", doc="its standard error"),
+    Column("theta_tau_deg", "deg", doc="damping axis"), Column("theta_tau_se_deg", "deg", doc="its standard error"),
+    Column("split_hz", "Hz", doc="frequency split"), Column("split_se_hz", "Hz", doc="its standard error"),
+    Column("theta_w_deg", "deg", doc="stiffness axis"), Column("theta_w_se_deg", "deg", doc="its standard error"),
+    Column("q_factor", "1", doc="Q = w0 / gamma"), Column("q_se", "1", doc="its standard error"),
+    Column("beta_c_per_s", "1/s", doc="amplitude channel's cos 4 theta term (drift model)"),
+    Column("beta_s_per_s", "1/s", doc="amplitude channel's sin 4 theta term (drift model)"),
+    Column("dof", "1", doc="degrees of freedom of the amplitude fit")))).names  # fmt: skip
+RATES = "hrg_selfcal_rates"
+RATE_COLUMNS = declare(StreamSchema(RATES, "hrg-selfcal", (
+    Column("t_s", "s", doc="time of the rate sample (midpoint)"),
+    Column("theta_deg", "deg", doc="measured wave angle"),
+    Column("plain_dph", "deg/h", doc="plain whole-angle rate -(thdot - command) / K"),
+    Column("drift_dph", "deg/h", doc="identified drift (input-referred) removed by the self-calibration"),
+    Column("selfcal_dph", "deg/h", doc="self-calibrated rate (NaN in the first, learning, cycle)")))).names  # fmt: skip
+
+#: model floor added in quadrature to the identified parameters' intervals (docs/selfcal.md, section 4):
+#: terms of second order in the gain difference and the loops' own residual, measured on noise-free runs
+Q_FLOOR_REL = 1e-5
+D_FLOOR_REL = 1e-3
+ANGLE_FLOOR_DEG = 0.05
+SPLIT_FLOOR_REL = 1e-3
+
+
+def _truth(key: str, scale: float = 1.0):
+    """The simulator's value of a noise term times scale; a station without that noise has none (0)."""
+    return lambda truth: truth.get(key, 0.0) * scale
+
+
+def _gain_truth(kind: str):
+    """The true X/Y gain difference at clock time 0 ("start") or its drift (ppm, ppm/h); 0 on a
+    station whose pickoff gains have no error."""
+    def rule(truth: dict[str, float]) -> float:
+        if kind == "start":
+            return truth.get("noise_gain_x_ppm", 0.0) - truth.get("noise_gain_y_ppm", 0.0)
+        return truth.get("noise_gain_x_drift_ppm_h", 0.0) - truth.get("noise_gain_y_drift_ppm_h", 0.0)
+    return rule
+
+
+class HrgSelfcal(HrgExcitation, Procedure):
+    """Whole-angle self-calibration: forced precession cycles with FM, gains, damping and stiffness
+    anisotropy and Q identified cycle after cycle, the rate compensated."""
+
+    name = "hrg-selfcal"
+    requires = ("fpga",)
+    kinds = ("hrg",)
+
+    cycles = Param(4, unit="", low=2, high=1000, doc="forced-precession cycles (the first one only learns)")
+    precession_dps = Param(0.05, unit="deg/s", low=1e-3, high=2.0,
+                           doc="wave-angle precession command: a cycle (90 deg forward, back) lasts 180 / rate s")
+    fm_amplitude_hz = Param(0.002, unit="Hz", low=0.0, high=1.0, doc="frequency modulation of the frequency loop")
+    fm_rate_hz = Param(0.05, unit="Hz", low=0.0, high=10.0, doc="its rate")
+    settle_s = Param(30.0, unit="s", low=0.0, high=3600.0, doc="loops settling in whole-angle mode first")
+    stream_hz = Param(1.0, unit="Hz", low=0.1, high=100.0, doc="rate of the samples analysed (boxcar stream)")
+    bin_s = Param(20.0, unit="s", low=1.0, high=600.0, doc="least-squares bins (the loops' outputs are correlated "
+                                                             "over a few seconds)")
+    smooth_s = Param(100.0, unit="s", low=1.0, high=3600.0, doc="bias-stability smoothing (the paper's 100 s)")
+    bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: the rate is the wave's rate / -K")
+    trim_gains = Param(1, unit="", low=0, high=1, doc="1: trim the identified gain difference out after each cycle")
+    confidence = Param(0.95, unit="", low=0.5, high=0.999, doc="level of the intervals")
+
+    measurements = (
+        Measurement("q_factor", "", "Q = w0 / gamma, last cycle", truth="Q"),
+        Measurement("delta_inv_tau_per_s", "1/s", "damping anisotropy D = Delta(1/tau), last cycle",
+                    truth="delta_inv_tau_per_s"),
+        Measurement("theta_tau_deg", "deg", "damping axis, last cycle", truth="theta_tau_deg"),
+        Measurement("split_hz", "Hz", "frequency split, last cycle", truth="split_hz"),
+        Measurement("theta_w_deg", "deg", "stiffness axis, last cycle", truth="theta_w_deg"),
+        Measurement("gain_diff_start_ppm", "ppm", "X/Y gain difference g_x - g_y at clock time 0, from the straight "
+                    "line through the cycles' identified values", truth=_gain_truth("start")),
+        Measurement("gain_drift_ppm_h", "ppm/h", "drift of the X/Y gain difference (slope of that line)",
+                    truth=_gain_truth("drift")),
+        Measurement("gain_diff_last_ppm", "ppm", "X/Y gain difference identified in the last cycle"),
+        Measurement("bias_stability_plain_dph", "deg/h", "plain whole-angle bias stability (smooth_s windows, "
+                    "1 sigma), cycles after the first"),
+        Measurement("bias_stability_selfcal_dph", "deg/h", "self-calibrated bias stability, same record; truth: the "
+                    "station's noise floor, its white drift-rate noise over 100 s (N 60 / sqrt(100 s))",
+                    truth=_truth("arw_deg_rth", 60.0 / 10.0)),
+        Measurement("improvement", "", "plain / self-calibrated bias stability"),
+        Measurement("mean_bias_dph", "deg/h", "mean self-calibrated bias since the start of the compensated record",
+                    truth=lambda t: t.get("earth_rate_dph", 0.0) + t.get("turn_on_bias_mean_dph", 0.0)),
+        Measurement("mean_bias_10h_dph", "deg/h", "mean bias since start after 10 h (NaN for shorter records)"),
+        Measurement("angle_error_deg", "deg", "integrated angle error at the end (interval: the ARW envelope "
+                    "+-1.96 N sqrt(T) from the Allan deviation)", truth=lambda t: 0.0),
+        Measurement("angle_error_max_deg", "deg", "largest integrated angle error over the record"),
+        Measurement("adev_100s_dph", "deg/h", "Allan deviation of the self-calibrated rate at tau = smooth_s"),
+    )
+
+    def __init__(self, params: dict[str, Any] | None = None) -> None:
+        super().__init__(params)
+        self._tap = _StreamTap(TAP_COLUMNS)
+
+    def demands(self) -> list:
+        return []
+
+    @step("Excite, hold the amplitude, whole-angle mode with FM")
+    def excite(self, ctx):
+        fpga = ctx.devices.fpga
+        ctx.subscribe(fpga, self._tap)
+        ctx.subscribe(fpga, self._keep_latest)
+        ctx.defer(self._tap.stop)
+        self._start_loops(ctx)
+        self._trim0 = {n: float(fpga.read_register(n)) for n in ("TRIM_EN", "TRIM_GAIN_X", "TRIM_GAIN_Y")}
+        ctx.defer(lambda: self._restore(fpga), "FPGA gain trims and FM back")
+        fpga.set_whole_angle(True, 0.0)
+        fpga.write_register("FM_RATE_HZ", self.fm_rate_hz)
+        fpga.write_register("FM_AMPLITUDE_HZ", self.fm_amplitude_hz)
+        a = self._hold_amplitude(ctx)
+        self._f0_hz = float(fpga.read_register("PLL_FREQ_HZ"))
+        ctx.sleep(self.settle_s)
+        period = float(fpga.read_register("SAMPLE_PERIOD_S"))
+        self._dec = max(1, int(round(1.0 / (self.stream_hz * period))))
+        self._dt = self._dec * period
+        fpga.start_stream(self._dec)
+        ctx.log.info(f"amplitude {a:.4f} held, {self._f0_hz:.3f} Hz, FM {self.fm_amplitude_hz:g} Hz at "
+                     f"{self.fm_rate_hz:g} Hz, stream {1 / self._dt:g} Hz")
+
+    def _restore(self, fpga) -> None:
+        fpga.write_register("FM_AMPLITUDE_HZ", 0.0)
+        fpga.set_whole_angle(True, 0.0)
+        for name, v in self._trim0.items():
+            fpga.write_register(name, v)
+
+    @step("Forced-precession cycles: identify, trim, compensate")
+    def run_cycles(self, ctx):
+        fpga = ctx.devices.fpga
+        half_s = 90.0 / self.precession_dps
+        w = math.radians(self.precession_dps)
+        trim_dg = 0.0
+        prev: sc.CycleFit | None = None
+        cyc_rows, rate_rows = [], []
+        self._tap.take(-math.inf, math.inf)
+        self._tap.on = True
+        for c in range(self.cycles):
+            fpga.sync()
+            t0 = ctx.clock.now()
+            for sign in (1.0, -1.0):
+                fpga.set_whole_angle(True, sign * self.precession_dps)
+                n = max(1, int(math.ceil(half_s / 300.0)))
+                for _ in range(n):
+                    ctx.sleep(half_s / n)
+            fpga.sync()
+            t1 = ctx.clock.now()
+            rows = self._tap.take(t0, t1)
+            cols = {name: rows[:, i] for i, name in enumerate(TAP_COLUMNS)}
+            t = cols["t_s"]
+            th = np.radians(cols["angle_out_deg"])
+            cmd = np.sign(cols["prec_ctrl"]) * w
+            thdot = np.gradient(th, t)
+            # a frame's angle is the boxcar mean of its dt (centred dt/2 earlier), its loop outputs
+            # the values at the frame: put the angle at the frame's time; the cycle's first and
+            # last frames (the gain-trim step, the command's start) are left out of the fit
+            th_fit = th + thdot * self._dt / 2.0
+            e = slice(3, len(t) - 3)
+            fit = sc.fit_cycle(t[e], th_fit[e], thdot[e], cols["amp_ctrl"][e], cols["freq_ctrl"][e],
+                               amplitude=self.amplitude, f0_hz=self._f0_hz, bin_s=self.bin_s,
+                               fm_rate_hz=self.fm_rate_hz if self.fm_amplitude_hz > 0 else 0.0,
+                               level=self.confidence)
+            g = fit.gain_diff
+            cyc_rows.append(self._cycle_row(t0, t1, fit, trim_dg))
+            # rates of this cycle: the previous cycle's identification (gain trimmed out since);
+            # the first cycle learns and is compensated by nothing
+            tm, thm, plain = sc.rate_dph(th, t, cmd, self.bryan_factor)
+            drift = np.zeros_like(plain) if prev is None else (
+                -np.degrees(prev.drift_rad_s(thm, cmd[1:], gain_removed=bool(self.trim_gains))) * 3600.0
+                / self.bryan_factor)
+            comp = plain - drift if prev is not None else np.full_like(plain, np.nan)
+            switch = np.flatnonzero(np.diff(np.sign(cols["prec_ctrl"])) != 0)  # command changed: drop +-2 samples
+            bad = np.zeros(len(plain), bool)
+            for i in switch:
+                bad[max(0, i - 2): i + 3] = True
+            plain[bad] = np.nan
+            comp[bad] = np.nan
+            rate_rows.append(np.column_stack([tm, np.degrees(thm), plain, drift, comp]))
+            if self.trim_gains:
+                trim_dg += g.value
+                fpga.write_register("TRIM_GAIN_X", 1.0 / (1.0 + trim_dg / 2.0))
+                fpga.write_register("TRIM_GAIN_Y", 1.0 / (1.0 - trim_dg / 2.0))
+                fpga.write_register("TRIM_EN", int(self._trim0["TRIM_EN"]) | fp.TRIM_GAIN)
+            prev = fit
+            ctx.record(CYCLES, CYCLE_COLUMNS, np.array([cyc_rows[-1]]))
+            ctx.record(RATES, RATE_COLUMNS, rate_rows[-1])
+            ctx.progress((c + 1) / self.cycles, f"cycle {c + 1}/{self.cycles}: D {fit.delta_inv_tau.value:.4g} 1/s, "
+                                                f"gain {cyc_rows[-1][2]:.0f} ppm")
+            ctx.log.info(f"cycle {c + 1}: Q {fit.q_factor.value:.5g}, D {fit.delta_inv_tau.value:.5g} 1/s at "
+                         f"{fit.theta_tau_deg.value:.3f} deg, split {fit.split_hz.value * 1e3:.4f} mHz at "
+                         f"{fit.theta_w_deg.value:.3f} deg, gain residual {g.value * 1e6:.1f} ppm")
+        self._tap.on = False
+        self._cycles = np.array(cyc_rows)
+        self._rates = np.vstack(rate_rows)
+
+    def _cycle_row(self, t0: float, t1: float, f: sc.CycleFit, trim_dg: float) -> list[float]:
+        g, d, tt, sp, tw, q = f.gain_diff, f.delta_inv_tau, f.theta_tau_deg, f.split_hz, f.theta_w_deg, f.q_factor
+        return [t0, t1, 1e6 * (trim_dg + g.value), 1e6 * g.se, 1e6 * trim_dg, d.value, d.se, tt.value, tt.se,
+                sp.value, sp.se, tw.value, tw.se, q.value, q.se, float(f.amp_coef[1]), float(f.amp_coef[2]),
+                float(f.dof)]
+
+    @step("Bias stability, mean bias, angle error, Allan deviation")
+    def results(self, ctx):
+        for res in _analyse(self._cycles, self._rates, self.smooth_s, self._dt, self.confidence):
+            ctx.report(res)
+
+    def analysis(self, data) -> list[Result]:
+        """Re-compute the results of a recorded run from its cycle and rate streams."""
+        if CYCLES not in data or RATES not in data:
+            raise ValueError(f"{data.path.name} holds no self-calibration cycles")
+        cyc, rates = data.table(CYCLES), data.table(RATES)
+        c = np.column_stack([cyc[n] for n in CYCLE_COLUMNS])
+        r = np.column_stack([rates[n] for n in RATE_COLUMNS])
+        dt = float(np.median(np.diff(r[:, 0]))) if len(r) > 1 else 1.0
+        return _analyse(c, r, self.smooth_s, dt, self.confidence)
+
+    def figures(self, data) -> list:
+        from bench.reporting.selfcal import figures
+
+        return figures(self, data)
+
+
+def _interval(v: float, se: float, floor: float, level: float) -> tuple[float, float]:
+    from scipy import stats
+
+    z = float(stats.norm.ppf(0.5 + level / 2))
+    h = z * math.hypot(se, floor)
+    return (v - h, v + h)
+
+
+def _analyse(cyc: np.ndarray, rates: np.ndarray, smooth_s: float, dt: float, level: float) -> list[Result]:
+    """Results from the cycle table (CYCLE_COLUMNS) and the rate table (RATE_COLUMNS)."""
+    col = {n: cyc[:, i] for i, n in enumerate(CYCLE_COLUMNS)}
+    last = {n: float(v[-1]) for n, v in col.items()}
+    out = [
+        Result("q_factor", last["q_factor"], ci95=_interval(last["q_factor"], last["q_se"],
+                                                            Q_FLOOR_REL * last["q_factor"], level)),
+        Result("delta_inv_tau_per_s", last["delta_inv_tau_per_s"], ci95=_interval(
+            last["delta_inv_tau_per_s"], last["delta_inv_tau_se_per_s"], D_FLOOR_REL * last["delta_inv_tau_per_s"],
+            level)),
+        Result("theta_tau_deg", last["theta_tau_deg"], ci95=_interval(last["theta_tau_deg"], last["theta_tau_se_deg"],
+                                                                      ANGLE_FLOOR_DEG, level)),
+        Result("split_hz", last["split_hz"], ci95=_interval(last["split_hz"], last["split_se_hz"],
+                                                            SPLIT_FLOOR_REL * last["split_hz"], level)),
+        Result("theta_w_deg", last["theta_w_deg"], ci95=_interval(last["theta_w_deg"], last["theta_w_se_deg"],
+                                                                  ANGLE_FLOOR_DEG, level)),
+        Result("gain_diff_last_ppm", last["gain_diff_ppm"], ci95=_interval(last["gain_diff_ppm"],
+                                                                           last["gain_diff_se_ppm"], 0.0, level)),
+    ]
+    t_mid_h = 0.5 * (col["t_start_s"] + col["t_end_s"]) / 3600.0
+    if len(t_mid_h) >= 3:
+        g0, slope = sc.gain_trend(t_mid_h, col["gain_diff_ppm"], col["gain_diff_se_ppm"], level)
+        out += [Result("gain_diff_start_ppm", g0.value, ci95=g0.ci), Result("gain_drift_ppm_h", slope.value,
+                                                                            ci95=slope.ci)]
+    r = {n: rates[:, i] for i, n in enumerate(RATE_COLUMNS)}
+    first = int(np.argmax(np.isfinite(r["selfcal_dph"])))
+    plain = r["plain_dph"][first:]
+    comp = r["selfcal_dph"][first:]
+    bs_plain = _nan_bias_stability(plain, dt, smooth_s)
+    bs_comp = _nan_bias_stability(comp, dt, smooth_s)
+    n_win = int(len(comp) * dt // smooth_s)
+    out += [
+        Result("bias_stability_plain_dph", bs_plain, ci95=sc.bias_stability_interval(bs_plain, n_win, level)),
+        Result("bias_stability_selfcal_dph", bs_comp, ci95=sc.bias_stability_interval(bs_comp, n_win, level)),
+        Result("improvement", bs_plain / bs_comp),
+    ]
+    filled = np.where(np.isfinite(comp), comp, np.nanmean(comp))
+    mean_since = sc.mean_since_start_dph(filled)
+    n = len(filled)
+    sd_mean = bs_comp * math.sqrt(smooth_s / (n * dt))
+    z = 1.96
+    out.append(Result("mean_bias_dph", float(mean_since[-1]), ci95=(float(mean_since[-1] - z * sd_mean),
+                                                                    float(mean_since[-1] + z * sd_mean))))
+    i10 = int(round(10 * 3600 / dt))
+    out.append(Result("mean_bias_10h_dph", float(mean_since[i10 - 1]) if n >= i10 else float("nan")))
+    angle = sc.integrated_angle_deg(filled, dt)
+    env = z * bs_comp * math.sqrt(smooth_s) * math.sqrt(n * dt) / 3600.0  # N sqrt(T), N in deg/sqrt(s)
+    out += [Result("angle_error_deg", float(angle[-1]), ci95=(float(angle[-1] - env), float(angle[-1] + env))),
+            Result("angle_error_max_deg", float(np.max(np.abs(angle))))]
+    import allantools
+
+    _taus, adev, _e, _n = allantools.oadev(filled, rate=1.0 / dt, data_type="freq", taus=np.array([smooth_s]))
+    out.append(Result("adev_100s_dph", float(adev[0])))
+    return out
+
+
+def _nan_bias_stability(rate: np.ndarray, dt: float, smooth_s: float) -> float:
+    m = max(1, int(round(smooth_s / dt)))
+    n = len(rate) // m
+    if n < 2:
+        raise RuntimeError(f"the compensated record of {len(rate) * dt:.0f} s holds fewer than two "
+                           f"{smooth_s:g} s windows")
+    means = np.nanmean(np.asarray(rate[: n * m]).reshape(n, m), axis=1)
+    return float(np.std(means, ddof=1))
