@@ -106,6 +106,10 @@ class Station:
     def load(cls, name_or_path: str | Path, **overrides: Any) -> Station:
         """Check a station file and build its (unopened) station; simulated ones become SimStation."""
         config = load_config(name_or_path)
+        if config.slots:  # several gyros on one table (bench.slots)
+            from bench.slots import BatchStation
+
+            return BatchStation.load(config.source, **overrides)
         if config.simulation is not None:
             from simulators.station_sim import SimStation
 
@@ -127,6 +131,10 @@ class Station:
     def _ordered_roles(self) -> list[str]:
         """The open devices in safe-state order (also the order of the link checks)."""
         return [role for _, roles in self.safe_state_plan() for role in roles]
+
+    def _health_roles(self) -> list[str]:
+        """The devices this station's link checks ask (a slot of a batch: its own only)."""
+        return self._ordered_roles()
 
     def _make_clock(self) -> Any:
         from bench.clock import RealClock
@@ -214,7 +222,7 @@ class Station:
         elif now_sim - last_sim < self.HEALTH_EVERY_SIM_S and now_wall - last_wall < self.HEALTH_EVERY_WALL_S:
             return
         self._last_health = (now_sim, now_wall)
-        for role in self._ordered_roles():
+        for role in self._health_roles():
             spec = self.spec(role)
             if spec.health is None:
                 continue
