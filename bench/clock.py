@@ -269,8 +269,10 @@ class SlotClock(_PollingWait):
                 del self._members[me]
                 self._cond.notify_all()
 
-    def unpark(self) -> None:
-        me = threading.get_ident()
+    def unpark(self, ident: int | None = None) -> None:
+        """The calling thread (or `ident`: the leader of a batch step hands every slot that waited
+        for it back to the clock before it waits itself) holds the world back again."""
+        me = threading.get_ident() if ident is None else ident
         with self._cond:
             depth = self._parked.get(me, 0)
             if depth:

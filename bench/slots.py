@@ -39,8 +39,7 @@ class SlotLock:
     """An engine-owned lock on a shared instrument: one slot at a time, re-entrant within a slot's
     thread, with a deadline.  A holder whose thread has ended, or that holds it longer than
     `deadline_wall_s`, loses it (`on_break(slot, thread, why)` is told) so the others never
-    deadlock.  A waiter is parked in the shared clock (the world may advance without it) and
-    calls `check()` while it waits, so an abort still ends it."""
+    deadlock.  A waiter calls `check()` while it waits, so an abort still ends it."""
 
     POLL_WALL_S = 0.02
 
@@ -63,9 +62,10 @@ class SlotLock:
             if self.holder == slot and self._thread is me:
                 self._depth += 1
                 return False
-        parked = clock is not None and hasattr(clock, "park")
-        if parked:
-            clock.park()
+        # not parked in the clock: a slot holds the lock for one call, in which no simulated time
+        # passes, so the world never needs to advance while a slot waits for it (a seeded batch stays
+        # the same whichever slot gets it first); a holder that never gives it back loses it at the deadline
+        parked = False
         try:
             while True:
                 with self._cond:
@@ -130,8 +130,10 @@ class Serialized:
 
 
 class SlotShare:
-    """A slot's handle on a shared instrument: every use takes the instrument's SlotLock for the
-    slot and switches the instrument to it (`select_slot`), unless the slot's step holds it."""
+    """A slot's handle on a shared instrument: every use (a call: switch + command) takes the
+    instrument's SlotLock for the slot and switches the instrument to it (`select_slot`); `using()`
+    holds it over several calls.  No clock wait happens under the lock in a call, so no simulated
+    time passes while a slot holds it: which slot gets it first cannot change a seeded batch."""
 
     def __init__(self, batch: BatchStation, role: str, slot: int) -> None:
         self._batch, self._role, self._slot = batch, role, slot
@@ -284,7 +286,8 @@ class BatchStation:
             if self.table_fault is not None:
                 raise self.table_fault
             grid = GuardedClock.LOCKSTEP_GRID_S if getattr(self.base_clock, "lockstep", False) else 0.35
-            if math.floor(now / grid + 1e-9) <= math.floor(self._last_shared_check / grid + 1e-9):
+            last = self._last_shared_check
+            if last > -math.inf and math.floor(now / grid + 1e-9) <= math.floor(last / grid + 1e-9):
                 return
             self._last_shared_check = now
             for role in self.config.devices:
