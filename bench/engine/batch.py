@@ -18,8 +18,12 @@ abort or a table fault: every slot's run ends at its next checkpoint, within 0.4
 
 from __future__ import annotations
 
+import datetime as _dt
 import threading
+import time
 from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 from drivers.errors import LinkLostError, SafetyTripError
@@ -29,6 +33,9 @@ from .measurement import ERROR
 from .procedure import Procedure, step_uses
 from .runner import Runner, RunRecord
 from .safety import SafeStateReport
+
+#: a batch run's outcome: the worst of its slots'
+_WORST_FIRST = ("ABORTED", "ERROR", "FAIL", "MARGINAL", "PASS", "COMPLETE")
 
 
 class BatchError(ValueError):
@@ -59,10 +66,15 @@ class Batch:
         self.station = station
         self.batch_roles = BATCH_ROLES
         self.serials = dict(serials)
-        self.runners = {
-            n: Runner(station.slot(n), runs_dir=runs_dir, store=store, operator=operator, duts=[serial],
+        self.store = store
+        self.operator = operator
+        self.runners = {  # the store gets the batch's one run (its N DUTs), not a run per slot
+            n: Runner(station.slot(n), runs_dir=runs_dir, store=None, operator=operator, duts=[serial],
                       bus=None if bus_for is None else bus_for(n), step_gate=self._gate(n))
             for n, serial in self.serials.items()}
+        self.runs_dir = runs_dir
+        self.record: RunRecord | None = None
+        self.store_error: str | None = None
         self._cond = threading.Condition()
         self._active: set[int] = set()
         self._arrived: dict[str, set[int]] = {}
@@ -89,6 +101,13 @@ class Batch:
         """Run a fresh procedure (from `make`) on every slot at once; each slot's RunRecord."""
         procs = {n: make() for n in self.runners}
         check_batchable(type(next(iter(procs.values()))), self.batch_roles)
+        from .runner import new_run_id
+
+        self.run_id = new_run_id()
+        for n, r in self.runners.items():
+            r.next_run_id = f"{self.run_id}-slot{n}"
+        started = _dt.datetime.now(_dt.UTC).isoformat()
+        t0_wall = time.monotonic()
         records: dict[int, RunRecord] = {}
         errors: dict[int, BaseException] = {}
         self._active = set(self.runners)
@@ -135,7 +154,41 @@ class Batch:
                 rec.end_reason += f"; the shared table did not come to rest: {self.table_report.errors}"
             rec.safe_detail.setdefault("devices", {}).update(
                 {f"shared {k}": v for k, v in self.table_report.devices.items()})
+        self.record = self._batch_record(procs, records, started, time.monotonic() - t0_wall)
+        if self.store is not None:
+            spool = None if self.runs_dir is None else Path(self.runs_dir) / "spool"
+            self.store_error = self.store.finish_run(self.record, spool)
         return dict(sorted(records.items()))
+
+    def _batch_record(self, procs: dict[int, Procedure], records: dict[int, RunRecord], started: str,
+                      wall_s: float) -> RunRecord:
+        """The batch as one run of the results store: its N DUTs in slot order, each measurement
+        with its DUT, each truth as `SERIAL:name`, each slot's run id and raw file in its params."""
+        from .runner import software_version
+
+        first = next(iter(procs.values()))
+        ordered = sorted(records.items())
+        rank = {o: i for i, o in enumerate(_WORST_FIRST)}
+        outcome = min((r.outcome for _, r in ordered), key=lambda o: rank.get(o, len(rank)), default=ERROR)
+        return RunRecord(
+            run_id=self.run_id, procedure=first.name, station_id=self.station.id,
+            simulated=bool(self.station.simulated), outcome=outcome,
+            end_reason="; ".join(f"slot {n} ({self.serials[n]}): {r.end_reason}" for n, r in ordered),
+            safe_state=all(r.safe_state for _, r in ordered) and bool(ordered),
+            safe_detail={"slots": {str(n): r.safe_detail for n, r in ordered},
+                         "table": None if self.table_report is None else self.table_report.devices},
+            measurements=[replace(m, dut=self.serials[n]) for n, r in ordered for m in r.measurements],
+            truth={f"{self.serials[n]}:{k}": v for n, r in ordered for k, v in (r.truth or {}).items()},
+            simulated_s=max((r.simulated_s for _, r in ordered), default=0.0), wall_s=wall_s,
+            raw_file=None, started_at=started, finished_at=_dt.datetime.now(_dt.UTC).isoformat(),
+            software_version=software_version(), operator=self.operator,
+            duts=[self.serials[n] for n in sorted(self.serials)],
+            seed=getattr(self.station.config, "simulation", None) and self.station.config.simulation.get("seed"),
+            params={**{k: v if isinstance(v, int | float | str | bool) or v is None else str(v)
+                       for k, v in first.params.items()},
+                    "batch_slots": {str(n): {"serial": self.serials[n], "run_id": r.run_id, "raw_file": r.raw_file,
+                                             "outcome": r.outcome} for n, r in ordered}},
+        )
 
     def _leave(self, n: int) -> None:
         with self._cond:

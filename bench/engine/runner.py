@@ -128,6 +128,8 @@ class Runner:
         #: step_gate(proc, name, ctx) runs one step instead of the runner (bench.engine.batch: batch
         #: steps once for every slot, a shared instrument's lock around a slot's step)
         self.step_gate = step_gate
+        #: the id the next run takes (a batch names its slots' runs after itself); None = a new one
+        self.next_run_id: str | None = None
         self.bus = bus or ev.EventBus()
         self.runs_dir = None if runs_dir is None else Path(runs_dir)
         self.store = store
@@ -230,7 +232,7 @@ class Runner:
         # an abort requested before the run began (Ctrl-C while the station opened) still holds
         st = self.station
         clock: GuardedClock = st.clock
-        run_id = new_run_id()
+        run_id, self.next_run_id = self.next_run_id or new_run_id(), None
         rec = RunRecord(
             run_id=run_id,
             procedure=proc.name,

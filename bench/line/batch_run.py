@@ -55,6 +55,8 @@ def run_batch_attempt(ctx: LineContext, station: Any, serials: dict[int, str], o
             for n, rec in records.items():
                 u = per[n]
                 outcomes = judge_run(cls, step, rec, step_limits, t0, u["runs"], u["measurements"], u["matched"])
+                # the results store holds the batch as one run (its N DUTs): this unit's run is part of it
+                u["runs"][-1].update(batch_run_id=batch.run_id, store_error=batch.store_error)
                 if step.stop_on_fail and outcomes and worst(outcomes) in STOP_OUTCOMES:
                     u["stopped_by"] = worst(outcomes)
     finally:
