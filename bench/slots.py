@@ -150,6 +150,13 @@ class SlotShare:
         finally:
             lock.release(self._slot)
 
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name.startswith("_"):
+            object.__setattr__(self, name, value)
+            return
+        with self.using() as device:  # a driver property (fe.lockin_tc_s = ...): set on the instrument
+            setattr(device, name, value)
+
     def __getattr__(self, name: str) -> Any:
         if name.startswith("_"):
             raise AttributeError(name)
