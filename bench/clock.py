@@ -259,6 +259,11 @@ class SlotClock(_PollingWait):
     def is_member(self) -> bool:
         return threading.get_ident() in self._members
 
+    def is_waiting(self, ident: int) -> bool:
+        """Thread `ident` is a member waiting on the clock now."""
+        with self._cond:
+            return self._members.get(ident) is not None
+
     def park(self) -> None:
         """The calling member waits on something other than the clock (a barrier, a lock): the
         world may advance without it until `unpark`."""

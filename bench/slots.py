@@ -64,7 +64,8 @@ class SlotLock:
                 return False
         # not parked in the clock: a slot holds the lock for one call, in which no simulated time
         # passes, so the world never needs to advance while a slot waits for it (a seeded batch stays
-        # the same whichever slot gets it first); a holder that never gives it back loses it at the deadline
+        # the same whichever slot gets it first).  Only a holder that waits on the clock under the lock
+        # (a front end's capture) makes the waiter park, so that the world can advance for the holder.
         parked = False
         try:
             while True:
@@ -80,6 +81,11 @@ class SlotLock:
                     if why is not None:
                         self._break(why)
                         continue
+                    holder = self._thread
+                    if (not parked and clock is not None and hasattr(clock, "is_waiting") and holder is not None
+                            and holder.ident is not None and clock.is_waiting(holder.ident)):
+                        clock.park()
+                        parked = True
                     self._cond.wait(self.POLL_WALL_S)
                 if check is not None:
                     check()
