@@ -394,6 +394,9 @@ class SlotStation(Station):
         under its lock, switched to this slot); the shared table is the batch's."""
         return by_part({role: self.spec(role).part for role in self.devices if role not in BATCH_ROLES})
 
+    def _note_safe_state_retry(self, role: str, ok: bool, attempts: int, failed: list[str]) -> None:
+        super()._note_safe_state_retry(f"slot {self.slot_number} {role}", ok, attempts, failed)
+
     def _health_roles(self) -> list[str]:
         return [r for r in self._ordered_roles() if r in self.own_roles]
 
