@@ -257,3 +257,53 @@ def test_shipped_several_gyros_stations():
     assert all(set(s) == {"fpga"} for s in hrg4.slots.values())
     assert set(mems4.devices) == {"table"} and all(set(s) == {"frontend", "fpga"} for s in mems4.slots.values())
     assert json.dumps(hrg4.slots)  # plain data
+
+
+class _CountingWorld:
+    """The least of a World a SimClock needs, counting the advances it is asked for."""
+
+    sample_period_s = 1e-3
+
+    def __init__(self) -> None:
+        self.sample_index = 0
+        self.advances: list[int] = []
+
+    @property
+    def t_s(self) -> float:
+        return self.sample_index * self.sample_period_s
+
+    def add_listener(self, callback) -> None:
+        pass
+
+    def advance_samples(self, n: int) -> None:
+        self.advances.append(n)
+        self.sample_index += n
+
+
+@pytest.mark.parametrize("order", [(0, 1, 2), (2, 1, 0), (1, 2, 0)])
+def test_the_shared_clock_advances_to_the_earliest_wake_up_once_every_slot_waits(order):
+    from bench.clock import SimClock, SlotClock
+
+    world = _CountingWorld()
+    clock = SlotClock(SimClock(world))
+    waits = {0: [0.3, 0.3, 0.4], 1: [0.5, 0.5], 2: [0.1, 0.9]}  # simulated seconds, per slot
+    woke: dict[int, list[int]] = {k: [] for k in waits}
+    start = threading.Barrier(3)
+
+    def slot(k: int) -> None:
+        clock.join()
+        start.wait()
+        time.sleep(0.01 * order.index(k))  # threads come to their waits in a different order each case
+        for dt in waits[k]:
+            clock.sleep(dt)
+            woke[k].append(world.sample_index)
+        clock.leave()
+
+    threads = [threading.Thread(target=slot, args=(k,)) for k in order]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(10.0)
+    assert woke == {0: [300, 600, 1000], 1: [500, 1000], 2: [100, 1000]}
+    # one advance to each distinct wake-up, whatever the order the threads came in
+    assert world.advances == [100, 200, 200, 100, 400]
