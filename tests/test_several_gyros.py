@@ -307,3 +307,32 @@ def test_the_shared_clock_advances_to_the_earliest_wake_up_once_every_slot_waits
     assert woke == {0: [300, 600, 1000], 1: [500, 1000], 2: [100, 1000]}
     # one advance to each distinct wake-up, whatever the order the threads came in
     assert world.advances == [100, 200, 200, 100, 400]
+
+
+def test_a_slot_that_dies_holding_the_front_end_lock_in_a_batch_leaves_the_others_their_turn():
+    from bench.engine import Procedure, step
+
+    class Grab(Procedure):
+        """Slot 2 takes the shared front end's lock and dies holding it; the others then use it."""
+
+        name = "grab-test"
+        requires = ("frontend",)
+
+        @step("Use the front end", uses=("frontend",))
+        def use(self, ctx):
+            st = ctx.station
+            if st.slot_number == 2:
+                st.batch.locks["frontend"].acquire(2)  # never given back
+                raise RuntimeError("slot 2 dies holding the front-end lock")
+            ctx.sleep(1.0)
+            ctx.devices.frontend.set_drive(1, output_on=False)  # its turn, switched to its slot
+
+    station = Station.load("sim-hrg-4", seed=3).open()
+    try:
+        records = Batch(station, {1: "L1", 2: "L2", 3: "L3", 4: "L4"}).run(Grab)
+        lock = station.locks["frontend"]
+        assert records[2].outcome == "ERROR" and "dies holding" in records[2].end_reason
+        assert all(records[n].outcome == "COMPLETE" for n in (1, 3, 4)), {n: r.end_reason for n, r in records.items()}
+        assert lock.broken and "slot 2" in lock.broken[0] and lock.holder is None
+    finally:
+        station.close()
