@@ -147,6 +147,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
             overrides["speed"] = _speed(args.speed)
         faults = [parse_fault(f) for f in args.fault]
         station = Station.load(args.station, **overrides)
+        if hasattr(station, "slots"):  # several gyros on one table: a batch, one unit a slot
+            raise StationError(
+                f"station {station.id!r} holds {station.n_slots} gyros on one table: run a sequence on them "
+                f"together with `gyrobench line run SEQUENCE --station {args.station} --dut S1 --dut S2 ...`")
         missing = [r for r in proc_cls.requires if r not in station.config.devices]
         if missing:
             raise StationError(

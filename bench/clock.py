@@ -207,3 +207,117 @@ class SimClock(_PollingWait):
         """Simulated seconds per wall second since a `mark()` (nan before any wall time passed)."""
         sim_s, wall_s = self.world.t_s - since[0], time.monotonic() - since[1]
         return sim_s / wall_s if wall_s > 0 else math.nan
+
+
+class SlotClock(_PollingWait):
+    """One SimClock shared by several slot threads (several gyros on one table).
+
+    Lockstep: a member thread's wait asks for a wake-up time and blocks; the world advances only
+    when every member is waiting (a member that is parked -- at a batch step's barrier, or waiting
+    for a shared instrument's lock -- or has left does not count), and then only to the earliest
+    wake-up asked for.  So the world's advances depend on the simulated times the slots ask for,
+    never on thread scheduling: a seeded batch is reproducible bit for bit.  A thread that is not a
+    member (the batch's coordinator bringing the table to rest) is a member for its wait.  In real
+    time the base clock's waits already let every thread wait on the one world."""
+
+    #: wall seconds a waiting member sleeps between looks at an abort (the guard runs after the wait)
+    POLL_WALL_S = 0.05
+
+    def __init__(self, base: SimClock) -> None:
+        self.base = base
+        self.world = base.world
+        self._cond = threading.Condition()
+        self._members: dict[int, int | None] = {}  # thread id -> wake-up sample index (None: running)
+        self._carry: dict[int, float] = {}  # each member's sub-sample remainder
+        self._parked: dict[int, int] = {}
+
+    def __getattr__(self, name: str):  # speed, set_speed, lockstep, mark ... of the SimClock
+        return getattr(self.base, name)
+
+    def now(self) -> float:
+        return self.base.now()
+
+    def close(self) -> None:
+        self.base.close()
+
+    # --- membership -----------------------------------------------------------------------------
+    def join(self) -> None:
+        """The calling thread is a slot: the world waits for it."""
+        with self._cond:
+            self._members.setdefault(threading.get_ident(), None)
+            self._carry.setdefault(threading.get_ident(), 0.0)
+
+    def leave(self, ident: int | None = None) -> None:
+        """The calling thread (or `ident`: a slot that died) no longer holds the world back."""
+        ident = threading.get_ident() if ident is None else ident
+        with self._cond:
+            self._members.pop(ident, None)
+            self._carry.pop(ident, None)
+            self._parked.pop(ident, None)
+            self._cond.notify_all()
+
+    def is_member(self) -> bool:
+        return threading.get_ident() in self._members
+
+    def is_waiting(self, ident: int) -> bool:
+        """Thread `ident` is a member waiting on the clock now."""
+        with self._cond:
+            return self._members.get(ident) is not None
+
+    def park(self) -> None:
+        """The calling member waits on something other than the clock (a barrier, a lock): the
+        world may advance without it until `unpark`."""
+        me = threading.get_ident()
+        with self._cond:
+            if me in self._members:
+                self._parked[me] = self._parked.get(me, 0) + 1
+                del self._members[me]
+                self._cond.notify_all()
+
+    def unpark(self, ident: int | None = None) -> None:
+        """The calling thread (or `ident`: the leader of a batch step hands every slot that waited
+        for it back to the clock before it waits itself) holds the world back again."""
+        me = threading.get_ident() if ident is None else ident
+        with self._cond:
+            depth = self._parked.get(me, 0)
+            if depth:
+                if depth == 1:
+                    del self._parked[me]
+                    self._members[me] = None
+                else:
+                    self._parked[me] = depth - 1
+
+    # --- waits ----------------------------------------------------------------------------------
+    def sleep(self, dt_s: float) -> None:
+        dt_s = _check_dt(dt_s)
+        if not self.base.lockstep:
+            self.base.sleep(dt_s)
+            return
+        me = threading.get_ident()
+        period = self.world.sample_period_s
+        with self._cond:
+            guest = me not in self._members
+            if guest:
+                self._members[me] = None
+                self._carry[me] = 0.0
+            try:
+                carry = self._carry[me] + dt_s
+                n = int(math.floor(carry / period + 1e-9))
+                self._carry[me] = max(0.0, carry - n * period)
+                target = self.world.sample_index + n
+                self._members[me] = target
+                while self.world.sample_index < target:
+                    wakes = list(self._members.values())
+                    if None not in wakes and min(wakes) > self.world.sample_index:
+                        # every member waits: advance to the earliest wake-up asked for
+                        self.world.advance_samples(min(wakes) - self.world.sample_index)
+                        self._cond.notify_all()
+                        continue
+                    self._cond.wait(self.POLL_WALL_S)
+            finally:
+                if guest:
+                    self._members.pop(me, None)
+                    self._carry.pop(me, None)
+                elif me in self._members:
+                    self._members[me] = None
+                self._cond.notify_all()

@@ -112,6 +112,10 @@ class Station:
     def load(cls, name_or_path: str | Path, **overrides: Any) -> Station:
         """Check a station file and build its (unopened) station; simulated ones become SimStation."""
         config = load_config(name_or_path)
+        if config.slots:  # several gyros on one table (bench.slots)
+            from bench.slots import BatchStation
+
+            return BatchStation.load(config.source, **overrides)
         if config.simulation is not None:
             from simulators.station_sim import SimStation
 
@@ -138,6 +142,10 @@ class Station:
         if cached is None or cached[0] != key:
             cached = self._roles_cache = (key, [role for _, roles in self.safe_state_plan() for role in roles])
         return list(cached[1])
+
+    def _health_roles(self) -> list[str]:
+        """The devices this station's link checks ask (a slot of a batch: its own only)."""
+        return self._ordered_roles()
 
     def _make_clock(self) -> Any:
         from bench.clock import RealClock
@@ -227,7 +235,7 @@ class Station:
         self._last_health = (now_sim, now_wall)
         # a streaming link's check waits for its reader to catch up with the clock: checked last,
         # the reader works through the frames while the other links answer (a stable order)
-        roles = self._ordered_roles()
+        roles = self._health_roles()
         for role in [r for r in roles if self.spec(r).stream is None] + [r for r in roles if self.spec(r).stream]:
             spec = self.spec(role)
             if spec.health is None:

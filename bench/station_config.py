@@ -45,6 +45,9 @@ class StationConfig:
     station: dict[str, Any]
     simulation: dict[str, Any] | None
     devices: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: several gyros on one table: each slot's own devices by role (`[slots.N.<role>]`), slot
+    #: numbers 1..N; `devices` then holds what the slots share (the table, a switched front end)
+    slots: dict[int, dict[str, dict[str, Any]]] = field(default_factory=dict)
 
     @property
     def id(self) -> str:
@@ -81,50 +84,97 @@ def load_config(name_or_path: str | Path) -> StationConfig:
     except OSError as exc:
         raise StationError(f"{path}: cannot be read: {exc.strerror or exc}") from None
     for top in raw:
-        if top not in ("station", "simulation", "devices"):
-            raise StationError(f"{path}: unknown table [{top}] (allowed: station, simulation, devices)")
+        if top not in ("station", "simulation", "devices", "slots"):
+            raise StationError(f"{path}: unknown table [{top}] (allowed: station, simulation, devices, slots)")
     if "station" not in raw:
         raise StationError(f'{path}: missing table [station] with id = "..."')
-    for top in ("station", "simulation", "devices"):
+    for top in ("station", "simulation", "devices", "slots"):
         if top in raw and not isinstance(raw[top], dict):
             raise StationError(f"{path}: {not_a(top, raw[top], 'a table ([' + top + '])')}")
     station = check_table(f"{path}: [station]", raw["station"], STATION_KEYS)
     sim = check_table(f"{path}: [simulation]", raw["simulation"], SIM_KEYS) if "simulation" in raw else None
-    devices: dict[str, dict[str, Any]] = {}
-    for role, table in (raw.get("devices") or {}).items():
-        where = f"{path}: [devices.{role}]"
-        if role not in ROLES and not role.isidentifier():
-            raise StationError(
-                f"{path}: [devices.{role}] {role!r} is not a name (roles: {', '.join(ROLES)}, or a name of your "
-                f"own, letters, digits and _, for an instrument)"
-            )
-        if not isinstance(table, dict):
-            raise StationError(f"{path}: {not_a(f'devices.{role}', table, 'a table')}")
-        name = table.get("driver")
-        kind = role if role in ROLES else INSTRUMENT
-        fitting = sorted(n for n, spec in DRIVERS.items() if spec.role == kind)
-        if name is None:
-            raise StationError(f"{where} {missing_key('driver', 'one of ' + ', '.join(fitting))}")
-        if not isinstance(name, str) or name not in DRIVERS:
-            raise StationError(f"{where} {not_one_of('driver', name, fitting)}")
-        spec = DRIVERS[name]
-        if kind == INSTRUMENT and spec.role in ROLES:
-            raise StationError(
-                f"{where} unknown role {role!r}: a {spec.role} driver goes under [devices.{spec.role}] "
-                f"(a name of your own holds an instrument: driver = one of {', '.join(fitting)})"
-            )
-        if spec.role != kind:
-            raise StationError(f"{where} {not_one_of('driver', name, fitting)} (it is a {spec.role} driver)")
-        cfg = check_table(where, table, spec.keys)
-        if spec.check_config is not None:
-            spec.check_config(where, cfg)
-        if kind == INSTRUMENT:
-            cfg["role"] = role  # the instrument's name in the run, its logged stream and `ctx.devices`
-        if sim is None:
-            missing = [k for k in ("resource", "url") if k in spec.keys and not cfg.get(k)]
-            if missing:
-                raise StationError(f"{where} {missing_key(missing[0], 'a real device needs its address')}")
-        devices[role] = cfg
+    devices = {role: _check_device(path, f"[devices.{role}]", role, table, sim)
+               for role, table in (raw.get("devices") or {}).items()}
+    slots = _check_slots(path, raw.get("slots") or {}, devices, sim)
     if not devices:
         raise StationError(f"{path}: no [devices.*] table (roles: {', '.join(ROLES)})")
-    return StationConfig(source=str(path), station=station, simulation=sim, devices=devices)
+    return StationConfig(source=str(path), station=station, simulation=sim, devices=devices, slots=slots)
+
+
+def _check_device(path: Path, name: str, role: str, table: Any, sim: dict[str, Any] | None) -> dict[str, Any]:
+    """One device table (`[devices.<role>]` or `[slots.N.<role>]`) checked against its driver's keys."""
+    where = f"{path}: {name}"
+    if role not in ROLES and not role.isidentifier():
+        raise StationError(
+            f"{where} {role!r} is not a name (roles: {', '.join(ROLES)}, or a name of your "
+            f"own, letters, digits and _, for an instrument)"
+        )
+    if not isinstance(table, dict):
+        raise StationError(f"{path}: {not_a(name.strip('[]'), table, 'a table')}")
+    driver = table.get("driver")
+    kind = role if role in ROLES else INSTRUMENT
+    fitting = sorted(n for n, spec in DRIVERS.items() if spec.role == kind)
+    if driver is None:
+        raise StationError(f"{where} {missing_key('driver', 'one of ' + ', '.join(fitting))}")
+    if not isinstance(driver, str) or driver not in DRIVERS:
+        raise StationError(f"{where} {not_one_of('driver', driver, fitting)}")
+    spec = DRIVERS[driver]
+    if kind == INSTRUMENT and spec.role in ROLES:
+        raise StationError(
+            f"{where} unknown role {role!r}: a {spec.role} driver goes under [devices.{spec.role}] "
+            f"(a name of your own holds an instrument: driver = one of {', '.join(fitting)})"
+        )
+    if spec.role != kind:
+        raise StationError(f"{where} {not_one_of('driver', driver, fitting)} (it is a {spec.role} driver)")
+    cfg = check_table(where, table, spec.keys)
+    if spec.check_config is not None:
+        spec.check_config(where, cfg)
+    if kind == INSTRUMENT:
+        cfg["role"] = role  # the instrument's name in the run, its logged stream and `ctx.devices`
+    if sim is None:
+        missing = [k for k in ("resource", "url") if k in spec.keys and not cfg.get(k)]
+        if missing:
+            raise StationError(f"{where} {missing_key(missing[0], 'a real device needs its address')}")
+    return cfg
+
+
+#: the most slots a station file may declare
+MAX_SLOTS = 16
+
+
+def _check_slots(path: Path, raw: Any, shared: dict[str, dict[str, Any]],
+                 sim: dict[str, Any] | None) -> dict[int, dict[str, dict[str, Any]]]:
+    """`[slots.N.<role>]`: slots numbered 1..N without a gap, each with the same roles, none of
+    them the shared table nor a role [devices.*] already shares."""
+    if not isinstance(raw, dict):
+        raise StationError(f"{path}: {not_a('slots', raw, 'a table of [slots.N] tables')}")
+    if not raw:
+        return {}
+    numbers = []
+    for key in raw:
+        if not (isinstance(key, str) and key.isdigit() and 1 <= int(key) <= MAX_SLOTS):
+            raise StationError(f"{path}: [slots.{key}]: a slot is a number from 1 to {MAX_SLOTS}")
+        numbers.append(int(key))
+    if sorted(numbers) != list(range(1, len(numbers) + 1)):
+        raise StationError(f"{path}: [slots.*] are {sorted(numbers)}: number them 1 to {len(numbers)} without a gap")
+    if "table" not in shared:
+        raise StationError(f"{path}: [slots.*] need the table they share in [devices.table]")
+    slots: dict[int, dict[str, dict[str, Any]]] = {}
+    roles_of_1: list[str] | None = None
+    for n in sorted(numbers):
+        body = raw[str(n)]
+        if not isinstance(body, dict) or not body:
+            raise StationError(f"{path}: [slots.{n}] holds no device table ([slots.{n}.fpga] ...)")
+        for role in body:
+            if role == "table":
+                raise StationError(f"{path}: [slots.{n}.table]: the slots share one table, [devices.table]")
+            if role in shared:
+                raise StationError(f"{path}: [slots.{n}.{role}]: {role} is already shared in [devices.{role}]")
+        slots[n] = {role: _check_device(path, f"[slots.{n}.{role}]", role, t, sim) for role, t in body.items()}
+        roles = sorted(body)
+        if roles_of_1 is None:
+            roles_of_1 = roles
+        elif roles != roles_of_1:
+            raise StationError(f"{path}: [slots.{n}] has {roles}, [slots.1] has {roles_of_1}: "
+                               "every slot the same roles")
+    return slots

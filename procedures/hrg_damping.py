@@ -207,7 +207,7 @@ class HrgDamping(HrgExcitation, Procedure):
         return self._tap.take(t0, t1)
 
     # --- steps -------------------------------------------------------------------------------
-    @step("Excite and hold the amplitude")
+    @step("Excite and hold the amplitude", uses=("fpga",))
     def excite(self, ctx):
         fpga = ctx.devices.fpga
         ctx.subscribe(fpga, self._tap)
@@ -217,20 +217,20 @@ class HrgDamping(HrgExcitation, Procedure):
         a = self._hold_amplitude(ctx)
         ctx.log.info(f"amplitude {a:.4f} held (setpoint {self.amplitude:g})")
 
-    @step("Spin the table")
+    @step("Spin the table", uses=("table",))
     def spin(self, ctx):
         self._start_spin(ctx)
 
-    @step("Wait for a stable rate")
+    @step("Wait for a stable rate", uses=("table",))
     def wait_stable(self, ctx):
         st = self._wait_stable(ctx)
         ctx.log.info(f"table stable at {st.rate_dps:.4f} deg/s")
 
-    @step("Cut the drive")
+    @step("Cut the drive", uses=("fpga", "frontend"))
     def cut_drive(self, ctx):
         self._cut_drive(ctx)
 
-    @step("Record cx, sx, cy, sy")
+    @step("Record cx, sx, cy, sy", uses=("fpga",))
     def record(self, ctx):
         fpga = ctx.devices.fpga
         period = self._sample_period_s(ctx)
@@ -246,7 +246,7 @@ class HrgDamping(HrgExcitation, Procedure):
         self._decay = self._decimate(rows, period)
         ctx.log.info(f"recorded {len(self._decay)} samples over {self.record_s:g} s at {1 / (dec * period):g} Hz")
 
-    @step("Compute E, theta and the quadrature")
+    @step("Compute E, theta and the quadrature", uses=())
     def elements(self, ctx):
         d = self._decay
         if d is None or len(d) < 8:
@@ -258,7 +258,7 @@ class HrgDamping(HrgExcitation, Procedure):
         ctx.fit("hrg-damping quadrature", t_s=t, quadrature_rel=k)
         ctx.measure("quadrature_rel_max", float(np.max(np.abs(el["k"] / np.maximum(el["a"], 1e-300)))))
 
-    @step("Fit the free-decay model")
+    @step("Fit the free-decay model", uses=("fpga",))
     def fit(self, ctx):
         d = self._decay
         fit = ctx.compute(fit_free_decay, *_decay_columns(d),  # abortable at once
@@ -273,7 +273,17 @@ class HrgDamping(HrgExcitation, Procedure):
             ctx.report(res)
         ctx.log.info(fit.summary())
 
-    @step("Compensate and verify")
+    @step("Stop the table", uses=("table",))
+    def stop_table(self, ctx):
+        """The verification turns the wave in whole-angle mode with the case at rest (a batch step
+        with several gyros on the table: one stop for all)."""
+        if not self.compensate:
+            return
+        table = ctx.devices.table
+        table.stop(self.accel_dps2)
+        table.wait_at_rest(timeout_s=self.rate_timeout_s + abs(self.rate_dps) / self.accel_dps2)
+
+    @step("Compensate and verify", uses=("fpga",))
     def compensate_step(self, ctx):
         self._compensate(ctx)
 
@@ -282,9 +292,7 @@ class HrgDamping(HrgExcitation, Procedure):
             ctx.log.info("compensation not requested")
             return
         fit = self._fit
-        fpga, table = ctx.devices.fpga, ctx.devices.table
-        table.stop(self.accel_dps2)
-        table.wait_at_rest(timeout_s=self.rate_timeout_s + abs(self.rate_dps) / self.accel_dps2)
+        fpga = ctx.devices.fpga
         fpga.set_drift_compensation(False, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
         fpga.set_whole_angle(True, self.verify_rate_dps)
         fpga.set_agc(True, self.amplitude)

@@ -183,22 +183,22 @@ class HrgFreeDecay(HrgExcitation, Procedure):
 
     measurements = _decay_declarations()
 
-    @step("Excite and hold the amplitude")
+    @step("Excite and hold the amplitude", uses=("fpga",))
     def excite(self, ctx):
         ctx.subscribe(ctx.devices.fpga, self._keep_latest)
         self._start_loops(ctx)
         self._hold_amplitude(ctx)
 
-    @step("Spin the table")
+    @step("Spin the table", uses=("table",))
     def spin(self, ctx):
         self._start_spin(ctx)
         self._wait_stable(ctx)
 
-    @step("Cut the drive")
+    @step("Cut the drive", uses=("fpga", "frontend"))
     def cut_drive(self, ctx):
         self._cut_drive(ctx)
 
-    @step("Record the decay")
+    @step("Record the decay", uses=("fpga",))
     def record(self, ctx):
         fpga = ctx.devices.fpga
         fpga.sync()
@@ -211,7 +211,7 @@ class HrgFreeDecay(HrgExcitation, Procedure):
         ref = float(fpga.read_register("PLL_FREQ_HZ"))
         ctx.record(WINDOW, WINDOW_COLUMNS, np.array([[t0, ctx.clock.now(), ref, self.rate_dps]]))
 
-    @step("Identify")
+    @step("Identify", uses=())
     def identify(self, ctx):
         results, fit, t, q = self._analyse(ctx.data(), compute=ctx.compute)  # abortable at once
         for res in results:

@@ -205,7 +205,7 @@ class MemsSweep(Procedure):
         ]
 
     # --- steps ---------------------------------------------------------------------------------
-    @step("Set up the drive")
+    @step("Set up the drive", uses=("frontend",))
     def set_up(self, ctx):
         fe = ctx.devices.frontend
         fe.lockin_tc_s = self.lockin_tc_s
@@ -216,22 +216,22 @@ class MemsSweep(Procedure):
         ctx.log.info("drive on at %.4f Hz; settling %.3f s per point", self.start_hz, self.settle_time_s())
         ctx.sleep(3.0 * self.settle_time_s())
 
-    @step("Sweep up")
+    @step("Sweep up", uses=("frontend",))
     def sweep_up(self, ctx):
         self._sweep(ctx, self.frequencies(), +1.0)
 
-    @step("Sweep down")
+    @step("Sweep down", uses=("frontend",))
     def sweep_down(self, ctx):
         if self.both_directions:
             self._sweep(ctx, self.frequencies()[::-1], -1.0)
 
-    @step("Drive off")
+    @step("Drive off", uses=("frontend",))
     def drive_off(self, ctx):
         fe = ctx.devices.frontend
         fe.set_drive(1, output_on=False)
         fe.set_drive(2, output_on=False)
 
-    @step("Identify")
+    @step("Identify", uses=())
     def identify(self, ctx):
         rows = np.array(self.rows)
         results, curves, _ = self._analyse(rows, compute=ctx.compute)  # abortable at once

@@ -118,6 +118,7 @@ class World:
         max_block_s: float = 0.1,
         noise: NoiseParams | None = None,
         earth_rate_dph: float = 0.0,
+        lock: threading.RLock | None = None,
     ) -> None:
         if not (math.isfinite(sample_period_s) and sample_period_s > 0):
             raise ValueError(f"sample_period_s={sample_period_s!r} must be > 0")
@@ -127,7 +128,9 @@ class World:
         self.seed = seed
         self.sample_period_s = float(sample_period_s)
         self.max_block_samples = max(1, int(round(max_block_s / sample_period_s)))
-        self.lock = threading.RLock()
+        self.lock = threading.RLock() if lock is None else lock  # several slot worlds of a rig share one
+        #: the world whose table turns this one (simulators.rig: a slot on a shared table), or None
+        self.case_source: World | None = None
         self.sample_index = 0
         self._pending_s = 0.0  # sub-sample remainder of requested advances
         self.devices: list[Any] = []  # change with attach / detach
@@ -238,6 +241,9 @@ class World:
         self.ripple_angle_rad = None
         for dev in self.devices:
             dev.before_block(self, t0, n, dt)
+        src = self.case_source
+        if src is not None:  # a slot on a shared table: the table's world has run this block already
+            self.case_rate_dps, self.ripple_angle_rad = src.case_rate_dps, src.ripple_angle_rad
         rate = self.case_rate_dps
         forces = self._forces
         if len(forces) == 1:

@@ -55,7 +55,7 @@ def run(tmp_path_factory):
 def test_registered_under_its_name():
     assert find_procedure("hrg-damping") is HrgDamping
     assert [s for s, _ in HrgDamping.step_specs()] == [
-        "excite", "spin", "wait_stable", "cut_drive", "record", "elements", "fit", "compensate_step"
+        "excite", "spin", "wait_stable", "cut_drive", "record", "elements", "fit", "stop_table", "compensate_step"
     ]
 
 

@@ -55,19 +55,30 @@ from .measurement import Measurement, MeasurementError, Result
 from .params import Param, declared_params, resolve_params
 
 _STEP_ATTR = "_gyrobench_step_title"
+_USES_ATTR = "_gyrobench_step_uses"
 
 
-def step(title: str | Callable | None = None):
-    """Mark a method `def name(self, ctx)` as a step; `@step` or `@step("Title")`."""
+def step(title: str | Callable | None = None, *, uses: tuple[str, ...] | None = None):
+    """Mark a method `def name(self, ctx)` as a step; `@step` or `@step("Title")`.  `uses` names the
+    device roles the step touches (`("table",)`, `("fpga", "frontend")`, `()` for analysis): with
+    several gyros on one table a step that uses only the shared table is a batch step (run once for
+    every slot), the others run per slot (bench.engine.batch); None = not said."""
     if callable(title):
         setattr(title, _STEP_ATTR, title.__name__.replace("_", " ").capitalize())
+        setattr(title, _USES_ATTR, uses)
         return title
 
     def mark(fn: Callable) -> Callable:
         setattr(fn, _STEP_ATTR, title or fn.__name__.replace("_", " ").capitalize())
+        setattr(fn, _USES_ATTR, None if uses is None else tuple(uses))
         return fn
 
     return mark
+
+
+def step_uses(proc: Any, name: str) -> tuple[str, ...] | None:
+    """The device roles step `name` of a procedure (class or instance) declares, None if undeclared."""
+    return getattr(getattr(proc, name), _USES_ATTR, None)
 
 
 def _kebab(name: str) -> str:

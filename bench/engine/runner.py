@@ -122,8 +122,14 @@ class Runner:
         store: Any = None,
         operator: str = "",
         duts: list[str] | tuple[str, ...] = (),
+        step_gate: Any = None,
     ) -> None:
         self.station = station
+        #: step_gate(proc, name, ctx) runs one step instead of the runner (bench.engine.batch: batch
+        #: steps once for every slot, a shared instrument's lock around a slot's step)
+        self.step_gate = step_gate
+        #: the id the next run takes (a batch names its slots' runs after itself); None = a new one
+        self.next_run_id: str | None = None
         self.bus = bus or ev.EventBus()
         self.runs_dir = None if runs_dir is None else Path(runs_dir)
         self.store = store
@@ -143,6 +149,20 @@ class Runner:
         polls the reason every 0.05 s instead of being woken."""
         if self._abort_reason is None:
             self._abort_reason = reason
+
+    def fail(self, reason: str) -> None:
+        """End the run at its next checkpoint with outcome ERROR (a slot that lost a shared
+        instrument's lock; a batch step that failed for every slot)."""
+        if self._fatal is None:
+            exc = RunAborted(reason)
+            exc.outcome = ERROR
+            self._fatal = exc
+        self._running.set()
+
+    @property
+    def stopping(self) -> bool:
+        """An abort or a failure is pending: the next checkpoint raises."""
+        return self._abort_reason is not None or self._fatal is not None
 
     def pause(self) -> None:
         self._running.clear()
@@ -212,7 +232,7 @@ class Runner:
         # an abort requested before the run began (Ctrl-C while the station opened) still holds
         st = self.station
         clock: GuardedClock = st.clock
-        run_id = new_run_id()
+        run_id, self.next_run_id = self.next_run_id or new_run_id(), None
         rec = RunRecord(
             run_id=run_id,
             procedure=proc.name,
@@ -282,7 +302,10 @@ class Runner:
                 current = name
                 self.checkpoint()
                 ctx.publish(ev.StepStarted, name=name, index=index, total=len(steps), title=title)
-                getattr(proc, name)(ctx)
+                if self.step_gate is None:
+                    getattr(proc, name)(ctx)
+                else:
+                    self.step_gate(proc, name, ctx)
                 ctx.publish(ev.StepFinished, name=name, index=index, status="done")
             rec.end_reason = "completed"
         except RunAborted as exc:

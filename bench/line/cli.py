@@ -71,6 +71,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     station_name = _station_of(args, seq.station)
     overrides = {} if args.seed is None else {"seed": args.seed}
     station = Station.load(station_name, **overrides)  # the file checked before anything opens
+    duts = args.dut or []
+    faults = [_parse_slot_fault(f) for f in args.fault or []]
+    if hasattr(station, "slots"):  # several gyros on one table: one unit a slot
+        return _run_batch(args, seq, station, duts, faults)
+    if len(duts) > 1:
+        raise LineError(f"station {station.id!r} holds one unit: give one --dut (or a station with [slots.N])")
+    if any(slot is not None for _, _, slot in faults):
+        raise LineError(f"station {station.id!r} has no slots: --fault KIND@SECONDS without :slotN")
+    args.dut = duts[0] if duts else None
     check_steps(seq, station)
     if args.runs_dir is None:  # the station's folder and store, as `gyrobench run` uses them
         args.runs_dir = station.runs_dir
@@ -84,8 +93,13 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         if not operator.confirm(f"unit {serial} is in the fixture of station {station_name!r}?"):
             raise LineError(f"unit {serial}: the fixture was not confirmed; nothing was run")
-        records = run_unit(ctx, lambda: Station.load(station_name, **overrides), serial, operator,
-                           first_attempt=ctx.db.next_attempt(serial))
+        def open_station():
+            st = Station.load(station_name, **overrides)
+            for kind, at_s, _ in faults:
+                st.schedule_fault(kind, at_s)
+            return st
+
+        records = run_unit(ctx, open_station, serial, operator, first_attempt=ctx.db.next_attempt(serial))
     finally:
         ctx.store.close()
         ctx.db.close()
@@ -96,6 +110,79 @@ def cmd_run(args: argparse.Namespace) -> int:
             return EXIT_BAD
     final = records[-1]["outcome"] if records else "ERROR"
     return EXIT_OK if final == "PASS" else EXIT_BAD
+
+
+def _parse_slot_fault(text: str) -> tuple[str, float, int | None]:
+    """`KIND@SECONDS` or `KIND@SECONDS:slotN` -> (kind, seconds, slot or None)."""
+    from bench.station import parse_fault
+
+    head, sep, where = text.rpartition(":slot")
+    slot = None
+    if sep:
+        if not where.isdigit() or int(where) < 1:
+            raise LineError(f"--fault {text!r}: the slot after ':slot' is a number from 1 (e.g. link-drop@150:slot3)")
+        slot, text = int(where), head
+    try:
+        kind, at_s = parse_fault(text)
+    except ValueError as exc:
+        raise LineError(str(exc)) from None
+    return kind, at_s, slot
+
+
+def _run_batch(args: argparse.Namespace, seq: Any, station: Any, duts: list[str], faults: list) -> int:
+    """Several units at once on a several-gyros station: --dut in slot order (slot 1 first)."""
+    from bench.engine.batch import BatchError, check_batchable
+    from bench.slots import BATCH_ROLES
+    from procedures import find_procedure
+
+    from .batch_run import run_batch_attempt
+    from .prompts import check_serial, make_operator, stdin_is_terminal
+
+    if not duts:
+        raise LineError(f"station {station.id!r} holds {station.n_slots} units: give one --dut SERIAL per slot "
+                        "in slot order (slot 1 first)")
+    if len(duts) > station.n_slots:
+        raise LineError(f"{len(duts)} --dut given; station {station.id!r} has {station.n_slots} slots")
+    serials = {n: check_serial(s) for n, s in enumerate(duts, 1)}
+    if len(set(serials.values())) != len(serials):
+        raise LineError(f"--dut {', '.join(duts)}: a serial is given twice")
+    check_steps(seq, station.slot(1))
+    for step in seq.steps:
+        try:
+            check_batchable(find_procedure(step.procedure), BATCH_ROLES)
+        except BatchError as exc:
+            raise LineError(f"{seq.source}: {exc}") from None
+    for kind, at_s, slot in faults:
+        station.schedule_fault(kind, at_s, slot)
+    if args.runs_dir is None:
+        args.runs_dir = station.runs_dir
+    db_url = args.db or (station.results_url if args.runs_dir == station.runs_dir else None)
+    operator = make_operator(serial=serials[1], assume_yes=args.yes, interactive=stdin_is_terminal())
+    ctx = _context(args, station_name=station.id, operator=args.operator, db_url=db_url)
+    records: list[dict[str, Any]] = []
+    try:
+        placed = ", ".join(f"{s} in slot {n}" for n, s in serials.items())
+        if not operator.confirm(f"units {placed} are in the fixtures of station {station.id!r}?"):
+            raise LineError("the fixtures were not confirmed; nothing was run")
+        try:
+            station.open()
+        except Exception as exc:  # noqa: BLE001 - a station that does not open is one line
+            raise LineError(f"station {station.id!r} did not open: {type(exc).__name__}: {exc}") from None
+        try:
+            attempts = {s: ctx.db.next_attempt(s) for s in serials.values()}
+            records = run_batch_attempt(ctx, station, serials, operator, attempts)
+        finally:
+            station.close()
+    finally:
+        ctx.store.close()
+        ctx.db.close()
+    _print_records(records, args.json)
+    if not args.json:
+        counts = _counts(records)
+        print(f"batch of {len(records)} units on {station.id}: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    if any(r.get("db_error") for r in records):
+        return EXIT_BAD
+    return EXIT_OK if records and all(r["outcome"] == "PASS" for r in records) else EXIT_BAD
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -241,7 +328,10 @@ def add_line_subcommand(sub: Any) -> None:
 
     run = lsub.add_parser("run", help="one unit through a sequence (records judged against product limits)")
     run.add_argument("sequence", help="a shipped sequence (eol-hrg, eol-mems, ...) or a TOML file")
-    run.add_argument("--dut", default=None, metavar="SERIAL", help="the unit's serial (else it is scanned)")
+    run.add_argument("--dut", action="append", default=None, metavar="SERIAL",
+                     help="the unit's serial (else it is scanned); on a station with slots one per slot, slot 1 first")
+    run.add_argument("--fault", action="append", default=None, metavar="KIND@SECONDS[:slotN]",
+                     help="inject a station fault (simulated stations); :slotN aims it at one slot's device")
     run.add_argument("--operator", required=True, metavar="NAME")
     run.add_argument("--station", default=None, help="built-in station name or station TOML (default: the sequence's)")
     run.add_argument("--limits", default=None, help="product limits (shipped name or TOML; default: the sequence's)")

@@ -79,6 +79,9 @@ def summary(record: dict[str, Any]) -> str:
     if not bad:
         return f"{record['outcome']}: {sum(1 for m in record['measurements'] if m['rule'])} limit(s) met"
     words = []
+    for r in record.get("runs", []):  # a run that ended in ERROR or ABORTED: why, first
+        if r.get("outcome") in (ERROR, "ABORTED"):
+            words.append(f"{r.get('step') or r.get('procedure')} {r['outcome']} ({r.get('end_reason', '')})")
     for m in bad[:4]:
         lim = m["limits"] or {}
         value = "-" if m["value"] is None else f"{m['value']:.6g}"

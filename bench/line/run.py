@@ -42,7 +42,6 @@ def _table_question(station: Any) -> str:
 def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, operator: Any) -> dict[str, Any]:
     """One attempt of one unit on an opened station: its record (written and stored)."""
     from bench.engine import Runner
-    from bench.engine.runner import software_version
     from procedures import find_procedure
 
     seq, limits = ctx.sequence, ctx.limits
@@ -74,35 +73,54 @@ def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, opera
                     continue
             t0 = now_iso()
             rec = runner.run(step.make())
-            js = rec.as_json()
-            truth = cls.truth_for(js.get("truth")) if js.get("truth") else {}
-            runs.append({"run_id": rec.run_id, "procedure": cls.name, "step": step.label, "outcome": rec.outcome,
-                         "end_reason": rec.end_reason, "safe_state": bool(rec.safe_state),
-                         "raw_file": rec.raw_file, "sha256": sha256_of(rec.raw_file), "started_at": t0,
-                         "ended_at": now_iso(), "simulated_s": float(rec.simulated_s), "wall_s": float(rec.wall_s),
-                         "params": _plain(rec.params), "store_error": rec.store_error})
-            by_name = {lim.name: lim for lim in step_limits}
-            step_outcomes = []
-            for name, m in js["measurements"].items():
-                lim = by_name.get(name)
-                if lim is None and m.get("outcome") == "NOT_MEASURED":
-                    continue
-                entry = judged(name, cls.name, rec.run_id, m, lim, truth.get(name))
-                measurements.append(entry)
-                step_outcomes.append(entry["outcome"])
-            for lim in step_limits:
-                matched.add((lim.name, lim.procedure))
-                if lim.name not in js["measurements"]:
-                    entry = judged(lim.name, cls.name, rec.run_id, None, lim)
-                    measurements.append(entry)
-                    step_outcomes.append(entry["outcome"])
-            if rec.outcome in (ERROR, ABORTED):
-                step_outcomes.append(rec.outcome)
+            step_outcomes = judge_run(cls, step, rec, step_limits, t0, runs, measurements, matched)
             if step.stop_on_fail and step_outcomes and worst(step_outcomes) in STOP_OUTCOMES:
                 stopped_by = worst(step_outcomes)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    return finish_record(ctx, station, serial, attempt, started, runs, measurements, matched, stopped_by)
+
+
+def judge_run(cls: Any, step: Any, rec: Any, step_limits: list, t0: str, runs: list, measurements: list,
+              matched: set) -> list[str]:
+    """One step's run into the unit's lists: its run entry, its measurements judged against the
+    limits (with their truth on a simulated station); the step's outcomes."""
+    js = rec.as_json()
+    truth = cls.truth_for(js.get("truth")) if js.get("truth") else {}
+    runs.append({"run_id": rec.run_id, "procedure": cls.name, "step": step.label, "outcome": rec.outcome,
+                 "end_reason": rec.end_reason, "safe_state": bool(rec.safe_state),
+                 "raw_file": rec.raw_file, "sha256": sha256_of(rec.raw_file), "started_at": t0,
+                 "ended_at": now_iso(), "simulated_s": float(rec.simulated_s), "wall_s": float(rec.wall_s),
+                 "params": _plain(rec.params), "store_error": rec.store_error})
+    by_name = {lim.name: lim for lim in step_limits}
+    step_outcomes = []
+    for name, m in js["measurements"].items():
+        lim = by_name.get(name)
+        if lim is None and m.get("outcome") == "NOT_MEASURED":
+            continue
+        entry = judged(name, cls.name, rec.run_id, m, lim, truth.get(name))
+        measurements.append(entry)
+        step_outcomes.append(entry["outcome"])
+    for lim in step_limits:
+        matched.add((lim.name, lim.procedure))
+        if lim.name not in js["measurements"]:
+            entry = judged(lim.name, cls.name, rec.run_id, None, lim)
+            measurements.append(entry)
+            step_outcomes.append(entry["outcome"])
+    if rec.outcome in (ERROR, ABORTED):
+        step_outcomes.append(rec.outcome)
+    return step_outcomes
+
+
+def finish_record(ctx: LineContext, station: Any, serial: str, attempt: int, started: str, runs: list,
+                  measurements: list, matched: set, stopped_by: str | None,
+                  extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The unit's record from its runs and judged measurements: outcome, written beside its
+    certificate (and compensation file), saved in the line database."""
+    from bench.engine.runner import software_version
+
+    seq, limits = ctx.sequence, ctx.limits
     for lim in limits.limits:  # named by the limits file, measured by no step of the sequence
         if not any(name == lim.name for name, _ in matched):
             measurements.append(judged(lim.name, lim.procedure or "", None, None, lim))
@@ -130,6 +148,7 @@ def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, opera
         "simulated": bool(getattr(station, "simulated", False)),
         "measurements": measurements,
         "runs": runs,
+        **(extra or {}),
     }
     record["summary"] = summary(record)
     folder = ctx.runs_dir / "line" / (ctx.lot or "no-lot")

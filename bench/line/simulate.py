@@ -107,10 +107,16 @@ def undecided(records: list[dict[str, Any]]) -> list[str]:
 
 
 def simulate_lot(ctx: Any, station_file: str, units: list[DrawnUnit], seed: int, operator: Any) -> list[dict]:
-    """Each unit through the sequence on its own simulated station; every attempt's record."""
+    """Each unit through the sequence on its own simulated station (on a station with slots, as many
+    units at once as it has slots); every attempt's record."""
+    from bench.station_config import load_config
     from simulators.station_sim import SimStation
 
     from .run import run_unit
+
+    config = load_config(station_file)
+    if config.slots:
+        return _simulate_batches(ctx, config, units, seed, operator)
 
     records: list[dict] = []
     for i, unit in enumerate(units):
@@ -121,6 +127,32 @@ def simulate_lot(ctx: Any, station_file: str, units: list[DrawnUnit], seed: int,
 
         first = ctx.db.next_attempt(unit.serial) if ctx.db is not None else 1
         records.extend(run_unit(ctx, open_station, unit.serial, operator, first_attempt=first))
+        if ctx.aborted:
+            break
+    return records
+
+
+def _simulate_batches(ctx: Any, config: Any, units: list[DrawnUnit], seed: int, operator: Any) -> list[dict]:
+    """The lot in batches of the station's slots: each batch on a fresh simulated several-gyros
+    station whose slots hold the batch's drawn resonators (a last, short batch leaves slots empty:
+    their resonators are the preset's, with no unit judged)."""
+    from simulators.physics.params import preset
+    from simulators.rig_station import SimBatchStation
+
+    from .batch_run import run_batch_attempt
+
+    n_slots = len(config.slots)
+    records: list[dict] = []
+    for b, first in enumerate(range(0, len(units), n_slots)):
+        group = units[first:first + n_slots]
+        params = [u.params for u in group] + [preset(config.simulation["preset"])] * (n_slots - len(group))
+        station = SimBatchStation(config, seed=seed * 10007 + b * 101, resonators=params).open()
+        try:
+            serials = {k + 1: u.serial for k, u in enumerate(group)}
+            attempts = {u.serial: ctx.db.next_attempt(u.serial) if ctx.db is not None else 1 for u in group}
+            records.extend(run_batch_attempt(ctx, station, serials, operator, attempts))
+        finally:
+            station.close()
         if ctx.aborted:
             break
     return records

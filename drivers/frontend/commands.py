@@ -154,4 +154,7 @@ LONG_FORMS: dict[str, str] = {
     "INITIATE": "INIT",
     "SYSTEM": "SYST",
     "ERROR": "ERR",
+    "ROUTE": "ROUT",
 }
+#: ROUT:SLOT n: the slot a front end shared by several gyros is switched to (1 on a single-gyro bench)
+SLOT_RANGE = (1, 64)

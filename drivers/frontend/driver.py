@@ -475,6 +475,17 @@ class ScpiFrontEnd:
             raise ProtocolError(f"{query!r}: {data.size} samples, expected {expected_samples}")
         return data
 
+    def select_slot(self, slot: int) -> None:
+        """ROUT:SLOT: switch a front end shared by several gyros on one table to `slot` (1-based);
+        the engine does it while the slot holds the front end's lock."""
+        lo, hi = cmd.SLOT_RANGE
+        if not (isinstance(slot, int) and lo <= slot <= hi):
+            raise ValueError(f"front-end slot={slot!r} is not an integer in [{lo}, {hi}]")
+        self._set(f"ROUT:SLOT {slot}")
+
+    def selected_slot(self) -> int:
+        return int(self._query("ROUT:SLOT?"))
+
     # --- safety -------------------------------------------------------------------------------
     def safe_state(self) -> bool:
         """Outputs off, amplitudes zero on every channel; True only when read back as such."""

@@ -97,6 +97,7 @@ class FrontEndModel:
         self.capture_points = cmd.RST_CAPTURE_POINTS
         self.capture: CaptureState | None = None
         self.captured: dict[int, np.ndarray] = {}
+        self.slot = 1  # ROUT:SLOT: the slot a switched front end is connected to (simulators.rig)
 
     # --- physics ----------------------------------------------------------------------------------
     def reference_hz(self) -> float | None:
@@ -308,6 +309,7 @@ class FrontEndModel:
         "SENS:SRAT": ("sample_rate_hz", False, "float", cmd.SAMPLE_RATE_RANGE_HZ),
         "SENS:LOCK:TC": ("lockin_tc_s", False, "float", cmd.TIME_CONSTANT_RANGE_S),
         "CAPT:POIN": ("capture_points", False, "int", cmd.CAPTURE_POINTS_RANGE),
+        "ROUT:SLOT": ("slot", False, "int", cmd.SLOT_RANGE),  # the output switch of a shared front end
     }
 
     def _setting(self, key: str, handler: tuple, ch: int, query: bool, arg: str) -> str | None:
