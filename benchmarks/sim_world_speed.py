@@ -35,6 +35,12 @@ recorded in blocks, alternately, 3 times each, each the median of 3 runs; per wa
   faster "after" this time and slower the time before: the load's noise, not the code.  Per thread (CPU s a run, same
   load): the Modbus server 0.6-1.0 -> 0.15-0.25; main thread ~2.7 (World.advance 1.1, link checks
   0.7), FPGA link reader ~0.5-0.7, front-end server ~0.2-0.3, writer + recorder ~0.5.
+  A third set at a quieter moment (load 1.2-2.7; 2922767 against eb37d10, alternately, twice each,
+  each the median of 3 runs; per wall s / per CPU s):
+  (c)     156 /   177     201 /   186  ->    353 /   316     212 /   209
+  (a) 3,362-6,579 / 6,597-7,082 -> 5,850-7,760 / 5,873-7,911; (b) 1,029-1,407 / 1,172-1,409 ->
+  1,191-1,421 / 1,192-1,734: even at load ~2 both cores were busy (the quiet figures of 2026-11-23
+  were ~13,000 and ~3,000), so none of the three sets is a quiet machine's.
 (c) is still far from 1000x, which allows 1.1 s of wall (one core) for the 1108 s run.  Where a
 run's CPU goes now (thread CPU clocks, load 6-10, 2026-11-26; ~3.8-4.5 CPU s a run in all):
   main thread ~2.5-3.0: World.advance 1.1-1.4 (13,872 blocks of the World, FPGA firmware with its
