@@ -10,7 +10,8 @@ a noisy angle; the turn-on spread (8 turn-ons).  Target: inside the 99 % binomia
 Part 2, end to end (optional, --seeds N): cvg-scale-factor and cvg-bias on sim-hrg (whole-angle)
 and sim-hrg-ftr (force-to-rebalance) with N seeds each, short settings; the fraction of runs
 whose intervals hold the truth, and the wall time a run.
-Run: .venv/bin/python benchmarks/cvg_rate_coverage.py [n_draws] [--seeds N]   (default 2000, 0)
+Run: .venv/bin/python benchmarks/cvg_rate_coverage.py [n_draws] [--seeds N] [--stations a,b]
+(default 2000, 0, sim-hrg,sim-hrg-ftr)
 """
 
 from __future__ import annotations
@@ -88,7 +89,7 @@ def bias_coverage(n: int, rng: np.random.Generator) -> None:
     print(f"  turn-on spread 2 deg/h, 8 turn-ons, records 0.5 deg/h: {hits / n:.3f}")
 
 
-def end_to_end(seeds: int) -> None:
+def end_to_end(seeds: int, stations: tuple[str, ...] = ("sim-hrg", "sim-hrg-ftr")) -> None:
     from bench.engine import Runner
     from bench.results import ResultsStore
     from bench.station import SimStation
@@ -99,7 +100,7 @@ def end_to_end(seeds: int) -> None:
               ("scale_factor", "bias_dph", "asymmetry_ppm")),
              (CvgBias, {"record_s": 20.0, "turn_ons": 3, "quench_s": 6.0, "settle_s": 30.0}, ("bias_dph",)))
     for cls, params, names in plans:
-        for station_name in ("sim-hrg", "sim-hrg-ftr"):
+        for station_name in stations:
             hits = {n: 0 for n in names}
             wall = []
             errs: dict[str, list[float]] = {n: [] for n in names}
@@ -122,7 +123,8 @@ def end_to_end(seeds: int) -> None:
                     hits[n] += lo <= truth[n] <= hi
                     errs[n].append(got[n].value - truth[n])
             print(f"  {cls.name:17s} {station_name:12s} " + "  ".join(
-                f"{n} {hits[n]}/{seeds} (rms error {np.sqrt(np.mean(np.square(errs[n]))):.3g})" for n in names)
+                f"{n} {hits[n]}/{seeds} (error mean {np.mean(errs[n]):.3g}, rms {np.sqrt(np.mean(np.square(errs[n]))):.3g})"
+                for n in names)
                 + f"  wall {np.median(wall):.1f} s a run")
 
 
@@ -132,6 +134,11 @@ def main() -> None:
     if "--seeds" in args:
         i = args.index("--seeds")
         seeds = int(args[i + 1])
+        del args[i : i + 2]
+    stations = ("sim-hrg", "sim-hrg-ftr")
+    if "--stations" in args:
+        i = args.index("--stations")
+        stations = tuple(args[i + 1].split(","))
         del args[i : i + 2]
     n = int(args[0]) if args else 2000
     lo, hi = _band(n)
@@ -143,7 +150,7 @@ def main() -> None:
     print(f"  ({time.perf_counter() - t0:.1f} s)")
     if seeds:
         print(f"end to end, {seeds} seeds a station:")
-        end_to_end(seeds)
+        end_to_end(seeds, stations)
 
 
 if __name__ == "__main__":

@@ -89,6 +89,7 @@ class CvgScaleFactor(CvgOutput, Procedure):
         self._start_output(ctx)
         self._start_loops(ctx)
         self._hold_amplitude(ctx)
+        self._learn_split(ctx)
         ctx.devices.table.enable()
 
     @step("Rate series")
