@@ -123,7 +123,8 @@ def end_to_end(seeds: int, stations: tuple[str, ...] = ("sim-hrg", "sim-hrg-ftr"
                     hits[n] += lo <= truth[n] <= hi
                     errs[n].append(got[n].value - truth[n])
             print(f"  {cls.name:17s} {station_name:12s} " + "  ".join(
-                f"{n} {hits[n]}/{seeds} (error mean {np.mean(errs[n]):.3g}, rms {np.sqrt(np.mean(np.square(errs[n]))):.3g})"
+                f"{n} {hits[n]}/{seeds} (error mean {np.mean(errs[n]):.3g}, "
+                f"rms {np.sqrt(np.mean(np.square(errs[n]))):.3g})"
                 for n in names)
                 + f"  wall {np.median(wall):.1f} s a run")
 
