@@ -26,11 +26,20 @@ def _ftr(truth: dict[str, float]) -> bool:
 
 
 def scale_factor_truth(truth: dict[str, float]) -> float:
-    """The output mode's true scale factor (docs/fpga_link.md, "Output modes"): G K in
-    force-to-rebalance (the rate output G degrees(F_p / (4 a_set)), F_p = 4 a K Omega), -K in
-    whole-angle (the wave angle turns at -K Omega)."""
+    """The output mode's true scale factor (docs/fpga_link.md, "Output modes"): G K / g in
+    force-to-rebalance (the rate output G degrees(F_p / (4 a_set)), F_p = 4 a K Omega, and the AGC
+    holds the measured amplitude g a at a_set, g the pickoff gain along the held wave:
+    |((1 + g_x) cos 2 theta, (1 + g_y) sin 2 theta)|, the noise model's gains at the start), -K in
+    whole-angle (the wave angle turns at -K Omega; unequal gains distort the angle within a turn only)."""
+    import math
+
     k = truth["bryan_factor"]
-    return truth["ftr_gain"] * k if _ftr(truth) else -k
+    if not _ftr(truth):
+        return -k
+    two_th = 2.0 * math.radians(truth["ftr_angle_deg"])
+    g = math.hypot((1.0 + 1e-6 * truth.get("noise_gain_x_ppm", 0.0)) * math.cos(two_th),
+                   (1.0 + 1e-6 * truth.get("noise_gain_y_ppm", 0.0)) * math.sin(two_th))
+    return truth["ftr_gain"] * k / g
 
 
 def bias_at_dph(truth: dict[str, float], theta_deg: float) -> float:

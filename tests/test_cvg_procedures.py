@@ -112,3 +112,36 @@ def test_analysis_of_the_raw_file_gives_the_live_results_and_figures(sf_run, bia
         for name, value in again.items():
             assert value == pytest.approx(live[name], rel=1e-9, abs=1e-12), name
         assert figs and all(f.svg().startswith("<svg") for f in figs)
+
+
+#: the noisy stations (noise model `hrg-wa`: ARW, bias instability, rate random walk, turn-on bias,
+#: pickoff gain errors, Earth's rate at 48 deg N), both output modes, the same short settings
+NOISY = ["sim-hrg-wa", "sim-hrg-wa-ftr"]
+BIAS_SF_NOISY = {"sim-hrg-wa": {}, "sim-hrg-wa-ftr": {"scale_factor": 0.9972}}
+
+
+@pytest.fixture(scope="module", params=NOISY)
+def noisy_sf_run(request, tmp_path_factory):
+    return _run(request.param, CvgScaleFactor, SF_PARAMS, tmp_path_factory.mktemp("cvg_sf_noisy"))
+
+
+@pytest.fixture(scope="module", params=NOISY)
+def noisy_bias_run(request, tmp_path_factory):
+    params = BIAS_PARAMS | BIAS_SF_NOISY[request.param]
+    return _run(request.param, CvgBias, params, tmp_path_factory.mktemp("cvg_bias_noisy"))
+
+
+def test_scale_factor_series_on_the_noisy_stations(noisy_sf_run):
+    """With the noise model and Earth's rate (removed from the station's latitude), scale factor and
+    bias hold the truth within their intervals in both modes (force-to-rebalance: G K / g, g the
+    +300 ppm X pickoff gain along the held wave, which the AGC's amplitude carries into the output)."""
+    record, truth = noisy_sf_run
+    _check_truths(record, truth, ("scale_factor", "bias_dph"))
+
+
+def test_bias_and_repeatability_on_the_noisy_stations(noisy_bias_run):
+    """Static bias over 3 turn-ons with the World's turn-on spread (2 deg/h): the bias (truth: at
+    the held angle plus the turn-on draws' mean) and the repeatability hold their truths."""
+    record, truth = noisy_bias_run
+    assert truth["bias_repeatability_dph"] > 0
+    _check_truths(record, truth, ("bias_dph", "bias_repeatability_dph"))
