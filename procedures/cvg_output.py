@@ -81,11 +81,6 @@ class CvgOutput(HrgExcitation):
                            doc="Earth's rate on the sensitive axis, removed from the bias; 0 = from the station "
                                "file's latitude_deg and axis (earth_rate_projection_dph), 0 when it gives none")
     settle_s = Param(5.0, unit="s", low=0.0, high=3600.0, doc="wait after the rate is stable, before averaging")
-    learn_split_deg = Param(90.0, unit="deg", low=0.0, high=720.0,
-                            doc="whole-angle: precess the wave this far before the first window, so the "
-                                "FPGA's quadrature loop has seen the split's whole 4-theta pattern (0: no)")
-    learn_settle_s = Param(10.0, unit="s", low=0.0, high=600.0,
-                           doc="whole-angle: wait after that precession (the quadrature loop's integrator settles)")
 
     _mode: str = "whole-angle"
 
@@ -119,23 +114,22 @@ class CvgOutput(HrgExcitation):
         ctx.log.info(f"output mode {mode}; streaming at {1.0 / (dec * fpga.sample_period_s):g} Hz")
         return mode
 
-    def _learn_split(self, ctx, rate_dps: float = 5.0) -> None:
-        """Whole-angle: precess the wave learn_split_deg at rate_dps, then wait learn_settle_s.  At
+    def _learn_split(self, ctx, learn_deg: float, settle_s: float, rate_dps: float = 5.0) -> None:
+        """Whole-angle: precess the wave learn_deg at rate_dps, then wait settle_s.  At
         rest the FPGA's split observer sees one combination of the split's 4-theta quadrature
         pattern; the other is learnt once the wave turns, and what the quadrature loop's integrator
         took up meanwhile drains over ~10 s, turned into drift by the split (+2 deg/h over a first
         window at -36 deg/s, 5 mHz: docs/fpga_link.md).  Done before the series, not in its windows."""
-        if self._mode != "whole-angle" or self.learn_split_deg <= 0.0:
+        if self._mode != "whole-angle" or learn_deg <= 0.0:
             return
         fpga = ctx.devices.fpga
         fpga.set_whole_angle(True, rate_dps)
         try:
-            ctx.sleep(self.learn_split_deg / rate_dps)
+            ctx.sleep(learn_deg / rate_dps)
         finally:
             fpga.set_whole_angle(True, 0.0)
-        ctx.sleep(self.learn_settle_s)
-        ctx.log.info(f"wave precessed {self.learn_split_deg:g} deg for the FPGA to learn the split; "
-                     f"settled {self.learn_settle_s:g} s")
+        ctx.sleep(settle_s)
+        ctx.log.info(f"wave precessed {learn_deg:g} deg for the FPGA to learn the split; settled {settle_s:g} s")
 
     def _record_window(self, ctx, seconds: float) -> tuple[float, float]:
         """Let the bench clock run `seconds` (in slices, for progress and abort); (t_start, t_end)."""
