@@ -3,8 +3,9 @@ output mode (force-to-rebalance or whole-angle).
 
 Steps: excite and hold the amplitude (whole-angle: then precess the wave a quarter turn, so the
 FPGA has learnt the split's pattern before the first window); then for each table rate of a
-series from -R to +R and back (both directions) set the rate, wait until it is stable, settle, and average the output over a
-window (by default whole turns of the table, so its angle-dependent ripple averages out); fit
+series from -R to +R and back (both directions) set the rate, wait until it is stable, settle,
+and average the output over a window (by default whole turns of the table, so its
+angle-dependent ripple averages out); fit
 by least squares (bench.analysis.cvg_rate.fit_scale_factor): the scale factor, the bias
 (input-referred, Earth's rate removed), the nonlinearity in ppm of full scale and the asymmetry
 of the positive and negative rates' scale factors, each with a 95 % interval.  In whole-angle
