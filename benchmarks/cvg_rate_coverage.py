@@ -96,7 +96,7 @@ def end_to_end(seeds: int, stations: tuple[str, ...] = ("sim-hrg", "sim-hrg-ftr"
     from procedures.cvg_bias import CvgBias
     from procedures.cvg_scale_factor import CvgScaleFactor
 
-    plans = ((CvgScaleFactor, {"max_rate_dps": 36.0, "steps": 2, "average_s": 4.0, "settle_s": 3.0},
+    plans = ((CvgScaleFactor, {"max_rate_dps": 36.0, "steps": 2, "average_s": 20.0, "settle_s": 3.0},
               ("scale_factor", "bias_dph", "asymmetry_ppm")),
              (CvgBias, {"record_s": 20.0, "turn_ons": 3, "quench_s": 6.0, "settle_s": 30.0}, ("bias_dph",)))
     for cls, params, names in plans:
