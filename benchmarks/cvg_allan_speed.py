@@ -21,6 +21,15 @@ Measured 2026-11-23 on 2 shared cores with 6-8 other jobs (load average 5-12):
       Recovered (truth N 0.01 deg/sqrt(h), B 0.3 deg/h, K 3 deg/h/sqrt(h)): N 0.00986
       [0.00952, 0.01018], B 0.322 [0.294, 0.349], K 2.66 [2.28, 3.05].
   (c) oadev of 3.6 million rates: 0.24-0.79 s; read-offs 0.01-0.04 s
+Measured 2026-11-26, load average 5-6: (a) 8.1-11.4 sim h / wall min, 16-21 / CPU min (the same
+before and after the whole-angle split fix: the firmware's extra work is a few trig calls a block);
+(b) 1 h record 2.60 sim h / wall min.  A cProfile of (b) with a 0.5 h record (main thread, 28.8 s
+under the profiler): the record step 18.3 s, of which the world's advances 10.8 s (36760 blocks,
+7.5 s in them) and the station's link checks 8.9 s (4598 checks, one every 0.4 s of bench time as
+the 0.5 s fault rule asks, each a Modbus, SCPI and FPGA round trip: table status 3.3 s); importing
+allantools 3.2 s.  The procedure, the stream's delivery and the recorder do not show in the main
+thread; the link checks' round trips to the simulated servers are the overhead to cut (branch
+`speed` is making those servers cheaper).
 """
 
 from __future__ import annotations

@@ -10,7 +10,8 @@ a noisy angle; the turn-on spread (8 turn-ons).  Target: inside the 99 % binomia
 Part 2, end to end (optional, --seeds N): cvg-scale-factor and cvg-bias on sim-hrg (whole-angle)
 and sim-hrg-ftr (force-to-rebalance) with N seeds each, short settings; the fraction of runs
 whose intervals hold the truth, and the wall time a run.
-Run: .venv/bin/python benchmarks/cvg_rate_coverage.py [n_draws] [--seeds N]   (default 2000, 0)
+Run: .venv/bin/python benchmarks/cvg_rate_coverage.py [n_draws] [--seeds N] [--stations a,b]
+(default 2000, 0, sim-hrg,sim-hrg-ftr)
 """
 
 from __future__ import annotations
@@ -88,18 +89,18 @@ def bias_coverage(n: int, rng: np.random.Generator) -> None:
     print(f"  turn-on spread 2 deg/h, 8 turn-ons, records 0.5 deg/h: {hits / n:.3f}")
 
 
-def end_to_end(seeds: int) -> None:
+def end_to_end(seeds: int, stations: tuple[str, ...] = ("sim-hrg", "sim-hrg-ftr")) -> None:
     from bench.engine import Runner
     from bench.results import ResultsStore
     from bench.station import SimStation
     from procedures.cvg_bias import CvgBias
     from procedures.cvg_scale_factor import CvgScaleFactor
 
-    plans = ((CvgScaleFactor, {"max_rate_dps": 36.0, "steps": 2, "average_s": 4.0, "settle_s": 3.0},
+    plans = ((CvgScaleFactor, {"max_rate_dps": 36.0, "steps": 2, "average_s": 20.0, "settle_s": 3.0},
               ("scale_factor", "bias_dph", "asymmetry_ppm")),
              (CvgBias, {"record_s": 20.0, "turn_ons": 3, "quench_s": 6.0, "settle_s": 30.0}, ("bias_dph",)))
     for cls, params, names in plans:
-        for station_name in ("sim-hrg", "sim-hrg-ftr"):
+        for station_name in stations:
             hits = {n: 0 for n in names}
             wall = []
             errs: dict[str, list[float]] = {n: [] for n in names}
@@ -109,7 +110,7 @@ def end_to_end(seeds: int) -> None:
                     store = ResultsStore(Path(tmp) / "r.sqlite")
                     try:
                         t0 = time.perf_counter()
-                        extra = {"scale_factor": 0.9972} if cls is CvgBias and station_name == "sim-hrg-ftr" else {}
+                        extra = {"scale_factor": 0.9972} if cls is CvgBias and station_name.endswith("-ftr") else {}
                         rec = Runner(station, runs_dir=Path(tmp) / "runs", store=store).run(cls, params | extra)
                         wall.append(time.perf_counter() - t0)
                         truth = cls.truth_for(station.truth())
@@ -122,7 +123,9 @@ def end_to_end(seeds: int) -> None:
                     hits[n] += lo <= truth[n] <= hi
                     errs[n].append(got[n].value - truth[n])
             print(f"  {cls.name:17s} {station_name:12s} " + "  ".join(
-                f"{n} {hits[n]}/{seeds} (rms error {np.sqrt(np.mean(np.square(errs[n]))):.3g})" for n in names)
+                f"{n} {hits[n]}/{seeds} (error mean {np.mean(errs[n]):.3g}, "
+                f"rms {np.sqrt(np.mean(np.square(errs[n]))):.3g})"
+                for n in names)
                 + f"  wall {np.median(wall):.1f} s a run")
 
 
@@ -132,6 +135,11 @@ def main() -> None:
     if "--seeds" in args:
         i = args.index("--seeds")
         seeds = int(args[i + 1])
+        del args[i : i + 2]
+    stations = ("sim-hrg", "sim-hrg-ftr")
+    if "--stations" in args:
+        i = args.index("--stations")
+        stations = tuple(args[i + 1].split(","))
         del args[i : i + 2]
     n = int(args[0]) if args else 2000
     lo, hi = _band(n)
@@ -143,7 +151,7 @@ def main() -> None:
     print(f"  ({time.perf_counter() - t0:.1f} s)")
     if seeds:
         print(f"end to end, {seeds} seeds a station:")
-        end_to_end(seeds)
+        end_to_end(seeds, stations)
 
 
 if __name__ == "__main__":

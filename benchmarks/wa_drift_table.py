@@ -17,6 +17,21 @@ after (forces along the predicted wave; the split's quadrature pumping learnt in
 (columns: mean, 4, 8, 12 theta, rest rms; truth (D/4)/K = 29.79; the decay fit's own error
 predicts 1.87 [0, 3.23] of 4 theta after compensation; seeds 1 and 2 alike, every term but 4 theta
 within noise.)
+Measured 2026-11-26 after the split fix (observer solve (M^2 + r^2) h = M v; chi predicted with the
+split's frequency pattern; docs/fpga_link.md):
+seed 0
+| compensation off |  0.58 [-0.31, 1.47] | 29.27 [27.68, 30.86] | 0.28 [0.00, 1.88] | 0.84 [0.00, 2.43] | 4.06 |
+| compensation on  |  0.03 [-0.82, 0.88] |  0.59 [0.00, 2.10]   | 0.31 [0.00, 1.83] | 0.94 [0.00, 2.46] | 3.87 |
+seed 1
+| compensation off |  0.20 [-0.78, 1.19] | 29.78 [28.02, 31.54] | 0.67 [0.00, 2.43] | 1.40 [0.00, 3.16] | 4.50 |
+| compensation on  | -0.08 [-1.03, 0.88] |  0.22 [0.00, 1.92]   | 0.63 [0.00, 2.33] | 2.01 [0.31, 3.71] | 4.34 |
+seed 2
+| compensation off | -0.54 [-1.51, 0.42] | 29.53 [27.81, 31.25] | 0.85 [0.00, 2.57] | 0.42 [0.00, 2.14] | 4.39 |
+| compensation on  |  0.71 [-0.37, 1.80] |  1.20 [0.00, 3.13]   | 0.78 [0.00, 2.72] | 0.64 [0.00, 2.57] | 4.94 |
+(4 theta after compensation predicted 1.87 [0, 3.23] in each; of the 21 intervals of terms whose
+truth is 0 (mean, 8, 12 theta; 4 theta after), one misses 0: seed 1's 12 theta after, 2.01
+[0.31, 3.71], about the 1 in 20 expected.  At 2 deg/s the split's residual was small: the mean
+moved by at most 0.16 deg/h.)
 """
 
 from __future__ import annotations

@@ -75,7 +75,7 @@ class CvgAllan(HrgExcitation, Procedure):
     measurements = (
         Measurement("arw_deg_rth", "deg/sqrt(h)", "angle random walk N: sigma = N / sqrt(tau), the -1/2 slope "
                     "line's value at tau = 1 h (60 N deg/h at tau = 1 s), input-referred (the rebalance loop's "
-                    "pickoff-noise term, docs/noise_model.md, adds 0.25 % in quadrature)",
+                    "pickoff-noise term, docs/noise_model.md, adds 0.3 % in quadrature)",
                     truth=_truth_or_zero("arw_deg_rth")),
         Measurement("bias_instability_dph", "deg/h", "bias instability B: the flat minimum of the Allan "
                     "deviation / 0.664, the other terms' part removed", truth=_truth_or_zero("bias_instability_dph")),

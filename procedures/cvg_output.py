@@ -26,11 +26,20 @@ def _ftr(truth: dict[str, float]) -> bool:
 
 
 def scale_factor_truth(truth: dict[str, float]) -> float:
-    """The output mode's true scale factor (docs/fpga_link.md, "Output modes"): G K in
-    force-to-rebalance (the rate output G degrees(F_p / (4 a_set)), F_p = 4 a K Omega), -K in
-    whole-angle (the wave angle turns at -K Omega)."""
+    """The output mode's true scale factor (docs/fpga_link.md, "Output modes"): G K / g in
+    force-to-rebalance (the rate output G degrees(F_p / (4 a_set)), F_p = 4 a K Omega, and the AGC
+    holds the measured amplitude g a at a_set, g the pickoff gain along the held wave:
+    |((1 + g_x) cos 2 theta, (1 + g_y) sin 2 theta)|, the noise model's gains at the start), -K in
+    whole-angle (the wave angle turns at -K Omega; unequal gains distort the angle within a turn only)."""
+    import math
+
     k = truth["bryan_factor"]
-    return truth["ftr_gain"] * k if _ftr(truth) else -k
+    if not _ftr(truth):
+        return -k
+    two_th = 2.0 * math.radians(truth["ftr_angle_deg"])
+    g = math.hypot((1.0 + 1e-6 * truth.get("noise_gain_x_ppm", 0.0)) * math.cos(two_th),
+                   (1.0 + 1e-6 * truth.get("noise_gain_y_ppm", 0.0)) * math.sin(two_th))
+    return truth["ftr_gain"] * k / g
 
 
 def bias_at_dph(truth: dict[str, float], theta_deg: float) -> float:
@@ -104,6 +113,23 @@ class CvgOutput(HrgExcitation):
             ctx.defer(lambda: fpga.start_stream(old) if fpga.connected else None, "restore the stream decimation")
         ctx.log.info(f"output mode {mode}; streaming at {1.0 / (dec * fpga.sample_period_s):g} Hz")
         return mode
+
+    def _learn_split(self, ctx, learn_deg: float, settle_s: float, rate_dps: float = 5.0) -> None:
+        """Whole-angle: precess the wave learn_deg at rate_dps, then wait settle_s.  At
+        rest the FPGA's split observer sees one combination of the split's 4-theta quadrature
+        pattern; the other is learnt once the wave turns, and what the quadrature loop's integrator
+        took up meanwhile drains over ~10 s, turned into drift by the split (+2 deg/h over a first
+        window at -36 deg/s, 5 mHz: docs/fpga_link.md).  Done before the series, not in its windows."""
+        if self._mode != "whole-angle" or learn_deg <= 0.0:
+            return
+        fpga = ctx.devices.fpga
+        fpga.set_whole_angle(True, rate_dps)
+        try:
+            ctx.sleep(learn_deg / rate_dps)
+        finally:
+            fpga.set_whole_angle(True, 0.0)
+        ctx.sleep(settle_s)
+        ctx.log.info(f"wave precessed {learn_deg:g} deg for the FPGA to learn the split; settled {settle_s:g} s")
 
     def _record_window(self, ctx, seconds: float) -> tuple[float, float]:
         """Let the bench clock run `seconds` (in slices, for progress and abort); (t_start, t_end)."""

@@ -1,9 +1,11 @@
 """cvg-scale-factor: the scale-factor series of IEEE Std 1431 on a rate table, in the station's
 output mode (force-to-rebalance or whole-angle).
 
-Steps: excite and hold the amplitude; then for each table rate of a series from -R to +R and back
-(both directions) set the rate, wait until it is stable, settle, and average the output over a
-window (by default whole turns of the table, so its angle-dependent ripple averages out); fit
+Steps: excite and hold the amplitude (whole-angle: then precess the wave a quarter turn, so the
+FPGA has learnt the split's pattern before the first window); then for each table rate of a
+series from -R to +R and back (both directions) set the rate, wait until it is stable, settle,
+and average the output over a window (by default whole turns of the table, so its
+angle-dependent ripple averages out); fit
 by least squares (bench.analysis.cvg_rate.fit_scale_factor): the scale factor, the bias
 (input-referred, Earth's rate removed), the nonlinearity in ppm of full scale and the asymmetry
 of the positive and negative rates' scale factors, each with a 95 % interval.  In whole-angle
@@ -64,6 +66,11 @@ class CvgScaleFactor(CvgOutput, Procedure):
     whole_turns = Param(True, doc="lengthen each window to whole turns of the table (its angle ripple then averages "
                                   "out of the rate)")
     accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
+    learn_split_deg = Param(90.0, unit="deg", low=0.0, high=720.0,
+                            doc="whole-angle: precess the wave this far before the first window, so the "
+                                "FPGA's quadrature loop has seen the split's whole 4-theta pattern (0: no)")
+    learn_settle_s = Param(10.0, unit="s", low=0.0, high=600.0,
+                           doc="whole-angle: wait after that precession (the quadrature loop's integrator settles)")
 
     measurements = (
         Measurement("scale_factor", "", "least-squares scale factor: output per input rate (deg/s per deg/s; "
@@ -89,6 +96,7 @@ class CvgScaleFactor(CvgOutput, Procedure):
         self._start_output(ctx)
         self._start_loops(ctx)
         self._hold_amplitude(ctx)
+        self._learn_split(ctx, self.learn_split_deg, self.learn_settle_s)
         ctx.devices.table.enable()
 
     @step("Rate series")

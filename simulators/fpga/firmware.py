@@ -181,7 +181,7 @@ class FpgaFirmware:
         st, w = self._st, OBS_PRIOR_WEIGHT
         st[k.S_M_CC] = st[k.S_M_SS] = w
         st[k.S_V_C], st[k.S_V_S] = w * h_c, w * h_s
-        st[k.S_H_C], st[k.S_H_S] = w * h_c / (w + k.OBS_RIDGE), w * h_s / (w + k.OBS_RIDGE)
+        st[k.S_H_C], st[k.S_H_S] = k.solve_split(w, 0.0, w, w * h_c, w * h_s)
 
     def _gains(self) -> np.ndarray | None:
         """The pickoff gain trims (cx, sx, cy, sy), None when off or unity."""
