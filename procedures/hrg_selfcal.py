@@ -112,7 +112,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("improvement", "", "plain / self-calibrated bias stability"),
         Measurement("mean_bias_dph", "deg/h", "mean self-calibrated bias since the start of the compensated record",
                     truth=lambda t: t.get("earth_rate_dph", 0.0) + t.get("turn_on_bias_mean_dph", 0.0)),
-        Measurement("mean_bias_10h_dph", "deg/h", "mean bias since start after 10 h (NaN for shorter records)"),
+        Measurement("mean_bias_10h_dph", "deg/h", "mean bias since compensation started, after 10 h",
+                    when=lambda p: (p.cycles - 1) * 180.0 / p.precession_dps > 10 * 3600.0,
+                    when_doc="more than 10 h of compensated cycles: (cycles - 1) x 180 / precession_dps > 36000 s"),
         Measurement("angle_error_deg", "deg", "integrated angle error at the end (interval: the ARW envelope "
                     "+-1.96 N sqrt(T) from the Allan deviation)", truth=lambda t: 0.0),
         Measurement("angle_error_max_deg", "deg", "largest integrated angle error over the record"),
@@ -301,7 +303,9 @@ def _analyse(cyc: np.ndarray, rates: np.ndarray, smooth_s: float, dt: float, lev
     out.append(Result("mean_bias_dph", float(mean_since[-1]), ci95=(float(mean_since[-1] - z * sd_mean),
                                                                     float(mean_since[-1] + z * sd_mean))))
     i10 = int(round(10 * 3600 / dt))
-    out.append(Result("mean_bias_10h_dph", float(mean_since[i10 - 1]) if n >= i10 else float("nan")))
+    if n >= i10:  # declared only for records of more than 10 h compensated (a cycle's edges are left out)
+        m10, sd10 = float(mean_since[i10 - 1]), bs_comp * math.sqrt(smooth_s / (i10 * dt))
+        out.append(Result("mean_bias_10h_dph", m10, ci95=(m10 - z * sd10, m10 + z * sd10)))
     angle = sc.integrated_angle_deg(filled, dt)
     env = z * bs_comp * math.sqrt(smooth_s) * math.sqrt(n * dt) / 3600.0  # N sqrt(T), N in deg/sqrt(s)
     out += [Result("angle_error_deg", float(angle[-1]), ci95=(float(angle[-1] - env), float(angle[-1] + env))),
