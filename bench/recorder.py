@@ -8,8 +8,9 @@ still read), `/parameters/<name>` (scalars with `units`), `/log` and `/measureme
 string a row, appended as they happen), `/fits/<name>/<curve>` (with `units`, from the curve's
 name), and the run's attributes on the root (params, station, software_version, truth when
 simulated, procedure, run_id, ...; outcome, end_reason and safe_state once the run ends).  The file is
-flushed whenever a second of data (bench-clock time) or a second of wall time has passed since
-the last flush, so a process killed mid-run leaves a readable file with all but the last second.
+flushed whenever a second of data (bench-clock time; and a quarter of a wall second or CHUNK_ROWS
+rows) or a second of wall time has passed since the last flush, so a process killed mid-run
+leaves a readable file with all but the last second (in lockstep: the last quarter wall second).
 
 While the run goes on the streams are stored uncompressed: fixed-size chunks never move, so the
 index on disk after any flush points at valid data whatever happens next (a compressed chunk
@@ -45,6 +46,10 @@ from bench.engine.streams import StreamSchema, schema_of, unit_from_name
 
 CHUNK_ROWS = 4096
 FLUSH_EVERY_S = 1.0
+#: the least wall time between two flushes that a second of bench-clock data asks for (unless a
+#: chunk's worth of rows came since): a lockstep run makes a simulated second in a few wall ms, and
+#: a flush each time cost a tenth of a long record's wall time
+MIN_FLUSH_WALL_S = 0.25
 #: filters of the streams in the closed file: readable by the stock HDF5 tools (h5dump); chosen by
 #: benchmarks/raw_compression.py.  None keeps the file as written.
 STREAM_FILTERS: dict[str, Any] | None = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
@@ -145,6 +150,7 @@ class Recorder:
         self._last_t: float | None = None
         self._last_flush_sim: float | None = None
         self._last_flush_wall = time.monotonic()
+        self._rows_since_flush = 0
 
     # --- the space reserve ---------------------------------------------------------------
     def _take_reserve(self) -> None:
@@ -217,6 +223,7 @@ class Recorder:
     def _write_event(self, event: ev.Event) -> None:
         if isinstance(event, ev.SampleBlock):
             self.append(event.stream, event.columns, event.data)
+            self._rows_since_flush += len(event.data)
         elif isinstance(event, ev.StreamDeclared):
             self._schemas[event.schema.name] = event.schema
         elif isinstance(event, ev.Measurement):
@@ -338,10 +345,15 @@ class Recorder:
         now = time.monotonic()
         if self._last_flush_sim is None:
             self._last_flush_sim = t_sim_s
-        if t_sim_s - self._last_flush_sim >= FLUSH_EVERY_S or now - self._last_flush_wall >= FLUSH_EVERY_S:
+        wall_s = now - self._last_flush_wall
+        if (
+            t_sim_s - self._last_flush_sim >= FLUSH_EVERY_S
+            and (wall_s >= MIN_FLUSH_WALL_S or self._rows_since_flush >= CHUNK_ROWS)
+        ) or wall_s >= FLUSH_EVERY_S:
             self._flush()
             self._last_flush_sim = t_sim_s
             self._last_flush_wall = now
+            self._rows_since_flush = 0
 
     def _check_space(self) -> None:
         """Disk full is declared while RESERVE_BYTES are still free, before a write fails: a write

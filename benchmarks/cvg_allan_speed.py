@@ -18,6 +18,10 @@ Measured 2026-11-23 on 2 shared cores with 6-8 other jobs (load average 5-12):
       the rest is the engine's per-slice work (0.1 s clock slices, link checks every 0.35 s), the
       stream's delivery through the link's reader thread and the recorder, all contending for the
       GIL on two busy cores.  A world that cost nothing would still leave the run under 5 h/min.
+      2026-11-26, after the recorder's flush rule (a flush at most every 0.25 wall s, not at every
+      simulated second): 1 h record interleaved before/after, load 2.1-2.9: 3.98 -> 5.21 and
+      3.47 -> 4.70 sim h / wall min (+30 %); results and raw streams bit-identical.
+      Where the rest goes: benchmarks/lockstep_breakdown.py.
       Recovered (truth N 0.01 deg/sqrt(h), B 0.3 deg/h, K 3 deg/h/sqrt(h)): N 0.00986
       [0.00952, 0.01018], B 0.322 [0.294, 0.349], K 2.66 [2.28, 3.05].
   (c) oadev of 3.6 million rates: 0.24-0.79 s; read-offs 0.01-0.04 s

@@ -1,0 +1,118 @@
+"""Where the main thread's wall time goes in a long lockstep record (issues 19 and 20): the run's
+world advances (the world's blocks, the FPGA server's stream flush at each advance's end), the
+station's link checks at each point of the clock's 0.4 s grid (the table's Modbus status, the front
+end's *IDN?, the FPGA link's sync) and the CPU seconds of every thread still alive at the end.
+Plain perf_counter wrappers around those calls (no profiler: cProfile's per-call cost would swamp
+the 0.1 ms blocks); the run's results are not changed by them.
+
+Run: nice -n 5 .venv/bin/python benchmarks/lockstep_breakdown.py [--procedure cvg-allan]
+     [--station sim-hrg-wa] [--set record_s=1200] [--seed 0]
+
+Measured 2026-11-26 on 2 shared cores (load average 2.8-3.7), cvg-allan on sim-hrg-wa, 1200 s record
+(1238 simulated s in 6.1-7.3 wall s = 2.8-3.4 sim h / wall min; startup and analysis included):
+  per 0.4 s grid point: world.advance 1.19-1.40 ms (of which 8 blocks of 50 ms at 0.12 ms each and the
+  stream flush 0.35 ms: a sendall of ~4 frames, most of it waiting for the GIL back from the
+  link's reader thread), check_links 0.44-0.59 ms (table status 0.22-0.31 ms, *IDN? ~0.25 ms, FPGA
+  sync 0.01-0.03 ms).  Threads' CPU: main 5.2 s, raw-data writer 0.56 s, FPGA reader 0.54 s, the
+  Modbus/SCPI request threads 0.15-0.18 s each.
+  So the main thread is the bottleneck (about 2 ms per 0.4 simulated s = 18 s per simulated hour
+  = 3.3 h/min); the 5 h/min target needs <= 1.33 ms per grid point.  The world's blocks in the
+  station cost ~1.8x those of cvg_allan_speed.py (a) (0.068 ms: no front-end model, no other
+  threads taking the GIL), the link checks a third of the rest.
+After the recorder's flush rule (a second of data flushes once a quarter wall second has passed,
+not every few wall ms): the raw-data writer's CPU 0.48-0.56 -> 0.28 s, the stream flush
+0.27-0.35 -> 0.06 ms per grid point (the writer no longer holds the GIL when the reader wants it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import os
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+_TOTAL_S: dict[str, float] = collections.defaultdict(float)
+_CALLS: collections.Counter[str] = collections.Counter()
+
+
+def _timed(cls: type, name: str, key: str) -> None:
+    """Replace cls.name by a wrapper adding its wall time to _TOTAL_S[key]."""
+    inner: Callable[..., Any] = getattr(cls, name)
+
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            _TOTAL_S[key] += time.perf_counter() - t0
+            _CALLS[key] += 1
+
+    setattr(cls, name, wrapper)
+
+
+def _thread_cpu_s(native_id: int) -> float:
+    """User + system CPU seconds of one thread of this process (Linux /proc)."""
+    fields = open(f"/proc/self/task/{native_id}/stat").read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--procedure", default="cvg-allan")
+    ap.add_argument("--station", default="sim-hrg-wa")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    from bench.engine import Runner
+    from bench.engine.context import GuardedClock
+    from bench.station import SimStation, Station
+    from bench.validation import parse_assignment
+    from drivers.fpga.link import FpgaLink
+    from procedures import find_procedure
+    from simulators.fpga.server import FpgaServer
+    from simulators.world import World
+
+    sets = dict(parse_assignment(item) for item in args.set) or (
+        {"record_s": "1200"} if args.procedure == "cvg-allan" else {})
+    for cls, name, key in ((World, "advance", "world.advance"), (World, "_run_block", "  world block"),
+                           (FpgaServer, "_flush_stream", "  stream flush"), (Station, "check_links", "check_links"),
+                           (FpgaLink, "sync", "  fpga sync"), (GuardedClock, "sleep", "engine sleeps")):
+        _timed(cls, name, key)
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    station = SimStation(args.station, seed=args.seed).open()
+    _timed(type(station.devices["table"]), "status", "  table status")
+    cpu_s: dict[str, float] = {}
+    stop = threading.Event()
+
+    def sample() -> None:
+        while not stop.is_set():
+            for t in threading.enumerate():
+                try:
+                    cpu_s[t.name] = _thread_cpu_s(t.native_id or 0)
+                except OSError:
+                    pass
+            time.sleep(0.2)
+
+    threading.Thread(target=sample, name="cpu-sampler", daemon=True).start()
+    try:
+        record = Runner(station, runs_dir=tempfile.mkdtemp(prefix="gyrobench-lockstep-")).run(
+            find_procedure(args.procedure), sets)
+    finally:
+        stop.set()
+        station.close()
+    print(f"{args.procedure} on {args.station} {sets}: {record.outcome}, {record.simulated_s:.0f} sim s in "
+          f"{record.wall_s:.2f} wall s = {record.simulated_s / 3600 / (record.wall_s / 60):.2f} sim h / wall min")
+    for key in _TOTAL_S:
+        print(f"  {key:16s} {_CALLS[key]:7d} calls {_TOTAL_S[key]:8.3f} s {_TOTAL_S[key] / _CALLS[key] * 1e3:8.3f} ms")
+    print("threads' CPU s (those alive at the end):")
+    for name, s in sorted(cpu_s.items(), key=lambda kv: -kv[1]):
+        if s >= 0.05 and name != "cpu-sampler":
+            print(f"  {s:7.2f}  {name}")
+
+
+if __name__ == "__main__":
+    main()
