@@ -57,3 +57,60 @@ def test_batch_view_shows_a_column_per_slot():
     t_end = {n: float(np.concatenate(c.t_s)[-1]) for n, c in view.columns.items()}
     assert t_end[3] < 21.0 < min(t_end[n] for n in (1, 2, 4))
     view.detach()
+
+
+SEQUENCE = """
+[sequence]
+name = "batch-window-test"
+
+[[step]]
+procedure = "hrg-damping"
+[step.params]
+compensate = false
+record_s = 40.0
+"""
+LIMITS = """
+[product]
+name = "batch-window-test"
+rule = "value"
+
+[limits.delta_inv_tau_per_s]
+high = 1.0
+unit = "1/s"
+"""
+
+
+def test_line_run_window_shows_the_batch_and_its_units_outcomes(tmp_path, monkeypatch, capsys):
+    """`gyrobench line run ... --window`: the batch runs in a worker thread under the window; slot 3's
+    link drop shows ERROR in its column, the others PASS, and the CLI prints the same four records."""
+    from bench.cli import main
+    from bench.gui import batch_window
+
+    (tmp_path / "seq.toml").write_text(SEQUENCE)
+    (tmp_path / "limits.toml").write_text(LIMITS)
+    shown: dict = {}
+    real = batch_window.BatchWindow.closeEvent
+
+    def keep(self, event):  # what the window shows when the batch ends and it closes
+        shown.update({c.serial: c.outcome_text for c in self.view.columns.values()}, status=self.status.text())
+        real(self, event)
+
+    monkeypatch.setattr(batch_window.BatchWindow, "closeEvent", keep)
+    code = main(["line", "run", str(tmp_path / "seq.toml"), "--limits", str(tmp_path / "limits.toml"),
+                 "--station", "sim-hrg-4", "--dut", "W1", "--dut", "W2", "--dut", "W3", "--dut", "W4",
+                 "--operator", "ann", "--yes", "--fault", "link-drop@20:slot3", "--window", "--close-when-done",
+                 "--runs-dir", str(tmp_path / "runs"), "--db", f"sqlite:///{tmp_path / 'line.sqlite'}"])
+    out = capsys.readouterr().out
+    assert code == 1  # one unit in ERROR
+    assert "batch of 4 units on sim-hrg-4: ERROR 1, PASS 3" in out
+    assert shown["W3"] == "ERROR" and all(shown[s] == "PASS" for s in ("W1", "W2", "W4"))
+    assert shown["status"].startswith("batch done: ERROR 1, PASS 3")
+
+
+def test_line_run_window_on_a_one_unit_station_says_where_its_window_is(tmp_path, capsys):
+    from bench.cli import main
+
+    code = main(["line", "run", "ci-spin", "--dut", "X1", "--operator", "ann", "--yes", "--window",
+                 "--runs-dir", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code != 0 and "gyrobench gui --operator" in err and "Traceback" not in err

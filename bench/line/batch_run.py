@@ -49,6 +49,8 @@ def run_batch_attempt(ctx: LineContext, station: Any, serials: dict[int, str], o
                 continue
             batch = Batch(station, going, runs_dir=ctx.runs_dir, store=ctx.store, operator=ctx.operator_name)
             current[:] = [batch]
+            if ctx.on_batch is not None:
+                ctx.on_batch(batch)
             t0 = now_iso()
             records = batch.run(step.make)
             current.clear()

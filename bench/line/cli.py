@@ -75,6 +75,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     faults = [_parse_slot_fault(f) for f in args.fault or []]
     if hasattr(station, "slots"):  # several gyros on one table: one unit a slot
         return _run_batch(args, seq, station, duts, faults)
+    if args.window:
+        raise LineError(f"--window shows a batch on a station with slots; station {station.id!r} holds one unit "
+                        "(its window: gyrobench gui --operator)")
     if len(duts) > 1:
         raise LineError(f"station {station.id!r} holds one unit: give one --dut (or a station with [slots.N])")
     if any(slot is not None for _, _, slot in faults):
@@ -170,7 +173,14 @@ def _run_batch(args: argparse.Namespace, seq: Any, station: Any, duts: list[str]
             raise LineError(f"station {station.id!r} did not open: {type(exc).__name__}: {exc}") from None
         try:
             attempts = {s: ctx.db.next_attempt(s) for s in serials.values()}
-            records = run_batch_attempt(ctx, station, serials, operator, attempts)
+            if args.window:  # the batch in a worker thread, its columns in a window on this thread
+                from bench.gui.batch_window import run_batch_in_window
+
+                records = run_batch_in_window(
+                    serials, lambda: run_batch_attempt(ctx, station, serials, operator, attempts), ctx,
+                    close_when_done=args.close_when_done)
+            else:
+                records = run_batch_attempt(ctx, station, serials, operator, attempts)
         finally:
             station.close()
     finally:
@@ -339,6 +349,10 @@ def add_line_subcommand(sub: Any) -> None:
     run.add_argument("--yes", action="store_true", help="answer yes to the fixture and table-spin questions")
     run.add_argument("--seed", type=int, default=None, help="simulation seed (simulated stations)")
     run.add_argument("--json", action="store_true", help="print the records as JSON")
+    run.add_argument("--window", action="store_true",
+                     help="on a station with slots: show a column a slot (outcome, step, live E(t)) with Abort")
+    run.add_argument("--close-when-done", action="store_true",
+                     help="with --window: close it when the batch ends (else it stays until closed)")
     _common(run)
     run.set_defaults(func=cmd_run)
 

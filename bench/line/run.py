@@ -33,6 +33,7 @@ class LineContext:
     lot: str = ""
     on_record: Callable[[dict[str, Any]], None] | None = None
     aborted: list[str] = field(default_factory=list)
+    on_batch: Callable[[Any], None] | None = None  # told each bench.engine.batch.Batch before it runs (the window)
 
 
 def _table_question(station: Any) -> str:
