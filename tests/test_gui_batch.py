@@ -114,3 +114,45 @@ def test_line_run_window_on_a_one_unit_station_says_where_its_window_is(tmp_path
                  "--runs-dir", str(tmp_path)])
     err = capsys.readouterr().err
     assert code != 0 and "gyrobench gui --operator" in err and "Traceback" not in err
+
+
+def test_line_run_window_abort_button_aborts_every_slot(tmp_path, monkeypatch, capsys):
+    """The window's Abort during the decay: every slot's run ends ABORTED with the window's reason (its
+    drive cut, the table to rest); each unit, left with its limits never measured, is ERROR by the
+    line's rule (as a one-unit run aborted by Ctrl-C), and the window shows it."""
+    from PySide6.QtCore import QTimer
+    from PySide6.QtWidgets import QApplication
+
+    from bench.cli import main
+    from bench.gui import batch_window
+
+    (tmp_path / "seq.toml").write_text(SEQUENCE.replace("record_s = 40.0", "record_s = 600.0"))
+    (tmp_path / "limits.toml").write_text(LIMITS)
+    shown: dict = {}
+    real_close, real_init = batch_window.BatchWindow.closeEvent, batch_window.BatchWindow.__init__
+
+    def init(self, *args, **kwargs):
+        real_init(self, *args, **kwargs)
+        QTimer.singleShot(2500, self.abort_button.click)  # the operator presses Abort mid-run
+
+    def keep(self, event):
+        shown.update({c.serial: c.outcome_text for c in self.view.columns.values()}, status=self.status.text())
+        real_close(self, event)
+
+    monkeypatch.setattr(batch_window.BatchWindow, "__init__", init)
+    monkeypatch.setattr(batch_window.BatchWindow, "closeEvent", keep)
+    QApplication.instance() or QApplication([])
+    code = main(["line", "run", str(tmp_path / "seq.toml"), "--limits", str(tmp_path / "limits.toml"),
+                 "--station", "sim-hrg-4", "--dut", "A1", "--dut", "A2", "--dut", "A3", "--dut", "A4",
+                 "--operator", "ann", "--yes", "--window", "--close-when-done",
+                 "--runs-dir", str(tmp_path / "runs"), "--db", f"sqlite:///{tmp_path / 'line.sqlite'}"])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert all(shown[s] == "ERROR" for s in ("A1", "A2", "A3", "A4")), (shown, out[-3000:])
+    assert "batch of 4 units on sim-hrg-4: ERROR 4" in out
+    import json
+
+    for s in ("A1", "A2", "A3", "A4"):
+        rec = json.loads((tmp_path / "runs" / "line" / "no-lot" / f"{s}-a1.json").read_text())
+        runs = [(r["outcome"], r["end_reason"]) for r in rec["runs"]]
+        assert runs == [("ABORTED", "aborted: aborted from the window")]
