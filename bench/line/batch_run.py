@@ -5,11 +5,10 @@ record per unit.  A unit stopped by a failing step leaves the batch; the others 
 from __future__ import annotations
 
 import signal
-import threading
 from typing import Any
 
 from .record import now_iso
-from .run import STOP_OUTCOMES, LineContext, finish_record, judge_run
+from .run import STOP_OUTCOMES, LineContext, abort_on_signals, finish_record, judge_run
 from .verdict import ABORTED, worst
 
 
@@ -26,7 +25,8 @@ def run_batch_attempt(ctx: LineContext, station: Any, serials: dict[int, str], o
                                       for n in serials}
     asked_spin = False
     current: list[Any] = []
-    previous = _abort_on_signals(current, ctx)
+    # SIGINT / SIGTERM abort the batch running (every slot's drive cut, then the table to rest)
+    previous = abort_on_signals(ctx, lambda name: [b.abort(f"aborted: {name}") for b in list(current)])
     try:
         for step in seq.steps:
             cls = find_procedure(step.procedure)
@@ -74,20 +74,3 @@ def run_batch_attempt(ctx: LineContext, station: Any, serials: dict[int, str], o
         operator.show_outcome(serial, rec["outcome"], rec["summary"])
         out.append(rec)
     return out
-
-
-def _abort_on_signals(current: list[Any], ctx: LineContext) -> dict:
-    """SIGINT / SIGTERM abort the batch running (every slot's drive cut, then the table to rest)."""
-    previous: dict = {}
-    if threading.current_thread() is not threading.main_thread():
-        return previous
-
-    def on_signal(signum, _frame):
-        name = signal.Signals(signum).name
-        ctx.aborted.append(f"aborted: {name}")
-        for b in list(current):
-            b.abort(f"aborted: {name}")
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        previous[sig] = signal.signal(sig, on_signal)
-    return previous

@@ -52,7 +52,7 @@ def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, opera
     stopped_by: str | None = None
     asked_spin = False
     runner = Runner(station, runs_dir=ctx.runs_dir, store=ctx.store, operator=ctx.operator_name, duts=[serial])
-    previous = _abort_on_signals(runner, ctx)
+    previous = abort_on_signals(ctx, runner.abort)
     try:
         for step in seq.steps:
             cls = find_procedure(step.procedure)
@@ -195,9 +195,9 @@ def run_unit(ctx: LineContext, open_station: Callable[[], Any], serial: str, ope
     return records
 
 
-def _abort_on_signals(runner: Any, ctx: LineContext) -> dict:
-    """SIGINT / SIGTERM abort the running procedure (the engine makes the station safe) and stop
-    the sequence; the handlers are put back after the attempt."""
+def abort_on_signals(ctx: LineContext, abort: Callable[[str], None]) -> dict:
+    """SIGINT / SIGTERM stop the sequence and call `abort(signal name)` (the running procedure or
+    batch; the engine makes the station safe); the caller puts the returned handlers back."""
     previous: dict = {}
     if threading.current_thread() is not threading.main_thread():
         return previous
@@ -205,7 +205,7 @@ def _abort_on_signals(runner: Any, ctx: LineContext) -> dict:
     def on_signal(signum, _frame):
         name = signal.Signals(signum).name
         ctx.aborted.append(f"aborted: {name}")
-        runner.abort(name)
+        abort(name)
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         previous[sig] = signal.signal(sig, on_signal)
