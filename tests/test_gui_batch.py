@@ -155,4 +155,4 @@ def test_line_run_window_abort_button_aborts_every_slot(tmp_path, monkeypatch, c
     for s in ("A1", "A2", "A3", "A4"):
         rec = json.loads((tmp_path / "runs" / "line" / "no-lot" / f"{s}-a1.json").read_text())
         runs = [(r["outcome"], r["end_reason"]) for r in rec["runs"]]
-        assert runs == [("ABORTED", "aborted: aborted from the window")]
+        assert runs == [("ABORTED", "aborted: operator abort from the window")]

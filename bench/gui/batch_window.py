@@ -28,7 +28,7 @@ class BatchWindow(QWidget):
         self.view = BatchView(serials)
         self.status = QLabel("running")
         self.abort_button = QPushButton("Abort")
-        self.abort_button.clicked.connect(lambda: self._abort("aborted from the window"))
+        self.abort_button.clicked.connect(lambda: self._abort("operator abort from the window"))
         bar = QHBoxLayout()
         bar.addWidget(self.status, 1)
         bar.addWidget(self.abort_button)
@@ -38,7 +38,7 @@ class BatchWindow(QWidget):
 
     def closeEvent(self, event: QCloseEvent) -> None:  # noqa: N802 - Qt's name
         if self._running():
-            self._abort("aborted: the window was closed")
+            self._abort("the window was closed")
         event.accept()
 
 
@@ -51,12 +51,12 @@ def run_batch_in_window(serials: dict[int, str], work: Callable[[], list[dict[st
     done = threading.Event()
     result: dict[str, Any] = {}
 
-    def abort(reason: str) -> None:
+    def abort(reason: str) -> None:  # each run ends "aborted: <reason>", as after a signal
         if not ctx.aborted:
-            ctx.aborted.append(reason)
+            ctx.aborted.append(f"aborted: {reason}")
         for b in list(batches):
             b.abort(reason)
-        win.status.setText(f"{reason}: bringing every slot to its safe state")
+        win.status.setText(f"aborted: {reason}: bringing every slot to its safe state")
 
     win = BatchWindow(serials, abort, lambda: not done.is_set())
 
@@ -93,7 +93,7 @@ def run_batch_in_window(serials: dict[int, str], work: Callable[[], list[dict[st
         if done.is_set() and not win.isVisible():
             app.quit()
 
-    previous = signal.signal(signal.SIGINT, lambda *_: abort("aborted: SIGINT"))
+    previous = signal.signal(signal.SIGINT, lambda *_: abort("SIGINT"))
     timer = QTimer()
     timer.timeout.connect(tick)
     timer.start(100)

@@ -26,7 +26,7 @@ def run_batch_attempt(ctx: LineContext, station: Any, serials: dict[int, str], o
     asked_spin = False
     current: list[Any] = []
     # SIGINT / SIGTERM abort the batch running (every slot's drive cut, then the table to rest)
-    previous = abort_on_signals(ctx, lambda name: [b.abort(f"aborted: {name}") for b in list(current)])
+    previous = abort_on_signals(ctx, lambda name: [b.abort(name) for b in list(current)])
     try:
         for step in seq.steps:
             cls = find_procedure(step.procedure)
