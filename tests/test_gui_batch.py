@@ -118,8 +118,8 @@ def test_line_run_window_on_a_one_unit_station_says_where_its_window_is(tmp_path
 
 def test_line_run_window_abort_button_aborts_every_slot(tmp_path, monkeypatch, capsys):
     """The window's Abort during the decay: every slot's run ends ABORTED with the window's reason (its
-    drive cut, the table to rest); each unit, left with its limits never measured, is ERROR by the
-    line's rule (as a one-unit run aborted by Ctrl-C), and the window shows it."""
+    drive cut, the table to rest); each unit is ABORTED (not ERROR: the limits its run never reached
+    are SKIPPED, naming the abort, as for a one-unit run aborted by Ctrl-C), and the window shows it."""
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
@@ -148,11 +148,16 @@ def test_line_run_window_abort_button_aborts_every_slot(tmp_path, monkeypatch, c
                  "--runs-dir", str(tmp_path / "runs"), "--db", f"sqlite:///{tmp_path / 'line.sqlite'}"])
     out = capsys.readouterr().out
     assert code == 1
-    assert all(shown[s] == "ERROR" for s in ("A1", "A2", "A3", "A4")), (shown, out[-3000:])
-    assert "batch of 4 units on sim-hrg-4: ERROR 4" in out
+    assert all(shown[s] == "ABORTED" for s in ("A1", "A2", "A3", "A4")), (shown, out[-3000:])
+    assert "batch of 4 units on sim-hrg-4: ABORTED 4" in out
     import json
 
     for s in ("A1", "A2", "A3", "A4"):
         rec = json.loads((tmp_path / "runs" / "line" / "no-lot" / f"{s}-a1.json").read_text())
         runs = [(r["outcome"], r["end_reason"]) for r in rec["runs"]]
         assert runs == [("ABORTED", "aborted: operator abort from the window")]
+        assert rec["outcome"] == "ABORTED"
+        reached = [m for m in rec["measurements"] if m["rule"]]
+        assert reached and all(m["outcome"] == "SKIPPED" for m in reached), reached
+        assert any(m["note"] == "not measured: the run ended (aborted: operator abort from the window)"
+                   for m in reached)

@@ -40,9 +40,10 @@ def sha256_of(path: str | Path | None) -> str | None:
 
 
 def judged(name: str, procedure: str, run_id: str | None, m: dict[str, Any] | None, limit: Limit | None,
-           truth: float | None = None, skipped: bool = False) -> dict[str, Any]:
+           truth: float | None = None, skipped: bool = False, aborted: str | None = None) -> dict[str, Any]:
     """One measurement of the record: the run's value and interval judged against a product limit.
-    m is the run's `as_json()` entry (None: never measured)."""
+    m is the run's `as_json()` entry (None: never measured); `aborted` (the run's end reason) makes a
+    limit the aborted run never reached SKIPPED, not ERROR: the unit was not tested, not faulty."""
     unit = (m or {}).get("unit", "") if m else (limit.unit or "" if limit else "")
     value = None if m is None else _num(m.get("value"))
     ci = None if m is None else m.get("ci95")
@@ -59,6 +60,8 @@ def judged(name: str, procedure: str, run_id: str | None, m: dict[str, Any] | No
         return out
     if skipped:
         out.update(rule=limit.rule, outcome=SKIPPED, note="not run: an earlier step stopped the sequence")
+    elif aborted is not None and (m is None or m.get("outcome") == "NOT_MEASURED"):
+        out.update(rule=limit.rule, outcome=SKIPPED, note=f"not measured: the run ended ({aborted})")
     elif m is None or m.get("outcome") == "NOT_MEASURED":
         out.update(rule=limit.rule, outcome=ERROR, note="named by the limits file, never measured")
     else:
@@ -76,12 +79,15 @@ def now_iso() -> str:
 def summary(record: dict[str, Any]) -> str:
     """One line for the operator: the outcome and what decided it."""
     bad = [m for m in record["measurements"] if m["outcome"] in (ERROR, "FAIL", MARGINAL)]
-    if not bad:
-        return f"{record['outcome']}: {sum(1 for m in record['measurements'] if m['rule'])} limit(s) met"
     words = []
     for r in record.get("runs", []):  # a run that ended in ERROR or ABORTED: why, first
         if r.get("outcome") in (ERROR, "ABORTED"):
             words.append(f"{r.get('step') or r.get('procedure')} {r['outcome']} ({r.get('end_reason', '')})")
+    if not bad:
+        met = sum(1 for m in record["measurements"] if m["rule"] and m["outcome"] == "PASS")
+        skipped = sum(1 for m in record["measurements"] if m["rule"] and m["outcome"] == SKIPPED)
+        words.append(f"{met} limit(s) met" + (f", {skipped} skipped" if skipped else ""))
+        return f"{record['outcome']}: " + "; ".join(words)
     for m in bad[:4]:
         lim = m["limits"] or {}
         value = "-" if m["value"] is None else f"{m['value']:.6g}"

@@ -96,17 +96,18 @@ def judge_run(cls: Any, step: Any, rec: Any, step_limits: list, t0: str, runs: l
                  "params": _plain(rec.params), "store_error": rec.store_error})
     by_name = {lim.name: lim for lim in step_limits}
     step_outcomes = []
+    aborted = rec.end_reason if rec.outcome == ABORTED else None  # its unreached limits: SKIPPED
     for name, m in js["measurements"].items():
         lim = by_name.get(name)
         if lim is None and m.get("outcome") == "NOT_MEASURED":
             continue
-        entry = judged(name, cls.name, rec.run_id, m, lim, truth.get(name))
+        entry = judged(name, cls.name, rec.run_id, m, lim, truth.get(name), aborted=aborted)
         measurements.append(entry)
         step_outcomes.append(entry["outcome"])
     for lim in step_limits:
         matched.add((lim.name, lim.procedure))
         if lim.name not in js["measurements"]:
-            entry = judged(lim.name, cls.name, rec.run_id, None, lim)
+            entry = judged(lim.name, cls.name, rec.run_id, None, lim, aborted=aborted)
             measurements.append(entry)
             step_outcomes.append(entry["outcome"])
     if rec.outcome in (ERROR, ABORTED):
