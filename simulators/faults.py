@@ -101,3 +101,16 @@ def parse_fault(text: str) -> tuple[str, float]:
     except ValidationError as exc:
         raise StationError(f"--fault {text!r}: {exc}") from None
     return kind, at_s
+
+
+def stop_simulators(timers: list, handles: dict) -> None:
+    """A simulated station's close: cancel its pending fault timers and stop every simulator it
+    serves (one failing to stop does not keep the others running)."""
+    for t in timers:
+        t.cancel()
+    for handle in handles.values():
+        try:
+            handle.stop()
+        except Exception:  # noqa: BLE001
+            pass
+    handles.clear()

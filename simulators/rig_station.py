@@ -12,7 +12,7 @@ from bench.devices import DRIVERS, StationError
 from bench.slots import BatchStation
 from bench.station_config import SIM_KEYS, StationConfig
 
-from .faults import FaultScheduler, check_kind
+from .faults import FaultScheduler, check_kind, stop_simulators
 from .faults import inject as inject_fault
 
 
@@ -106,14 +106,7 @@ class SimBatchStation(BatchStation):
 
     def close(self) -> None:
         super().close()
-        for t in self._timers:
-            t.cancel()
-        for handle in self.handles.values():
-            try:
-                handle.stop()
-            except Exception:  # noqa: BLE001
-                pass
-        self.handles.clear()
+        stop_simulators(self._timers, self.handles)
         self.base_clock.close()
 
     def truth(self, slot: int) -> dict[str, float]:

@@ -13,7 +13,7 @@ from bench.devices import DRIVERS, StationError
 from bench.station import Station
 from bench.station_config import SIM_KEYS, StationConfig, load_config
 
-from .faults import FAULTS, FaultScheduler, check_kind
+from .faults import FAULTS, FaultScheduler, check_kind, stop_simulators
 from .faults import inject as inject_fault
 
 
@@ -104,14 +104,7 @@ class SimStation(Station):
 
     def close(self) -> None:
         super().close()
-        for t in self._timers:
-            t.cancel()
-        for handle in self.handles.values():
-            try:
-                handle.stop()
-            except Exception:  # noqa: BLE001
-                pass
-        self.handles.clear()
+        stop_simulators(self._timers, self.handles)
         self.clock.close()
 
     def truth(self) -> dict[str, float]:
