@@ -36,9 +36,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cycles", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--runs-dir", default=None, help="keep the run's raw file here (default: a temporary folder)")
     args = ap.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    sim_h, wall_min, v = run(args.cycles, args.seed, tempfile.mkdtemp(prefix="gyrobench-selfcal-"))
+    sim_h, wall_min, v = run(args.cycles, args.seed, args.runs_dir or tempfile.mkdtemp(prefix="gyrobench-selfcal-"))
     print(f"hrg-selfcal, {args.cycles} cycles: {sim_h:.2f} sim h in {wall_min:.2f} wall min = "
           f"{sim_h / wall_min:.2f} sim h / wall min (target >= 5)")
     for name, (value, ci) in v.items():
