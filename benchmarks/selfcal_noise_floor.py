@@ -6,7 +6,7 @@ Derivation (docs/selfcal.md, section 1): the floor is a white drift-rate noise o
 N (deg/sqrt(h)) plus a bounded angle wander (a Gauss-Markov angle of standard deviation sigma_phi and
 correlation time tau_c entering as an input rate); averaged over T seconds they have the standard
 deviation sqrt((60 N)^2 / T + 2 (1 - e^(-T/tau_c)) (3600 sigma_phi / T)^2) deg/h
-(`NoiseParams.average_sd_dph`): N = 0.01, sigma_phi = 0.03 deg, tau_c = 823 s give 0.520 at 100 s.
+(`NoiseParams.average_sd_dph`): N = 0.006, sigma_phi = 0.025 deg, tau_c = 550 s give 0.520 at 100 s.
 
 Run: .venv/bin/python benchmarks/selfcal_noise_floor.py [--hours 5] [--seed 1]
 

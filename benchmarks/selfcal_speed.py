@@ -17,12 +17,22 @@ import os
 import tempfile
 
 
-def run(cycles: int, seed: int, runs_dir: str) -> tuple[float, float, dict]:
+def run(cycles: int, seed: int, runs_dir: str, noise_free: bool = False) -> tuple[float, float, dict]:
     from bench.engine import Runner
     from bench.station import SimStation
     from procedures.hrg_selfcal import HrgSelfcal
 
-    station = SimStation("sim-hrg-selfcal", seed=seed).open()
+    resonator = None
+    if noise_free:  # the loops' own bias: no drift-rate noise, no angle wander, quiet pickoffs
+        import dataclasses
+
+        from simulators.physics import noise
+        from simulators.physics.params import preset
+
+        noise.NOISE_PRESETS["hrg-selfcal"] = dataclasses.replace(noise.NOISE_PRESETS["hrg-selfcal"],
+                                                                 arw_deg_rth=0.0, angle_wander_deg=0.0)
+        resonator = dataclasses.replace(preset("hrg-selfcal"), noise_sigma=0.0)
+    station = SimStation("sim-hrg-selfcal", seed=seed, resonator=resonator).open()
     try:
         record = Runner(station, runs_dir=runs_dir).run(HrgSelfcal, {"cycles": cycles})
     finally:
@@ -36,10 +46,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cycles", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--noise-free", action="store_true",
+                    help="no drift-rate noise, angle wander or pickoff noise (the loops' own mean bias)")
     ap.add_argument("--runs-dir", default=None, help="keep the run's raw file here (default: a temporary folder)")
     args = ap.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    sim_h, wall_min, v = run(args.cycles, args.seed, args.runs_dir or tempfile.mkdtemp(prefix="gyrobench-selfcal-"))
+    sim_h, wall_min, v = run(args.cycles, args.seed, args.runs_dir or tempfile.mkdtemp(prefix="gyrobench-selfcal-"),
+                          args.noise_free)
     print(f"hrg-selfcal, {args.cycles} cycles: {sim_h:.2f} sim h in {wall_min:.2f} wall min = "
           f"{sim_h / wall_min:.2f} sim h / wall min (target >= 5)")
     for name, (value, ci) in v.items():
