@@ -42,14 +42,30 @@ def run(cycles: int, seed: int, runs_dir: str, noise_free: bool = False) -> tupl
     return record.simulated_s / 3600.0, record.wall_s / 60.0, values
 
 
+def reanalyse(path: str) -> dict:
+    """The measurements of a kept raw file, from the analysis as it is now (and their truths)."""
+    from bench.recorder import open_run
+    from procedures.hrg_selfcal import HrgSelfcal
+
+    data = open_run(path)
+    proc = HrgSelfcal(data.params)
+    truth = HrgSelfcal.truth_for(data.truth or {})
+    return {r.name: (r.value, r.ci95, truth.get(r.name)) for r in proc.analysis(data)}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cycles", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--noise-free", action="store_true",
                     help="no drift-rate noise, angle wander or pickoff noise (the loops' own mean bias)")
+    ap.add_argument("--reanalyse", metavar="RAW_FILE", help="print a kept run's measurements (no new run)")
     ap.add_argument("--runs-dir", default=None, help="keep the run's raw file here (default: a temporary folder)")
     args = ap.parse_args()
+    if args.reanalyse:
+        for name, (value, ci, truth) in reanalyse(args.reanalyse).items():
+            print(f"  {name:28s} {value:.6g}  {ci}  truth {truth}")
+        return
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     sim_h, wall_min, v = run(args.cycles, args.seed, args.runs_dir or tempfile.mkdtemp(prefix="gyrobench-selfcal-"),
                           args.noise_free)

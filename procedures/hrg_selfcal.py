@@ -127,9 +127,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("angle_error_deg", "deg", "integrated angle error at the end (interval: +-1.96 sqrt(D(T)), "
                     "D the increment variance of the angle random walk plus bounded angle fitted to the record)",
                     truth=lambda t: 0.0),
-        Measurement("angle_error_sd_first_deg", "deg", "std of the integrated angle error over the first half"),
-        Measurement("angle_error_sd_second_deg", "deg", "std of the integrated angle error over the second half "
-                    "(about the first half's if it does not accumulate)"),
+        Measurement("angle_error_rms_first_deg", "deg", "rms of the integrated angle error over the first half"),
+        Measurement("angle_error_rms_second_deg", "deg", "rms of the integrated angle error over the second half "
+                    "(about the first half's if it does not accumulate; sqrt(3) x for a random walk)"),
         Measurement("angle_bounded_sd_deg", "deg", "bounded angle error's std, fitted to the record's increments",
                     truth=_truth("noise_angle_wander_deg")),
         Measurement("angle_arw_deg_rth", "deg/sqrt(h)", "angle random walk fitted to the record's increments",
@@ -334,8 +334,8 @@ def _analyse(cyc: np.ndarray, rates: np.ndarray, smooth_s: float, dt: float, lev
     half = n // 2
     out += [Result("angle_error_deg", float(angle[-1]), ci95=(float(angle[-1] - env), float(angle[-1] + env))),
             Result("angle_error_max_deg", float(np.max(np.abs(angle)))),
-            Result("angle_error_sd_first_deg", float(np.std(angle[:half]))),
-            Result("angle_error_sd_second_deg", float(np.std(angle[half:]))),
+            Result("angle_error_rms_first_deg", float(np.sqrt(np.mean(angle[:half] ** 2)))),
+            Result("angle_error_rms_second_deg", float(np.sqrt(np.mean(angle[half:] ** 2)))),
             Result("angle_bounded_sd_deg", math.sqrt(model.bounded_var_deg2)),
             Result("angle_arw_deg_rth", math.sqrt(model.arw2_deg2_s) * 60.0)]
     import allantools
