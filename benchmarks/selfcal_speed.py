@@ -78,7 +78,8 @@ def main() -> None:
     print(f"targets: plain {plain:.2f} deg/h (paper 19.3, a third of the p-p); self-calibrated {comp:.3f} = "
           f"{comp / 0.52:.3f} x the 0.52 floor (<= 1.1); "
           f"mean bias after 10 h {mean_10h:.4f} "
-          f"(|.| < 0.018)")
+          f"(|.| < 0.018); angle error rms first / second half {v['angle_error_rms_first_deg'][0]:.3f} / "
+          f"{v['angle_error_rms_second_deg'][0]:.3f} deg (bounded: about equal; a random walk: x sqrt(3))")
 
 
 if __name__ == "__main__":
