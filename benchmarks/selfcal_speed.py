@@ -17,12 +17,22 @@ import os
 import tempfile
 
 
-def run(cycles: int, seed: int, runs_dir: str) -> tuple[float, float, dict]:
+def run(cycles: int, seed: int, runs_dir: str, noise_free: bool = False) -> tuple[float, float, dict]:
     from bench.engine import Runner
     from bench.station import SimStation
     from procedures.hrg_selfcal import HrgSelfcal
 
-    station = SimStation("sim-hrg-selfcal", seed=seed).open()
+    resonator = None
+    if noise_free:  # the loops' own bias: no drift-rate noise, no angle wander, quiet pickoffs
+        import dataclasses
+
+        from simulators.physics import noise
+        from simulators.physics.params import preset
+
+        noise.NOISE_PRESETS["hrg-selfcal"] = dataclasses.replace(noise.NOISE_PRESETS["hrg-selfcal"],
+                                                                 arw_deg_rth=0.0, angle_wander_deg=0.0)
+        resonator = dataclasses.replace(preset("hrg-selfcal"), noise_sigma=0.0)
+    station = SimStation("sim-hrg-selfcal", seed=seed, resonator=resonator).open()
     try:
         record = Runner(station, runs_dir=runs_dir).run(HrgSelfcal, {"cycles": cycles})
     finally:
@@ -32,13 +42,33 @@ def run(cycles: int, seed: int, runs_dir: str) -> tuple[float, float, dict]:
     return record.simulated_s / 3600.0, record.wall_s / 60.0, values
 
 
+def reanalyse(path: str) -> dict:
+    """The measurements of a kept raw file, from the analysis as it is now (and their truths)."""
+    from bench.recorder import open_run
+    from procedures.hrg_selfcal import HrgSelfcal
+
+    data = open_run(path)
+    proc = HrgSelfcal(data.params)
+    truth = HrgSelfcal.truth_for(data.truth or {})
+    return {r.name: (r.value, r.ci95, truth.get(r.name)) for r in proc.analysis(data)}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cycles", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--noise-free", action="store_true",
+                    help="no drift-rate noise, angle wander or pickoff noise (the loops' own mean bias)")
+    ap.add_argument("--reanalyse", metavar="RAW_FILE", help="print a kept run's measurements (no new run)")
+    ap.add_argument("--runs-dir", default=None, help="keep the run's raw file here (default: a temporary folder)")
     args = ap.parse_args()
+    if args.reanalyse:
+        for name, (value, ci, truth) in reanalyse(args.reanalyse).items():
+            print(f"  {name:28s} {value:.6g}  {ci}  truth {truth}")
+        return
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    sim_h, wall_min, v = run(args.cycles, args.seed, tempfile.mkdtemp(prefix="gyrobench-selfcal-"))
+    sim_h, wall_min, v = run(args.cycles, args.seed, args.runs_dir or tempfile.mkdtemp(prefix="gyrobench-selfcal-"),
+                          args.noise_free)
     print(f"hrg-selfcal, {args.cycles} cycles: {sim_h:.2f} sim h in {wall_min:.2f} wall min = "
           f"{sim_h / wall_min:.2f} sim h / wall min (target >= 5)")
     for name, (value, ci) in v.items():
@@ -48,7 +78,8 @@ def main() -> None:
     print(f"targets: plain {plain:.2f} deg/h (paper 19.3, a third of the p-p); self-calibrated {comp:.3f} = "
           f"{comp / 0.52:.3f} x the 0.52 floor (<= 1.1); "
           f"mean bias after 10 h {mean_10h:.4f} "
-          f"(|.| < 0.018)")
+          f"(|.| < 0.018); angle error rms first / second half {v['angle_error_rms_first_deg'][0]:.3f} / "
+          f"{v['angle_error_rms_second_deg'][0]:.3f} deg (bounded: about equal; a random walk: x sqrt(3))")
 
 
 if __name__ == "__main__":

@@ -60,6 +60,15 @@ def _truth(key: str, scale: float = 1.0):
     return lambda truth: truth.get(key, 0.0) * scale
 
 
+def _floor_truth(truth: dict[str, float]) -> float:
+    """The station's noise floor at 100 s (deg/h): its white drift-rate noise and bounded angle wander
+    averaged over 100 s (simulators/physics/noise.py, NoiseParams.average_sd_dph)."""
+    n_dph = truth.get("arw_deg_rth", 0.0) * 60.0 / 10.0
+    tau_c = truth.get("noise_angle_wander_tau_s", 1.0)
+    wander_dph = math.sqrt(2.0 * (1.0 - math.exp(-100.0 / tau_c))) * truth.get("noise_angle_wander_deg", 0.0) * 36.0
+    return math.hypot(n_dph, wander_dph)
+
+
 def _gain_truth(kind: str):
     """The true X/Y gain difference at clock time 0 ("start") or its drift (ppm, ppm/h); 0 on a
     station whose pickoff gains have no error."""
@@ -107,16 +116,24 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("bias_stability_plain_dph", "deg/h", "plain whole-angle bias stability (smooth_s windows, "
                     "1 sigma), cycles after the first"),
         Measurement("bias_stability_selfcal_dph", "deg/h", "self-calibrated bias stability, same record; truth: the "
-                    "station's noise floor, its white drift-rate noise over 100 s (N 60 / sqrt(100 s))",
-                    truth=_truth("arw_deg_rth", 60.0 / 10.0)),
+                    "station's noise floor over 100 s, its white drift-rate noise and bounded angle wander "
+                    "(sqrt((60 N / 10)^2 + 2 (1 - e^(-100/tau_c)) (36 sigma_phi)^2))", truth=_floor_truth),
         Measurement("improvement", "", "plain / self-calibrated bias stability"),
         Measurement("mean_bias_dph", "deg/h", "mean self-calibrated bias since the start of the compensated record",
                     truth=lambda t: t.get("earth_rate_dph", 0.0) + t.get("turn_on_bias_mean_dph", 0.0)),
         Measurement("mean_bias_10h_dph", "deg/h", "mean bias since compensation started, after 10 h",
                     when=lambda p: (p.cycles - 1) * 180.0 / p.precession_dps > 10 * 3600.0,
                     when_doc="more than 10 h of compensated cycles: (cycles - 1) x 180 / precession_dps > 36000 s"),
-        Measurement("angle_error_deg", "deg", "integrated angle error at the end (interval: the ARW envelope "
-                    "+-1.96 N sqrt(T) from the Allan deviation)", truth=lambda t: 0.0),
+        Measurement("angle_error_deg", "deg", "integrated angle error at the end (interval: +-1.96 sqrt(D(T)), "
+                    "D the increment variance of the angle random walk plus bounded angle fitted to the record)",
+                    truth=lambda t: 0.0),
+        Measurement("angle_error_rms_first_deg", "deg", "rms of the integrated angle error over the first half"),
+        Measurement("angle_error_rms_second_deg", "deg", "rms of the integrated angle error over the second half "
+                    "(about the first half's if it does not accumulate; sqrt(3) x for a random walk)"),
+        Measurement("angle_bounded_sd_deg", "deg", "bounded angle error's std, fitted to the record's increments",
+                    truth=_truth("noise_angle_wander_deg")),
+        Measurement("angle_arw_deg_rth", "deg/sqrt(h)", "angle random walk fitted to the record's increments",
+                    truth=_truth("arw_deg_rth")),
         Measurement("angle_error_max_deg", "deg", "largest integrated angle error over the record"),
         Measurement("adev_100s_dph", "deg/h", "Allan deviation of the self-calibrated rate at tau = smooth_s"),
     )
@@ -261,6 +278,8 @@ def _interval(v: float, se: float, floor: float, level: float) -> tuple[float, f
 
 def _analyse(cyc: np.ndarray, rates: np.ndarray, smooth_s: float, dt: float, level: float) -> list[Result]:
     """Results from the cycle table (CYCLE_COLUMNS) and the rate table (RATE_COLUMNS)."""
+    from scipy import stats
+
     col = {n: cyc[:, i] for i, n in enumerate(CYCLE_COLUMNS)}
     last = {n: float(v[-1]) for n, v in col.items()}
     out = [
@@ -298,18 +317,27 @@ def _analyse(cyc: np.ndarray, rates: np.ndarray, smooth_s: float, dt: float, lev
     filled = np.where(np.isfinite(comp), comp, np.nanmean(comp))
     mean_since = sc.mean_since_start_dph(filled)
     n = len(filled)
-    sd_mean = bs_comp * math.sqrt(smooth_s / (n * dt))
-    z = 1.96
+    angle = sc.integrated_angle_deg(filled, dt)
+    # the spread of the mean since start and of the angle error: from the angle error's increment
+    # variance D(L) fitted to this record (angle random walk plus a bounded angle; docs/selfcal.md s. 4)
+    model = sc.fit_angle_error(angle, dt, min_lag_s=max(smooth_s / 10.0, dt))
+    z = float(stats.norm.ppf(0.5 + level / 2))
+    t_rec = n * dt
+    sd_mean = model.mean_sd_dph(t_rec)
     out.append(Result("mean_bias_dph", float(mean_since[-1]), ci95=(float(mean_since[-1] - z * sd_mean),
                                                                     float(mean_since[-1] + z * sd_mean))))
     i10 = int(round(10 * 3600 / dt))
     if n >= i10:  # declared only for records of more than 10 h compensated (a cycle's edges are left out)
-        m10, sd10 = float(mean_since[i10 - 1]), bs_comp * math.sqrt(smooth_s / (i10 * dt))
+        m10, sd10 = float(mean_since[i10 - 1]), model.mean_sd_dph(i10 * dt)
         out.append(Result("mean_bias_10h_dph", m10, ci95=(m10 - z * sd10, m10 + z * sd10)))
-    angle = sc.integrated_angle_deg(filled, dt)
-    env = z * bs_comp * math.sqrt(smooth_s) * math.sqrt(n * dt) / 3600.0  # N sqrt(T), N in deg/sqrt(s)
+    env = z * math.sqrt(float(model.increment_var_deg2(t_rec)))
+    half = n // 2
     out += [Result("angle_error_deg", float(angle[-1]), ci95=(float(angle[-1] - env), float(angle[-1] + env))),
-            Result("angle_error_max_deg", float(np.max(np.abs(angle))))]
+            Result("angle_error_max_deg", float(np.max(np.abs(angle)))),
+            Result("angle_error_rms_first_deg", float(np.sqrt(np.mean(angle[:half] ** 2)))),
+            Result("angle_error_rms_second_deg", float(np.sqrt(np.mean(angle[half:] ** 2)))),
+            Result("angle_bounded_sd_deg", math.sqrt(model.bounded_var_deg2)),
+            Result("angle_arw_deg_rth", math.sqrt(model.arw2_deg2_s) * 60.0)]
     import allantools
 
     _taus, adev, _e, _n = allantools.oadev(filled, rate=1.0 / dt, data_type="freq", taus=np.array([smooth_s]))

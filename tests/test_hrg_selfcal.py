@@ -30,6 +30,11 @@ def test_hrg_selfcal_short_record(run_procedure, sim_truth, sim_station):
     lo, hi = got["bias_stability_selfcal_dph"].ci95
     assert lo <= truth["bias_stability_selfcal_dph"] <= hi and comp < 0.8
     assert got["improvement"].value > 20.0
+    # the mean bias since start and the angle error: intervals from the fitted angle-error model cover 0
+    for name in ("mean_bias_dph", "angle_error_deg"):
+        lo, hi = got[name].ci95
+        assert lo <= 0.0 <= hi, (name, got[name].value, got[name].ci95)
+    assert got["angle_error_rms_first_deg"].value > 0 and got["angle_error_rms_second_deg"].value > 0
     data = open_run(record.raw_file)
     cyc = data.table("hrg_selfcal_cycles")
     assert len(cyc["t_start_s"]) == 3 and np.all(cyc["trim_diff_ppm"][1:] > 1000.0)

@@ -214,3 +214,79 @@ def test_ftr_pickoff_noise_term_matches_the_delayed_loop_closed_form():
     got = white_level_dpsh(u[::2] / k, 2 * t_s, 50)
     want = closed_form_dpsh(1e-5, k, t_s)
     assert got == pytest.approx(want, rel=0.10), (got, want)
+
+
+WANDER = NoiseParams(angle_wander_deg=0.03, angle_wander_tau_s=300.0)
+
+
+def _wander_records(nz: NoiseParams, seeds: int, hours: float, fs: float = 1.0) -> np.ndarray:
+    return np.array([Environment(nz, seed=s, sample_period_s=1.0 / fs).rate_samples(int(hours * 3600 * fs))
+                     for s in range(seeds)]) * TO_DPH
+
+
+def test_the_angle_wander_is_bounded_and_exactly_the_integrated_rate():
+    """The integrated angle the wander adds is phi(t) - phi(0) (no accumulation) to rounding."""
+    env = Environment(WANDER, seed=3, sample_period_s=0.5)
+    phi0 = env.wander_angle_rad
+    rate = env.rate_samples(20000)
+    assert math.isclose(np.sum(rate) * 0.5, env.wander_angle_rad - phi0, rel_tol=0, abs_tol=1e-15)
+    env2 = Environment(WANDER, seed=3, sample_period_s=0.5)
+    blocks = sum(env2.block_rate_rad_s(n) * n * 0.5 for n in (7, 1000, 3, 18990))  # the World's path
+    assert math.isclose(blocks, env2.wander_angle_rad - phi0, rel_tol=0, abs_tol=1e-15)
+
+
+def test_the_angle_wander_has_its_closed_form_allan_variance_and_averages():
+    recs = _wander_records(WANDER, seeds=12, hours=3.0)
+    ratios = []
+    for r in recs:
+        curve = allan_deviation(r, 1.0)
+        sel = (curve.tau_s >= 4.0) & (curve.tau_s <= 3000.0)  # 1 s sampling to a quarter of the record
+        assert sel.sum() >= 8
+        ratios.append(curve.adev[sel] ** 2 / (WANDER.true_avar(curve.tau_s[sel]) * TO_DPH**2))
+    ratios = np.array(ratios)
+    m, se = ratios.mean(axis=0), ratios.std(axis=0, ddof=1) / math.sqrt(len(ratios))
+    assert np.all(np.abs(m - 1.0) < 4.0 * se + 0.02), (m, se)
+    # the 100 s bias stability: the std of 100 s means, against average_sd_dph(100)
+    means = recs[:, : recs.shape[1] // 100 * 100].reshape(len(recs), -1, 100).mean(axis=2)
+    bs = float(np.sqrt(np.mean(np.var(means, axis=1, ddof=1))))
+    k = means.size - len(recs)
+    lo, hi = (bs * math.sqrt(k / stats.chi2.ppf(q, k)) for q in (0.9995, 0.0005))
+    assert lo <= float(WANDER.average_sd_dph(100.0)) <= hi, (bs, WANDER.average_sd_dph(100.0))
+
+
+def test_the_mean_since_start_has_the_closed_form_spread():
+    """Across 200 seeded starts the mean after T has the spread sqrt(N^2/T + 2(1-e^(-T/tau_c)) s^2/T^2)."""
+    nz = NoiseParams(arw_deg_rth=0.01, angle_wander_deg=0.03, angle_wander_tau_s=300.0)
+    t_s = 1800.0
+    means = np.array([np.mean(Environment(nz, seed=s, sample_period_s=10.0).rate_samples(180)) * TO_DPH
+                      for s in range(200)])
+    sd = float(np.sqrt(np.mean(means**2)))
+    k = len(means)
+    lo, hi = (sd * math.sqrt(k / stats.chi2.ppf(q, k)) for q in (0.9995, 0.0005))
+    assert lo <= float(nz.average_sd_dph(t_s)) <= hi, (sd, nz.average_sd_dph(t_s))
+    # white part alone, bounded part alone: the closed form's two terms
+    assert float(NoiseParams(arw_deg_rth=0.01).average_sd_dph(t_s)) == pytest.approx(0.6 / math.sqrt(t_s), rel=1e-12)
+    assert float(WANDER.average_sd_dph(1e9)) == pytest.approx(math.sqrt(2) * 0.03 * 3600 / 1e9, rel=1e-6)
+
+
+def test_the_angle_wander_is_off_by_default_and_checked():
+    assert NoiseParams().angle_wander_deg == 0.0
+    a = Environment(NoiseParams(arw_deg_rth=0.01), seed=5, sample_period_s=0.1).rate_samples(500)
+    b = Environment(dataclasses.replace(NoiseParams(arw_deg_rth=0.01), angle_wander_tau_s=50.0), seed=5,
+                    sample_period_s=0.1).rate_samples(500)
+    assert np.array_equal(a, b)  # no wander: no draws, the other processes' streams untouched
+    w = Environment(dataclasses.replace(NoiseParams(arw_deg_rth=0.01), angle_wander_deg=0.01), seed=5,
+                    sample_period_s=0.1).rate_samples(500)
+    assert not np.array_equal(a, w)
+    with pytest.raises(ValueError, match="angle_wander_deg"):
+        NoiseParams(angle_wander_deg=-0.1)
+    with pytest.raises(ValueError, match="angle_wander_tau_s"):
+        NoiseParams(angle_wander_tau_s=0.0)
+
+
+def test_hrg_selfcal_floor_is_the_papers_figures():
+    """The preset's floor: 0.52 deg/h at 100 s, and its mean since start after 10 h at 3 sigma under
+    0.018 deg/h (docs/selfcal.md, section 1)."""
+    nz = NOISE_PRESETS["hrg-selfcal"]
+    assert float(nz.average_sd_dph(100.0)) == pytest.approx(0.52, abs=0.002)
+    assert 3.0 * float(nz.average_sd_dph(36000.0)) < 0.018

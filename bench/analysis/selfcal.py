@@ -227,3 +227,73 @@ def gain_trend(t_h: np.ndarray, values: np.ndarray, se: np.ndarray, level: float
         se_j = math.sqrt(cov[j, j])
         out.append(Estimate(float(coef[j]), se_j, (float(coef[j] - t * se_j), float(coef[j] + t * se_j))))
     return out[0], out[1]
+
+
+@dataclass(frozen=True)
+class AngleErrorModel:
+    """The integrated angle error's spread, fitted to its increments: D(L) = E[(e(t + L) - e(t))^2] =
+    arw2_deg2_s L + 2 bounded_var_deg2 (1 - exp(-L / tau_c_s)): an angle random walk (white rate
+    noise, N^2 in deg^2/s) plus a bounded (stationary) angle error of variance s^2 and correlation
+    time tau_c (docs/selfcal.md, section 4).  Flicker or a rate random walk would bend D(L) upward
+    faster than this model allows: `worst_rel_misfit` says how well it holds."""
+
+    arw2_deg2_s: float
+    bounded_var_deg2: float
+    tau_c_s: float
+    worst_rel_misfit: float
+    dof: float  # of the longest lag's variance (about 3 record / lag): the interval's Student t
+
+    def mean_halfwidth_dph(self, t_s: float, level: float = 0.95) -> float:
+        """Half-width of the mean bias since start's interval after t_s: Student t (dof) x its sd,
+        for the sd is itself estimated from a few record lengths' worth of increments."""
+        return float(stats.t.ppf(0.5 + level / 2, self.dof)) * self.mean_sd_dph(t_s)
+
+    def increment_var_deg2(self, lag_s: np.ndarray | float) -> np.ndarray:
+        lag = np.asarray(lag_s, dtype=float)
+        return self.arw2_deg2_s * lag + 2.0 * self.bounded_var_deg2 * (1.0 - np.exp(-lag / self.tau_c_s))
+
+    def mean_sd_dph(self, t_s: float) -> float:
+        """Standard deviation of the mean bias since start after t_s: sqrt(D(t)) / t."""
+        return float(np.sqrt(self.increment_var_deg2(t_s)) / t_s * 3600.0)
+
+
+def increment_var_deg2(angle_deg: np.ndarray, sample_s: float, lags_s: np.ndarray) -> np.ndarray:
+    """D(L): the mean square of the angle error's increments over each lag (overlapping)."""
+    e = np.asarray(angle_deg, dtype=float)
+    out = np.empty(len(lags_s))
+    for i, lag in enumerate(lags_s):
+        k = max(1, int(round(lag / sample_s)))
+        d = e[k:] - e[:-k]
+        out[i] = float(np.mean(d * d))
+    return out
+
+
+def fit_angle_error(angle_deg: np.ndarray, sample_s: float, min_lag_s: float = 10.0,
+                    max_lag_fraction: float = 0.25) -> AngleErrorModel:
+    """Fit AngleErrorModel to the record's increment variances at lags from min_lag_s to a quarter of
+    the record (geometric, 8 a factor of ten): tau_c on a log grid, the two variances >= 0 by
+    non-negative least squares on relative errors, the best tau_c kept."""
+    from scipy.optimize import nnls
+
+    n = len(angle_deg)
+    t_rec = (n - 1) * sample_s
+    hi = max_lag_fraction * t_rec
+    if hi <= min_lag_s:
+        raise ValueError(f"a record of {t_rec:.0f} s is too short to fit its angle error over lags of "
+                         f"{min_lag_s:g} s and up")
+    lags = np.unique(np.round(np.geomspace(min_lag_s, hi, int(8 * math.log10(hi / min_lag_s)) + 2) / sample_s))
+    lags = lags * sample_s
+    d = increment_var_deg2(angle_deg, sample_s, lags)
+    w = np.sqrt(t_rec / lags)  # a relative error of D(L) grows as sqrt(L / T): weigh by its inverse
+    best: AngleErrorModel | None = None
+    best_cost = math.inf
+    for tau_c in np.geomspace(min_lag_s / 3.0, hi / 4.0, 50):  # a bounded error saturates inside the lags
+        a = np.column_stack([lags, 2.0 * (1.0 - np.exp(-lags / tau_c))]) / d[:, None] * w[:, None]
+        coef, _ = nnls(a, w)
+        cost = float(np.sum((a @ coef - w) ** 2))
+        if cost < best_cost:
+            best_cost = cost
+            best = AngleErrorModel(float(coef[0]), float(coef[1]), float(tau_c), 0.0, 3.0 / max_lag_fraction)
+    assert best is not None
+    misfit = float(np.max(np.abs(best.increment_var_deg2(lags) / d - 1.0)))
+    return AngleErrorModel(best.arw2_deg2_s, best.bounded_var_deg2, best.tau_c_s, misfit, best.dof)

@@ -81,23 +81,40 @@ def angle_figure(r) -> list[ReportFigure]:
     angle = np.cumsum(c) * dt / 3600.0
     mean = np.cumsum(c) / np.arange(1, len(c) + 1)
     k = max(1, len(t) // 4000)
+    try:  # the envelope +-1.96 sqrt(D(t)) of the angle-error model fitted to this record (docs/selfcal.md s. 4)
+        from bench.analysis.selfcal import fit_angle_error
+
+        model = fit_angle_error(angle, dt)
+        env = 1.96 * np.sqrt(model.increment_var_deg2(np.maximum(t[::k] - t[0], dt)))
+    except ValueError:
+        env = None
     fig, ax = new_figure(1, 1, height_in=3.0)
     ax[0, 0].plot(t_h[::k], angle[::k], lw=1.0)
     ax[0, 0].axhline(0.0, color="k", lw=0.5)
+    if env is not None:
+        ax[0, 0].plot(t_h[::k], env, color="C3", ls="--", lw=0.7)
+        ax[0, 0].plot(t_h[::k], -env, color="C3", ls="--", lw=0.7)
     ax[0, 0].set_xlabel("time since compensation started (h)")
     ax[0, 0].set_ylabel("integrated angle error (deg)")
     f1 = ReportFigure("hrg-selfcal_angle", "Integrated angle error against time (paper fig. 6)", fig,
-                      "The self-calibrated rate integrated (true input rate 0: axis east, at rest).")
+                      "The self-calibrated rate integrated (true input rate 0: axis east, at rest); dashed: "
+                      "±1.96 √D(t), D the angle random walk plus bounded angle error fitted to the record "
+                      "(flat when the angle error does not accumulate).")
     fig2, ax2 = new_figure(1, 1, height_in=3.0)
     ax2[0, 0].plot(t_h[::k], mean[::k], lw=1.0)
     ax2[0, 0].axhline(0.0, color="k", lw=0.5)
+    if env is not None:
+        tt = np.maximum(t[::k] - t[0], dt) / 3600.0
+        ax2[0, 0].plot(t_h[::k], env / tt, color="C1", ls=":", lw=0.7)
+        ax2[0, 0].plot(t_h[::k], -env / tt, color="C1", ls=":", lw=0.7)
     for y in (-0.018, 0.018):
         ax2[0, 0].axhline(y, color="C3", ls="--", lw=0.7)
     ax2[0, 0].set_ylim(-0.5, 0.5)
     ax2[0, 0].set_xlabel("time since compensation started (h)")
     ax2[0, 0].set_ylabel("mean bias since start (deg/h)")
     f2 = ReportFigure("hrg-selfcal_mean_bias", "Mean bias since start (paper fig. 7)", fig2,
-                      "Running mean of the self-calibrated rate; dashed: ±0.018 deg/h (the paper's value after 10 h).")
+                      "Running mean of the self-calibrated rate; dashed: ±0.018 deg/h (the paper's value after 10 h); "
+                      "dotted: ±1.96 √D(t) / t from the fitted angle-error model.")
     return [f1, f2]
 
 
