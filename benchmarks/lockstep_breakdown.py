@@ -85,6 +85,8 @@ def main() -> None:
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     station = SimStation(args.station, seed=args.seed).open()
     _timed(type(station.devices["table"]), "status", "  table status")
+    if "frontend" in station.devices:
+        _timed(type(station.devices["frontend"]), "_query", "  frontend query")
     cpu_s: dict[str, float] = {}
     stop = threading.Event()
 
