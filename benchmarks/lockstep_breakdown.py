@@ -36,6 +36,7 @@ from collections.abc import Callable
 from typing import Any
 
 _TOTAL_S: dict[str, float] = collections.defaultdict(float)
+_CPU_S: dict[str, float] = collections.defaultdict(float)  # the calling thread's CPU seconds in them
 _CALLS: collections.Counter[str] = collections.Counter()
 
 
@@ -44,11 +45,12 @@ def _timed(cls: type, name: str, key: str) -> None:
     inner: Callable[..., Any] = getattr(cls, name)
 
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         try:
             return inner(*args, **kwargs)
         finally:
             _TOTAL_S[key] += time.perf_counter() - t0
+            _CPU_S[key] += time.thread_time() - c0
             _CALLS[key] += 1
 
     setattr(cls, name, wrapper)
@@ -84,7 +86,8 @@ def main() -> None:
         _timed(cls, name, key)
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     station = SimStation(args.station, seed=args.seed).open()
-    _timed(type(station.devices["table"]), "status", "  table status")
+    table_cls = type(station.devices["table"])
+    _timed(table_cls, "probe_status" if hasattr(table_cls, "probe_status") else "status", "  table status")
     if "frontend" in station.devices:
         _timed(type(station.devices["frontend"]), "_query", "  frontend query")
     cpu_s: dict[str, float] = {}
@@ -100,6 +103,7 @@ def main() -> None:
             time.sleep(0.2)
 
     threading.Thread(target=sample, name="cpu-sampler", daemon=True).start()
+    cpu0 = time.process_time()
     try:
         record = Runner(station, runs_dir=tempfile.mkdtemp(prefix="gyrobench-lockstep-")).run(
             find_procedure(args.procedure), sets)
@@ -108,8 +112,13 @@ def main() -> None:
         station.close()
     print(f"{args.procedure} on {args.station} {sets}: {record.outcome}, {record.simulated_s:.0f} sim s in "
           f"{record.wall_s:.2f} wall s = {record.simulated_s / 3600 / (record.wall_s / 60):.2f} sim h / wall min")
+    n_grid = _CALLS["check_links"]
+    print(f"process CPU {time.process_time() - cpu0:.2f} s (all threads) = "
+          f"{(time.process_time() - cpu0) / n_grid * 1e3:.3f} ms per check_links call")
+    print(f"  {'':16s} {'calls':>7s} {'wall s':>8s} {'wall ms':>8s} {'cpu ms':>8s}  (cpu: the calling thread's)")
     for key in _TOTAL_S:
-        print(f"  {key:16s} {_CALLS[key]:7d} calls {_TOTAL_S[key]:8.3f} s {_TOTAL_S[key] / _CALLS[key] * 1e3:8.3f} ms")
+        n = _CALLS[key]
+        print(f"  {key:16s} {n:7d} {_TOTAL_S[key]:8.3f} {_TOTAL_S[key] / n * 1e3:8.3f} {_CPU_S[key] / n * 1e3:8.3f}")
     print("threads' CPU s (those alive at the end):")
     for name, s in sorted(cpu_s.items(), key=lambda kv: -kv[1]):
         if s >= 0.05 and name != "cpu-sampler":
