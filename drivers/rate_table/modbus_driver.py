@@ -57,7 +57,7 @@ class ModbusRateTable(RateTable):
         self._beat_count = 0
         self._rx: _ReceivedBytes | None = None  # RTU: what a transaction received, to spot extra frames
         self.timeout_s = float(timeout_s)
-        self._probe_tid = 0  # transaction id of begin_status's own requests (TCP)
+        self._probe_tid = 0  # transaction id of probe_status's own requests (TCP)
 
     @classmethod
     def rtu(
@@ -238,8 +238,6 @@ class ModbusRateTable(RateTable):
 _FC4_REQUEST = struct.Struct(">HHHBBHH")
 _MBAP = struct.Struct(">HHHBB")  # + function code
 _STATUS_REPLY_BYTES = _MBAP.size + 1 + 2 * mp.IR_COUNT  # MBAP, fc, byte count, 6 registers
-
-
 _STATUS_REGS = struct.Struct(f">{mp.IR_COUNT}H")
 
 
