@@ -22,18 +22,22 @@ Measured 2026-11-26 on 2 shared cores (load average 2.8-3.7), cvg-allan on sim-h
 After the recorder's flush rule (a second of data flushes once a quarter wall second has passed,
 not every few wall ms): the raw-data writer's CPU 0.48-0.56 -> 0.28 s, the stream flush
 0.27-0.35 -> 0.06 ms per grid point (the writer no longer holds the GIL when the reader wants it).
-Then (2026-11-26, load 1.7-6.5; d8058b1 against the tree with the table's status read as one
-prebuilt Modbus frame on the client's socket (`probe_status`), the streaming link's sync first, and
-the raw-data writer woken per batch of blocks; alternately, 6 runs each; medians [ranges]):
-  check_links wall 0.54 [0.40-0.92] -> 0.51 [0.30-1.22] ms, main-thread CPU in it 0.26 [0.19-0.34]
-  -> 0.21 [0.15-0.26] ms; table status 0.30 [0.21-0.51] -> 0.13 [0.08-0.36] ms wall; process CPU
-  (all threads) per grid point 1.68 [1.25-1.91] -> 1.52 [1.20-1.83] ms; the writer's CPU 0.13-0.25
-  -> 0.06-0.10 s, the reader's 0.37-0.73 -> 0.34-0.60 s; the quietest runs 3.5 -> 4.0 sim h / wall min.
-  The sync now waits for the reader's parsing (0.06-0.4 ms, which the table's read waited for
-  before, queued for the GIL).  The check's wall time is about the CPU of every thread it waits
-  for (main, reader, the two servers) plus ~4 thread hand-offs: sending the table's and the front
-  end's requests before reading either reply (tried) was no faster in the run and 20% slower in a
-  tight loop (the two servers and the main thread then contend for the GIL).
+Then (2026-11-26; d8058b1 against the tree with the table's status read as one prebuilt Modbus
+frame on the client's socket (`probe_status`), the streaming link's sync first and the raw-data
+writer woken per batch of blocks; alternately; medians [ranges]):
+  6 runs each, load 1.7-6.5, writer batch 16: check_links wall 0.54 [0.40-0.92] -> 0.51 [0.30-1.22]
+  ms, main-thread CPU in it 0.26 [0.19-0.34] -> 0.21 [0.15-0.26] ms; table status 0.30 [0.21-0.51]
+  -> 0.13 [0.08-0.36] ms wall; process CPU (all threads) per grid point 1.68 [1.25-1.91] -> 1.52
+  [1.20-1.83] ms; writer CPU 0.13-0.25 -> 0.06-0.10 s; the quietest runs 3.5 -> 4.0 sim h / wall min.
+  3 runs each, load 3.9-5.1, the final tree (writer batch 2, see docs/raw_data.md): check_links
+  wall 0.77 [0.70-0.89] -> 0.66 [0.51-1.03] ms, CPU in it 0.33 [0.30-0.34] -> 0.27 [0.23-0.28] ms;
+  process CPU per grid point 1.99 [1.84-2.05] -> 1.76 [1.72-1.88] ms; writer CPU 0.20-0.22 ->
+  0.15-0.18 s; reader 0.62-0.68 -> 0.57-0.67 s.
+  So the link checks' own CPU fell by ~1/5, not the 3x asked: their wall time is about the CPU of
+  every thread they wait for (main, the FPGA reader's parsing, now seen in the sync, the two
+  servers) plus ~4 thread hand-offs under the GIL.  Sending the table's and the front end's
+  requests before reading either reply (tried) was no faster in the run and 20% slower in a tight
+  loop (the two servers and the main thread then contend for the GIL).
 """
 
 from __future__ import annotations

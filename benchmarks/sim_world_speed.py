@@ -62,8 +62,8 @@ streaming link's sync first and the writer woken per batch; alternately, twice e
 runs; per wall s / per CPU s):
   (c)     274 /   230     232 /   202  ->    273 /   247     299 /   268   (x1.1 per CPU s)
   The link checks' client side went from ~0.26 to ~0.21 ms of main-thread CPU per grid point and
-  the writer thread's CPU from 0.2 to 0.07 s a run; the round trips themselves are thread
-  hand-offs under the GIL (benchmarks/lockstep_breakdown.py).
+  the writer thread's CPU (woken per 2 blocks; these runs had 16) from 0.2 to 0.07-0.15 s a run;
+  the round trips themselves are thread hand-offs under the GIL (benchmarks/lockstep_breakdown.py).
 """
 
 from __future__ import annotations
