@@ -233,10 +233,11 @@ class Station:
         elif now_sim - last_sim < self.HEALTH_EVERY_SIM_S and now_wall - last_wall < self.HEALTH_EVERY_WALL_S:
             return
         self._last_health = (now_sim, now_wall)
-        # a streaming link's check waits for its reader to catch up with the clock: checked last,
-        # the reader works through the frames while the other links answer (a stable order)
+        # a streaming link's check waits for its reader to catch up with the clock: checked first,
+        # so the reader works through the frames while this thread waits, and the other links'
+        # round trips after it do not wait for the GIL behind the reader (a stable order)
         roles = self._health_roles()
-        for role in [r for r in roles if self.spec(r).stream is None] + [r for r in roles if self.spec(r).stream]:
+        for role in [r for r in roles if self.spec(r).stream] + [r for r in roles if self.spec(r).stream is None]:
             spec = self.spec(role)
             if spec.health is None:
                 continue

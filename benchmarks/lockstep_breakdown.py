@@ -22,6 +22,22 @@ Measured 2026-11-26 on 2 shared cores (load average 2.8-3.7), cvg-allan on sim-h
 After the recorder's flush rule (a second of data flushes once a quarter wall second has passed,
 not every few wall ms): the raw-data writer's CPU 0.48-0.56 -> 0.28 s, the stream flush
 0.27-0.35 -> 0.06 ms per grid point (the writer no longer holds the GIL when the reader wants it).
+Then (2026-11-26; d8058b1 against the tree with the table's status read as one prebuilt Modbus
+frame on the client's socket (`probe_status`), the streaming link's sync first and the raw-data
+writer woken per batch of blocks; alternately; medians [ranges]):
+  6 runs each, load 1.7-6.5, writer batch 16: check_links wall 0.54 [0.40-0.92] -> 0.51 [0.30-1.22]
+  ms, main-thread CPU in it 0.26 [0.19-0.34] -> 0.21 [0.15-0.26] ms; table status 0.30 [0.21-0.51]
+  -> 0.13 [0.08-0.36] ms wall; process CPU (all threads) per grid point 1.68 [1.25-1.91] -> 1.52
+  [1.20-1.83] ms; writer CPU 0.13-0.25 -> 0.06-0.10 s; the quietest runs 3.5 -> 4.0 sim h / wall min.
+  3 runs each, load 3.9-5.1, the final tree (writer batch 2, see docs/raw_data.md): check_links
+  wall 0.77 [0.70-0.89] -> 0.66 [0.51-1.03] ms, CPU in it 0.33 [0.30-0.34] -> 0.27 [0.23-0.28] ms;
+  process CPU per grid point 1.99 [1.84-2.05] -> 1.76 [1.72-1.88] ms; writer CPU 0.20-0.22 ->
+  0.15-0.18 s; reader 0.62-0.68 -> 0.57-0.67 s.
+  So the link checks' own CPU fell by ~1/5, not the 3x asked: their wall time is about the CPU of
+  every thread they wait for (main, the FPGA reader's parsing, now seen in the sync, the two
+  servers) plus ~4 thread hand-offs under the GIL.  Sending the table's and the front end's
+  requests before reading either reply (tried) was no faster in the run and 20% slower in a tight
+  loop (the two servers and the main thread then contend for the GIL).
 """
 
 from __future__ import annotations
@@ -36,6 +52,7 @@ from collections.abc import Callable
 from typing import Any
 
 _TOTAL_S: dict[str, float] = collections.defaultdict(float)
+_CPU_S: dict[str, float] = collections.defaultdict(float)  # the calling thread's CPU seconds in them
 _CALLS: collections.Counter[str] = collections.Counter()
 
 
@@ -44,11 +61,12 @@ def _timed(cls: type, name: str, key: str) -> None:
     inner: Callable[..., Any] = getattr(cls, name)
 
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         try:
             return inner(*args, **kwargs)
         finally:
             _TOTAL_S[key] += time.perf_counter() - t0
+            _CPU_S[key] += time.thread_time() - c0
             _CALLS[key] += 1
 
     setattr(cls, name, wrapper)
@@ -84,7 +102,10 @@ def main() -> None:
         _timed(cls, name, key)
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     station = SimStation(args.station, seed=args.seed).open()
-    _timed(type(station.devices["table"]), "status", "  table status")
+    table_cls = type(station.devices["table"])
+    _timed(table_cls, "probe_status" if hasattr(table_cls, "probe_status") else "status", "  table status")
+    if "frontend" in station.devices:
+        _timed(type(station.devices["frontend"]), "_query", "  frontend query")
     cpu_s: dict[str, float] = {}
     stop = threading.Event()
 
@@ -98,6 +119,7 @@ def main() -> None:
             time.sleep(0.2)
 
     threading.Thread(target=sample, name="cpu-sampler", daemon=True).start()
+    cpu0 = time.process_time()
     try:
         record = Runner(station, runs_dir=tempfile.mkdtemp(prefix="gyrobench-lockstep-")).run(
             find_procedure(args.procedure), sets)
@@ -106,8 +128,13 @@ def main() -> None:
         station.close()
     print(f"{args.procedure} on {args.station} {sets}: {record.outcome}, {record.simulated_s:.0f} sim s in "
           f"{record.wall_s:.2f} wall s = {record.simulated_s / 3600 / (record.wall_s / 60):.2f} sim h / wall min")
+    n_grid = _CALLS["check_links"]
+    print(f"process CPU {time.process_time() - cpu0:.2f} s (all threads) = "
+          f"{(time.process_time() - cpu0) / n_grid * 1e3:.3f} ms per check_links call")
+    print(f"  {'':16s} {'calls':>7s} {'wall s':>8s} {'wall ms':>8s} {'cpu ms':>8s}  (cpu: the calling thread's)")
     for key in _TOTAL_S:
-        print(f"  {key:16s} {_CALLS[key]:7d} calls {_TOTAL_S[key]:8.3f} s {_TOTAL_S[key] / _CALLS[key] * 1e3:8.3f} ms")
+        n = _CALLS[key]
+        print(f"  {key:16s} {n:7d} {_TOTAL_S[key]:8.3f} {_TOTAL_S[key] / n * 1e3:8.3f} {_CPU_S[key] / n * 1e3:8.3f}")
     print("threads' CPU s (those alive at the end):")
     for name, s in sorted(cpu_s.items(), key=lambda kv: -kv[1]):
         if s >= 0.05 and name != "cpu-sampler":

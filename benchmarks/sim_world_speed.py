@@ -57,6 +57,13 @@ The World alone takes the whole 1.1 s budget, and the checks that find a fault w
 + fit, ~0.1-0.3 s wall) is not in the per-CPU-s figures (another process); the raw file's
 compaction after the run (gzip, ~0.3-0.8 s) is in them but not in the wall figures (the run's
 wall time is taken before it).
+Then (2026-11-26, load 2.3-3.5; d8058b1 against the tree with the table's lean status probe, the
+streaming link's sync first and the writer woken per batch; alternately, twice each, medians of 3
+runs; per wall s / per CPU s):
+  (c)     274 /   230     232 /   202  ->    273 /   247     299 /   268   (x1.1 per CPU s)
+  The link checks' client side went from ~0.26 to ~0.21 ms of main-thread CPU per grid point and
+  the writer thread's CPU (woken per 2 blocks; these runs had 16) from 0.2 to 0.07-0.15 s a run;
+  the round trips themselves are thread hand-offs under the GIL (benchmarks/lockstep_breakdown.py).
 """
 
 from __future__ import annotations

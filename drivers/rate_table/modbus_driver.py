@@ -8,7 +8,10 @@ link becomes LinkLostError naming the table's address.
 
 from __future__ import annotations
 
+import select
+import struct
 import threading
+import time
 
 from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
@@ -53,6 +56,8 @@ class ModbusRateTable(RateTable):
         self.heartbeat = Heartbeat(self._beat, heartbeat_s if heartbeat_s else max(0.05, self.watchdog_s / 8))
         self._beat_count = 0
         self._rx: _ReceivedBytes | None = None  # RTU: what a transaction received, to spot extra frames
+        self.timeout_s = float(timeout_s)
+        self._probe_tid = 0  # transaction id of probe_status's own requests (TCP)
 
     @classmethod
     def rtu(
@@ -175,23 +180,83 @@ class ModbusRateTable(RateTable):
                 fc=4,
             )
             try:
-                rate, angle, bits, code = mp.decode_status(rr.registers)
+                return self._status_from(rr.registers)
             except ValueError as exc:
                 last = exc
-                continue
-            return TableStatus(
-                rate_dps=rate,
-                angle_deg=angle,
-                enabled=bool(bits & mp.ST_ENABLED),
-                at_rate=bool(bits & mp.ST_AT_RATE),
-                in_position=bool(bits & mp.ST_IN_POSITION),
-                fault=bool(bits & mp.ST_FAULT),
-                estop=bool(bits & mp.ST_ESTOP),
-                interlock_open=bool(bits & mp.ST_INTERLOCK_OPEN),
-                watchdog_expired=bool(bits & mp.ST_WATCHDOG_EXPIRED),
-                fault_code=code,
-            )
         raise ProtocolError(f"rate table at {self.address}: malformed status reply ({last})")
+
+    def probe_status(self) -> TableStatus:
+        """status() for the station's link check at every lockstep grid point, without pymodbus's
+        per-call bookkeeping: the same MBAP frame and FC4 read on the client's own socket, its
+        reply checked field by field (transaction id, unit, function, byte count).  Anything else
+        (no reply within timeout_s, a short, foreign or late reply, RTU) goes to status(), with
+        its retries and errors, on a fresh connection so a late reply is never taken for the next
+        one."""
+        sock = getattr(self.client, "socket", None)
+        if self._rx is not None or sock is None or not isinstance(self.client, ModbusTcpClient):
+            return self.status()
+        with self._io_lock:
+            self._probe_tid = self._probe_tid % 0xFFFF + 1
+            tid = self._probe_tid
+            try:
+                sock.sendall(_FC4_REQUEST.pack(tid, 0, 6, self.device_id, 4, mp.IR_RATE_ACT, mp.IR_COUNT))
+                reply = _read_reply(sock, time.monotonic() + self.timeout_s)
+            except OSError:
+                reply = None
+            if reply is not None and _MBAP.unpack_from(reply)[:4] == (tid, 0, len(reply) - 6, self.device_id):
+                fc, n_bytes = reply[7], reply[8]
+                if fc == 4 and n_bytes == 2 * mp.IR_COUNT:
+                    try:
+                        return self._status_from(_STATUS_REGS.unpack_from(reply, 9))
+                    except ValueError:
+                        pass  # status() reads again and names what is malformed
+                elif fc == 0x84:
+                    raise DeviceError(
+                        f"rate table at {self.address} (unit {self.device_id}) refused status read: "
+                        f"Modbus exception {n_bytes} ({mp.EXCEPTION_NAMES.get(n_bytes, 'unknown')})"
+                    )
+            self.client.close()  # pymodbus connects again at the next transaction
+        return self.status()
+
+    def _status_from(self, registers) -> TableStatus:
+        rate, angle, bits, code = mp.decode_status(registers)
+        return TableStatus(
+            rate_dps=rate,
+            angle_deg=angle,
+            enabled=bool(bits & mp.ST_ENABLED),
+            at_rate=bool(bits & mp.ST_AT_RATE),
+            in_position=bool(bits & mp.ST_IN_POSITION),
+            fault=bool(bits & mp.ST_FAULT),
+            estop=bool(bits & mp.ST_ESTOP),
+            interlock_open=bool(bits & mp.ST_INTERLOCK_OPEN),
+            watchdog_expired=bool(bits & mp.ST_WATCHDOG_EXPIRED),
+            fault_code=code,
+        )
+
+
+#: MBAP header (transaction id, protocol 0, length, unit) + FC4 request (address, count)
+_FC4_REQUEST = struct.Struct(">HHHBBHH")
+_MBAP = struct.Struct(">HHHBB")  # + function code
+_STATUS_REPLY_BYTES = _MBAP.size + 1 + 2 * mp.IR_COUNT  # MBAP, fc, byte count, 6 registers
+_STATUS_REGS = struct.Struct(f">{mp.IR_COUNT}H")
+
+
+def _read_reply(sock, deadline: float) -> bytes | None:
+    """One Modbus TCP reply to the FC4 status read (or an exception reply) from a socket, None
+    when the deadline passes first or the peer closed the connection."""
+    data = b""
+    want = _STATUS_REPLY_BYTES
+    while len(data) < want:
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([sock], [], [], left)[0]:
+            return None
+        piece = sock.recv(want - len(data))
+        if not piece:
+            return None
+        data += piece
+        if len(data) >= 8 and data[7] & 0x80:
+            want = 9  # an exception reply: MBAP, fc | 0x80, exception code
+    return data
 
 
 class _ReceivedBytes:

@@ -6,7 +6,7 @@ from typing import Any
 
 from bench.devices import DriverSpec, Key, register_driver
 
-from .station_keys import TABLE_HEALTH_COLUMNS, table_health, table_keys
+from .station_keys import TABLE_HEALTH_COLUMNS, table_keys, table_probe_health
 
 
 def _build(cfg: dict[str, Any], clock: Any) -> Any:
@@ -38,7 +38,7 @@ SPEC = register_driver(
         ),
         build=_build,
         serve="simulators.rate_table.modbus_server:serve_station",
-        health=table_health,
+        health=table_probe_health,
         health_columns=TABLE_HEALTH_COLUMNS,
         doc="rate table, Modbus TCP or RTU",
     )

@@ -28,7 +28,15 @@ def table_keys(address: dict[str, Key]) -> dict[str, Key]:
 
 def table_health(table: Any, since: Any = None) -> np.ndarray:
     """One row (rate_dps, angle_deg); SafetyTripError when the table has tripped."""
-    st = table.status()
+    return _health_row(table.status())
+
+
+def table_probe_health(table: Any, since: Any = None) -> np.ndarray:
+    """table_health through the model's cheaper `probe_status` (the same read and row)."""
+    return _health_row(table.probe_status())
+
+
+def _health_row(st: Any) -> np.ndarray:
     if st.tripped:
         raise SafetyTripError(f"rate table tripped: {st.trip_reason()}, rate={st.rate_dps:.3f} deg/s")
     return np.array([[st.rate_dps, st.angle_deg]])
