@@ -23,10 +23,8 @@ from bench.engine.context import RunAborted
 
 #: events the queue holds (about a second of a 1 kHz stream in 50 ms blocks, many times over)
 QUEUE_EVENTS = 256
-#: stream blocks queued before the writer is woken for them (fewer come within POLL_WALL_S); in
-#: lockstep a block comes per 0.4 s grid point, so a failed write (a full disk) ends the run at most
-#: one grid point later than with a wake-up per block (tests/test_cli.py's full disk allows 5 s)
-BATCH_EVENTS = 2
+#: stream blocks queued before the writer is woken for them (fewer come within POLL_WALL_S)
+BATCH_EVENTS = 16
 #: the longest a stream block waits in the queue (wall seconds) when fewer than BATCH_EVENTS come
 POLL_WALL_S = 0.05
 log = logging.getLogger("gyrobench.writer")
