@@ -4,15 +4,12 @@ to the recorder.  In lockstep a full queue blocks the producer (backpressure: no
 the simulation waits for the disk); in real time a block that finds the queue full is dropped,
 counted and warned about (the acquisition must not wait for a slow disk).  Other events (log,
 measurements, steps) are never dropped.  A write that fails goes to `on_error` (the runner ends
-the run at its next checkpoint); later events are taken and discarded, so nothing blocks.
-The writer wakes for a batch of stream blocks (or any other event, a drain, close, or after
-POLL_WALL_S), not for every block: in lockstep a wake-up per 0.4 s grid point cost the GIL more
-than the writing did."""
+the run at its next checkpoint); later events are taken and discarded, so nothing blocks."""
 
 from __future__ import annotations
 
-import collections
 import logging
+import queue
 import threading
 import time
 from collections.abc import Callable
@@ -23,10 +20,6 @@ from bench.engine.context import RunAborted
 
 #: events the queue holds (about a second of a 1 kHz stream in 50 ms blocks, many times over)
 QUEUE_EVENTS = 256
-#: stream blocks queued before the writer is woken for them (fewer come within POLL_WALL_S)
-BATCH_EVENTS = 16
-#: the longest a stream block waits in the queue (wall seconds) when fewer than BATCH_EVENTS come
-POLL_WALL_S = 0.05
 log = logging.getLogger("gyrobench.writer")
 _STOP = object()
 
@@ -42,11 +35,10 @@ class WriterThread:
         self.on_error = on_error
         self.overflow_blocks = 0
         self.overflow_rows = 0
-        self._maxsize = maxsize or QUEUE_EVENTS
-        self._items: collections.deque[Any] = collections.deque()
-        self._cond = threading.Condition()  # guards _items; producers wait on it for space, the writer for work
+        self._q: queue.Queue = queue.Queue(maxsize=maxsize or QUEUE_EVENTS)
         self._queued = 0  # events accepted so far, and events written (or discarded) so far
         self._written = 0
+        self._count_lock = threading.Lock()
         self._progress = threading.Condition()
         self._failed = False
         self._closed = False
@@ -59,23 +51,21 @@ class WriterThread:
         which is then dropped and counted)."""
         if self._closed:
             return
-        block = isinstance(event, ev.SampleBlock)
-        with self._cond:  # numbered in the order queued (several producers)
-            if len(self._items) >= self._maxsize:
-                if block and not self._lockstep():
-                    self.overflow_blocks += 1
-                    self.overflow_rows += len(event.data)
-                    if self.overflow_blocks == 1:
-                        log.warning("raw data: the writer cannot keep up; stream %r block at t = %.3f s dropped "
-                                    "(and counted)", event.stream, event.t_sim_s)
-                    return
-                self._cond.notify_all()
-                while len(self._items) >= self._maxsize:  # backpressure
-                    self._cond.wait(POLL_WALL_S)
-            self._items.append(event)
-            self._queued += 1
-            if not block or len(self._items) >= BATCH_EVENTS:
-                self._cond.notify_all()
+        with self._count_lock:  # numbered in the order queued (several producers)
+            if not isinstance(event, ev.SampleBlock) or self._lockstep():
+                self._q.put(event)
+                self._queued += 1
+                return
+            try:
+                self._q.put_nowait(event)
+                self._queued += 1
+                return
+            except queue.Full:
+                self.overflow_blocks += 1
+                self.overflow_rows += len(event.data)
+            if self.overflow_blocks == 1:
+                log.warning("raw data: the writer cannot keep up; stream %r block at t = %.3f s dropped (and counted)",
+                            event.stream, event.t_sim_s)
 
     def overflow_text(self) -> str:
         return (f"raw data: {self.overflow_blocks} stream block(s) ({self.overflow_rows} rows) dropped in real time: "
@@ -84,36 +74,27 @@ class WriterThread:
     # --- the writer thread --------------------------------------------------------------------
     def _loop(self) -> None:
         while True:
-            with self._cond:
-                while not self._items:
-                    self._cond.wait(POLL_WALL_S)
-                batch = list(self._items)
-                self._items.clear()
-                self._cond.notify_all()  # producers waiting for space
-            stop = False
-            for event in batch:
+            event = self._q.get()
+            try:
                 if event is _STOP:
-                    stop = True
-                elif not self._failed:
+                    return
+                if not self._failed:
                     try:
                         self.recorder.on_event(event)
                     except Exception as exc:  # noqa: BLE001 - RawDataError, or any failure: the run ends
                         self._failed = True
                         self.on_error(exc)
-            with self._progress:
-                self._written += len(batch)
-                self._progress.notify_all()
-            if stop:
-                return
+            finally:
+                with self._progress:
+                    self._written += 1
+                    self._progress.notify_all()
 
     def drain(self, timeout_s: float = 60.0) -> None:
         """Wait (wall time) until every event queued before this call is written (events queued
         meanwhile need not be: a stream in real time never stops); RunAborted if the writer does
         not get there within timeout_s (a disk that hangs)."""
         deadline = time.monotonic() + timeout_s
-        with self._cond:
-            target = self._queued
-            self._cond.notify_all()  # the writer takes what is queued now
+        target = self._queued
         with self._progress:
             while self._written < target:
                 left = deadline - time.monotonic()
@@ -127,10 +108,7 @@ class WriterThread:
         if self._closed:
             return
         self._closed = True
-        with self._cond:
-            self._items.append(_STOP)
-            self._queued += 1
-            self._cond.notify_all()
+        self._q.put(_STOP)
         self._thread.join(timeout_s)
         if self._thread.is_alive():
             log.error("raw data: the writer thread did not end within %g s", timeout_s)
