@@ -33,6 +33,9 @@ writer woken per batch of blocks; alternately; medians [ranges]):
   wall 0.77 [0.70-0.89] -> 0.66 [0.51-1.03] ms, CPU in it 0.33 [0.30-0.34] -> 0.27 [0.23-0.28] ms;
   process CPU per grid point 1.99 [1.84-2.05] -> 1.76 [1.72-1.88] ms; writer CPU 0.20-0.22 ->
   0.15-0.18 s; reader 0.62-0.68 -> 0.57-0.67 s.
+  The writer's batched wake-ups were then taken out again (a full disk reached the run later in
+  simulated time, by an amount that depends on the load; docs/raw_data.md): the link-check figures
+  above are without them.
   So the link checks' own CPU fell by ~1/5, not the 3x asked: their wall time is about the CPU of
   every thread they wait for (main, the FPGA reader's parsing, now seen in the sync, the two
   servers) plus ~4 thread hand-offs under the GIL.  Sending the table's and the front end's
