@@ -193,9 +193,13 @@ class World:
             if force is None:
                 self._forces.pop(source, None)
             else:
-                if source == TURN_ON_SOURCE and source not in self._forces and self.environment is not None:
+                held = self._forces.get(source)
+                if held is not None:  # the world's own copy, refreshed in place (a block's hot path)
+                    held[:] = np.asarray(force, dtype=float).reshape(4)
+                    return
+                if source == TURN_ON_SOURCE and self.environment is not None:
                     self.environment.turn_on()  # the drive comes on: a new turn-on bias
-                self._forces[source] = np.asarray(force, dtype=float).reshape(4)
+                self._forces[source] = np.array(force, dtype=float).reshape(4)  # a copy: the caller may reuse its array
 
     @property
     def total_force(self) -> np.ndarray:
