@@ -44,7 +44,8 @@ def _is_wall_clock(name: str) -> bool:
 def digest_run(name: str, workdir: pathlib.Path) -> dict:
     """Run one case through the CLI; its JSON digest and its datasets' digests."""
     procedure, station, sets = RUNS[name]
-    cmd = [str(pathlib.Path(sys.executable).with_name("gyrobench")), "run", procedure, "--station", station, "--seed", str(SEED), "--json"]
+    cli = str(pathlib.Path(sys.executable).with_name("gyrobench"))
+    cmd = [cli, "run", procedure, "--station", station, "--seed", str(SEED), "--json"]
     cmd += [a for s in sets for a in ("--set", s)]
     cmd += ["--runs-dir", str(workdir / name), "--results", str(workdir / f"{name}.sqlite")]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
