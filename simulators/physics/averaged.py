@@ -20,6 +20,7 @@ from threadpoolctl import threadpool_limits
 from bench.analysis.slow_model import k_cubic, k_quintic, linear_matrix
 
 from .kernels import linear_block
+from .normals import NormalBuffer
 from .params import TWO_PI, ResonatorParams
 
 _blas_limiter: object | None = None
@@ -64,6 +65,7 @@ class Resonator:
         self.params = params
         self.coeffs = params.coefficients()
         self.rng = np.random.default_rng(seed)
+        self._normals = NormalBuffer(self.rng)  # every pickoff noise draw goes through it
         self._q = np.zeros(4) if state is None else np.asarray(state, dtype=float).copy()
         self._psi = 0.0  # current ripple rotation (electrical rad) applied to the output
         self._zg = self.coeffs.zg(0.0)  # the kernel's parameter vector; nu is set per block
@@ -177,7 +179,7 @@ class Resonator:
         sigma = self._sigma
         noise = _EMPTY_ROWS
         if measure and sigma != 0.0:
-            noise = self.rng.standard_normal((n, 4))  # the draws of rng.normal(0, sigma, (n, 4))
+            noise = self._normals.take(4 * n).reshape(n, 4)  # the draws of rng.normal(0, sigma, (n, 4))
         out = np.empty((n, 4))
         if gains is not None and sigma != 0.0:  # the gains applied in the kernel's noise loop
             linear_block(zg, lam, dt, self._q, u, ripple, psi_per_rad, out, noise, sigma, gains[0], gains[1])
@@ -221,7 +223,9 @@ class Resonator:
         sigma = self.params.noise_sigma
         if sigma == 0.0:
             return np.array(q_true, dtype=float, copy=True)
-        return q_true + self.rng.normal(0.0, sigma, size=np.shape(q_true))
+        shape = np.shape(q_true)
+        z = self._normals.take(int(np.prod(shape))).reshape(shape)
+        return q_true + (0.0 + sigma * z)  # rng.normal(0, sigma, shape): loc + scale z
 
     def steady_state(self, *, rate_rad_s: float = 0.0, force: np.ndarray, ref_freq_hz: float) -> np.ndarray:
         """Forced steady state of the linear model: 0 = A q + u/2 (used to start sweeps settled)."""
