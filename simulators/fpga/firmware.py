@@ -283,29 +283,30 @@ class FpgaFirmware:
             prm = self._params()
             ctrl, gains, _, _, dec = self._hot
             q_meas = block.q_meas if gains is None else block.q_meas * gains
-            if ctrl & (p.DRIVE_EN | p.PLL_EN):  # nothing to update with the drive and PLL off
-                st = self._st
+            update = bool(ctrl & (p.DRIVE_EN | p.PLL_EN))  # nothing to update with the drive and PLL off
+            stream = bool(ctrl & p.STREAM_EN)
+            st = self._st
+            if update:
                 st[k.S_PLL_FREQ_HZ] = regs["PLL_FREQ_HZ"]
-                dt = world.sample_period_s
-                t_end = last * dt
-                k.update_loops(q_meas, t_end, dt, world.ref_freq_hz, ctrl, prm, st)
+            if stream and len(q_meas) > len(self._frames):
+                self._frames = p.stream_frame_buffer(max(len(q_meas), 2 * len(self._frames)))
+            dt = world.sample_period_s
+            # the loops' update, then the block's stream frames, decimated by a boxcar (CIC-1) filter
+            # as the real firmware does: each frame carries the mean of the `dec` samples ending at
+            # its index, so decimating keeps the information (noise falls by sqrt(dec))
+            n, self._dec_n = k.after_block(
+                q_meas, update, last * dt, dt, world.ref_freq_hz, ctrl, prm, st,
+                stream, block.first_index, dec, self._dec_sum, self._dec_n, self._stream_seq, self._frames,
+                p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
+            )  # fmt: skip
+            if update:
                 regs["PLL_FREQ_HZ"] = float(st[k.S_PLL_FREQ_HZ])
-            if ctrl & p.STREAM_EN:
-                self._emit(block, q_meas, dec)
+            if n:
+                self._sent(n)
 
     # --- stream ---------------------------------------------------------------------------------
-    def _emit(self, block, q: np.ndarray, dec: int) -> None:
-        """Stream the block, decimated by a boxcar (CIC-1) filter as the real firmware does: each
-        frame carries the mean of the `dec` samples ending at its index, so decimating keeps the
-        information (noise falls by sqrt(dec)) instead of throwing samples away."""
-        if len(q) > len(self._frames):
-            self._frames = p.stream_frame_buffer(max(len(q), 2 * len(self._frames)))
-        n, self._dec_n = k.emit_frames(
-            q, block.first_index, self.world.sample_period_s, dec, self._dec_sum, self._dec_n,
-            self._st, self._stream_seq, self._frames, p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
-        )  # fmt: skip
-        if n == 0:
-            return
+    def _sent(self, n: int) -> None:
+        """Hand the n frames encoded in `_frames` to the sink."""
         data = self._frames[:n].tobytes()
         self._stream_seq = (self._stream_seq + n) % p.SEQ_MOD
         self.regs["FRAMES_SENT"] += n
