@@ -22,6 +22,14 @@ Measured 2026-11-26 on 2 shared cores (load average 2.8-3.7), cvg-allan on sim-h
 After the recorder's flush rule (a second of data flushes once a quarter wall second has passed,
 not every few wall ms): the raw-data writer's CPU 0.48-0.56 -> 0.28 s, the stream flush
 0.27-0.35 -> 0.06 ms per grid point (the writer no longer holds the GIL when the reader wants it).
+2026-11-26, the world's per-block glue cut (branch `fused`: firmware values cached per register
+write, one compiled call for the loops and the stream, pickoff gains in the resonator's kernel,
+normal draws in chunks; results bit-identical, benchmarks/sim_identical.py), 1200 s record,
+d8058b1 and the branch alternately, twice each, load average 3.6-4.3:
+  world block 0.201 / 0.157 ms -> 0.114 / 0.104 ms (1.4-1.9x; ~0.016 ms of it is numba's one-time
+  first call, 0.4 s, paid in the run's first block); world.advance per grid point 1.93 / 1.55 ->
+  1.19 / 1.00 ms; check_links unchanged (0.6-0.8 ms); the run 1.93 / 2.20 -> 2.72 / 3.01 sim h /
+  wall min.  The link checks are now the main thread's largest item.
 """
 
 from __future__ import annotations
