@@ -367,14 +367,13 @@ class TableMechanics:
                 e = math.exp(-dt_s / self.noise_tau_s)
                 self._ou_key, self._ou = key, (e, self.noise_deg * math.sqrt(1.0 - e * e))
             e, scale = self._ou
-            w = self._noise_normals.take(n)
-            w *= scale
+            w = self._noise_normals.take(n)  # standard normals: the kernel scales them
             y_prev = e * self._noise_state
         else:
-            e, w, y_prev = 0.0, _NO_ANGLES, 0.0
+            e, scale, w, y_prev = 0.0, 1.0, _NO_ANGLES, 0.0
         dev = np.empty(n)
         r1, r2 = self.ripple_deg
-        y = deviation_rad(angles, settled, a0, rate_step, mean_rate, dt_s, r1, r2, w, e, y_prev, dev)
+        y = deviation_rad(angles, settled, a0, rate_step, mean_rate, dt_s, r1, r2, w, e, y_prev, dev, scale)
         if self.noise_deg > 0:
             self._noise_state = y
         world.case_rate_dps = float(mean_rate)
