@@ -34,6 +34,17 @@ the 0.5 s fault rule asks, each a Modbus, SCPI and FPGA round trip: table status
 allantools 3.2 s.  The procedure, the stream's delivery and the recorder do not show in the main
 thread; the link checks' round trips to the simulated servers are the overhead to cut (branch
 `speed` is making those servers cheaper).
+2026-11-26, the world's per-block glue cut (branch `fused`: firmware values cached per register
+write, loops and stream in one compiled call, pickoff gains in the resonator's kernel, normal draws
+in chunks; seeded results bit-identical, benchmarks/sim_identical.py), d8058b1 against the branch,
+load average 2.8-5.0:
+  (a) per block, two live processes alternating 20 times (0.02 h each, thread CPU): median 74.3 ->
+      54.5 us (min 49.8 -> 37.1), wall median 117 -> 74 us; this script's (a), 0.5 h, alternately:
+      13.4 / 11.0 -> 13.4 / 16.2 sim h / wall min, 17.2 / 12.2 -> 18.5 / 16.2 per CPU min.
+  (b) 1 h record, alternately: 3.41 / 3.13 -> 3.62 / 5.69 sim h / wall min (same measurements to
+      the last digit).  Load too high for the 10 h record's figure.
+  With the table's jitter scaling in its kernel too, the same 20 alternations, load 3.0-3.7: median
+  59.7 -> 43.6 CPU us a block (min 55.9 -> 41.4): 1.37x.
 """
 
 from __future__ import annotations

@@ -41,6 +41,18 @@ writer woken per batch of blocks; alternately; medians [ranges]):
   servers) plus ~4 thread hand-offs under the GIL.  Sending the table's and the front end's
   requests before reading either reply (tried) was no faster in the run and 20% slower in a tight
   loop (the two servers and the main thread then contend for the GIL).
+2026-11-26, the world's per-block glue cut (branch `fused`: firmware values cached per register
+write, one compiled call for the loops and the stream, pickoff gains in the resonator's kernel,
+normal draws in chunks; results bit-identical, benchmarks/sim_identical.py), 1200 s record,
+d8058b1 and the branch alternately, twice each, load average 3.6-4.3:
+  world block 0.201 / 0.157 ms -> 0.114 / 0.104 ms (1.4-1.9x; ~0.016 ms of it is numba's one-time
+  first call, 0.4 s, paid in the run's first block); world.advance per grid point 1.93 / 1.55 ->
+  1.19 / 1.00 ms; check_links unchanged (0.6-0.8 ms); the run 1.93 / 2.20 -> 2.72 / 3.01 sim h /
+  wall min.  Again after the table's jitter scaling moved into its kernel, load 2.7-3.0: world block
+  0.119 / 0.130 -> 0.106 / 0.085 ms, world.advance 1.24 / 1.22 -> 1.10 / 0.97 ms per grid point,
+  the run 2.51 / 2.64 -> 2.80 / 2.62 sim h / wall min.  Over the four pairs the block is 1.1-1.9x
+  cheaper (the load moves the figures by as much); the link checks are now the main thread's
+  largest item.
 """
 
 from __future__ import annotations

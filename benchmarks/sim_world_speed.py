@@ -66,6 +66,16 @@ runs; per wall s / per CPU s):
   the round trips themselves are thread hand-offs under the GIL (benchmarks/lockstep_breakdown.py).
   The writer's batched wake-ups were taken out again at the merge (docs/raw_data.md), so part of
   this x1.1 (the writer's ~0.1 CPU s a run) is not in main.
+2026-11-26, the world's per-block glue cut (branch `fused`; seeded results bit-identical, checked
+with benchmarks/sim_identical.py), d8058b1 against the branch, alternately, twice each, medians of 3
+(per wall s / per CPU s), load average 2.7-4.0:
+  (a)  4,754 / 5,425   4,327 / 5,150  ->  5,125 / 5,135   5,182 / 5,229   (unchanged: no loops)
+  (b)    987 / 1,063     783 / 1,170  ->  1,061 / 1,104   1,075 / 1,076   (~1.05x: this world has no
+       noise model and no pickoff noise, where most of the saving is; the table at rate, the
+       firmware and the frame encoder's glue remain: ~45 us a block)
+  (c)    283 /   261     237 /   226  ->    308 /   312     302 /   291   (1.1-1.3x)
+  The static whole-angle world of benchmarks/cvg_allan_speed.py (noise on) gains more: its
+  blocks 46-68 -> 31-46 CPU us.
 """
 
 from __future__ import annotations

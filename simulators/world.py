@@ -193,9 +193,13 @@ class World:
             if force is None:
                 self._forces.pop(source, None)
             else:
-                if source == TURN_ON_SOURCE and source not in self._forces and self.environment is not None:
+                held = self._forces.get(source)
+                if held is not None:  # the world's own copy, refreshed in place (a block's hot path)
+                    held[:] = np.asarray(force, dtype=float).reshape(4)
+                    return
+                if source == TURN_ON_SOURCE and self.environment is not None:
                     self.environment.turn_on()  # the drive comes on: a new turn-on bias
-                self._forces[source] = np.asarray(force, dtype=float).reshape(4)
+                self._forces[source] = np.array(force, dtype=float).reshape(4)  # a copy: the caller may reuse its array
 
     @property
     def total_force(self) -> np.ndarray:
@@ -252,11 +256,13 @@ class World:
             force = self.total_force
         rate_rad_s = math.radians(rate)
         env = self.environment
+        gains = None
         if env is not None:
             rate_rad_s += env.block_rate_rad_s(n)  # Earth, turn-on bias and drift noise: an input rate
             if env.has_slow_drifts:
                 d, th = env.damping(t0, self.params.delta_inv_tau_per_s, self.params.theta_tau_deg)
                 self.resonator.set_damping_anisotropy(d, th)
+                gains = env.gains(t0)  # the X pickoff electrodes (cx, sx), the Y ones (cy, sy)
         q_true, q_meas = self.resonator.step_and_measure(
             n,
             dt,
@@ -264,11 +270,8 @@ class World:
             force=force,
             ref_freq_hz=self.ref_freq_hz,
             ripple_angle_rad=self.ripple_angle_rad,
+            gains=gains,
         )
-        if env is not None and env.has_slow_drifts:
-            gx, gy = env.gains(t0)
-            q_meas[:, :2] *= gx  # the X pickoff electrodes (cx, sx)
-            q_meas[:, 2:] *= gy
         angle0 = self.case_angle_deg
         block = WorldBlock(i0 + 1, q_true, q_meas, rate, angle0, dt, self.ripple_angle_rad)
         self.sample_index = i0 + n

@@ -209,6 +209,7 @@ class FpgaFirmware:
         self._st = np.zeros(k.N_STATE)  # loop integrators, amplitude, phase error, force, outputs
         self._st[k.S_PLL_INT_HZ] = float(self.regs["PLL_FREQ_HZ"])
         self._prm: np.ndarray | None = None  # loop registers packed for the kernel (None: repack)
+        self._hot: tuple = ()  # _hot_values(), made with _prm
         self._owns_ref = False  # the world's reference follows this NCO only while active
         self._u_on = True  # the force is applied (False once the drive is cut, until it is on again)
 
@@ -219,22 +220,37 @@ class FpgaFirmware:
             if not int(self.regs["CTRL"]) & p.DRIFT_COMP_EN and int(self.regs["TRIM_EN"]) & p.TRIM_DRIFT:
                 prm[k.P_DRIFT_D_PER_S] = float(self.regs["TRIM_DRIFT_D_PER_S"])
                 prm[k.P_DRIFT_THETA_TAU_DEG] = float(self.regs["TRIM_DRIFT_THETA_TAU_DEG"])
+            self._hot = self._hot_values()
         return prm
+
+    def _hot_values(self) -> tuple:
+        """What the blocks read that only a register write changes, worked out once per write
+        (every write path clears `_prm`): (loop CTRL, gain trims or None, block limit in samples
+        or None, FM on, stream decimation)."""
+        regs = self.regs
+        fm_on = bool(regs["FM_AMPLITUDE_HZ"] and regs["FM_RATE_HZ"])
+        limit = None
+        if int(regs["CTRL"]) & (p.DRIVE_EN | p.PLL_EN) or fm_on:
+            limit = max(1, int(round(regs["LOOP_PERIOD_S"] / self.world.sample_period_s)))
+        return self._ctrl(), self._gains(), limit, fm_on, int(regs["STREAM_DECIMATION"])
+
+    def _hot_now(self) -> tuple:
+        """The cached per-write values (`_hot_values`), brought up to date after a write."""
+        if self._prm is None:
+            self._params()
+        return self._hot
 
     def max_block_samples(self, world) -> int | None:
         """Loops update once per block: while any loop runs, blocks last one loop period."""
         with self.lock:
-            regs = self.regs
-            if int(regs["CTRL"]) & (p.DRIVE_EN | p.PLL_EN) or (regs["FM_AMPLITUDE_HZ"] and regs["FM_RATE_HZ"]):
-                return max(1, int(round(regs["LOOP_PERIOD_S"] / world.sample_period_s)))
-        return None
+            return self._hot_now()[2]
 
     def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
         with self.lock:
             regs = self.regs
-            ctrl = self._ctrl()
+            prm = self._params()
+            ctrl, _, _, fm_on, _ = self._hot
             fm = 0.0
-            fm_on = bool(regs["FM_AMPLITUDE_HZ"] and regs["FM_RATE_HZ"])
             if fm_on:
                 t_mid = t_s + 0.5 * n * dt_s
                 fm = regs["FM_AMPLITUDE_HZ"] * math.sin(2 * math.pi * regs["FM_RATE_HZ"] * t_mid)
@@ -242,15 +258,16 @@ class FpgaFirmware:
             # idle, it leaves the reference to whoever drives (the front end in a MEMS sweep)
             # (one more block after going idle, so the reference ends at the NCO's final value)
             active = bool(ctrl & (p.DRIVE_EN | p.PLL_EN) or fm_on)
+            pll_hz = regs["PLL_FREQ_HZ"]
             if active or self._owns_ref:
-                world.ref_freq_hz = regs["PLL_FREQ_HZ"] + fm  # held over the block (its forces need it)
+                world.ref_freq_hz = pll_hz + fm  # held over the block (its forces need it)
             self._owns_ref = active
             st = self._st
-            st[k.S_OUT + 1] = regs["PLL_FREQ_HZ"] + fm - regs["REF_FREQ_HZ"]
+            st[k.S_OUT + 1] = pll_hz + fm - regs["REF_FREQ_HZ"]
             if ctrl & p.DRIVE_EN:
                 self._u_on = True
-                k.wave_force(t_s, n, dt_s, world.ref_freq_hz, ctrl, self._params(), st)
-                world.set_force("fpga", st[k.S_U : k.S_U + 4].copy())
+                k.wave_force(t_s, n, dt_s, world.ref_freq_hz, ctrl, prm, st)
+                world.set_force("fpga", st[k.S_U : k.S_U + 4])  # the world keeps its own copy
             elif self._u_on:
                 self._u_on = False
                 st[k.S_U : k.S_U + 4] = 0.0
@@ -261,34 +278,35 @@ class FpgaFirmware:
     def after_block(self, world, block) -> None:
         with self.lock:
             regs = self.regs
-            regs["SAMPLE_INDEX"] = block.first_index + block.n - 1
-            ctrl = self._ctrl()
-            gains = self._gains()
+            last = block.first_index + block.n - 1
+            regs["SAMPLE_INDEX"] = last
+            prm = self._params()
+            ctrl, gains, _, _, dec = self._hot
             q_meas = block.q_meas if gains is None else block.q_meas * gains
-            if ctrl & (p.DRIVE_EN | p.PLL_EN):  # nothing to update with the drive and PLL off
-                st = self._st
+            update = bool(ctrl & (p.DRIVE_EN | p.PLL_EN))  # nothing to update with the drive and PLL off
+            stream = bool(ctrl & p.STREAM_EN)
+            st = self._st
+            if update:
                 st[k.S_PLL_FREQ_HZ] = regs["PLL_FREQ_HZ"]
-                dt = world.sample_period_s
-                t_end = (block.first_index + block.n - 1) * dt
-                k.update_loops(q_meas, t_end, dt, world.ref_freq_hz, ctrl, self._params(), st)
+            if stream and len(q_meas) > len(self._frames):
+                self._frames = p.stream_frame_buffer(max(len(q_meas), 2 * len(self._frames)))
+            dt = world.sample_period_s
+            # the loops' update, then the block's stream frames, decimated by a boxcar (CIC-1) filter
+            # as the real firmware does: each frame carries the mean of the `dec` samples ending at
+            # its index, so decimating keeps the information (noise falls by sqrt(dec))
+            n, self._dec_n = k.after_block(
+                q_meas, update, last * dt, dt, world.ref_freq_hz, ctrl, prm, st,
+                stream, block.first_index, dec, self._dec_sum, self._dec_n, self._stream_seq, self._frames,
+                p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
+            )  # fmt: skip
+            if update:
                 regs["PLL_FREQ_HZ"] = float(st[k.S_PLL_FREQ_HZ])
-            if ctrl & p.STREAM_EN:
-                self._emit(block, q_meas)
+            if n:
+                self._sent(n)
 
     # --- stream ---------------------------------------------------------------------------------
-    def _emit(self, block, q: np.ndarray) -> None:
-        """Stream the block, decimated by a boxcar (CIC-1) filter as the real firmware does: each
-        frame carries the mean of the `dec` samples ending at its index, so decimating keeps the
-        information (noise falls by sqrt(dec)) instead of throwing samples away."""
-        dec = int(self.regs["STREAM_DECIMATION"])
-        if len(q) > len(self._frames):
-            self._frames = p.stream_frame_buffer(max(len(q), 2 * len(self._frames)))
-        n, self._dec_n = k.emit_frames(
-            q, block.first_index, self.world.sample_period_s, dec, self._dec_sum, self._dec_n,
-            self._st, self._stream_seq, self._frames, p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS,
-        )  # fmt: skip
-        if n == 0:
-            return
+    def _sent(self, n: int) -> None:
+        """Hand the n frames encoded in `_frames` to the sink."""
         data = self._frames[:n].tobytes()
         self._stream_seq = (self._stream_seq + n) % p.SEQ_MOD
         self.regs["FRAMES_SENT"] += n

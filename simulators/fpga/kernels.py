@@ -371,3 +371,32 @@ def emit_frames(
     carry[2] = c2 + k2
     carry[3] = c3 + k3
     return 0, n + carry_n
+
+
+@njit(cache=True)
+def after_block(
+    q_meas: np.ndarray,
+    update: bool,
+    t_end_s: float,
+    dt_s: float,
+    ref_hz: float,
+    ctrl: int,
+    prm: np.ndarray,
+    st: np.ndarray,
+    stream: bool,
+    i0: int,
+    dec: int,
+    carry: np.ndarray,
+    carry_n: int,
+    seq0: int,
+    frames: np.ndarray,
+    crc_table: np.ndarray,
+    crc_zeros: int,
+) -> tuple:
+    """A block's firmware work in one compiled call: `update_loops` (with `update`), then
+    `emit_frames` (with `stream`; else no frames, carry_n kept).  Returns (frames, new carry_n)."""
+    if update:
+        update_loops(q_meas, t_end_s, dt_s, ref_hz, ctrl, prm, st)
+    if stream:
+        return emit_frames(q_meas, i0, dt_s, dec, carry, carry_n, st, seq0, frames, crc_table, crc_zeros)
+    return 0, carry_n

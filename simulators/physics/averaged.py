@@ -20,6 +20,7 @@ from threadpoolctl import threadpool_limits
 from bench.analysis.slow_model import k_cubic, k_quintic, linear_matrix
 
 from .kernels import linear_block
+from .normals import NormalBuffer
 from .params import TWO_PI, ResonatorParams
 
 _blas_limiter: object | None = None
@@ -50,6 +51,12 @@ def rotate_wave(q: np.ndarray, psi_rad: np.ndarray | float) -> np.ndarray:
     return out
 
 
+def _scale(q: np.ndarray, gains: tuple[float, float]) -> None:
+    """Pickoff gains on measured states (n, 4) in place: X on cx, sx; Y on cy, sy."""
+    q[:, :2] *= gains[0]
+    q[:, 2:] *= gains[1]
+
+
 class Resonator:
     """The resonator's slow state and its integration.  Not thread-safe: the World locks it."""
 
@@ -58,9 +65,16 @@ class Resonator:
         self.params = params
         self.coeffs = params.coefficients()
         self.rng = np.random.default_rng(seed)
+        self._normals = NormalBuffer(self.rng)  # every pickoff noise draw goes through it
         self._q = np.zeros(4) if state is None else np.asarray(state, dtype=float).copy()
         self._psi = 0.0  # current ripple rotation (electrical rad) applied to the output
         self._zg = self.coeffs.zg(0.0)  # the kernel's parameter vector; nu is set per block
+        # constants of the per-block path, read once (params and coefficients are frozen)
+        c = self.coeffs
+        self._linear = c.xi == 0.0 and c.kappa == 0.0
+        self._four_k, self._nu_offset, self._w0 = 4.0 * c.bryan_factor, c.nu_offset, c.w0_rad_s
+        self._psi_per_rad = -2.0 * c.bryan_factor
+        self._sigma = params.noise_sigma
 
     # --- state -------------------------------------------------------------------------------
     @property
@@ -114,15 +128,17 @@ class Resonator:
         ref_freq_hz: float | None = None,
         ripple_angle_rad: np.ndarray | None = None,
         measure: bool = True,
+        gains: tuple[float, float] | None = None,
     ) -> tuple[np.ndarray, np.ndarray | None]:
         """step_block and, with `measure`, `measure` of its states: (true, measured) states (the
-        World's block in one compiled call when the model is linear)."""
+        World's block in one compiled call when the model is linear); `gains` (X on cx, sx; Y on
+        cy, sy) scale the measured states."""
         if n_samples <= 0:
             return np.empty((0, 4)), (np.empty((0, 4)) if measure else None)
         u = _ZERO4 if force is None else np.asarray(force, dtype=float)
-        lam = 0.0 if ref_freq_hz is None else self.detuning_rad_s(ref_freq_hz)
-        if self.is_linear:
-            return self._linear_block(n_samples, dt_s, rate_rad_s, u, lam, ripple_angle_rad, measure)
+        lam = 0.0 if ref_freq_hz is None else TWO_PI * ref_freq_hz - self._w0  # detuning_rad_s
+        if self._linear:
+            return self._linear_block(n_samples, dt_s, rate_rad_s, u, lam, ripple_angle_rad, measure, gains)
         traj = self._nonlinear_block(n_samples, dt_s, self.coeffs.zg(rate_rad_s), u, lam)
         self._q = traj[-1].copy()
         if ripple_angle_rad is None:
@@ -131,7 +147,12 @@ class Resonator:
             psi = -2.0 * self.coeffs.bryan_factor * np.asarray(ripple_angle_rad, dtype=float)
             self._psi = float(psi[-1])
             traj = rotate_wave(traj, psi)
-        return traj, (self.measure(traj) if measure else None)
+        if not measure:
+            return traj, None
+        q_meas = self.measure(traj)
+        if gains is not None:
+            _scale(q_meas, gains)
+        return traj, q_meas
 
     def _linear_block(
         self,
@@ -142,27 +163,34 @@ class Resonator:
         lam: float,
         ripple_angle_rad: np.ndarray | None,
         measure: bool,
+        gains: tuple[float, float] | None = None,
     ) -> tuple[np.ndarray, np.ndarray | None]:
         """Exact steps of dq/dt = A q + u/2 (the top row of exp([[A, I/2], [0, 0]] dt) applied to
         (q, u) each sample), the ripple rotation and the pickoff noise: kernels.linear_block."""
         zg = self._zg
-        zg[1] = 4.0 * self.coeffs.bryan_factor * rate_rad_s + self.coeffs.nu_offset
-        psi_per_rad = -2.0 * self.coeffs.bryan_factor
+        zg[1] = self._four_k * rate_rad_s + self._nu_offset  # 4 K rate + nu_offset, as coeffs.zg
+        psi_per_rad = self._psi_per_rad
         if ripple_angle_rad is None:
             self._psi = 0.0
             ripple = _EMPTY
         else:
             ripple = np.ascontiguousarray(ripple_angle_rad, dtype=float)
             self._psi = float(psi_per_rad * ripple[-1])
-        sigma = self.params.noise_sigma
+        sigma = self._sigma
         noise = _EMPTY_ROWS
         if measure and sigma != 0.0:
-            noise = self.rng.standard_normal((n, 4))  # the draws of rng.normal(0, sigma, (n, 4))
+            noise = self._normals.take(4 * n).reshape(n, 4)  # the draws of rng.normal(0, sigma, (n, 4))
         out = np.empty((n, 4))
+        if gains is not None and sigma != 0.0:  # the gains applied in the kernel's noise loop
+            linear_block(zg, lam, dt, self._q, u, ripple, psi_per_rad, out, noise, sigma, gains[0], gains[1])
+            return out, noise
         linear_block(zg, lam, dt, self._q, u, ripple, psi_per_rad, out, noise, sigma)
         if not measure:
             return out, None
-        return out, (noise if sigma != 0.0 else out.copy())
+        q_meas = noise if sigma != 0.0 else out.copy()
+        if gains is not None:
+            _scale(q_meas, gains)
+        return out, q_meas
 
     def _nonlinear_block(self, n: int, dt: float, zg: np.ndarray, u: np.ndarray, lam: float) -> np.ndarray:
         a = linear_matrix(zg, lam)
@@ -195,7 +223,9 @@ class Resonator:
         sigma = self.params.noise_sigma
         if sigma == 0.0:
             return np.array(q_true, dtype=float, copy=True)
-        return q_true + self.rng.normal(0.0, sigma, size=np.shape(q_true))
+        shape = np.shape(q_true)
+        z = self._normals.take(int(np.prod(shape))).reshape(shape)
+        return q_true + (0.0 + sigma * z)  # rng.normal(0, sigma, shape): loc + scale z
 
     def steady_state(self, *, rate_rad_s: float = 0.0, force: np.ndarray, ref_freq_hz: float) -> np.ndarray:
         """Forced steady state of the linear model: 0 = A q + u/2 (used to start sweeps settled)."""

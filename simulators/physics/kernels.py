@@ -97,12 +97,15 @@ def linear_block(
     out: np.ndarray,
     noise: np.ndarray,
     sigma: float,
+    gain_x: float = 1.0,
+    gain_y: float = 1.0,
 ) -> None:
     """Exact steps of dq/dt = A(zg, lam) q + u/2 from q over len(out) samples into out (n, 4);
     q ends as the last (unrotated) state.  With a ripple (n,) (rad; empty for none), out is
     rotated by psi = psi_per_rad * ripple electrical.  With noise (n, 4) standard normals (empty
-    for none), noise becomes the measured states out + sigma * noise.  Inputs are held over the
-    block."""
+    for none), noise becomes the measured states out + sigma * noise, times the pickoff gains
+    (gain_x on cx, sx; gain_y on cy, sy: the same products as scaling afterwards).  Inputs are
+    held over the block."""
     a = np.empty((4, 4))
     linear_matrix_into(zg, lam, a)
     phi = np.empty((4, 4))
@@ -133,9 +136,16 @@ def linear_block(
             out[k, 2] = q1 * s + q2 * c
             out[k, 3] = p1 * s + p2 * c
     if noise.shape[0] > 0:  # as rng.normal(0, sigma) added: q + (0 + sigma z)
-        for k in range(out.shape[0]):
-            for i in range(4):
-                noise[k, i] = out[k, i] + (0.0 + sigma * noise[k, i])
+        if gain_x == 1.0 and gain_y == 1.0:
+            for k in range(out.shape[0]):
+                for i in range(4):
+                    noise[k, i] = out[k, i] + (0.0 + sigma * noise[k, i])
+        else:
+            for k in range(out.shape[0]):
+                noise[k, 0] = (out[k, 0] + (0.0 + sigma * noise[k, 0])) * gain_x
+                noise[k, 1] = (out[k, 1] + (0.0 + sigma * noise[k, 1])) * gain_x
+                noise[k, 2] = (out[k, 2] + (0.0 + sigma * noise[k, 2])) * gain_y
+                noise[k, 3] = (out[k, 3] + (0.0 + sigma * noise[k, 3])) * gain_y
 
 
 

@@ -26,11 +26,13 @@ def deviation_rad(
     e: float,
     y_prev: float,
     out: np.ndarray,
+    w_scale: float = 1.0,
 ) -> float:
     """out_k = radians(angle_k - a0 - mean_rate t_k + ripple(angle_k) + jitter_k) over the block,
     t_k = (k + 1) dt.  angle_k = a0 + rate_step_deg (k + 1) when `settled` (then `angles` is not
     read), else angles[k].  jitter_k = e jitter_(k-1) + w_k from jitter_(-1) = y_prev / e (an AR(1)
-    / OU process; no jitter if w is empty).  Returns the last jitter."""
+    / OU process; no jitter if w is empty), the innovations w_k taken as w[k] * w_scale (standard
+    normals and their scale: the product numpy's w * w_scale gives).  Returns the last jitter."""
     y = y_prev
     noise = w.shape[0] > 0
     for k in range(out.shape[0]):
@@ -40,7 +42,8 @@ def deviation_rad(
         ripple = ripple1_deg * math.sin(th) + ripple2_deg * math.sin(2.0 * th)
         jitter = 0.0
         if noise:
-            y = (y + w[k]) if k == 0 else (e * y + w[k])
+            wk = w[k] * w_scale
+            y = (y + wk) if k == 0 else (e * y + wk)
             jitter = y
         out[k] = (ang - a0 - mean_rate_dps * (dt_s * s) + ripple + jitter) * _DEG
     return y

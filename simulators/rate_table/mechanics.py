@@ -20,6 +20,7 @@ import numpy as np
 
 from drivers.rate_table import modbus_protocol as mp
 
+from ..physics.normals import NormalBuffer
 from .kernels import deviation_rad
 
 _NO_ANGLES = np.empty(0)
@@ -78,6 +79,7 @@ class TableMechanics:
         self.accel_block_samples = int(accel_block_samples)
         self.wall_clock = wall_clock
         self._rng_noise = np.random.default_rng([seed, 1])
+        self._noise_normals = NormalBuffer(self._rng_noise)  # the jitter's draws, in its order
         self._rng_meas = np.random.default_rng([seed, 2])
         # motion state
         self.ref_dps = 0.0  # profile velocity
@@ -365,13 +367,13 @@ class TableMechanics:
                 e = math.exp(-dt_s / self.noise_tau_s)
                 self._ou_key, self._ou = key, (e, self.noise_deg * math.sqrt(1.0 - e * e))
             e, scale = self._ou
-            w = self._rng_noise.standard_normal(n) * scale
+            w = self._noise_normals.take(n)  # standard normals: the kernel scales them
             y_prev = e * self._noise_state
         else:
-            e, w, y_prev = 0.0, _NO_ANGLES, 0.0
+            e, scale, w, y_prev = 0.0, 1.0, _NO_ANGLES, 0.0
         dev = np.empty(n)
         r1, r2 = self.ripple_deg
-        y = deviation_rad(angles, settled, a0, rate_step, mean_rate, dt_s, r1, r2, w, e, y_prev, dev)
+        y = deviation_rad(angles, settled, a0, rate_step, mean_rate, dt_s, r1, r2, w, e, y_prev, dev, scale)
         if self.noise_deg > 0:
             self._noise_state = y
         world.case_rate_dps = float(mean_rate)
