@@ -26,9 +26,9 @@ Measured 2026-11-23 on 2 shared cores with 6-8 other jobs (load average 5-12):
       bit-identical: the same read-offs below to the last digit): 2 h record, d8058b1 and the new
       tree alternately, load 0.8-1.2: 3.50 -> 3.97 and 3.75 -> 4.29 sim h / wall min (1.13-1.14x);
       10 h record at load 0.5: 4.05 sim h / wall min (2 min 33 s; 154 CPU s, one core busy all the
-      way). The 5 h target is still not met on this machine (which ran d8058b1 ~10 % slower than
-      the earlier stop's 4.36): per 0.4 s grid point the world's 8 blocks (~1.0 ms) and the link
-      checks (~0.6 ms) leave the rest of the 1.33 ms budget negative.
+      way; the earlier stop's 4.36 for d8058b1 was measured on another day's machine state). The
+      5 h target is still not met: per 0.4 s grid point the world's 8 blocks (~1.0 ms) and the
+      link checks (~0.6 ms) already exceed the 1.33 ms budget.
       Recovered (truth N 0.01 deg/sqrt(h), B 0.3 deg/h, K 3 deg/h/sqrt(h)): N 0.00986
       [0.00952, 0.01018], B 0.322 [0.294, 0.349], K 2.66 [2.28, 3.05].
   (c) oadev of 3.6 million rates: 0.24-0.79 s; read-offs 0.01-0.04 s
