@@ -82,6 +82,19 @@ def check_table(where: str, table: Any, keys: dict[str, Key]) -> dict[str, Any]:
 
 
 # --- specs ---------------------------------------------------------------------------------
+def close_devices(devices: dict[str, Any], roles: list[str] | None = None) -> None:
+    """Close the drivers of `roles` (default: all) in the reverse of their order, each whatever the
+    others do (closing must go on), then forget all of them."""
+    for role in reversed(list(devices) if roles is None else roles):
+        dev = devices.get(role)
+        if dev is not None:
+            try:
+                dev.close()
+            except Exception:  # noqa: BLE001 - closing must go on
+                pass
+    devices.clear()
+
+
 def _device_safe_state(device: Any) -> bool:
     return bool(device.safe_state())
 

@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from bench.devices import DRIVERS, StationError
+from bench.devices import DRIVERS, StationError, close_devices
 from bench.engine.context import GuardedClock
 from bench.engine.safety import SafeStateReport, by_part
 from bench.station import Station
@@ -266,12 +266,7 @@ class BatchStation:
     def close(self) -> None:
         for st in self.slots.values():
             st.close()
-        for role in reversed(list(self.shared)):
-            try:
-                self.shared[role].close()
-            except Exception:  # noqa: BLE001 - closing must go on
-                pass
-        self.shared.clear()
+        close_devices(self.shared)
 
     def __enter__(self) -> BatchStation:
         return self.open()
@@ -374,14 +369,7 @@ class SlotStation(Station):
         return self
 
     def close(self) -> None:
-        for role in reversed(self.own_roles):
-            dev = self.devices.get(role)
-            if dev is not None:
-                try:
-                    dev.close()
-                except Exception:  # noqa: BLE001
-                    pass
-        self.devices.clear()
+        close_devices(self.devices, list(self.own_roles))  # the shared ones are the batch's to close
 
     def _own_cfg(self, role: str, cfg: dict[str, Any]) -> dict[str, Any]:
         return self.batch._device_cfg(self.slot_number if role in self.own_roles else None, role, cfg)

@@ -46,6 +46,7 @@ from bench.devices import (  # noqa: F401 - re-exported: the station's public na
     StationError,
     StreamSpec,
     check_table,
+    close_devices,
     register_driver,
 )
 from bench.engine.context import GuardedClock
@@ -193,12 +194,7 @@ class Station:
         return cfg
 
     def close(self) -> None:
-        for role in reversed(list(self.devices)):
-            try:
-                self.devices[role].close()
-            except Exception:  # noqa: BLE001 - closing must go on
-                pass
-        self.devices.clear()
+        close_devices(self.devices)
 
     def __enter__(self) -> Station:
         return self.open()
