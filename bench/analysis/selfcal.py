@@ -241,12 +241,6 @@ class AngleErrorModel:
     bounded_var_deg2: float
     tau_c_s: float
     worst_rel_misfit: float
-    dof: float  # of the longest lag's variance (about 3 record / lag): the interval's Student t
-
-    def mean_halfwidth_dph(self, t_s: float, level: float = 0.95) -> float:
-        """Half-width of the mean bias since start's interval after t_s: Student t (dof) x its sd,
-        for the sd is itself estimated from a few record lengths' worth of increments."""
-        return float(stats.t.ppf(0.5 + level / 2, self.dof)) * self.mean_sd_dph(t_s)
 
     def increment_var_deg2(self, lag_s: np.ndarray | float) -> np.ndarray:
         lag = np.asarray(lag_s, dtype=float)
@@ -293,7 +287,7 @@ def fit_angle_error(angle_deg: np.ndarray, sample_s: float, min_lag_s: float = 1
         cost = float(np.sum((a @ coef - w) ** 2))
         if cost < best_cost:
             best_cost = cost
-            best = AngleErrorModel(float(coef[0]), float(coef[1]), float(tau_c), 0.0, 3.0 / max_lag_fraction)
+            best = AngleErrorModel(float(coef[0]), float(coef[1]), float(tau_c), 0.0)
     assert best is not None
     misfit = float(np.max(np.abs(best.increment_var_deg2(lags) / d - 1.0)))
-    return AngleErrorModel(best.arw2_deg2_s, best.bounded_var_deg2, best.tau_c_s, misfit, best.dof)
+    return AngleErrorModel(best.arw2_deg2_s, best.bounded_var_deg2, best.tau_c_s, misfit)

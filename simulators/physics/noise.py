@@ -18,6 +18,7 @@ import numpy as np
 from bench.analysis.cvg_rate import EARTH_RATE_DPH  # noqa: F401 - Earth's sidereal rate, deg/h
 
 from .kernels import drift_noise_fill
+from .normals import NormalBuffer
 
 DEG = math.pi / 180.0
 #: each process's stream of random numbers: SeedSequence(world seed, spawn_key=(id,)) (the turn-on
@@ -185,10 +186,9 @@ class Environment:
         self._wander_sd = nz.angle_wander_deg * DEG
         self._wander_tau_s = nz.angle_wander_tau_s
         self._wander_phi = self._wander_phi_before = 0.0
-        self._wander_z = np.empty(0)
-        self._wander_pos = 0
         if self._wander_sd:
             self._rng["wander"] = process_rng(seed, "wander")
+            self._wander_normals = NormalBuffer(self._rng["wander"], chunk=4096)
             self._wander_phi = self._wander_sd * self._wander_normal()
         # the per-sample noise is made a chunk ahead (one compiled call) and its running sum read per block
         self._chunk = np.empty(max(1, int(round(CHUNK_S / dt))))
@@ -228,12 +228,7 @@ class Environment:
 
     def _wander_normal(self) -> float:
         """The wander's next standard normal (drawn 4096 at a time from its own generator)."""
-        if self._wander_pos == len(self._wander_z):
-            self._wander_z = self._rng["wander"].standard_normal(4096)
-            self._wander_pos = 0
-        z = float(self._wander_z[self._wander_pos])
-        self._wander_pos += 1
-        return z
+        return float(self._wander_normals.take(1)[0])
 
     def _wander_step(self, h_s: float) -> float:
         """Advance the angle wander by h_s exactly (Gauss-Markov transition); returns the new angle
