@@ -120,7 +120,8 @@ def main() -> None:
     table_cls = type(station.devices["table"])
     _timed(table_cls, "probe_status" if hasattr(table_cls, "probe_status") else "status", "  table status")
     if "frontend" in station.devices:
-        _timed(type(station.devices["frontend"]), "_query", "  frontend query")
+        fe_cls = type(station.devices["frontend"])
+        _timed(fe_cls, "probe" if hasattr(fe_cls, "probe") else "_query", "  frontend probe")
     cpu_s: dict[str, float] = {}
     stop = threading.Event()
 

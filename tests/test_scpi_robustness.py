@@ -279,3 +279,43 @@ def test_a_stray_line_before_a_capture_block_is_caught_and_the_block_read_again(
         again = fe.fetch_capture(1, expected_samples=2000)
     np.testing.assert_array_equal(again, first)
     assert fe.ch1.amplitude_v == 0.5
+
+
+def test_the_link_check_probe_reads_its_own_reply_on_the_socket_without_pyvisa(bench, monkeypatch):
+    """The station's per-grid-point probe (a tagged *IDN? on pyvisa-py's socket) on a healthy link
+    takes no pyvisa query; the link stays in step for the queries after it."""
+    server, fe = bench
+
+    def no_query(command: str) -> str:
+        raise AssertionError(f"the probe took pyvisa's query path for {command!r}")
+
+    monkeypatch.setattr(fe, "_query", no_query)
+    for _ in range(50):
+        fe.probe()
+    monkeypatch.undo()
+    assert _check_own_values(fe) == 0
+
+
+@pytest.mark.parametrize("stray", [b"0.5", b"GYROBENCH,FE-2CH,SIM0001,1.0;123", b"\xff\xfe garbage"])
+def test_a_stray_line_before_the_probe_sends_it_to_the_full_query_path(bench, stray):
+    """A line that is not the probe's own reply (wrong tag, not an IDN) is never taken for a sign of
+    life by itself: the probe clears the input and asks again through the confirmed path."""
+    server, fe = bench
+    server.send_unsolicited(stray)
+    time.sleep(0.02)
+    fe.probe()  # the full path's confirmation: no error, the link proven
+    assert not fe._suspect
+    assert _check_own_values(fe) == 0
+
+
+@pytest.mark.parametrize("how", ["hang", "gone"])
+def test_a_probe_of_a_silent_or_gone_device_is_a_lost_link_in_bounded_time(bench, how):
+    server, fe = bench
+    if how == "hang":
+        server.inject("hang")
+    else:
+        server.stop()
+    t0 = time.monotonic()
+    with pytest.raises(LinkLostError):
+        fe.probe()
+    assert time.monotonic() - t0 < 2.0 * fe.timeout_s + 0.5  # the probe's wait, then the full query's

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import logging
 import math
+import select
+import socket
 import threading
 import time
 from dataclasses import dataclass
@@ -313,6 +315,35 @@ class ScpiFrontEnd:
             raise ProtocolError(f"*IDN? answered {reply!r}: expected four comma-separated fields")
         return reply
 
+    def probe(self) -> None:
+        """The station's link check at every lockstep grid point: the tagged `*IDN?` of `idn`, sent
+        and read on pyvisa-py's own TCP socket when that is the transport and nothing is pending
+        in its input (pyvisa's write and sliced reads cost twice the round trip itself).  The reply
+        is checked as `idn` checks it (its tag, four fields); anything else (another transport, a
+        suspect link, no full line within timeout_s, a foreign or extra reply) goes to `idn`, with
+        its input clearing, confirmation and errors."""
+        with self._lock:
+            res = self._resource()
+            session = getattr(getattr(res, "visalib", None), "sessions", {}).get(getattr(res, "session", None))
+            sock = getattr(session, "interface", None)
+            if self._suspect or not isinstance(sock, socket.socket) or getattr(session, "_pending_buffer", b"?"):
+                self.idn  # noqa: B018 - the full query path
+                return
+            tag = self._next_tag()
+            message = f"{cmd.ESE} {tag}{cmd.SEPARATOR}{cmd.IDN}{cmd.SEPARATOR}{cmd.ESE}?{cmd.TERMINATION}"
+            line = None
+            try:
+                sock.sendall(message.encode("ascii"))
+                line = _recv_line(sock, time.monotonic() + self.timeout_s)
+            except OSError:
+                pass
+            if line is not None:
+                body, sep, tail = line.rpartition(cmd.SEPARATOR.encode())
+                if sep and tail.strip().lstrip(b"+") == str(tag).encode() and body.count(b",") == 3:
+                    return
+            self._suspect = True  # the full path clears the input and confirms the link first
+            self.idn  # noqa: B018
+
     def reset(self) -> None:
         """*RST: outputs off, amplitudes zero, every setting to its default; then *CLS."""
         self._set(cmd.RST)
@@ -506,3 +537,24 @@ class ScpiFrontEnd:
         if failures:
             log.warning("front end %s: safe state trouble: %s", self.resource_name, "; ".join(failures))
         return confirmed and not failures
+
+
+def _recv_line(sock: socket.socket, deadline: float) -> bytes | None:
+    """One reply line read straight from the socket, without its terminator, before `deadline`;
+    None when it did not come whole in time or more than the one line came (the caller then
+    takes the full query path, whose input clearing discards the rest)."""
+    buf = b""
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0 or len(buf) > transport.MAX_LINE_BYTES:
+            return None
+        ready, _, _ = select.select([sock], [], [], left)
+        if not ready:
+            return None
+        chunk = sock.recv(4096)
+        if not chunk:
+            return None
+        buf += chunk
+        end = buf.find(transport.TERMINATOR)
+        if end >= 0:
+            return buf[:end] if end == len(buf) - len(transport.TERMINATOR) else None

@@ -21,7 +21,7 @@ def _build(cfg: dict[str, Any], clock: Any) -> Any:
 
 
 def _health(fe: Any, since: Any = None) -> None:
-    fe.idn  # noqa: B018 - a query that proves the instrument answers
+    fe.probe()  # the tagged *IDN?: a query that proves the instrument answers
 
 
 SPEC = register_driver(
