@@ -88,7 +88,7 @@ class SimClock(_PollingWait):
         self._stop = threading.Event()
         self._thread_error: BaseException | None = None
         self._dropped_s = 0.0
-        world.add_listener(self._on_world_advanced)
+        world.add_listener(self._on_world_advanced, each_block=False)  # waits need only know it moved
         self.set_speed(speed)
 
     # --- speed -----------------------------------------------------------------------------

@@ -71,8 +71,8 @@ _CPU_S: dict[str, float] = collections.defaultdict(float)  # the calling thread'
 _CALLS: collections.Counter[str] = collections.Counter()
 
 
-def _timed(cls: type, name: str, key: str) -> None:
-    """Replace cls.name by a wrapper adding its wall time to _TOTAL_S[key]."""
+def _timed(cls: Any, name: str, key: str) -> None:
+    """Replace cls.name (a class's or a module's) by a wrapper adding its wall time to _TOTAL_S[key]."""
     inner: Callable[..., Any] = getattr(cls, name)
 
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -111,7 +111,10 @@ def main() -> None:
 
     sets = dict(parse_assignment(item) for item in args.set) or (
         {"record_s": "1200"} if args.procedure == "cvg-allan" else {})
+    import simulators.fused as fused
+
     for cls, name, key in ((World, "advance", "world.advance"), (World, "_run_block", "  world block"),
+                           (fused, "run_fused_blocks", "  fused blocks"),
                            (FpgaServer, "_flush_stream", "  stream flush"), (Station, "check_links", "check_links"),
                            (FpgaLink, "sync", "  fpga sync"), (GuardedClock, "sleep", "engine sleeps")):
         _timed(cls, name, key)

@@ -55,7 +55,7 @@ class Rig:
     def detach(self, device: Any) -> None:
         self.table_world.detach(device)
 
-    def add_listener(self, callback: Any) -> None:
+    def add_listener(self, callback: Any, *, each_block: bool = True) -> None:
         """callback(rig) after every block of all slots (the real-time clock's waits)."""
         self._listeners.append(callback)
 

@@ -143,6 +143,7 @@ class World:
         self._forces: dict[str, np.ndarray] = {}
         self.last_block: WorldBlock | None = None
         self._listeners: list[Any] = []
+        self._run_listeners: list[Any] = []
         # noise and environment (simulators.physics.noise): None for a noise-free world, whose
         # arithmetic and random draws are then those of the world before the noise model
         self.environment: Environment | None = None
@@ -151,6 +152,10 @@ class World:
                 noise, seed=seed, sample_period_s=self.sample_period_s, earth_rate_dph=earth_rate_dph
             )
         self._advance_listeners: list[Any] = []
+        #: runs of steady blocks take the compiled path (simulators.fused; the same numbers either way)
+        self.fused = True
+        self.blocks_fused = 0  # blocks advanced that way (diagnostics, tests)
+        self._fused_parts: Any = None
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -172,9 +177,10 @@ class World:
         fns = (getattr(dev, "max_block_samples", None) for dev in self.devices)
         self._limiters = [fn for fn in fns if fn is not None]
 
-    def add_listener(self, callback: Any) -> None:
-        """callback(world) after every block: clocks waiting in real-time mode use it."""
-        self._listeners.append(callback)
+    def add_listener(self, callback: Any, *, each_block: bool = True) -> None:
+        """callback(world) after every block; with each_block=False, after a run of fused blocks
+        only (simulators.fused): enough for a clock whose waits need to know the world moved."""
+        (self._listeners if each_block else self._run_listeners).append(callback)
 
     def add_advance_listener(self, callback: Any) -> None:
         """callback(world) at the end of every `advance` (under the world lock): a simulated link
@@ -220,7 +226,15 @@ class World:
             self._pending_s = max(0.0, self._pending_s - n_total * self.sample_period_s)
             done = 0
             while done < n_total:
-                n = min(n_total - done, self._block_limit())
+                left = n_total - done
+                n = min(left, self._block_limit())
+                if self.fused and left >= 2 * n:  # a run of steady blocks: one compiled call (simulators.fused)
+                    from .fused import MAX_FUSED_BLOCKS, fused_blocks_possible, run_fused_blocks
+
+                    k = min(left // n, MAX_FUSED_BLOCKS)
+                    if fused_blocks_possible(self, n, k) and run_fused_blocks(self, n, k):
+                        done += k * n
+                        continue
                 self._run_block(n)
                 done += n
             for cb in self._advance_listeners:
@@ -280,6 +294,8 @@ class World:
         for dev in self.devices:
             dev.after_block(self, block)
         for cb in self._listeners:
+            cb(self)
+        for cb in self._run_listeners:
             cb(self)
 
     # --- truth -----------------------------------------------------------------------------

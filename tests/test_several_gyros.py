@@ -272,7 +272,7 @@ class _CountingWorld:
     def t_s(self) -> float:
         return self.sample_index * self.sample_period_s
 
-    def add_listener(self, callback) -> None:
+    def add_listener(self, callback, *, each_block: bool = True) -> None:
         pass
 
     def advance_samples(self, n: int) -> None:

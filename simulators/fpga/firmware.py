@@ -58,6 +58,7 @@ class FpgaFirmware:
         self._stream_seq = 0
         self._dec_sum, self._dec_n = np.zeros(4), 0  # boxcar decimator's carry between blocks
         self._frames = p.stream_frame_buffer(128)  # encoded frames of a block, reused
+        self._fused_buf: np.ndarray | None = None  # those of the world's fused blocks
         self._reset_loops()
         self._nvm_reload()  # power-up: the trims come from NVM
 
@@ -307,7 +308,18 @@ class FpgaFirmware:
     # --- stream ---------------------------------------------------------------------------------
     def _sent(self, n: int) -> None:
         """Hand the n frames encoded in `_frames` to the sink."""
-        data = self._frames[:n].tobytes()
+        self._sent_frames(self._frames[:n], n)
+
+    def _fused_frames(self, n: int) -> np.ndarray:
+        """A frame buffer of at least n rows for the world's fused blocks (simulators.fused), reused."""
+        buf = self._fused_buf
+        if buf is None or len(buf) < n:
+            buf = self._fused_buf = p.stream_frame_buffer(max(n, 2 * (0 if buf is None else len(buf))))
+        return buf
+
+    def _sent_frames(self, frames: np.ndarray, n: int) -> None:
+        """Hand n encoded frames (rows of `frames`) to the sink; the stream's counters follow."""
+        data = frames.tobytes()
         self._stream_seq = (self._stream_seq + n) % p.SEQ_MOD
         self.regs["FRAMES_SENT"] += n
         if self.sink is not None:

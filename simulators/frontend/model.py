@@ -20,6 +20,8 @@ import numpy as np
 
 from drivers.frontend import commands as cmd
 
+from .kernels import lockin_fold
+
 FORCE_SOURCE = "frontend"
 
 
@@ -128,20 +130,7 @@ class FrontEndModel:
             world.ref_freq_hz = self.reference_hz()
 
     def after_block(self, world, block) -> None:
-        q = block.q_meas
-        if self.lockin_tc_s <= 0.0:
-            self.lockin = q[-1].copy()
-        else:
-            # the first-order low-pass y_k = a q_k + (1 - a) y_(k-1) over the block, of which only
-            # the last output is kept: y_(n-1) = (1 - a)^n y_(-1) + sum_k a (1 - a)^(n-1-k) q_k
-            a = 1.0 - math.exp(-world.sample_period_s / self.lockin_tc_s)
-            n = len(q)
-            key = (n, a)
-            if self._lockin_weights_key != key:
-                self._lockin_weights = a * (1.0 - a) ** np.arange(n - 1, -1, -1, dtype=float)
-                self._lockin_carry = (1.0 - a) ** n
-                self._lockin_weights_key = key
-            self.lockin = self._lockin_carry * self.lockin + self._lockin_weights @ q
+        self._lockin_blocks(block.q_meas, block.n, world.sample_period_s)
         cap = self.capture
         if cap is not None:
             cap.t_s.append(block.t_s)
@@ -149,6 +138,28 @@ class FrontEndModel:
             if block.t_s[-1] >= cap.t_end_s - 1e-12:
                 self._synthesise(cap, world.ref_freq_hz)
                 self.capture = None
+
+    def _lockin_blocks(self, q: np.ndarray, n: int, dt_s: float) -> None:
+        """The lock-in over blocks of n samples of q (m, 4): the first-order low-pass y_k = a q_k
+        + (1 - a) y_(k-1), of which only each block's last output is kept: y_(n-1) = (1 - a)^n
+        y_(-1) + sum_k a (1 - a)^(n-1-k) q_k (kernels.lockin_fold)."""
+        if self.lockin_tc_s <= 0.0:
+            self.lockin = q[-1].copy()
+            return
+        a = 1.0 - math.exp(-dt_s / self.lockin_tc_s)
+        key = (n, a)
+        if self._lockin_weights_key != key:
+            self._lockin_weights = a * (1.0 - a) ** np.arange(n - 1, -1, -1, dtype=float)
+            self._lockin_carry = (1.0 - a) ** n
+            self._lockin_weights_key = key
+        y = np.array(self.lockin, dtype=float)  # a fresh array: a reader may hold the old one
+        lockin_fold(y, q, n, self._lockin_weights, self._lockin_carry)
+        self.lockin = y
+
+    def fused_after_blocks(self, q_meas: np.ndarray, n: int, dt_s: float) -> None:
+        """`after_block` for consecutive blocks of n samples (q_meas (k n, 4)) of the world's fused
+        path, which runs only while no capture is armed."""
+        self._lockin_blocks(q_meas, n, dt_s)
 
     def _synthesise(self, cap: CaptureState, ref_hz: float) -> None:
         """Carrier-level samples of both pickoffs from the interpolated slow state."""

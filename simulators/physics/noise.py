@@ -226,6 +226,32 @@ class Environment:
             rate += (self._wander_step(h) - self._wander_phi_before) / h
         return rate
 
+    def block_rates_rad_s(self, n: int, k: int) -> np.ndarray:
+        """`block_rate_rad_s(n)` for k consecutive blocks at once (the world's fused path): the
+        same values, from the same draws, in the same order of operations."""
+        rates = np.full(k, dph_to_rad_s(self.earth_rate_dph + self.turn_on_bias_dph))
+        if self._noisy:
+            if self._pos + n * k <= len(self._chunk):  # every block inside the current chunk
+                cum = self._cum[self._pos + n * np.arange(k + 1)]
+                self._pos += n * k
+                sums = cum[1:] - cum[:-1]
+            else:
+                sums = np.array([self._noise_sum(n) for _ in range(k)])
+            rates = rates + sums / n
+        if self._wander_sd:
+            h = n * self._dt
+            r = math.exp(-h / self._wander_tau_s)
+            scale = self._wander_sd * math.sqrt(1.0 - r * r)
+            z = self._wander_normals.take(k)
+            steps = np.empty(k)
+            phi = self._wander_phi
+            for j in range(k):
+                before, phi = phi, r * phi + scale * float(z[j])
+                steps[j] = (phi - before) / h
+            self._wander_phi_before, self._wander_phi = before, phi
+            rates = rates + steps
+        return rates
+
     def _wander_normal(self) -> float:
         """The wander's next standard normal (drawn 4096 at a time from its own generator)."""
         return float(self._wander_normals.take(1)[0])

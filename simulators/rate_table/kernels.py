@@ -47,3 +47,33 @@ def deviation_rad(
             jitter = y
         out[k] = (ang - a0 - mean_rate_dps * (dt_s * s) + ripple + jitter) * _DEG
     return y
+
+
+@njit(cache=True)
+def deviation_rad_blocks(
+    a0_deg: np.ndarray,
+    rate_step_deg: float,
+    mean_rate_dps: np.ndarray,
+    dt_s: float,
+    ripple1_deg: float,
+    ripple2_deg: float,
+    w: np.ndarray,
+    e: float,
+    state: float,
+    out: np.ndarray,
+    w_scale: float,
+) -> float:
+    """`deviation_rad` of a settled table for K blocks of n samples (out (K, n)), block j from
+    angle a0_deg[j] at mean rate mean_rate_dps[j], its jitter innovations w[j n:(j + 1) n] (w
+    empty: no jitter) continuing from the jitter state as the per-block calls chain it (y_prev =
+    e state).  Returns the last jitter (the new state)."""
+    n = out.shape[1]
+    noise = w.shape[0] > 0
+    for j in range(out.shape[0]):
+        wj = w[j * n : (j + 1) * n] if noise else w
+        y_prev = e * state if noise else 0.0
+        y = deviation_rad(wj[:0], True, a0_deg[j], rate_step_deg, mean_rate_dps[j], dt_s, ripple1_deg, ripple2_deg,
+                          wj, e, y_prev, out[j], w_scale)  # fmt: skip
+        if noise:
+            state = y
+    return state

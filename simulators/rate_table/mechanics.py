@@ -21,7 +21,7 @@ import numpy as np
 from drivers.rate_table import modbus_protocol as mp
 
 from ..physics.normals import NormalBuffer
-from .kernels import deviation_rad
+from .kernels import deviation_rad, deviation_rad_blocks
 
 _NO_ANGLES = np.empty(0)
 
@@ -379,6 +379,42 @@ class TableMechanics:
         world.case_rate_dps = float(mean_rate)
         world.ripple_angle_rad = dev
         self.t_s = t_s + n * dt_s
+
+    def fused_before_blocks(self, i0: int, k: int, n: int, dt_s: float) -> tuple[list[float], np.ndarray] | None:
+        """`before_block` for k blocks of n samples from sample i0 at once, for the world's fused
+        path (simulators.fused): each block's mean rate (deg/s) and in-block deviation (k, n) rad,
+        the same values and draws as k calls; None (nothing changed) unless the table is settled."""
+        self.check_watchdog()
+        if not self.settled():
+            return None
+        rate_step = self.rate_dps * dt_s
+        if self.rate_dps == 0.0 and self.ref_dps == 0.0:  # at rest: the angle stays, every mean rate is 0
+            a0s, rates = np.full(k, self.angle_deg), [0.0] * k
+        else:
+            a0s, rates = np.empty(k), []
+            for j in range(k):
+                a0 = self.angle_deg
+                a_end = a0 + rate_step * float(n)
+                self.angle_deg = a_end
+                self.ref_angle_deg += self.ref_dps * dt_s * n
+                a0s[j] = a0
+                rates.append(round((a_end - a0) / (n * dt_s), 9))
+        if self.noise_deg > 0:
+            key = (dt_s, self.noise_tau_s, self.noise_deg)
+            if self._ou_key != key:
+                e = math.exp(-dt_s / self.noise_tau_s)
+                self._ou_key, self._ou = key, (e, self.noise_deg * math.sqrt(1.0 - e * e))
+            e, scale = self._ou
+            w = self._noise_normals.take(n * k)
+        else:
+            e, scale, w = 0.0, 1.0, _NO_ANGLES
+        dev = np.empty((k, n))
+        r1, r2 = self.ripple_deg
+        y = deviation_rad_blocks(a0s, rate_step, np.array(rates), dt_s, r1, r2, w, e, self._noise_state, dev, scale)
+        if self.noise_deg > 0:
+            self._noise_state = y
+        self.t_s = (i0 + (k - 1) * n) * dt_s + n * dt_s
+        return rates, dev
 
     def after_block(self, world, block) -> None:
         pass

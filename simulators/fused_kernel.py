@@ -1,0 +1,122 @@
+"""Compiled core of the world's fused blocks (simulators.fused): K blocks of the FPGA firmware's
+loops closed around the linear resonator in one call, each block exactly as the per-block path
+computes it (firmware before_block, the resonator's exact step, firmware after_block), in the
+same order of floating-point operations, so a seeded run gives the same arrays bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from simulators.fpga import kernels as fk
+from simulators.physics.kernels import linear_block
+from simulators.physics.params import TWO_PI
+
+_SEQ_MOD = 1 << 32  # drivers.fpga.protocol.SEQ_MOD
+
+
+@njit(cache=True)
+def closed_loop_blocks(
+    n: int,
+    i0: int,
+    dt: float,
+    rate_rad_s: np.ndarray,  # (K,) input rate of each block (case rate + environment)
+    ripple: np.ndarray,  # (K, n) the table's in-block angle deviation (rad), or (K, 0) for none
+    zg: np.ndarray,  # the resonator's parameter vector (zg[1] set per block)
+    four_k: float,
+    nu_offset: float,
+    w0: float,
+    q: np.ndarray,  # resonator state, advanced
+    psi_per_rad: float,
+    sigma: float,
+    slow: bool,  # the environment's slow drifts: per block zg[2], zg[3] and the pickoff gains below
+    zg2: np.ndarray,
+    zg3: np.ndarray,
+    gain_x: np.ndarray,
+    gain_y: np.ndarray,
+    q_true: np.ndarray,  # (K n, 4) out: true states
+    q_meas: np.ndarray,  # (K n, 4) in: standard normals (sigma != 0); out: measured states
+    drive: bool,  # DRIVE_EN: wave_force each block (else no force: the drive is off and cut)
+    ref_follows: bool,  # the NCO sets the world's reference each block (active or owning it)
+    ref_other_hz: float,  # the reference when it does not
+    pll0_hz: float,  # PLL_FREQ_HZ at the first block
+    ref_reg_hz: float,  # REF_FREQ_HZ
+    update: bool,
+    stream: bool,
+    ctrl: int,
+    prm: np.ndarray,
+    st: np.ndarray,
+    gains: np.ndarray,  # (4,) pickoff gain trims, or (0,) for none
+    dec: int,
+    carry: np.ndarray,
+    carry_n: int,
+    seq0: int,
+    frames: np.ndarray,  # (>= K n, 72) uint8 stream frame buffer
+    crc_table: np.ndarray,
+    crc_zeros: int,
+    frame_counts: np.ndarray,  # (K,) out: frames written by each block (consecutive in `frames`)
+    ref_hz: np.ndarray,  # (K,) out: the world's reference over each block
+    force: np.ndarray,  # (4,) out: the force of the last block (the world's held copy)
+) -> tuple:
+    """Returns (PLL_FREQ_HZ after the last block, the decimator's carry_n, stream seq after)."""
+    k_blocks = rate_rad_s.shape[0]
+    u = np.zeros(4)
+    pll = pll0_hz
+    seq = seq0
+    off = 0
+    scaled = np.empty((n, 4)) if gains.shape[0] > 0 else np.empty((0, 4))
+    no_noise = np.empty((0, 4))
+    for j in range(k_blocks):
+        a = j * n
+        t0 = (i0 + a) * dt
+        # firmware before_block (no FM in a fused run: fm = 0.0 as there)
+        ref = pll + 0.0 if ref_follows else ref_other_hz
+        ref_hz[j] = ref
+        st[fk.S_OUT + 1] = pll + 0.0 - ref_reg_hz
+        if drive:
+            fk.wave_force(t0, n, dt, ref, ctrl, prm, st)
+            for i in range(4):
+                u[i] = st[fk.S_U + i]
+        # the resonator's block (Resonator._linear_block)
+        gx, gy = 1.0, 1.0
+        if slow:
+            zg[2], zg[3] = zg2[j], zg3[j]
+            gx, gy = gain_x[j], gain_y[j]
+        zg[1] = four_k * rate_rad_s[j] + nu_offset
+        lam = TWO_PI * ref - w0
+        out = q_true[a : a + n]
+        meas = q_meas[a : a + n]
+        if sigma != 0.0:
+            linear_block(zg, lam, dt, q, u, ripple[j], psi_per_rad, out, meas, sigma, gx, gy)
+        else:
+            linear_block(zg, lam, dt, q, u, ripple[j], psi_per_rad, out, no_noise, sigma)
+            meas[:, :] = out
+            if slow:  # Resonator._scale: X gains on cx, sx; Y on cy, sy
+                for r in range(n):
+                    meas[r, 0] *= gx
+                    meas[r, 1] *= gx
+                    meas[r, 2] *= gy
+                    meas[r, 3] *= gy
+        # firmware after_block
+        fw_meas = meas
+        if gains.shape[0] > 0:
+            for r in range(n):
+                for c in range(4):
+                    scaled[r, c] = meas[r, c] * gains[c]
+            fw_meas = scaled
+        last = i0 + a + n
+        if update:
+            st[fk.S_PLL_FREQ_HZ] = pll
+        nf, carry_n = fk.after_block(
+            fw_meas, update, last * dt, dt, ref, ctrl, prm, st,
+            stream, i0 + a + 1, dec, carry, carry_n, seq, frames[off:],
+            crc_table, crc_zeros,
+        )  # fmt: skip
+        if update:
+            pll = st[fk.S_PLL_FREQ_HZ]
+        frame_counts[j] = nf
+        off += nf
+        seq = (seq + nf) % _SEQ_MOD
+    for i in range(4):
+        force[i] = u[i]
+    return pll, carry_n, seq
