@@ -52,6 +52,20 @@ load average 2.8-5.0:
       the last digit).  Load too high for the 10 h record's figure.
   With the table's jitter scaling in its kernel too, the same 20 alternations, load 3.0-3.7: median
   59.7 -> 43.6 CPU us a block (min 55.9 -> 41.4): 1.37x.
+2026-11-27, the world's fused blocks (simulators/fused.py: a run of steady loop periods in one
+compiled call, bit-identical) and the front end's link check on pyvisa-py's socket, nothing else
+running (load average 0.9-1.2):
+  (b) 10 h record: ffbf24f 4.33 sim h / wall min; the new tree 6.26, 6.54 (1 min 32-36 s for the
+      10 h record; 88 user + 13 system CPU s); the same read-offs to the last digit (N 0.009856
+      [0.009521, 0.010179], B 0.3216 [0.2944, 0.3485], K 2.657 [2.278, 3.055]).  1 h records,
+      alternately, 3 each (benchmark process CPU per simulated hour): 4.03 -> 5.50 sim h / wall
+      min (14.2 -> 10.2 CPU s per sim h).  The 5 h target is met on a quiet machine.
+  Per 0.4 s grid point (benchmarks/lockstep_breakdown.py): world.advance ~0.81 -> ~0.5 ms (the
+  fused call ~0.38 ms for its 8 blocks: the compiled loops and resonator ~0.08 ms, the drift
+  noise's generation ~0.09 ms, the table's jitter and the pickoff noise draws ~0.08 ms); link
+  checks ~0.62 ms wall (the front end's probe 0.18 -> 0.11 ms).
+  Run one tree's code against another's with PYTHONPATH set to that tree: an editable install in
+  the venv otherwise imports the venv's tree.
 """
 
 from __future__ import annotations

@@ -76,6 +76,21 @@ with benchmarks/sim_identical.py), d8058b1 against the branch, alternately, twic
   (c)    283 /   261     237 /   226  ->    308 /   312     302 /   291   (1.1-1.3x)
   The static whole-angle world of benchmarks/cvg_allan_speed.py (noise on) gains more: its
   blocks 46-68 -> 31-46 CPU us.
+2026-11-27, the world's fused blocks (simulators/fused.py: K loop periods in one compiled call,
+bit-identical: tests/test_world_fused.py, benchmarks/sim_identical.py) and the front end's link
+check on pyvisa-py's socket; ffbf24f (PYTHONPATH set to its tree) then the new tree, one run of 3
+rounds each, nothing else running (load average 0.9-1.0), medians (per wall s / per CPU s):
+  (a)  5,372 / 5,372  ->  5,009 / 5,009   (unchanged: no loops, no fused path)
+  (b)  1,497 / 1,497  ->  3,469 / 3,469   (x2.3: the target 2,000x met)
+  (c)    248 /   219  ->    278 /   251   (x1.12-1.15: far from 1,000x)
+  hrg-damping now spends its wall time (benchmarks/lockstep_breakdown.py, 4.3 s for 1,108 s):
+  link checks 2.0 s (4,592 checks, 2,771 with round trips: the FPGA link's sync 0.95 s, most of it
+  waiting for the reader thread to parse and deliver the 1 kHz stream, the table's status 0.43 s,
+  the front end's probe 0.35 s), the world 1.5 s (fused calls 0.7 s for 2,809 runs of blocks;
+  1,076 blocks one by one while the table ramps or the front end drives, 0.48 s with numba's
+  one-time loads of ~0.4 s), the rest the procedure and engine.  The reader thread 0.8 CPU s and
+  the writer 0.3 CPU s contend for the GIL with them.  1,000x needs the whole run in 1.1 s: the
+  link checks alone exceed it, so the next lever is not in the simulated devices.
 """
 
 from __future__ import annotations
