@@ -84,7 +84,13 @@ def fused_blocks_possible(world: World, n: int, k: int) -> bool:
     fe = parts.frontend
     if fe is not None and (fe.capture is not None or fe.reference_hz() is not None):
         return False
-    fw = parts.firmware
+    with parts.firmware.lock:
+        return _firmware_steady(world, parts.firmware)
+
+
+def _firmware_steady(world: World, fw: FpgaFirmware) -> bool:
+    """The firmware's part of the check (under its lock: the FPGA server writes registers from its
+    own thread, holding only that lock)."""
     ctrl, _, _, fm_on, _ = fw._hot_now()
     if fm_on:
         return False
@@ -96,7 +102,7 @@ def fused_blocks_possible(world: World, n: int, k: int) -> bool:
 
 def run_fused_blocks(world: World, n: int, k: int) -> bool:
     """Advance the world by k blocks of n samples (`fused_blocks_possible` said so); False (and
-    nothing done) if the table turned out not settled."""
+    nothing done) if the table turned out not settled or a register was written since the check."""
     parts = world._fused_parts
     assert parts is not None
     table, fe, fw = parts.table, parts.frontend, parts.firmware
@@ -104,6 +110,8 @@ def run_fused_blocks(world: World, n: int, k: int) -> bool:
     dt = world.sample_period_s
     i0 = world.sample_index
     with fw.lock:
+        if not _firmware_steady(world, fw):  # a register written since the check (real-time mode)
+            return False
         inputs = table.fused_before_blocks(i0, k, n, dt)
         if inputs is None:
             return False

@@ -87,6 +87,9 @@ class SimBatchStation(BatchStation):
     def open(self) -> SimBatchStation:
         if self.shared:
             return self
+        from simulators.warm import warm_kernels
+
+        warm_kernels()  # compiled kernels loaded before anything serves (simulators/warm.py says why)
         try:
             for role, cfg in self.config.devices.items():
                 if (None, role) not in self.handles:

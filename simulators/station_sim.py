@@ -80,6 +80,9 @@ class SimStation(Station):
 
     def start_simulators(self) -> dict[str, dict[str, Any]]:
         """Start each device's simulator on loopback; their addresses by role."""
+        from simulators.warm import warm_kernels
+
+        warm_kernels()  # compiled kernels loaded before anything serves (simulators/warm.py says why)
         for role, cfg in self.config.devices.items():
             spec = DRIVERS[cfg["driver"]]
             if spec.serve is None:

@@ -77,3 +77,61 @@ def deviation_rad_blocks(
         if noise:
             state = y
     return state
+
+
+@njit(cache=True)
+def profile_step(
+    state: np.ndarray,
+    n: int,
+    dt_s: float,
+    alpha: float,
+    halted: bool,
+    mode: int,
+    target_rate_dps: float,
+    accel_dps2: float,
+    brake_decel_dps2: float,
+    traverse_dps: float,
+    target_unwrapped_deg: float,
+    watchdog_expired: bool,
+    angles: np.ndarray,
+) -> None:
+    """TableMechanics' motion over n samples while it is not settled, sample by sample: the
+    profile's velocity toward its goal within the acceleration, the lag (first order, alpha per
+    sample) and the angle; angles[k] the angle at sample k's end.  state = (ref_dps, ref_angle_deg,
+    rate_dps, angle_deg, position_done, enabled), updated in place; modes as
+    drivers.rate_table.modbus_protocol (1 rate, 2 position).  The arithmetic of the Python loop it
+    replaced, operation for operation."""
+    ref, ref_angle, rate, angle = state[0], state[1], state[2], state[3]
+    done, enabled = state[4] != 0.0, state[5] != 0.0
+    for k in range(n):
+        if halted or not enabled:
+            goal, a = 0.0, brake_decel_dps2
+        elif mode == 1:
+            goal, a = target_rate_dps, accel_dps2
+        elif mode == 2 and not done:
+            a = accel_dps2
+            err = target_unwrapped_deg - ref_angle
+            v = min(traverse_dps, math.sqrt(2.0 * a * abs(err)), abs(err) / dt_s)
+            goal = math.copysign(v, err)
+        else:
+            goal, a = 0.0, accel_dps2
+        dv = a * dt_s
+        ref_old = ref
+        ref = goal if abs(goal - ref_old) <= dv else ref_old + math.copysign(dv, goal - ref_old)
+        ref_angle += 0.5 * (ref_old + ref) * dt_s
+        if mode == 2 and enabled and not done:
+            err = target_unwrapped_deg - ref_angle
+            if abs(err) <= 1e-9 or (abs(err) <= a * dt_s * dt_s and abs(ref) <= dv):
+                ref_angle, ref, done = target_unwrapped_deg, 0.0, True
+        y_old = rate
+        y = y_old + (ref - y_old) * alpha
+        if abs(y - ref) < 1e-9:
+            y = ref
+        rate = y
+        angle += 0.5 * (y_old + y) * dt_s
+        if watchdog_expired and enabled and y == 0.0 and ref == 0.0:
+            enabled = False
+        angles[k] = angle
+    state[0], state[1], state[2], state[3] = ref, ref_angle, rate, angle
+    state[4] = 1.0 if done else 0.0
+    state[5] = 1.0 if enabled else 0.0

@@ -21,7 +21,7 @@ import numpy as np
 from drivers.rate_table import modbus_protocol as mp
 
 from ..physics.normals import NormalBuffer
-from .kernels import deviation_rad, deviation_rad_blocks
+from .kernels import deviation_rad, deviation_rad_blocks, profile_step
 
 _NO_ANGLES = np.empty(0)
 
@@ -308,25 +308,14 @@ class TableMechanics:
             return angles
         alpha = 1.0 - math.exp(-dt_s / self.tau_s)
         angles = np.empty(n)
-        for k in range(n):
-            goal, a = self._goal(dt_s)
-            dv = a * dt_s
-            ref_old = self.ref_dps
-            self.ref_dps = goal if abs(goal - ref_old) <= dv else ref_old + math.copysign(dv, goal - ref_old)
-            self.ref_angle_deg += 0.5 * (ref_old + self.ref_dps) * dt_s
-            if self.mode == mp.MODE_POSITION and self.enabled and not self._position_done:
-                err = self._target_unwrapped_deg - self.ref_angle_deg
-                if abs(err) <= 1e-9 or (abs(err) <= a * dt_s * dt_s and abs(self.ref_dps) <= dv):
-                    self.ref_angle_deg, self.ref_dps, self._position_done = self._target_unwrapped_deg, 0.0, True
-            y_old = self.rate_dps
-            y = y_old + (self.ref_dps - y_old) * alpha
-            if abs(y - self.ref_dps) < 1e-9:
-                y = self.ref_dps
-            self.rate_dps = y
-            self.angle_deg += 0.5 * (y_old + y) * dt_s
-            if self.watchdog_expired and self.enabled and y == 0.0 and self.ref_dps == 0.0:
-                self.enabled = False
-            angles[k] = self.angle_deg
+        state = np.array([self.ref_dps, self.ref_angle_deg, self.rate_dps, self.angle_deg,
+                          float(self._position_done), float(self.enabled)])  # fmt: skip
+        halted = self.estop_pressed or self.estop_latched or self.fault_latched or self.interlock_open
+        profile_step(state, n, dt_s, alpha, halted, int(self.mode), float(self.target_rate_dps),
+                     float(self.accel_dps2), float(self.brake_decel_dps2), float(self.traverse_dps),
+                     float(self._target_unwrapped_deg), self.watchdog_expired, angles)  # fmt: skip
+        self.ref_dps, self.ref_angle_deg, self.rate_dps, self.angle_deg = (float(v) for v in state[:4])
+        self._position_done, self.enabled = bool(state[4]), bool(state[5])
         return angles
 
     # --- World device ---------------------------------------------------------------------------
