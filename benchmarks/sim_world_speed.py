@@ -91,6 +91,12 @@ rounds each, nothing else running (load average 0.9-1.0), medians (per wall s / 
   one-time loads of ~0.4 s), the rest the procedure and engine.  The reader thread 0.8 CPU s and
   the writer 0.3 CPU s contend for the GIL with them.  1,000x needs the whole run in 1.1 s: the
   link checks alone exceed it, so the next lever is not in the simulated devices.
+  Then the table's ramp and position motion as a compiled step (bit-identical) and the kernels
+  loaded when the simulated station opens (simulators/warm.py: ~0.4 s of numba's cache loads that
+  were in the run's first blocks now come before the run, outside this script's timing), load 0.8-0.9:
+  (a) 4,529-6,542x, (b) 3,141-5,058x (the load's noise), (c) 333x median (310-385x), 274x per CPU s.
+  Of (c)'s 278 -> 333x about half is the table's step (its blocks while it ramps: ~190 -> ~20 us)
+  and half the loads moved out of the run; the whole 1,108 s run now takes ~3.4-3.9 s wall.
 """
 
 from __future__ import annotations
