@@ -95,8 +95,9 @@ rounds each, nothing else running (load average 0.9-1.0), medians (per wall s / 
   loaded when the simulated station opens (simulators/warm.py: ~0.4 s of numba's cache loads that
   were in the run's first blocks now come before the run, outside this script's timing), load 0.8-0.9:
   (a) 4,529-6,542x, (b) 3,141-5,058x (the load's noise), (c) 333x median (310-385x), 274x per CPU s.
-  Of (c)'s 278 -> 333x about half is the table's step (its blocks while it ramps: ~190 -> ~20 us)
-  and half the loads moved out of the run; the whole 1,108 s run now takes ~3.4-3.9 s wall.
+  (c)'s 278 -> 333x is partly the table's step (a ramping block's motion: ~200 us of Python loop
+  -> ~4 us) and partly the loads moved out of the run (not told apart here); the whole 1,108 s run
+  now takes ~3.3-3.9 s wall.
 """
 
 from __future__ import annotations
