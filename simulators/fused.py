@@ -25,6 +25,7 @@ from .faults import FaultScheduler
 from .fpga.firmware import FpgaFirmware
 from .frontend.model import FrontEndModel
 from .fused_kernel import closed_loop_blocks
+from .physics.averaged import damping_terms
 from .rate_table.mechanics import TableMechanics
 from .world import WorldBlock
 
@@ -33,8 +34,7 @@ if TYPE_CHECKING:
 
 #: at most this many blocks in one fused call (a lockstep grid step is 8 loop periods)
 MAX_FUSED_BLOCKS = 64
-_NO_GAINS = np.empty(0)
-_NONE = np.empty(0)
+_NONE = np.empty(0)  # an absent per-block input or gain trim
 
 
 class _Parts:
@@ -128,9 +128,7 @@ def run_fused_blocks(world: World, n: int, k: int) -> bool:
                 d0, th0 = world.params.delta_inv_tau_per_s, world.params.theta_tau_deg
                 for j in range(k):
                     t0 = (i0 + j * n) * dt
-                    d, th_deg = env.damping(t0, d0, th0)
-                    th = math.radians(th_deg)
-                    zg2[j], zg3[j] = d * math.cos(4.0 * th), d * math.sin(4.0 * th)
+                    zg2[j], zg3[j] = damping_terms(*env.damping(t0, d0, th0))
                     gain_x[j], gain_y[j] = env.gains(t0)
         sigma = res._sigma
         q_meas = res._normals.take(4 * n * k).reshape(n * k, 4) if sigma != 0.0 else np.empty((n * k, 4))
@@ -150,7 +148,7 @@ def run_fused_blocks(world: World, n: int, k: int) -> bool:
             res._psi_per_rad, sigma, slow, zg2, zg3, gain_x, gain_y, q_true, q_meas,
             drive, active or fw._owns_ref, float(world.ref_freq_hz), float(regs["PLL_FREQ_HZ"]),
             float(regs["REF_FREQ_HZ"]), active, stream, ctrl, prm, fw._st,
-            _NO_GAINS if gains is None else gains, dec, fw._dec_sum, fw._dec_n, fw._stream_seq, frames,
+            _NONE if gains is None else gains, dec, fw._dec_sum, fw._dec_n, fw._stream_seq, frames,
             p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS, frame_counts, ref_hz, force,
         )  # fmt: skip
         res._psi = float(res._psi_per_rad * ripple[-1, -1])

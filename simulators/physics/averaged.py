@@ -57,6 +57,12 @@ def _scale(q: np.ndarray, gains: tuple[float, float]) -> None:
     q[:, 2:] *= gains[1]
 
 
+def damping_terms(d_per_s: float, theta_tau_deg: float) -> tuple[float, float]:
+    """The linear step's damping-anisotropy parameters (zg[2], zg[3]) of Delta(1/tau) at its axis."""
+    th = math.radians(theta_tau_deg)
+    return d_per_s * math.cos(4.0 * th), d_per_s * math.sin(4.0 * th)
+
+
 class Resonator:
     """The resonator's slow state and its integration.  Not thread-safe: the World locks it."""
 
@@ -89,8 +95,7 @@ class Resonator:
     def set_damping_anisotropy(self, d_per_s: float, theta_tau_deg: float) -> None:
         """Change Delta(1/tau) and its axis (the slow drift of simulators.physics.noise) in the
         linear step's parameters."""
-        th = math.radians(theta_tau_deg)
-        self._zg[2], self._zg[3] = d_per_s * math.cos(4.0 * th), d_per_s * math.sin(4.0 * th)
+        self._zg[2], self._zg[3] = damping_terms(d_per_s, theta_tau_deg)
 
     @property
     def is_linear(self) -> bool:

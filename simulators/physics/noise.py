@@ -218,17 +218,11 @@ class Environment:
     def block_rate_rad_s(self, n: int) -> float:
         """The equivalent input rate over the next block of n samples: Earth's rate, the turn-on
         bias and the mean of the drift-rate noise over the block."""
-        rate = dph_to_rad_s(self.earth_rate_dph + self.turn_on_bias_dph)
-        if self._noisy:
-            rate += self._noise_sum(n) / n
-        if self._wander_sd:
-            h = n * self._dt
-            rate += (self._wander_step(h) - self._wander_phi_before) / h
-        return rate
+        return float(self.block_rates_rad_s(n, 1)[0])
 
     def block_rates_rad_s(self, n: int, k: int) -> np.ndarray:
-        """`block_rate_rad_s(n)` for k consecutive blocks at once (the world's fused path): the
-        same values, from the same draws, in the same order of operations."""
+        """`block_rate_rad_s(n)` for k consecutive blocks at once (the world's fused path), each
+        from its own draws in their order: the same numbers as k calls of one block."""
         rates = np.full(k, dph_to_rad_s(self.earth_rate_dph + self.turn_on_bias_dph))
         if self._noisy:
             if self._pos + n * k <= len(self._chunk):  # every block inside the current chunk

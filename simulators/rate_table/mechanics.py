@@ -331,6 +331,14 @@ class TableMechanics:
             self._steps_cache = {n: steps} if len(self._steps_cache) > 16 else {**self._steps_cache, n: steps}
         return steps
 
+    def _ou_step(self, dt_s: float) -> tuple[float, float]:
+        """The jitter's OU step over dt_s: (decay, innovation scale), worked out once per dt."""
+        key = (dt_s, self.noise_tau_s, self.noise_deg)
+        if self._ou_key != key:
+            e = math.exp(-dt_s / self.noise_tau_s)
+            self._ou_key, self._ou = key, (e, self.noise_deg * math.sqrt(1.0 - e * e))
+        return self._ou
+
     def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
         """Move the table over the block; hand the world its mean rate and the in-block angle
         deviation (profile curvature, ripple, jitter) as `ripple_angle_rad` (compiled kernel)."""
@@ -351,11 +359,7 @@ class TableMechanics:
         # (its exact step is cached on the inputs); the rounding goes into the deviation below
         mean_rate = round((a_end - a0) / (n * dt_s), 9)
         if self.noise_deg > 0:
-            key = (dt_s, self.noise_tau_s, self.noise_deg)
-            if self._ou_key != key:  # the OU step's decay and innovation scale for this dt
-                e = math.exp(-dt_s / self.noise_tau_s)
-                self._ou_key, self._ou = key, (e, self.noise_deg * math.sqrt(1.0 - e * e))
-            e, scale = self._ou
+            e, scale = self._ou_step(dt_s)
             w = self._noise_normals.take(n)  # standard normals: the kernel scales them
             y_prev = e * self._noise_state
         else:
@@ -389,11 +393,7 @@ class TableMechanics:
                 a0s[j] = a0
                 rates.append(round((a_end - a0) / (n * dt_s), 9))
         if self.noise_deg > 0:
-            key = (dt_s, self.noise_tau_s, self.noise_deg)
-            if self._ou_key != key:
-                e = math.exp(-dt_s / self.noise_tau_s)
-                self._ou_key, self._ou = key, (e, self.noise_deg * math.sqrt(1.0 - e * e))
-            e, scale = self._ou
+            e, scale = self._ou_step(dt_s)
             w = self._noise_normals.take(n * k)
         else:
             e, scale, w = 0.0, 1.0, _NO_ANGLES
