@@ -21,8 +21,10 @@ import types
 from collections.abc import Callable
 from typing import Any
 
-#: modules the forkserver imports once, so that each worker starts warm
-PRELOAD = ("numpy", "scipy.integrate", "scipy.optimize", "bench.analysis.damping", "bench.analysis.maslov")
+#: modules the forkserver imports once, so that each worker starts warm: the worker's own code
+#: (bench.engine: ~0.06 s to import) and the estimators with their one-time tables (bench.analysis.warm)
+PRELOAD = ("numpy", "scipy.integrate", "scipy.optimize", "threadpoolctl", "bench.engine.compute",
+           "bench.analysis.damping", "bench.analysis.maslov", "bench.analysis.warm")
 #: how often (wall s) a waiting computation passes an engine checkpoint
 POLL_S = 0.05
 
