@@ -186,9 +186,10 @@ class ModbusRateTable(RateTable):
         raise ProtocolError(f"rate table at {self.address}: malformed status reply ({last})")
 
     def probe_status(self) -> TableStatus:
-        """status() for the station's link check at every lockstep grid point, without pymodbus's
-        per-call bookkeeping: the same MBAP frame and FC4 read on the client's own socket, its
-        reply checked field by field (transaction id, unit, function, byte count).  Anything else
+        """status() for the station's link check at every lockstep grid point and the waits'
+        polls (`poll_status`), without pymodbus's per-call bookkeeping: the same MBAP frame and
+        FC4 read on the client's own socket, its reply checked field by field (transaction id,
+        unit, function, byte count).  Anything else
         (no reply within timeout_s, a short, foreign or late reply, RTU) goes to status(), with
         its retries and errors, on a fresh connection so a late reply is never taken for the next
         one."""
@@ -217,6 +218,8 @@ class ModbusRateTable(RateTable):
                     )
             self.client.close()  # pymodbus connects again at the next transaction
         return self.status()
+
+    poll_status = probe_status
 
     def _status_from(self, registers) -> TableStatus:
         rate, angle, bits, code = mp.decode_status(registers)
