@@ -58,14 +58,16 @@ class _StreamTap:
 
     def __init__(self, columns: tuple[str, ...] = _TAP) -> None:
         self.columns = tuple(columns)
+        self._positions = FPGA.indices(*self.columns)  # looked up by name once, not per block
         self.on = False
         self._rows: list[np.ndarray] = []
         self._lock = threading.Lock()
 
     def __call__(self, block: np.ndarray) -> None:
         if self.on:
+            rows = block[:, self._positions]
             with self._lock:
-                self._rows.append(FPGA.columns_of(block, *self.columns))
+                self._rows.append(rows)
 
     def stop(self) -> None:
         """Keep nothing more and drop what is kept (the run has ended)."""

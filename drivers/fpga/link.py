@@ -455,7 +455,7 @@ class FpgaLink:
                 self._cond.notify_all()
 
     def _deliver(self, arr: np.ndarray) -> None:
-        seq = arr["seq"].astype(np.int64)
+        seq = arr["seq"]
         first, last = int(seq[0]), int(seq[-1])
         with self._cond:
             expected = self._expected_seq
@@ -464,6 +464,7 @@ class FpgaLink:
             if first == expected and last - first == len(seq) - 1:
                 pass  # the usual run: consecutive from the expected number, nothing lost
             else:
+                seq = seq.astype(np.int64)
                 prev = np.empty_like(seq)
                 prev[0] = expected - 1
                 prev[1:] = seq[:-1]
@@ -471,8 +472,8 @@ class FpgaLink:
                 self._dropped += int(gaps.sum())
             self._expected_seq = (last + 1) % p.SEQ_MOD
             self._frames += len(arr)
-            block = p.stream_rows(arr)
             subscribers = list(self._subscribers)
+        block = p.stream_rows(arr)
         for cb in subscribers:
             try:
                 cb(block)
