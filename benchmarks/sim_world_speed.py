@@ -220,12 +220,7 @@ def main() -> None:
     }
     t0 = time.perf_counter()
     free_decay_world(1.0)  # warm-up, untimed: imports, first calls (loading numba's compiled kernels)
-    device_world(0.5)
-    import numpy as np
-
-    from drivers.fpga import protocol
-
-    protocol.crc16_frames(np.frombuffer(bytes(protocol.STREAM_FRAME_SIZE), np.uint8).reshape(1, -1))  # the link's CRC
+    device_world(0.5)  # (c)'s station loads its own kernels when it opens (simulators/warm.py)
     print(f"warm-up (first calls in this process): {time.perf_counter() - t0:.2f} s")
     load0 = os.getloadavg()[0]
     print(f"load average {load0:.1f} on {os.cpu_count()} cores; {args.repeat} interleaved runs of {','.join(cases)}")
