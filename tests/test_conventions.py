@@ -71,6 +71,25 @@ def test_every_procedure_module_imports_and_is_registered():
 
 
 @pytest.mark.parametrize("name", sorted(all_procedures()))
+def test_a_procedure_found_by_name_is_the_registered_one(name):
+    """`procedure_named` (a run imports its own procedure's module only) finds what the registry
+    has, its own module's or, failing that, any module's (the examples' table-spin)."""
+    from procedures import find_procedure, procedure_named
+
+    assert procedure_named(name) is all_procedures()[name]
+    assert find_procedure(name) is all_procedures()[name]
+
+
+def test_an_unknown_procedure_name_is_none_and_find_procedure_lists_the_known():
+    from procedures import ProcedureNotFound, find_procedure, procedure_named
+
+    for name in ("no-such-procedure", "", "hrg-damping.x", "../etc", "__init__", "examples"):
+        assert procedure_named(name) is None
+    with pytest.raises(ProcedureNotFound, match="known: .*hrg-damping"):
+        find_procedure("no-such-procedure")
+
+
+@pytest.mark.parametrize("name", sorted(all_procedures()))
 def test_procedure_conventions(name):
     cls = all_procedures()[name]
     problems: list[str] = []
