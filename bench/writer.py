@@ -20,6 +20,10 @@ from bench.engine.context import RunAborted
 
 #: events the queue holds (about a second of a 1 kHz stream in 50 ms blocks, many times over)
 QUEUE_EVENTS = 256
+#: in lockstep the run waits for the writer when it has fallen this far behind the bench clock
+#: (simulated s): a disk that fails or fills is noticed within about this much of the run, however
+#: busy the machine (the queue alone would let the simulation run ahead by up to QUEUE_EVENTS blocks)
+MAX_LAG_S = 1.0
 log = logging.getLogger("gyrobench.writer")
 _STOP = object()
 
@@ -38,6 +42,7 @@ class WriterThread:
         self._q: queue.Queue = queue.Queue(maxsize=maxsize or QUEUE_EVENTS)
         self._queued = 0  # events accepted so far, and events written (or discarded) so far
         self._written = 0
+        self._written_t_s = -float("inf")  # bench-clock time the writer has written (or discarded) up to
         self._count_lock = threading.Lock()
         self._progress = threading.Condition()
         self._failed = False
@@ -52,6 +57,8 @@ class WriterThread:
         if self._closed:
             return
         with self._count_lock:  # numbered in the order queued (several producers)
+            if self._queued == 0:  # the writer's lag counts from the first event, not from -inf
+                self._written_t_s = event.t_sim_s
             if not isinstance(event, ev.SampleBlock) or self._lockstep():
                 self._q.put(event)
                 self._queued += 1
@@ -87,7 +94,15 @@ class WriterThread:
             finally:
                 with self._progress:
                     self._written += 1
+                    if event is not _STOP:
+                        self._written_t_s = max(self._written_t_s, event.t_sim_s)
                     self._progress.notify_all()
+
+    def keep_up(self, now_s: float, max_lag_s: float = MAX_LAG_S) -> None:
+        """Lockstep: when events are still queued and the last one written is more than max_lag_s
+        (bench clock) behind now_s, wait until everything queued is written (`drain`)."""
+        if self._written < self._queued and self._written_t_s < now_s - max_lag_s:
+            self.drain()
 
     def drain(self, timeout_s: float = 60.0) -> None:
         """Wait (wall time) until every event queued before this call is written (events queued

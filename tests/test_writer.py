@@ -63,6 +63,25 @@ def test_a_failing_write_goes_to_on_error_once_and_nothing_blocks():
     assert [str(e) for e in errors] == ["disk full"]
 
 
+def test_keep_up_waits_only_for_a_writer_more_than_max_lag_behind():
+    """Lockstep's bound on how far the simulation runs ahead of the disk (bench.writer.MAX_LAG_S):
+    keep_up returns at once while the writer is within the lag, and waits until everything queued
+    is written once it is further behind."""
+    sink = SlowSink(0.02)
+    w = bw.WriterThread(sink, lockstep=True, on_error=pytest.fail)
+    try:
+        for k in range(20):  # events at t = 0 .. 19 s, each 20 ms to write
+            w.put(_block(k))
+        t0 = time.perf_counter()
+        w.keep_up(now_s=0.5)  # the clock is not a second ahead of anything queued: no wait
+        assert time.perf_counter() - t0 < 0.01 and len(sink.seen) < 20
+        w.keep_up(now_s=19.0)  # far behind: written up to the last queued event
+        assert len(sink.seen) == 20
+        w.keep_up(now_s=1000.0)  # nothing queued: nothing to wait for
+    finally:
+        w.close()
+
+
 def _spin(tmp_path, monkeypatch, speed: float | None, delay_s: float):
     from bench.station import SimStation
 
