@@ -53,6 +53,15 @@ d8058b1 and the branch alternately, twice each, load average 3.6-4.3:
   the run 2.51 / 2.64 -> 2.80 / 2.62 sim h / wall min.  Over the four pairs the block is 1.1-1.9x
   cheaper (the load moves the figures by as much); the link checks are now the main thread's
   largest item.
+2026-11-27, hrg-damping on sim-hrg at f0c9d32 (load 1.2-1.5, no CPU steal), timed from after the
+station's opening (before, the kernels' warm-up there counted ~100 blocks and ~0.4 s as the run's):
+  1108 s in 3.06 s wall; per grid point (2,771 with round trips): the FPGA link's sync 0.19 ms
+  (0.03 ms of it this thread's CPU, the rest the reader parsing and delivering the grid point's
+  frames), the table's status 0.12 ms, the front end's probe 0.09 ms; the world 0.27 ms an advance
+  (2,809 fused runs at 0.21 ms, 1,076 single blocks at 0.09 ms while the table ramps or polls).
+  The same checks on an idle station (benchmarks/link_check_floor.py) take 0.001 / 0.05 / 0.05 ms:
+  in the run the reader, the writer and the servers' threads share the GIL and two vCPUs that slow
+  each other, and every hand-off waits for the other thread's whole piece of work.
 """
 
 from __future__ import annotations

@@ -98,6 +98,19 @@ rounds each, nothing else running (load average 0.9-1.0), medians (per wall s / 
   (c)'s 278 -> 333x is partly the table's step (a ramping block's motion: ~200 us of Python loop
   -> ~4 us) and partly the loads moved out of the run (not told apart here); the whole 1,108 s run
   now takes ~3.3-3.9 s wall.
+2026-11-27 (later), the compute worker started warm (the fit step 0.24-0.32 -> 0.10-0.12 s wall),
+the table's waits polling with the lean status read, the FPGA link's reads checked in one compiled
+pass (reader CPU a read 66-84 -> 28-30 us), all bit-identical (benchmarks/sim_identical.py); 26daa52
+(PYTHONPATH on its tree) and the new tree alternately, twice each, 3 rounds, no CPU steal from the
+host (/proc/stat), load 1.1-1.3:
+  (c)  304 / 261   328 / 285  ->  351 / 289   355 / 309   (x1.08-1.15)
+  and in fresh processes, one run each, the two trees alternately, 7 each (load 0.5-1.4): median
+  302 -> 356x per wall s (257-365 -> 303-412), 263 -> 305x per CPU s.  The whole run: 3.1-3.6 s.
+  On this machine the two vCPUs slow each other: a compiled CRC of 40 frames takes 5 us alone and
+  10 us with the other vCPU busy, and the host's CPU steal (the 8th field of /proc/stat's cpu line)
+  took a run to 102-158x during this stop while the load average stayed ~1: speed figures need the
+  steal read beside them.  Why (c) stays far from 1000x: benchmarks/link_check_floor.py and
+  benchmarks/lockstep_breakdown.py.
 """
 
 from __future__ import annotations
