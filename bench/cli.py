@@ -386,17 +386,26 @@ def _open_recorded(run: str, results: str | None):
     return open_run(row["raw_file"]), store, row["run_id"]
 
 
-def _cmd_analyze(args: argparse.Namespace) -> int:
-    from procedures import ProcedureNotFound, find_procedure
-
+def _open_for_command(args: argparse.Namespace) -> tuple[Any, Any, str] | int:
+    """`_open_recorded` for analyze and report: (data, store, run id), or the exit code after one
+    message (an unknown run or missing file: usage; a file that is not HDF5 or is damaged)."""
     try:
-        data, store, run_id = _open_recorded(args.run, args.results)
+        return _open_recorded(args.run, args.results)
     except KeyError as exc:
         _err(str(exc.args[0]))
         return EXIT_USAGE
     except OSError as exc:  # not an HDF5 file, or damaged
         _err(f"cannot read the raw file of {args.run!r}: {exc}")
         return EXIT_BAD_OUTCOME
+
+
+def _cmd_analyze(args: argparse.Namespace) -> int:
+    from procedures import ProcedureNotFound, find_procedure
+
+    opened = _open_for_command(args)
+    if isinstance(opened, int):
+        return opened
+    data, store, run_id = opened
     with data:
         try:
             cls = find_procedure(args.procedure or data.attrs["procedure"])
@@ -453,16 +462,10 @@ def _write_figures(data, proc, directory: str) -> list:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-
-
-    try:
-        data, store, run_id = _open_recorded(args.run, args.results)
-    except KeyError as exc:
-        _err(str(exc.args[0]))
-        return EXIT_USAGE
-    except OSError as exc:  # not an HDF5 file, or damaged
-        _err(f"cannot read the raw file of {args.run!r}: {exc}")
-        return EXIT_BAD_OUTCOME
+    opened = _open_for_command(args)
+    if isinstance(opened, int):
+        return opened
+    data, store, run_id = opened
     with data:
         row = store.get_run(run_id) if store is not None else None
         raw_file = str(data.path)
