@@ -1,10 +1,12 @@
-"""A bounded queue and a writer thread between acquisition and storage: the thread that
-publishes a block (the FPGA link's reader, the engine) only queues it, the writer thread hands it
-to the recorder.  In lockstep a full queue blocks the producer (backpressure: no block is lost,
-the simulation waits for the disk); in real time a block that finds the queue full is dropped,
-counted and warned about (the acquisition must not wait for a slow disk).  Other events (log,
-measurements, steps) are never dropped.  A write that fails goes to `on_error` (the runner ends
-the run at its next checkpoint); later events are taken and discarded, so nothing blocks."""
+"""Between acquisition and storage.  In real time, a bounded queue and a writer thread: the thread
+that publishes a block (the FPGA link's reader, the engine) only queues it, the writer thread hands
+it to the recorder, and a block that finds the queue full is dropped, counted and warned about (the
+acquisition must not wait for a slow disk).  In lockstep the publishing thread writes the event
+itself, in the order published, after anything real time had queued: the strictest backpressure
+(the simulation waits for the disk, no block is lost, a failed write is known before the clock
+moves on) and no writer thread working beside the run (a quicker run: docs/raw_data.md).  Other
+events (log, measurements, steps) are never dropped.  A write that fails goes to `on_error` (the
+runner ends the run at its next checkpoint); later events are dropped, so nothing blocks."""
 
 from __future__ import annotations
 
@@ -20,10 +22,6 @@ from bench.engine.context import RunAborted
 
 #: events the queue holds (about a second of a 1 kHz stream in 50 ms blocks, many times over)
 QUEUE_EVENTS = 256
-#: in lockstep the run waits for the writer when it has fallen this far behind the bench clock
-#: (simulated s): a disk that fails or fills is noticed within about this much of the run, however
-#: busy the machine (the queue alone would let the simulation run ahead by up to QUEUE_EVENTS blocks)
-MAX_LAG_S = 1.0
 log = logging.getLogger("gyrobench.writer")
 _STOP = object()
 
@@ -42,7 +40,6 @@ class WriterThread:
         self._q: queue.Queue = queue.Queue(maxsize=maxsize or QUEUE_EVENTS)
         self._queued = 0  # events accepted so far, and events written (or discarded) so far
         self._written = 0
-        self._written_t_s = -float("inf")  # bench-clock time the writer has written (or discarded) up to
         self._count_lock = threading.Lock()
         self._progress = threading.Condition()
         self._failed = False
@@ -52,14 +49,18 @@ class WriterThread:
 
     # --- the producer's side ------------------------------------------------------------------
     def put(self, event: ev.Event) -> None:
-        """Queue an event (blocks while the queue is full, except a stream block in real time,
-        which is then dropped and counted)."""
+        """Lockstep: write the event now, on the calling thread.  Real time: queue it (blocks while
+        the queue is full, except a stream block, which is then dropped and counted)."""
         if self._closed:
             return
-        with self._count_lock:  # numbered in the order queued (several producers)
-            if self._queued == 0:  # the writer's lag counts from the first event, not from -inf
-                self._written_t_s = event.t_sim_s
-            if not isinstance(event, ev.SampleBlock) or self._lockstep():
+        with self._count_lock:  # in the order published (several producers)
+            lockstep = self._lockstep()
+            if lockstep and not self._failed:
+                if self._written < self._queued:  # queued in real time (the speed just changed): those first
+                    self.drain()
+                self._write(event)
+                return
+            if not isinstance(event, ev.SampleBlock) or lockstep:
                 self._q.put(event)
                 self._queued += 1
                 return
@@ -78,6 +79,16 @@ class WriterThread:
         return (f"raw data: {self.overflow_blocks} stream block(s) ({self.overflow_rows} rows) dropped in real time: "
                 f"the writer could not keep up with the acquisition")
 
+    def _write(self, event: ev.Event) -> None:
+        """One event to the recorder; the first failure goes to on_error and later events are dropped."""
+        if self._failed:
+            return
+        try:
+            self.recorder.on_event(event)
+        except Exception as exc:  # noqa: BLE001 - RawDataError, or any failure: the run ends
+            self._failed = True
+            self.on_error(exc)
+
     # --- the writer thread --------------------------------------------------------------------
     def _loop(self) -> None:
         while True:
@@ -85,24 +96,11 @@ class WriterThread:
             try:
                 if event is _STOP:
                     return
-                if not self._failed:
-                    try:
-                        self.recorder.on_event(event)
-                    except Exception as exc:  # noqa: BLE001 - RawDataError, or any failure: the run ends
-                        self._failed = True
-                        self.on_error(exc)
+                self._write(event)
             finally:
                 with self._progress:
                     self._written += 1
-                    if event is not _STOP:
-                        self._written_t_s = max(self._written_t_s, event.t_sim_s)
                     self._progress.notify_all()
-
-    def keep_up(self, now_s: float, max_lag_s: float = MAX_LAG_S) -> None:
-        """Lockstep: when events are still queued and the last one written is more than max_lag_s
-        (bench clock) behind now_s, wait until everything queued is written (`drain`)."""
-        if self._written < self._queued and self._written_t_s < now_s - max_lag_s:
-            self.drain()
 
     def drain(self, timeout_s: float = 60.0) -> None:
         """Wait (wall time) until every event queued before this call is written (events queued

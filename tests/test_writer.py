@@ -63,21 +63,30 @@ def test_a_failing_write_goes_to_on_error_once_and_nothing_blocks():
     assert [str(e) for e in errors] == ["disk full"]
 
 
-def test_keep_up_waits_only_for_a_writer_more_than_max_lag_behind():
-    """Lockstep's bound on how far the simulation runs ahead of the disk (bench.writer.MAX_LAG_S):
-    keep_up returns at once while the writer is within the lag, and waits until everything queued
-    is written once it is further behind."""
-    sink = SlowSink(0.02)
-    w = bw.WriterThread(sink, lockstep=True, on_error=pytest.fail)
+def test_lockstep_writes_on_the_publishing_thread_after_what_real_time_queued():
+    """Lockstep: put returns once the event is written, written by the thread that published it;
+    events real time had queued (the window's speed control switched to lockstep) are written
+    first, so the file keeps the order published."""
+    import threading
+
+    class Sink(SlowSink):
+        def on_event(self, event) -> None:
+            super().on_event(event)
+            self.threads = getattr(self, "threads", []) + [threading.current_thread().name]
+
+    sink = Sink(0.01)
+    mode = {"lockstep": False}
+    w = bw.WriterThread(sink, lockstep=lambda: mode["lockstep"], on_error=pytest.fail)
     try:
-        for k in range(20):  # events at t = 0 .. 19 s, each 20 ms to write
+        for k in range(5):  # real time: queued, the writer thread writes them (10 ms each)
             w.put(_block(k))
-        t0 = time.perf_counter()
-        w.keep_up(now_s=0.5)  # the clock is not a second ahead of anything queued: no wait
-        assert time.perf_counter() - t0 < 0.01 and len(sink.seen) < 20
-        w.keep_up(now_s=19.0)  # far behind: written up to the last queued event
-        assert len(sink.seen) == 20
-        w.keep_up(now_s=1000.0)  # nothing queued: nothing to wait for
+        mode["lockstep"] = True
+        for k in range(5, 10):
+            w.put(_block(k))
+            assert int(sink.seen[-1].data[0, 0]) == k  # written before put returned
+        assert [int(e.data[0, 0]) for e in sink.seen] == list(range(10))
+        assert sink.threads[5:] == [threading.current_thread().name] * 5
+        assert set(sink.threads[:5]) <= {"raw-data-writer", threading.current_thread().name}
     finally:
         w.close()
 

@@ -137,7 +137,6 @@ class Runner:
         self.duts = list(duts)
         self._abort_reason: str | None = None
         self._fatal: RunAborted | None = None  # the recorder failed (reported by the writer thread)
-        self._writer: Any = None  # the run's raw-data writer (bench.writer.WriterThread), while it runs
         self._running = threading.Event()
         self._running.set()
         self._in_run = False
@@ -176,16 +175,8 @@ class Runner:
         return not self._running.is_set()
 
     def checkpoint(self) -> None:
-        """Raise RunAborted after an abort, hold while paused, raise a lost link the station saw;
-        in lockstep, first let a raw-data writer that has fallen behind catch up (bench.writer)."""
+        """Raise RunAborted after an abort, hold while paused, raise a lost link the station saw."""
         check = getattr(self.station, "check_links", None)
-        writer, clock = self._writer, getattr(self.station, "clock", None)
-        if writer is not None and getattr(clock, "lockstep", False):
-            try:
-                writer.keep_up(clock.now())  # a failed write is then _fatal below
-            except RunAborted as exc:  # a disk that hangs
-                exc.outcome = ERROR
-                raise
         while True:
             if self._fatal is not None:
                 raise self._fatal
@@ -276,7 +267,6 @@ class Runner:
                 writer = WriterThread(recorder, lockstep=lambda: bool(getattr(clock, "lockstep", False)),
                                       on_error=self._recorder_failed)
                 unsubscribe_rec = self.bus.subscribe(writer.put)
-                self._writer = writer
         ctx = RunContext(
             run_id=run_id,
             params=proc.params,
@@ -337,7 +327,6 @@ class Runner:
             self._step_failed(ctx, steps, current, "error")
         finally:
             clock.guard = None
-            self._writer = None
             if outcome is not None:
                 rec.failed_step = current
             with _sigint_deferred(ctx):  # what the procedure acquired, before the safe state; never raises
