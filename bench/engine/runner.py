@@ -136,7 +136,7 @@ class Runner:
         self.operator = operator
         self.duts = list(duts)
         self._abort_reason: str | None = None
-        self._fatal: RunAborted | None = None  # the recorder failed (reported by the writer thread)
+        self._fatal: RunAborted | None = None  # the recorder failed (reported by bench.writer)
         self._running = threading.Event()
         self._running.set()
         self._in_run = False
@@ -263,7 +263,7 @@ class Runner:
                 self._fatal = exc
             else:
                 rec.raw_file = str(recorder.path)
-                # the recorder writes on its own thread, fed by a bounded queue (bench.writer)
+                # the recorder is fed by bench.writer (a queue and a thread in real time)
                 writer = WriterThread(recorder, lockstep=lambda: bool(getattr(clock, "lockstep", False)),
                                       on_error=self._recorder_failed)
                 unsubscribe_rec = self.bus.subscribe(writer.put)
