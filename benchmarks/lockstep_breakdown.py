@@ -62,6 +62,10 @@ station's opening (before, the kernels' warm-up there counted ~100 blocks and ~0
   The same checks on an idle station (benchmarks/link_check_floor.py) take 0.001 / 0.05 / 0.05 ms:
   in the run the reader, the writer and the servers' threads share the GIL and two vCPUs that slow
   each other, and every hand-off waits for the other thread's whole piece of work.
+  At 14c764f (lockstep's raw data written by the publishing thread, no writer thread beside the
+  run): 1108 s in 2.93 s wall, process CPU 3.1 s (3.7 s before); the world 0.23 ms an advance, the
+  sync 0.19, the table 0.11, the front end 0.09 ms a grid point; the reader thread 0.56 CPU s (it
+  now writes the stream to the recorder's buffer too).
 """
 
 from __future__ import annotations

@@ -109,7 +109,12 @@ host (/proc/stat), load 1.1-1.3:
   On this machine the two vCPUs slow each other: a compiled CRC of 40 frames takes 5 us alone and
   10 us with the other vCPU busy, and the host's CPU steal (the 8th field of /proc/stat's cpu line)
   took a run to 102-158x during this stop while the load average stayed ~1: speed figures need the
-  steal read beside them.  Why (c) stays far from 1000x: benchmarks/link_check_floor.py and
+  steal read beside them.  Then the raw data written in lockstep by the thread that publishes them
+  (bench.writer: no writer thread working beside the run), 005583d against it alternately, 6 runs
+  each in fresh processes, no steal: median 472 -> 578x (per CPU s 404 -> 471).  The whole stop,
+  26daa52 against 14c764f, 6 each alternately, no steal, load 0.7-1.4: median 367 -> 521x per wall s
+  (357-381 -> 426-597x), 332 -> 435x per CPU s; this script on 14c764f: (a) 5,150x, (b) 3,522x,
+  (c) 434x (412-437x).  Why (c) stays far from 1000x: benchmarks/link_check_floor.py and
   benchmarks/lockstep_breakdown.py.
 """
 
