@@ -146,8 +146,8 @@ class RateTable(ABC):
 
     # --- waits on the bench clock ---------------------------------------------------------
     def poll_status(self) -> TableStatus:
-        """status() for the waits' polls and the station's link check (every few simulated ms
-        while a wait lasts): a model may read the same status a cheaper way."""
+        """status() for the waits' polls (every few simulated ms while a wait lasts): a model may
+        read the same status a cheaper way (the Modbus table: `probe_status`)."""
         return self.status()
 
     def _checked_status(self) -> TableStatus:

@@ -189,10 +189,9 @@ class ModbusRateTable(RateTable):
         """status() for the station's link check at every lockstep grid point and the waits'
         polls (`poll_status`), without pymodbus's per-call bookkeeping: the same MBAP frame and
         FC4 read on the client's own socket, its reply checked field by field (transaction id,
-        unit, function, byte count).  Anything else
-        (no reply within timeout_s, a short, foreign or late reply, RTU) goes to status(), with
-        its retries and errors, on a fresh connection so a late reply is never taken for the next
-        one."""
+        unit, function, byte count).  Anything else (no reply within timeout_s, a short, foreign
+        or late reply, RTU) goes to status(), with its retries and errors, on a fresh connection
+        so a late reply is never taken for the next one."""
         sock = getattr(self.client, "socket", None)
         if self._rx is not None or sock is None or not isinstance(self.client, ModbusTcpClient):
             return self.status()
