@@ -16,9 +16,12 @@ class LineServer:
     """Serve `reply(line) -> bytes | None` on a loopback port (0: a free one) until `stop()`."""
 
     def __init__(self, reply: Callable[[str], bytes | None], host: str = "127.0.0.1", port: int = 0,
-                 name: str = "line-server", max_line: int = 65536, whole_lines: bool = False) -> None:
+                 name: str = "line-server", max_line: int = 65536, whole_lines: bool = False,
+                 drop_long_lines: bool = False) -> None:
         """whole_lines: a line without its LF (too long, or cut by the peer closing) ends the
-        connection unanswered instead of being answered as it is."""
+        connection unanswered instead of being answered as it is.  drop_long_lines: a line longer
+        than max_line is read to its LF and dropped unanswered (an instrument's input buffer
+        overflowing), the connection stays."""
         self._stop = threading.Event()
         self._conns: set[socket.socket] = set()
         self._conns_lock = threading.Lock()
@@ -35,6 +38,10 @@ class LineServer:
                 try:
                     while not outer._stop.is_set():
                         raw = self.rfile.readline(max_line)
+                        if drop_long_lines and len(raw) == max_line and not raw.endswith(b"\n"):
+                            while raw and not raw.endswith(b"\n"):
+                                raw = self.rfile.readline(max_line)
+                            continue
                         if not raw or (whole_lines and not raw.endswith(b"\n")):
                             return
                         out = outer.reply(raw.decode("ascii", "replace"))

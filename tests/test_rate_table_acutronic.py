@@ -31,20 +31,30 @@ from tests.test_rate_table import (  # noqa: F401 - collected here again, on the
 )
 
 
-def make_acutrol(model: str = "acutrol-tcp", timeout_s: float = 0.3):
+def make_acutrol(model: str = "acutrol-tcp", timeout_s: float = 0.3, axis: int = 1, **server_kw):
+    """acutrol-tcp: the Ethernet port (tcp framing); acutrol-gpib: the GPIB code path (gpib
+    framing, *ESR?) over the simulator's socket STANDING IN for a GPIB resource; acutrol-visa-tcp:
+    the Ethernet port reached through a VISA socket resource."""
     world = World(preset("hrg"), seed=3)
     clock = SimClock(world)
-    server = serve_acutrol_table(world)
-    kw = dict(limits=LIMITS, clock=clock, timeout_s=timeout_s)
-    if model == "acutrol-visa":
+    server = serve_acutrol_table(world, **server_kw)
+    kw = dict(limits=LIMITS, clock=clock, timeout_s=timeout_s, axis=axis)
+    if model == "acutrol-gpib":
+        table = AcutrolRateTable(resource=server.gpib_standin_resource, framing="gpib", **kw)
+    elif model == "acutrol-visa-tcp":
         table = AcutrolRateTable(resource=server.resource_name, **kw)
     else:
         table = AcutrolRateTable(server.host, server.port, **kw)
-    table.connect()
+    try:
+        table.connect()
+    except Exception:
+        server.stop()
+        clock.close()
+        raise
     return world, clock, server, table
 
 
-@pytest.fixture(params=["acutrol-tcp", "acutrol-visa"])
+@pytest.fixture(params=["acutrol-tcp", "acutrol-gpib"])
 def bench(request):
     world, clock, server, table = make_acutrol(request.param)
     yield world, clock, server, table
@@ -89,24 +99,74 @@ def test_interlock_close_matches_the_manual_up_to_case():
     assert ap.interlock_close(1).upper() == ":INT:CLOSe 1".upper()
 
 
-def test_the_driver_sends_exactly_these_bytes():
-    world, clock, server, table = make_acutrol()
+@pytest.mark.parametrize(
+    "model, expected",
+    [
+        (  # every message answered with a header: no *ESR? needed; enable reads the interlock back
+            "acutrol-tcp",
+            [":INT:CLOSE 1\n", ":INT? 1\n", ":LIM:ACC R,1,200.0;:DEM:RATE 1,100.0;:MODE:RATE 1\n",
+             ":LIM:ACC O,1,150.0;:MODE:OFF 1\n", ":INT:OPEN 1\n"],
+        ),
+        (  # only queries answer: every command message ends in *ESR?
+            "acutrol-gpib",
+            [":INT:CLOSE 1;*ESR?\n", ":INT? 1\n", ":LIM:ACC R,1,200.0;:DEM:RATE 1,100.0;:MODE:RATE 1;*ESR?\n",
+             ":LIM:ACC O,1,150.0;:MODE:OFF 1;*ESR?\n", ":INT:OPEN 1;*ESR?\n"],
+        ),
+    ],
+)  # fmt: skip
+def test_the_driver_sends_exactly_these_bytes(model, expected):
+    world, clock, server, table = make_acutrol(model)
     try:
         server.controller.log.clear()
         table.enable()
         table.set_rate(100.0, 200.0)
         table.stop(150.0)
         table.disable()
-        assert server.controller.log == [
-            ":INT:CLOSE 1;*ESR?\n",
-            ":LIM:ACC R,1,200.0;:DEM:RATE 1,100.0;:MODE:RATE 1;*ESR?\n",
-            ":LIM:ACC O,1,150.0;:MODE:OFF 1;*ESR?\n",
-            ":INT:OPEN 1;*ESR?\n",
-        ]
+        assert server.controller.log == expected
     finally:
         table.close()
         server.stop()
         clock.close()
+
+
+def test_connect_sets_ascii_numbers_checks_units_and_close_releases_to_local():
+    """GPIB: `:U:F F` (the manual's example, 4.14.1) and its read-back, the axis's scaling, the
+    lockout; on close the lockout off and the IEEE-488 interface to local (4.4.2)."""
+    world, clock, server, table = make_acutrol("acutrol-gpib", number_format=ap.FORMAT_BINARY)
+    c = server.controller
+    try:
+        assert c.log[:5] == ["*IDN?\n", "*CLS;*ESR?\n", ":U:F F;*ESR?\n", ":U:F?\n", ":CONF:SCAL? 1\n"]
+        assert c.number_format == ap.FORMAT_FLOAT and table.units == "deg"
+        assert c.lockout and c.gpib_remote
+    finally:
+        table.close()
+    assert c.log[-2:] == [":Utility:Lockout OFF;*ESR?\n", ":Interface:IEEE488:Local;*ESR?\n"]
+    assert not c.lockout and not c.gpib_remote
+    server.stop()
+    clock.close()
+
+
+def test_tcp_cannot_set_the_number_format_so_binary_is_refused_with_a_message():
+    """4.14.1: only the IEEE-488 controller in charge may set :U:F; over TCP a controller left in
+    BINARY is refused at connect, saying what to do."""
+    with pytest.raises(DeviceError, match=r"BINARY format .* ASCII \(FLOAT\) only; set ':U:F F'"):
+        make_acutrol("acutrol-tcp", number_format=ap.FORMAT_BINARY)
+
+
+def test_tcp_close_releases_the_lockout():
+    world, clock, server, table = make_acutrol("acutrol-tcp")
+    assert server.controller.lockout
+    table.close()
+    assert not server.controller.lockout and server.controller.log[-1] == ":Utility:Lockout OFF\n"
+    server.stop()
+    clock.close()
+
+
+@pytest.mark.parametrize("units, full_scale", [("rad", 360.0), ("rev", 1.0), ("deg", 720.0)])
+@pytest.mark.parametrize("model", ["acutrol-tcp", "acutrol-gpib"])
+def test_an_axis_not_scaled_in_degrees_is_refused_at_connect(model, units, full_scale):
+    with pytest.raises(DeviceError, match=rf"axis 1 is scaled in '{units}' .* degrees over 360 deg"):
+        make_acutrol(model, units=units, full_scale_deg=full_scale)
 
 
 @pytest.mark.parametrize(
@@ -132,16 +192,64 @@ def test_parser_rejects_the_manual_error_examples(message):
         ap.split_message(message)
 
 
-def test_errors_come_back_as_esr_bits(bench_tcp):
+def test_tcp_refusals_come_back_as_error_codes_with_the_controllers_words(bench_tcp):
     world, clock, server, table = bench_tcp
-    with pytest.raises(DeviceError, match="command error"):
+    with pytest.raises(DeviceError, match="error code 1: unknown command"):
         table._send(":FLY 1", idempotent=False)
-    with pytest.raises(DeviceError, match="execution error"):
+    with pytest.raises(DeviceError, match="error code 3: axis or value out of range"):
         table._send(":DEM:POS 1,400", idempotent=False)
-    with pytest.raises(DeviceError, match="command error"):
+    with pytest.raises(DeviceError, match="error code 2: bad arguments"):
         table._send(":DEM:RATE 1,fast", idempotent=False)
-    assert table._query("*ESR?") == "0"  # read clears it
     assert table._query(":U:L?") == "ON"  # the driver locked the other interfaces out
+
+
+def test_gpib_refusals_come_back_as_esr_bits():
+    world, clock, server, table = make_acutrol("acutrol-gpib")
+    try:
+        with pytest.raises(DeviceError, match="bit 5"):
+            table._send(":FLY 1", idempotent=False)
+        with pytest.raises(DeviceError, match="bit 4"):
+            table._send(":DEM:POS 1,400", idempotent=False)
+        assert table._query("*ESR?") == "0"  # read clears it
+    finally:
+        table.close()
+        server.stop()
+        clock.close()
+
+
+def test_only_bits_2_4_5_are_errors():
+    """Errors in the manual's (ACT2000) table and in IEEE 488.2 alike; bit 3 is "all axis profiles
+    complete" there, bit 0 a servo fault the driver reads from the interlock instead."""
+    assert ap.ESR_ERRORS == 0b110100
+    assert not ap.ESR_ERRORS & (ap.ESR_BIT3 | ap.ESR_BIT0)
+
+
+def test_with_the_act2000_table_a_normal_stop_does_not_raise():
+    """The ACT2000 table sets bit 3 when every profile completes: a spin, a stop and a disable
+    go through; a refused command (bit 5) and a failed servo attempt (bit 0) still raise."""
+    world, clock, server, table = make_acutrol("acutrol-gpib", esr_table="act2000")
+    c = server.controller
+    try:
+        table.enable()
+        table.set_rate(100.0, 300.0)
+        table.wait_at_rate(0.1, 0.0, 5.0)
+        clock.sleep(0.5)
+        table.status()  # the profile has completed: bit 3 is waiting in *ESR?
+        assert c.esr & ap.ESR_BIT3
+        table.stop()
+        assert table.wait_at_rest(5.0) is not None
+        table.stop()  # *ESR? answers 8 (bit 3 again): not an error
+        table.disable()
+        table._send(":FLY 1", idempotent=False)  # unknown: ignored silently in this table
+        with pytest.raises(DeviceError, match="bit 5"):
+            table.set_rate(10.0)  # not servoed: the axis did not respond as commanded
+        server.inject("estop")
+        with pytest.raises(DeviceError, match="interlock reads Fault"):
+            table.enable()  # bit 0 only: the interlock read-back tells
+    finally:
+        table.close()
+        server.stop()
+        clock.close()
 
 
 def test_velocity_trip_shuts_the_axis_down(bench_tcp):
@@ -182,7 +290,7 @@ def test_station_sim_hrg_acutronic_builds_the_acutrol_driver():
         assert station.safe_state().confirmed
 
 
-@pytest.mark.parametrize("model", ["acutrol-tcp", "acutrol-visa"])
+@pytest.mark.parametrize("model", ["acutrol-tcp", "acutrol-gpib", "acutrol-visa-tcp"])
 def test_a_late_reply_is_not_taken_for_the_next_answer(model):
     """*IDN? answered 0.5 s late (timeout 0.3 s): the next request gets its own answer."""
     from drivers.errors import LinkLostError
@@ -193,7 +301,7 @@ def test_a_late_reply_is_not_taken_for_the_next_answer(model):
         with pytest.raises(LinkLostError):
             table._transact("*IDN?")
         time.sleep(0.3)  # the late answer is now waiting in the input
-        assert ap.parse_status(table._transact(ap.status_query(1)))[2] == "Open"
+        assert ap.parse_status(table._transact(ap.status_query(1))[1])[2] == "Open"
     finally:
         table.close()
         server.stop()

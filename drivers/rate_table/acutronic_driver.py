@@ -1,22 +1,24 @@
 """Acutronic ACUTROL3000/3000e table controller, one axis, speaking ACL (TM-8004) over Ethernet
 TCP (port 9878) or over GPIB through a VISA resource (docs/rate_table_acutronic.md).
 
-Every message the driver sends answers with exactly one line: queries answer themselves and a
-command message ends in `*ESR?`, whose error bits turn a refused command into a DeviceError.
-Stale input is flushed before each request; queries retry on a timeout or a malformed reply;
-commands retry only when idempotent (interlock close/open, the stop).  The controller has no
-host watchdog in ACL: a bench that dies leaves the table at its last demand (see the doc).
+The answers come in the framing of the link (acutronic_framing): on TCP every message is answered
+with an error code and a length before the text, commands with `OK`; on GPIB only queries answer,
+so a command message ends in `*ESR?`, whose error bits (2, 4, 5 only) turn a refusal into a
+DeviceError.  At connect the driver sets and checks ASCII numbers (`:U:F F`) and the axis's units
+(degrees only); on close it releases the lockout (and, on GPIB, the interface) to local.  Queries
+retry on a timeout or a malformed reply; commands retry only when idempotent.  The controller has
+no host watchdog in ACL: a bench that dies leaves the table at its last demand (see the doc).
 """
 
 from __future__ import annotations
 
-import socket
 import threading
-import time
 
 from drivers.errors import DeviceError, LinkLostError, ProtocolError
 
+from . import acutronic_framing as af
 from . import acutronic_protocol as ap
+from .acutronic_links import AclLink, SocketBytes, VisaBytes
 from .base import DEFAULT_POLL_S, RateTable, TableLimits, TableStatus
 
 #: |rate - demand| within which the driver reports `at_rate` (deg/s)
@@ -25,115 +27,9 @@ AT_RATE_TOL_DPS = 0.05
 IN_POSITION_TOL_DEG = 0.005
 
 
-class _TcpLink:
-    """One TCP connection, LF-terminated lines."""
-
-    def __init__(self, host: str, port: int, timeout_s: float) -> None:
-        self.host, self.port, self.timeout_s = host, int(port), float(timeout_s)
-        self._sock: socket.socket | None = None
-        self._buf = b""
-
-    def open(self) -> None:
-        self._sock = socket.create_connection((self.host, self.port), timeout=self.timeout_s)
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-
-    def close(self) -> None:
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
-
-    def _flush(self) -> None:
-        self._buf = b""
-        assert self._sock is not None
-        self._sock.setblocking(False)
-        try:
-            while self._sock.recv(65536):
-                pass
-        except (BlockingIOError, InterruptedError):
-            pass
-        finally:
-            self._sock.settimeout(self.timeout_s)
-
-    def transact(self, line: str) -> bytes:
-        if self._sock is None:
-            raise OSError("not connected")
-        self._flush()
-        self._sock.sendall((line + ap.TERMINATOR).encode("ascii"))
-        deadline = time.monotonic() + self.timeout_s
-        while b"\n" not in self._buf:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                return self._buf
-            self._sock.settimeout(left)
-            try:
-                chunk = self._sock.recv(65536)
-            except TimeoutError:
-                return self._buf
-            if not chunk:
-                raise OSError("connection closed by the controller")
-            self._buf += chunk
-        raw, _, self._buf = self._buf.partition(b"\n")
-        return raw + b"\n"
-
-
-class _VisaLink:
-    """A VISA resource (GPIB0::1::INSTR, or TCPIP::host::9878::SOCKET) through pyvisa."""
-
-    def __init__(self, resource: str, timeout_s: float) -> None:
-        self.resource, self.timeout_s = resource, float(timeout_s)
-        self._inst = None
-        self._stale = False  # a reply timed out: it may still arrive, drain it before the next request
-
-    def open(self) -> None:
-        import pyvisa
-
-        rm = pyvisa.ResourceManager("@py") if "::SOCKET" in self.resource.upper() else pyvisa.ResourceManager()
-        inst = rm.open_resource(self.resource)
-        inst.timeout = int(self.timeout_s * 1000)
-        inst.read_termination = ap.TERMINATOR
-        inst.write_termination = ap.TERMINATOR
-        self._inst = inst
-
-    def close(self) -> None:
-        if self._inst is not None:
-            self._inst.close()
-            self._inst = None
-
-    def transact(self, line: str) -> bytes:
-        import pyvisa
-
-        if self._inst is None:
-            raise OSError("not connected")
-        try:
-            if self._stale:
-                self._drain()
-            self._inst.write(line)
-            return self._inst.read_raw()
-        except pyvisa.errors.VisaIOError as exc:
-            if exc.error_code == pyvisa.constants.StatusCode.error_timeout:
-                self._stale = True
-                return b""
-            raise OSError(str(exc)) from exc
-
-    def _drain(self) -> None:
-        """Read and drop whatever a late reply left, with a short timeout, so it is not taken for
-        the answer to the next request."""
-        import pyvisa
-
-        inst, keep = self._inst, self._inst.timeout
-        inst.timeout = 50
-        try:
-            while True:
-                inst.read_raw()
-        except pyvisa.errors.VisaIOError:
-            pass
-        finally:
-            inst.timeout = keep
-            self._stale = False
-
-
 class AcutrolRateTable(RateTable):
-    """One axis of an ACUTROL3000 over TCP (`host`, `port`) or a VISA `resource`."""
+    """One axis of an ACUTROL3000 over TCP (`host`, `port`) or a VISA `resource`; `framing` is
+    "auto" (GPIB resources speak lines, sockets the TCP header), "tcp" or "gpib"."""
 
     def __init__(
         self,
@@ -141,6 +37,7 @@ class AcutrolRateTable(RateTable):
         port: int = ap.TCP_PORT,
         *,
         resource: str = "",
+        framing: str = "auto",
         axis: int = 1,
         limits: TableLimits,
         clock,
@@ -154,23 +51,26 @@ class AcutrolRateTable(RateTable):
         if not (host or resource):
             raise ValueError("AcutrolRateTable needs a host (TCP) or a VISA resource")
         self.axis = int(axis)
+        self.resource = resource
         self.where = resource or f"{host}:{port}"
+        self.framing = af.framing_for(resource, framing)
         self.vtrip_dps = float(vtrip_dps) if vtrip_dps else 1.1 * limits.max_rate_dps
         self.lockout = bool(lockout)
         self.timeout_s = float(timeout_s)
         self.read_retries = int(read_retries)
-        self._link = _VisaLink(resource, timeout_s) if resource else _TcpLink(host, port, timeout_s)
+        lines = self.framing == "gpib"
+        io = VisaBytes(resource, timeout_s, lines=lines) if resource else SocketBytes(host, port, timeout_s)
+        self._link = AclLink(io, self.framing, timeout_s)
         self._io_lock = threading.Lock()
         self._connected = False
         self.idn = ""
+        self.units = ""
 
     # --- link ------------------------------------------------------------------------------------
     def connect(self) -> None:
         try:
             self._link.open()
-        except (OSError, ValueError) as exc:
-            raise LinkLostError(f"rate table: cannot open {self.where}: {exc}") from exc
-        except Exception as exc:  # pyvisa raises its own errors for a bad resource name
+        except Exception as exc:  # OSError, ValueError, and pyvisa's own errors for a bad resource name
             raise LinkLostError(f"rate table: cannot open {self.where}: {exc}") from exc
         self._connected = True
         try:
@@ -178,6 +78,8 @@ class AcutrolRateTable(RateTable):
             if "ACUTROL" not in self.idn.upper():
                 raise ProtocolError(f"rate table at {self.where}: *IDN? answered {self.idn!r}, not an Acutrol")
             self._send("*CLS", idempotent=True)
+            self._set_ascii_numbers()
+            self._check_units()
             if self.lockout:
                 self._send(ap.lockout(True), idempotent=True)
             self.write_limits()
@@ -185,6 +87,39 @@ class AcutrolRateTable(RateTable):
             self._connected = False
             self._link.close()
             raise
+
+    def _set_ascii_numbers(self) -> None:
+        """`:U:F F` and read it back: every number the driver parses is ASCII (TM-8004 4.14.1).  The
+        manual lets only the IEEE-488 controller in charge set the format, so on TCP a refusal is
+        accepted as long as the format already reads FLOAT."""
+        try:
+            self._send(ap.SET_FORMAT_FLOAT, idempotent=True)
+        except DeviceError:
+            if self.framing == "gpib":
+                raise
+        answer = self._query(ap.FORMAT_QUERY).strip().upper()
+        if answer != ap.FORMAT_FLOAT:
+            raise DeviceError(
+                f"rate table at {self.where}: numbers are in {answer or '?'} format (:U:F? answered {answer!r}) "
+                f"and gyrobench reads ASCII (FLOAT) only; set ':U:F F' from the GPIB controller or the "
+                f"Acutrol GUI (TM-8004 4.14.1)"
+            )
+
+    def _check_units(self) -> None:
+        """The axis's engineering unit and full scale (:Configure:Scaling?, TM-8004 4.2.26): the
+        driver's numbers are degrees over a 360 deg turn, anything else is refused."""
+        answer = self._query(ap.scaling_query(self.axis))
+        try:
+            full_scale, units = ap.parse_scaling(answer)
+        except ValueError as exc:
+            raise ProtocolError(f"rate table at {self.where}: {exc}") from None
+        self.units = units
+        if units.upper() not in ap.DEGREE_UNITS or abs(full_scale - 360.0) > 1e-6:
+            raise DeviceError(
+                f"rate table at {self.where}: axis {self.axis} is scaled in {units!r} over a full scale of "
+                f"{full_scale:g} (:Configure:Scaling? answered {answer!r}); gyrobench commands and reads "
+                f"degrees over 360 deg: set the axis's scaling to 360,...,deg in the controller's set-up"
+            )
 
     def write_limits(self) -> None:
         """The station's rate and acceleration limits into every mode the driver uses, and the
@@ -199,49 +134,81 @@ class AcutrolRateTable(RateTable):
         self._send(";".join(cmds), idempotent=True)
 
     def close(self) -> None:
-        if self._connected and self.lockout:
-            try:
-                self._send(ap.lockout(False), idempotent=True)
-            except (DeviceError, LinkLostError):
-                pass
+        """Release the controller to local: the lockout off, and on GPIB the interface to local
+        (TM-8004 4.4.2, and the bus's go-to-local, 5.2.3), then close the link."""
+        if self._connected:
+            release = [ap.lockout(False)] if self.lockout else []
+            if self.framing == "gpib":
+                release.append(ap.IEEE488_LOCAL)
+            for command in release:
+                try:
+                    self._send(command, idempotent=True)
+                except (DeviceError, LinkLostError):
+                    pass
+            self._go_to_local()
         self._connected = False
         self._link.close()
 
-    def _transact(self, line: str) -> str:
-        """One message, one reply line (wall-clock timeout); LinkLostError if none."""
+    def _go_to_local(self) -> None:
+        """The GPIB bus's go-to-local for this device (a VISA GPIB resource only)."""
+        if not self.resource.upper().startswith("GPIB"):
+            return
+        try:
+            import pyvisa
+
+            inst = self._link.io.instrument
+            if inst is not None:
+                inst.control_ren(pyvisa.constants.RENLineOperation.address_gtl)
+        except Exception:  # a VISA without the call: the ACL command above did the same
+            pass
+
+    def _transact(self, line: str) -> tuple[int, str]:
+        """One message, its answer (error code, text); LinkLostError if none, ProtocolError if not an answer."""
         if not self._connected:
             raise LinkLostError("rate table: not connected")
         with self._io_lock:
             try:
-                raw = self._link.transact(line)
+                return self._link.transact(line)
             except OSError as exc:
-                raise LinkLostError(f"rate table: link error on {line!r}: {exc}") from exc
-        if not raw.endswith(b"\n"):
-            raise LinkLostError(f"rate table: no reply to {line!r} within {self.timeout_s} s (got {raw!r})")
-        try:
-            return raw.decode("ascii").strip()
-        except UnicodeDecodeError:
-            raise ProtocolError(f"rate table: non-ASCII reply {raw!r} to {line!r}") from None
+                raise LinkLostError(f"rate table: no answer to {line!r} within {self.timeout_s} s: {exc}") from exc
+            except (ValueError, UnicodeDecodeError) as exc:
+                raise ProtocolError(f"rate table: bad answer to {line!r}: {exc}") from None
 
     def _query(self, line: str) -> str:
+        """A query's text; retried on a lost or malformed answer; DeviceError when the controller
+        refuses it (tcp: a non-zero error code)."""
         last: Exception | None = None
         for _ in range(1 + self.read_retries):
             try:
-                return self._transact(line)
-            except (LinkLostError, ProtocolError) as exc:
-                last = exc
-        raise last if last is not None else LinkLostError(line)
-
-    def _send(self, command: str, *, idempotent: bool) -> None:
-        """A command message with `*ESR?` appended; DeviceError when an error bit comes back."""
-        line = ap.with_esr(command)
-        last: Exception | None = None
-        for _ in range(1 + (self.read_retries if idempotent else 0)):
-            try:
-                esr = ap.parse_esr(self._transact(line))
+                code, text = self._transact(line)
             except (LinkLostError, ProtocolError) as exc:
                 last = exc
                 continue
+            if code != ap.ERR_NONE:
+                raise DeviceError(f"rate table refused {line!r}: {self._error_text(code)}")
+            return text
+        raise last if last is not None else LinkLostError(line)
+
+    def _send(self, command: str, *, idempotent: bool) -> None:
+        """A command message; DeviceError when the controller refused it.  tcp: the answer's error
+        code (and `OK`); gpib: `*ESR?` appended, its error bits."""
+        line = ap.with_esr(command) if self.framing == "gpib" else command
+        last: Exception | None = None
+        for _ in range(1 + (self.read_retries if idempotent else 0)):
+            try:
+                code, text = self._transact(line)
+            except (LinkLostError, ProtocolError) as exc:
+                last = exc
+                continue
+            if self.framing == "tcp":
+                if code != ap.ERR_NONE:
+                    raise DeviceError(f"rate table refused {command!r}: {self._error_text(code)}")
+                if text != af.COMMAND_OK:
+                    last = ProtocolError(f"rate table: {command!r} answered {text!r}, not {af.COMMAND_OK!r}")
+                    continue
+                return
+            try:
+                esr = ap.parse_esr(text)
             except ValueError as exc:
                 last = ProtocolError(f"rate table: bad *ESR? answer to {command!r}: {exc}")
                 continue
@@ -250,9 +217,22 @@ class AcutrolRateTable(RateTable):
             return
         raise last if last is not None else LinkLostError(command)
 
+    def _error_text(self, code: int) -> str:
+        """`error code N: <the controller's words>` (:Query:Error?, TM-8004 4.9.1), or just the code."""
+        try:
+            words_code, words = self._transact(ap.query_error(code))
+        except (LinkLostError, ProtocolError):
+            return f"error code {code}"
+        return f"error code {code}: {words}" if words_code == ap.ERR_NONE and words else f"error code {code}"
+
     # --- commands --------------------------------------------------------------------------------
     def enable(self) -> None:
+        """Close the interlock and check it reads Close: a failed servo attempt is a *ESR? bit only
+        in the ACT2000 table (bit 0), which the driver does not raise on."""
         self._send(ap.interlock_close(self.axis), idempotent=True)
+        state = ap.parse_interlock(self._query(f":INT? {self.axis}"))
+        if state != "Close":
+            raise DeviceError(f"rate table refused {ap.interlock_close(self.axis)!r}: the interlock reads {state}")
 
     def disable(self) -> None:
         self._send(ap.interlock_open(self.axis), idempotent=True)
@@ -282,26 +262,28 @@ class AcutrolRateTable(RateTable):
     # --- read-back -------------------------------------------------------------------------------
     def read_acceleration(self) -> float:
         """Acceleration feedback (deg/s^2)."""
-        return float(self._query(ap.read_acceleration(self.axis)))
+        try:
+            return float(self._query(ap.read_acceleration(self.axis)))
+        except ValueError:
+            raise ProtocolError(f"rate table: {ap.read_acceleration(self.axis)!r} answered no number") from None
 
     def status(self) -> TableStatus:
-        """Rate, position, interlock, mode and the interlock register from one message."""
+        """Rate, position, interlock, mode and the interlock registers from one message."""
         last: Exception | None = None
         for _ in range(1 + self.read_retries):
             reply = self._query(ap.status_query(self.axis))
             try:
-                rate, angle, intlk, mode, si = ap.parse_status(reply)
+                rate, angle, intlk, mode, si, axis_intlk = ap.parse_status(reply)
             except ValueError as exc:
                 last = exc
                 continue
-            return self._to_status(rate, angle, intlk, mode, si)
+            return self._to_status(rate, angle, intlk, mode, si, axis_intlk)
         raise ProtocolError(f"rate table: malformed status reply ({last})")
 
-    def _to_status(self, rate: float, angle: float, intlk: str, mode: str, si: int) -> TableStatus:
+    def _to_status(self, rate: float, angle: float, intlk: str, mode: str, si: int, axis_intlk: int) -> TableStatus:
         angle %= 360.0
-        estop = bool(si & ap.SI_GLOBAL1)
-        door = bool(si & ap.SI_AXIS1_HW)
-        fault = bool(si & ap.SI_AXIS1_SW) or (intlk == "Fault" and not (estop or door))
+        estop, door, fault = ap.axis_conditions(self.axis, si, axis_intlk)
+        fault = fault or (intlk == "Fault" and not (estop or door))
         enabled = intlk == "Close"
         code = 1 if estop else 3 if door else 2 if fault else 0  # the fault codes of modbus_protocol
         at_rate = enabled and mode == ap.MODE_RATE and abs(rate - self.commanded_rate_dps) <= AT_RATE_TOL_DPS

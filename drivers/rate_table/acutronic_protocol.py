@@ -3,9 +3,8 @@ formatting and parsing shared by the driver and the simulator (docs/rate_table_a
 
 Messages are ASCII lines ending in LF; commands in one message are separated by ';' and a
 command that does not start with ':' stays in the subsystem of the one before it (TM-8004 2.3).
-Only queries answer: the answers of one message come back as one line, joined by ';'.  The
-driver ends every command message with `*ESR?`, so each message gets exactly one reply line
-over TCP (port 9878, TM-9384C 1) and over GPIB alike, and a refused command shows up at once.
+The answers of one message come back together, joined by ';'; how they are framed (GPIB lines,
+or the TCP header) is acutronic_framing's part.
 """
 
 from __future__ import annotations
@@ -23,24 +22,68 @@ MODE_OFF, MODE_POSITION, MODE_RATE = "O", "P", "R"
 #: :Interlock? answers (the states of TM-8004 4.5.3; see the doc for why these words)
 INTERLOCK_STATES = ("Close", "Open", "Fault")
 
-# IEEE 488.2 standard event status register bits (*ESR?, TM-8004 3.3)
-ESR_OPC = 1 << 0
-ESR_QUERY_ERROR = 1 << 2
-ESR_DEVICE_ERROR = 1 << 3
-ESR_EXECUTION_ERROR = 1 << 4
-ESR_COMMAND_ERROR = 1 << 5
-ESR_ERRORS = ESR_QUERY_ERROR | ESR_DEVICE_ERROR | ESR_EXECUTION_ERROR | ESR_COMMAND_ERROR
+# *ESR? (TM-8004 3.3).  The manual gives no bit table of the Acutrol3000's own; the one it prints
+# after 3.9 is the ACT2000's (bit 3 "all axis profiles complete" is a normal event there, bit 0 a
+# servo fault), while IEEE 488.2 numbers 2 query, 3 device, 4 execution, 5 command error.  The
+# driver raises only on the bits that are errors in both: 2, 4 and 5 (docs: "*ESR? bits").
+ESR_BIT0 = 1 << 0  # ACT2000: MIS servo fault (IEEE 488.2: operation complete)
+ESR_BIT2 = 1 << 2  # ACT2000: bad device dependent message (IEEE: query error)
+ESR_BIT3 = 1 << 3  # ACT2000: all axis profiles complete, a normal event (IEEE: device error)
+ESR_BIT4 = 1 << 4  # ACT2000: fault during a mode transition (IEEE: execution error)
+ESR_BIT5 = 1 << 5  # ACT2000: axis timed out, did not respond as commanded (IEEE: command error)
+ESR_ERRORS = ESR_BIT2 | ESR_BIT4 | ESR_BIT5
+ESR_TABLES = ("ieee488", "act2000")
 ESR_NAMES = {
-    ESR_QUERY_ERROR: "query error",
-    ESR_DEVICE_ERROR: "device error",
-    ESR_EXECUTION_ERROR: "execution error (refused or out of range)",
-    ESR_COMMAND_ERROR: "command error (unknown or bad syntax)",
+    ESR_BIT2: "bit 2: bad message / query error",
+    ESR_BIT4: "bit 4: mode transition fault / execution error (refused or out of range)",
+    ESR_BIT5: "bit 5: axis did not respond as commanded / command error (unknown or bad syntax)",
 }
 
-# :Status:CSR? SI bits (system interlocks summary, TM-8004 4.11 register table)
-SI_GLOBAL1 = 1 << 0  # global interlocks incl. the master interlock (the e-stop string)
-SI_AXIS1_HW = 1 << 2  # axis 1 hardware interlock / fault (a door or guard switch)
-SI_AXIS1_SW = 1 << 3  # axis 1 software-detected fault (velocity trip, drive fault)
+# :Status:CSR? SI, the system interlocks summary (TM-8004 4.11 register table): bit 0 sums
+# G1INTLK (axes 1-3 interlock inputs, GLOBAL1-3 and the master interlock), bit 1 G2INTLK (axes
+# 4-6); then per axis n, bit 2n its hardware interlock/fault register A(n)INTLK, bit 2n+1 its
+# software-detected fault A(n)SWFLT.  SI bit 0 is set by a door as much as by the e-stop.
+SI_G1INTLK = 1 << 0
+SI_G2INTLK = 1 << 1
+
+# A(n)INTLK, one axis's hardware interlock register (TM-8004 appendix B 6.3, TM-9385A table 2):
+# bits 0-5 the general-purpose discrete inputs, 6 the power-amplifier acknowledge, 7-8 the
+# interlock inputs INTLK1/INTLK2, 9 the master interlock (e-stop string and the front-panel
+# disable, TM-9385A 3.3.4), 10-15 the axis interface module's own faults.  A set bit is failed.
+INTLK_MASTER = 1 << 9
+INTLK_PA_ACK = 1 << 6
+INTLK_DOOR1 = 1 << 7  # INTLK1: where the simulator wires its door switch
+INTLK_GUARDS = 0b1_1011_1111  # bits 0-5, 7, 8: door and guard switches, wired by the lab
+INTLK_AIM_FAULTS = 0xFC00
+
+
+def si_axis_interlock(axis: int) -> int:
+    """SI bit of A(axis)INTLK."""
+    return 1 << (2 * int(axis))
+
+
+def si_axis_software_fault(axis: int) -> int:
+    """SI bit of A(axis)SWFLT."""
+    return 1 << (2 * int(axis) + 1)
+
+
+def axis_conditions(axis: int, si: int, intlk: int) -> tuple[bool, bool, bool]:
+    """(e-stop, door/guard open, fault) of one axis from the SI summary and its A(n)INTLK register:
+    the master interlock is the e-stop, an interlock or guard input a door, the software fault bit,
+    the drive acknowledge and the interface module's faults a fault."""
+    estop = bool(intlk & INTLK_MASTER)
+    door = bool(intlk & INTLK_GUARDS)
+    fault = bool(si & si_axis_software_fault(axis)) or bool(intlk & (INTLK_PA_ACK | INTLK_AIM_FAULTS))
+    return estop, door, fault
+
+
+#: :Utility:Format answers (TM-8004 4.14.1); the driver reads and writes FLOAT (ASCII) numbers only
+FORMAT_FLOAT, FORMAT_BINARY = "FLOAT", "BINARY"
+FORMAT_QUERY = ":U:F?"
+SET_FORMAT_FLOAT = ":U:F F"  # the manual's own example
+#: engineering units the driver accepts for an axis (:Configure:Scaling, TM-8004 4.2.26; default deg)
+DEGREE_UNITS = ("DEG", "DEGREE", "DEGREES")
+IEEE488_LOCAL = ":Interface:IEEE488:Local"  # 4.4.2: the IEEE-488 interface back to local
 
 
 def number(value: float) -> str:
@@ -131,10 +174,24 @@ def read_acceleration(axis: int) -> str:
 
 
 def status_query(axis: int) -> str:
-    """Rate, position, interlock state, mode and the system-interlock register in ONE message: the
-    read-backs of one message come from the same controller frame (TM-8004 4.10.3)."""
+    """Rate, position, interlock state, mode, the system-interlock summary and the axis's own
+    interlock register in ONE message: the read-backs of one message come from the same controller
+    frame (TM-8004 4.10.3)."""
     a = int(axis)
-    return f"{read_rate(a)};POS? {a};:INT? {a};:MODE? {a};:STAT:CSR? SI"
+    return f"{read_rate(a)};POS? {a};:INT? {a};:MODE? {a};:STAT:CSR? SI;CSR? A{a}INTLK"
+
+
+STATUS_FIELDS = 6
+
+
+def scaling_query(axis: int) -> str:
+    """4.2.26: the axis's demand scaling, whose 4th field is its engineering unit."""
+    return f":CONF:SCAL? {int(axis)}"
+
+
+def query_error(code: int) -> str:
+    """4.9.1: the controller's description of an error code."""
+    return f":Q:E? {int(code)}"
 
 
 def with_esr(command: str) -> str:
@@ -163,6 +220,24 @@ def esr_text(esr: int) -> str:
     return f"*ESR?={esr}: " + (", ".join(names) or "no error bits")
 
 
+# Error codes in the tcp framing's header.  TM-8004 points to a list of them (its appendix C)
+# that the TM-8004-C copy does not hold; these are the simulator's, and the driver treats any
+# non-zero code as a refusal and asks :Query:Error? for the controller's own words.
+ERR_NONE = 0
+ERR_UNKNOWN = 1  # unknown command (ignored)
+ERR_SYNTAX = 2  # wrong number or form of arguments
+ERR_RANGE = 3  # axis or value out of range
+ERR_REFUSED = 4  # refused in the axis's state (not servoed, tripped)
+ERR_INTERFACE = 5  # not allowed from this interface (:Utility:Format from a non-GPIB link)
+ERROR_TEXT = {
+    ERR_UNKNOWN: "unknown command",
+    ERR_SYNTAX: "bad arguments",
+    ERR_RANGE: "axis or value out of range",
+    ERR_REFUSED: "refused in the axis's present state",
+    ERR_INTERFACE: "only the IEEE-488 controller in charge may issue this command",
+}
+
+
 def parse_mode(text: str) -> str:
     """:Mode? answer -> "O", "P", "R" (or the first letter of another mode)."""
     t = text.strip().upper()
@@ -178,18 +253,35 @@ def parse_interlock(text: str) -> str:
     return t
 
 
-def parse_status(reply: str) -> tuple[float, float, str, str, int]:
-    """status_query answer -> (rate_dps, angle_deg, interlock, mode, SI register); ValueError when malformed."""
+def parse_status(reply: str) -> tuple[float, float, str, str, int, int]:
+    """status_query answer -> (rate_dps, angle_deg, interlock, mode, SI, A(n)INTLK); ValueError
+    when malformed: a field count other than 6 (a query the controller did not know answers
+    nothing and shifts the fields after it), an empty field (a known query that failed)."""
     parts = reply.strip().split(";")
-    if len(parts) != 5:
-        raise ValueError(f"status reply {reply!r} does not have 5 fields")
+    if len(parts) != STATUS_FIELDS:
+        raise ValueError(f"status reply {reply!r} has {len(parts)} fields, expected {STATUS_FIELDS}")
+    if any(not p.strip() for p in parts):
+        raise ValueError(f"status reply {reply!r} has an empty field (a query the controller refused)")
     rate, angle = float(parts[0]), float(parts[1])
     if not (math.isfinite(rate) and math.isfinite(angle)):
         raise ValueError(f"status reply {reply!r} has a non-finite rate or position")
-    si = int(parts[4])
-    if not 0 <= si < 1 << 16:
-        raise ValueError(f"status reply {reply!r}: SI register out of range")
-    return rate, angle, parse_interlock(parts[2]), parse_mode(parts[3]), si
+    si, intlk = _register(parts[4], reply), _register(parts[5], reply)
+    return rate, angle, parse_interlock(parts[2]), parse_mode(parts[3]), si, intlk
+
+
+def _register(text: str, reply: str) -> int:
+    v = int(text.strip())
+    if not 0 <= v < 1 << 16:
+        raise ValueError(f"status reply {reply!r}: register {v} outside 16 bits")
+    return v
+
+
+def parse_scaling(reply: str) -> tuple[float, str]:
+    """:Configure:Scaling? answer -> (full-scale position, engineering unit); ValueError when malformed."""
+    parts = [p.strip().strip('"') for p in reply.strip().split(",")]
+    if len(parts) < 4 or not parts[3]:
+        raise ValueError(f":Configure:Scaling? answer {reply!r} has no engineering unit (4th field)")
+    return float(parts[0]), parts[3]
 
 
 def format_float(value: float) -> str:
@@ -198,18 +290,23 @@ def format_float(value: float) -> str:
 
 
 # --- the ACL parser (simulator side) -------------------------------------------------------------
-#: the command tree the simulator knows: subsystem -> its nodes, in the order a one-letter short
-#: form resolves (TM-8004's own short examples: :D:P, :D:R, :M:O, :I:C, :L:R, :L:V, :R:A ...)
-TREE: dict[str, tuple[str, ...]] = {
-    "DEMAND": ("POSITION", "RATE", "ACCELERATION"),
-    "INTERLOCK": ("CLOSE", "OPEN", "RESET"),
-    "LIMIT": ("RATE", "ACCELERATION", "VTRIP", "VELOCITYTRIP"),
-    "MODE": ("OFF", "POSITION", "RATE"),
-    "READ": ("ACCELERATION", "RATE", "POSITION"),
-    "STATUS": ("CSR",),
-    "UTILITY": ("LOCKOUT", "REMOTELOCKOUT"),
+#: the command tree the simulator knows: a node's path -> its children, in the order a one-letter
+#: short form resolves (TM-8004's own short examples: :D:P, :D:R, :M:O, :I:C, :L:R, :U:F ...)
+TREE: dict[tuple[str, ...], tuple[str, ...]] = {
+    (): ("CONFIGURE", "DEMAND", "INTERLOCK", "INTERFACE", "LIMIT", "MODE", "QUERY", "READ", "STATUS", "UTILITY"),
+    ("CONFIGURE",): ("SCALING",),
+    ("DEMAND",): ("POSITION", "RATE", "ACCELERATION"),
+    ("INTERLOCK",): ("CLOSE", "OPEN", "RESET"),
+    ("INTERFACE",): ("IEEE488",),
+    ("INTERFACE", "IEEE488"): ("LOCAL",),
+    ("LIMIT",): ("RATE", "ACCELERATION", "VTRIP", "VELOCITYTRIP"),
+    ("MODE",): ("OFF", "POSITION", "RATE"),
+    ("QUERY",): ("ERROR",),
+    ("READ",): ("ACCELERATION", "RATE", "POSITION"),
+    ("STATUS",): ("CSR",),
+    ("UTILITY",): ("FORMAT", "LOCKOUT", "REMOTELOCKOUT"),
 }
-ROOTS = ("DEMAND", "INTERLOCK", "LIMIT", "MODE", "READ", "STATUS", "UTILITY")
+ROOTS = TREE[()]
 
 
 def resolve(token: str, names: tuple[str, ...]) -> str | None:
@@ -262,8 +359,7 @@ def _one_header(cmd: str, current: tuple[str, ...], out: list) -> tuple[str, ...
         parts, base = head.split(":"), current[:-1]
     path = list(base)
     for token in parts:
-        names = ROOTS if not path else TREE.get(path[0], ()) if len(path) == 1 else ()
-        full = resolve(token, names)
+        full = resolve(token, TREE.get(tuple(path), ()))
         if full is None:
             raise ValueError(f"unknown mnemonic {token!r} in {cmd!r}")
         path.append(full)

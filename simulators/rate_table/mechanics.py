@@ -407,3 +407,15 @@ class TableMechanics:
 
     def after_block(self, world, block) -> None:
         pass
+
+    def advance_alone(self, n: int, dt_s: float) -> None:
+        """Move n samples without a World: an axis of a multi-axis controller that carries no
+        gyro, caught up by its server when asked (nothing reads its in-block angles)."""
+        while n > 0:
+            if self.settled():
+                self.angle_deg += self.rate_dps * dt_s * n
+                self.ref_angle_deg += self.ref_dps * dt_s * n
+                break
+            k = min(n, 4096)
+            self._step(k, dt_s)
+            n -= k
