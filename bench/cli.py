@@ -132,8 +132,11 @@ def _warn_unfired_faults(station: Any, faults: list[tuple[str, float]]) -> None:
 
 # --- run -----------------------------------------------------------------------------------------
 def _cmd_run(args: argparse.Namespace) -> int:
+    from bench.composition import load_station
+    from bench.composition.sim_station import SimStation
+    from bench.devices import StationError
     from bench.engine import ParamError, Runner, check_station
-    from bench.station import SimStation, Station, StationError, parse_fault
+    from bench.fault_kinds import parse_fault
     from procedures import ProcedureNotFound, find_procedure
 
     try:
@@ -146,7 +149,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if args.speed is not None:
             overrides["speed"] = _speed(args.speed)
         faults = [parse_fault(f) for f in args.fault]
-        station = Station.load(args.station, **overrides)
+        station = load_station(args.station, **overrides)
         if hasattr(station, "slots"):  # several gyros on one table: a batch, one unit a slot
             raise StationError(
                 f"station {station.id!r} holds {station.n_slots} gyros on one table: run a sequence on them "
@@ -255,7 +258,9 @@ def _print_record(js: dict[str, Any]) -> None:
 
 # --- list / runs / show ------------------------------------------------------------------------
 def _cmd_list(args: argparse.Namespace) -> int:
-    from bench.station import DRIVERS, FAULTS, builtin_stations
+    from bench.devices import DRIVERS
+    from bench.fault_kinds import FAULTS
+    from bench.station_config import builtin_stations
     from procedures import all_procedures
 
     procs = {name: cls.describe() for name, cls in all_procedures().items()}
@@ -519,7 +524,8 @@ def _cmd_design(args: argparse.Namespace) -> int:
 
 # --- sim -----------------------------------------------------------------------------------------
 def _cmd_sim(args: argparse.Namespace) -> int:
-    from bench.station import SimStation, StationError
+    from bench.composition.sim_station import SimStation
+    from bench.devices import StationError
 
     try:
         station = SimStation(args.station, seed=args.seed, speed=args.speed)
@@ -536,7 +542,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     try:
         addresses = station.start_simulators()
         for kind_at in args.fault:
-            from bench.station import parse_fault
+            from bench.fault_kinds import parse_fault
 
             station.schedule_fault(*parse_fault(kind_at))
         print(

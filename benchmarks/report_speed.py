@@ -22,8 +22,8 @@ TARGET_S = 3.0
 
 
 def record_run(runs_dir: str) -> Path:
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.station import SimStation
     from procedures.hrg_damping import HrgDamping
 
     station = SimStation("sim-hrg", seed=0).open()

@@ -18,7 +18,7 @@ import numpy as np
 
 from bench.analysis.allan import NoiseTerms, adev_band, allan_deviation, read_noise_terms
 from bench.engine import Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 from .hrg_damping import _StreamTap
 from .hrg_excitation import HrgExcitation

@@ -18,7 +18,7 @@ import numpy as np
 
 from bench.analysis.cvg_rate import static_bias, turn_on_repeatability
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 from .cvg_output import MODES, CvgOutput, static_bias_truth, turn_on_sigma_truth
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from bench.analysis.cvg_rate import fit_scale_factor
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 from .cvg_output import MODES, CvgOutput, mean_bias_truth, scale_factor_truth, window_outputs
 

@@ -20,7 +20,7 @@ import numpy as np
 from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_drift_harmonics, fit_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
 from .hrg_excitation import HrgExcitation

@@ -30,7 +30,7 @@ from bench.analysis.maslov import (
     identify_forced,
 )
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 SWEEP = declare(StreamSchema("sweep", "mems-sweep", (
     Column("t_s", "s", quantity="time t"), Column("freq_hz", "Hz", quantity="drive frequency f"),

@@ -12,10 +12,11 @@ import pytest
 pytest.importorskip("pytestqt")
 
 from bench.cli import main  # noqa: E402
+from bench.devices import StationError
 from bench.engine import procedure as procedure_module  # noqa: E402
 from bench.engine.params import Param, ParamError  # noqa: E402
 from bench.gui.param_form import ParameterForm  # noqa: E402
-from bench.station import Station, StationError  # noqa: E402
+from bench.station import Station
 from procedures import find_procedure  # noqa: E402
 
 NUMBERS = ["0x10", "1e3", "abc", "", " 5 ", "nan", "inf", "-inf", "-0", "+7", "1_000", "99999", "-5000",

@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
+from bench.composition.sim_station import SimStation
 from bench.engine import Runner
 from bench.engine.params import ParamError
 from bench.recorder import open_run
-from bench.station import SimStation
 from procedures.hrg_free_decay import HrgFreeDecay
 from procedures.mems_sweep import MemsSweep, choose_model
 

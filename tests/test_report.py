@@ -102,8 +102,8 @@ def test_linear_trajectory_matches_an_adaptive_integration():
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     """One short run of each procedure: {name: raw file}."""
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.station import SimStation
     from procedures import find_procedure
 
     tmp = tmp_path_factory.mktemp("report_runs")

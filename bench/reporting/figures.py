@@ -48,7 +48,7 @@ def unit_text(unit: str | None) -> str:
 
 def declared(data: Any, source: str, column: str) -> tuple[str, str]:
     """(quantity, unit) of a stream's column or a fit's curve as the run declared it (the raw
-    file's declaration, bench.engine.streams); the unit is "" where nothing was declared."""
+    file's declaration, bench.streams); the unit is "" where nothing was declared."""
     try:
         return data.declared(source).get(column, (column, ""))
     except KeyError:

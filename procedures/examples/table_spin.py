@@ -1,7 +1,7 @@
 """Spin the table at a rate, hold it there, and check the rate the table reports."""
 
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 HOLD = declare(StreamSchema("hold", "table-spin", (Column("t_s", "s", quantity="time t"),
                                                     Column("rate_dps", "deg/s", quantity="table rate Ω"))))
