@@ -222,7 +222,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None = None, pdf: bool = False) -> Any:
     """Render the HTML report (and with pdf the PDF) of a recorded run beside its raw file (or
     to output); their paths."""
-    from bench.reporting import PdfUnavailable, write_report
+    from bench.pdf import PdfUnavailable
+    from bench.reporting import write_report
 
     try:
         return write_report(raw_file, row, output, pdf=pdf)
@@ -483,13 +484,13 @@ def _cmd_design(args: argparse.Namespace) -> int:
     """Design the run the procedure will make: its stream rate (boxcar-decimated from the FPGA's
     sample rate, which sets the noise per fitted sample), then table rate and record length."""
     from bench.analysis.damping_design import design_hrg_damping, design_hrg_free_decay
+    from bench.composition import simulated_unit
     from procedures.hrg_damping import HrgDamping
     from procedures.hrg_free_decay import HrgFreeDecay
-    from simulators.physics.params import ParameterError, preset
 
     proc = {"hrg-damping": HrgDamping, "hrg-free-decay": HrgFreeDecay}[args.procedure]
     try:
-        p = preset(args.preset)
+        p = simulated_unit(args.preset)
         stream_hz = args.stream_hz if args.stream_hz is not None else float(proc.stream_hz.default)
         if not 0 < stream_hz <= args.sample_hz:
             raise ValueError(f"--stream-hz {stream_hz:g} must be in (0, --sample-hz {args.sample_hz:g}]")
@@ -511,7 +512,7 @@ def _cmd_design(args: argparse.Namespace) -> int:
             design = design_hrg_damping(model=args.model, lengths_tau=(0.25, 0.5, 1.0, 2.0, 3.0), **kw)
         else:
             design = design_hrg_free_decay(**kw)
-    except (ParameterError, ValueError) as exc:
+    except ValueError as exc:  # a bad value, or no preset by that name (ParameterError)
         _err(str(exc))
         return EXIT_USAGE
     print(design.summary())

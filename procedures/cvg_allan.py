@@ -165,7 +165,7 @@ class CvgAllan(HrgExcitation, Procedure):
 
     def figures(self, data) -> list:
         """The log-log Allan deviation with its band, the read-offs and the slope lines."""
-        from bench.reporting.cvg_allan import figures
+        from procedures.figures.cvg_allan import figures
 
         return figures(self, data)
 

@@ -57,6 +57,8 @@ class CvgScaleFactor(CvgOutput, Procedure):
     """Scale factor, bias, nonlinearity and asymmetry from a rate series in both directions."""
 
     name = "cvg-scale-factor"
+    #: the rate windows' stream (its figures read it here)
+    windows_schema = WINDOWS
     requires = ("table", "fpga")
     kinds = ("hrg",)
 
@@ -148,6 +150,6 @@ class CvgScaleFactor(CvgOutput, Procedure):
 
     def figures(self, data) -> list:
         """The output against the rate with the fitted line, and the residuals in ppm of full scale."""
-        from bench.reporting.cvg import scale_factor_figures
+        from procedures.figures.cvg import scale_factor_figures
 
         return scale_factor_figures(self, data)

@@ -263,7 +263,7 @@ class HrgSelfcal(HrgExcitation, Procedure):
         return _analyse(c, r, self.smooth_s, dt, self.confidence)
 
     def figures(self, data) -> list:
-        from bench.reporting.selfcal import figures
+        from procedures.figures.hrg_selfcal import figures
 
         return figures(self, data)
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from bench.analysis.maslov import (
     PAPER_NATURAL_FREQ_HZ,
+    choose_model,
     derived_ci95,
     forced_param_names,
     identify_forced,
@@ -86,18 +87,6 @@ def _declarations() -> tuple[Measurement, ...]:
                            "sweeps at one frequency (model units)", when=lambda proc: proc.both_directions,
                            when_doc="both_directions"))
     return tuple(out)
-
-
-def choose_model(sigmas: dict[str, float], improvement: float) -> str:
-    """The simplest model that the next richer one does not beat by more than `improvement`
-    (relative reduction of the residual sigma)."""
-    chosen = "linear"
-    for richer in ("cubic", "quintic"):
-        if sigmas[richer] < (1.0 - improvement) * sigmas[chosen]:
-            chosen = richer
-        else:
-            break
-    return chosen
 
 
 def sweep_analysis(
@@ -304,8 +293,8 @@ class MemsSweep(Procedure):
         return results
 
     def figures(self, data) -> list:
-        """The figures this run's results need (bench.reporting.sweep): the report and
+        """The figures this run's results need (procedures.figures.mems_sweep): the report and
         `gyrobench analyze --figures` draw these."""
-        from bench.reporting.sweep import figures
+        from procedures.figures.mems_sweep import figures
 
         return figures(self, data)

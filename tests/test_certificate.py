@@ -113,9 +113,9 @@ def test_the_run_report_with_the_certificate_as_its_first_page(tmp_path):
     the PDF has the certificate on a page of its own."""
     from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.line.certificate import report_with_certificate
     from bench.recorder import open_run
     from bench.reporting import render_html as report_html
+    from bench.reporting.unit_certificate import report_with_certificate
     from procedures import find_procedure
 
     station = SimStation("sim-hrg", seed=3).open()

@@ -119,8 +119,8 @@ def test_h5dump_shows_units_and_legends(damping_run):
 
 
 def test_reader_and_report_show_declared_units_and_meanings(damping_run):
+    from bench.figures import stream_figure
     from bench.recorder import open_run
-    from bench.reporting.figures import stream_figure
 
     record, _ = damping_run
     with open_run(record.raw_file) as d:

@@ -39,6 +39,15 @@ def load_station(name_or_path: str | Path, **overrides: Any) -> Station | BatchS
     return Station(config)
 
 
+def simulated_unit(preset: str) -> Any:
+    """The resonator parameters of a simulated preset ("hrg", "mems" ...): what `gyrobench design`
+    takes its defaults from.  ValueError (simulators.physics.params.ParameterError) naming the
+    known presets when there is none by that name."""
+    from simulators.physics.params import preset as make_preset
+
+    return make_preset(preset)
+
+
 def load_batch_station(name_or_path: str | Path | StationConfig, **overrides: Any) -> BatchStation:
     """A several-gyros station (one table, N slots) from its station file, real or simulated."""
     config = name_or_path if isinstance(name_or_path, StationConfig) else load_config(name_or_path)

@@ -55,8 +55,8 @@ class TableSpin(Procedure):
         return [Result("table_rate_dps", mean, ci95=(mean - half, mean + half))]  # of the mean of the readings
 
     def figures(self, data) -> list:
-        """The figures this run's results need (bench.reporting.table_spin): the report and
+        """The figures this run's results need (procedures.figures.table_spin): the report and
         `gyrobench analyze --figures` draw these."""
-        from bench.reporting.table_spin import figures
+        from procedures.figures.table_spin import figures
 
         return figures(self, data)

@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from .numbers import pretty_unit  # noqa: E402
+from bench.numbers import pretty_unit  # noqa: E402
 
 #: points of a record drawn as a line; longer records are drawn as a min/max envelope of this many bins
 ENVELOPE_BINS = 1200
