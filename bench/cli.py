@@ -132,8 +132,11 @@ def _warn_unfired_faults(station: Any, faults: list[tuple[str, float]]) -> None:
 
 # --- run -----------------------------------------------------------------------------------------
 def _cmd_run(args: argparse.Namespace) -> int:
+    from bench.composition import load_station
+    from bench.composition.sim_station import SimStation
+    from bench.devices import StationError
     from bench.engine import ParamError, Runner, check_station
-    from bench.station import SimStation, Station, StationError, parse_fault
+    from bench.fault_kinds import parse_fault
     from procedures import ProcedureNotFound, find_procedure
 
     try:
@@ -146,7 +149,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if args.speed is not None:
             overrides["speed"] = _speed(args.speed)
         faults = [parse_fault(f) for f in args.fault]
-        station = Station.load(args.station, **overrides)
+        station = load_station(args.station, **overrides)
         if hasattr(station, "slots"):  # several gyros on one table: a batch, one unit a slot
             raise StationError(
                 f"station {station.id!r} holds {station.n_slots} gyros on one table: run a sequence on them "
@@ -219,7 +222,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None = None, pdf: bool = False) -> Any:
     """Render the HTML report (and with pdf the PDF) of a recorded run beside its raw file (or
     to output); their paths."""
-    from bench.reporting import PdfUnavailable, write_report
+    from bench.pdf import PdfUnavailable
+    from bench.reporting import write_report
 
     try:
         return write_report(raw_file, row, output, pdf=pdf)
@@ -255,7 +259,9 @@ def _print_record(js: dict[str, Any]) -> None:
 
 # --- list / runs / show ------------------------------------------------------------------------
 def _cmd_list(args: argparse.Namespace) -> int:
-    from bench.station import DRIVERS, FAULTS, builtin_stations
+    from bench.devices import DRIVERS
+    from bench.fault_kinds import FAULTS
+    from bench.station_config import builtin_stations
     from procedures import all_procedures
 
     procs = {name: cls.describe() for name, cls in all_procedures().items()}
@@ -478,13 +484,13 @@ def _cmd_design(args: argparse.Namespace) -> int:
     """Design the run the procedure will make: its stream rate (boxcar-decimated from the FPGA's
     sample rate, which sets the noise per fitted sample), then table rate and record length."""
     from bench.analysis.damping_design import design_hrg_damping, design_hrg_free_decay
+    from bench.composition import simulated_unit
     from procedures.hrg_damping import HrgDamping
     from procedures.hrg_free_decay import HrgFreeDecay
-    from simulators.physics.params import ParameterError, preset
 
     proc = {"hrg-damping": HrgDamping, "hrg-free-decay": HrgFreeDecay}[args.procedure]
     try:
-        p = preset(args.preset)
+        p = simulated_unit(args.preset)
         stream_hz = args.stream_hz if args.stream_hz is not None else float(proc.stream_hz.default)
         if not 0 < stream_hz <= args.sample_hz:
             raise ValueError(f"--stream-hz {stream_hz:g} must be in (0, --sample-hz {args.sample_hz:g}]")
@@ -506,7 +512,7 @@ def _cmd_design(args: argparse.Namespace) -> int:
             design = design_hrg_damping(model=args.model, lengths_tau=(0.25, 0.5, 1.0, 2.0, 3.0), **kw)
         else:
             design = design_hrg_free_decay(**kw)
-    except (ParameterError, ValueError) as exc:
+    except ValueError as exc:  # a bad value, or no preset by that name (ParameterError)
         _err(str(exc))
         return EXIT_USAGE
     print(design.summary())
@@ -519,7 +525,8 @@ def _cmd_design(args: argparse.Namespace) -> int:
 
 # --- sim -----------------------------------------------------------------------------------------
 def _cmd_sim(args: argparse.Namespace) -> int:
-    from bench.station import SimStation, StationError
+    from bench.composition.sim_station import SimStation
+    from bench.devices import StationError
 
     try:
         station = SimStation(args.station, seed=args.seed, speed=args.speed)
@@ -536,7 +543,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     try:
         addresses = station.start_simulators()
         for kind_at in args.fault:
-            from bench.station import parse_fault
+            from bench.fault_kinds import parse_fault
 
             station.schedule_fault(*parse_fault(kind_at))
         print(

@@ -3,7 +3,7 @@
 
 A spec says everything the station needs to know about one model: its config keys, how to build
 the driver, how to ask it for a sign of life, its safe-state step and which part of the engine's
-safe state it plays (`bench.engine.safety.SAFE_PARTS`), its stream (if any) and where its
+safe state it plays (`bench.devices.SAFE_PARTS`), its stream (if any) and where its
 simulator is served.  The station never names a model or a role: a new rate-table model is one
 new `drivers/rate_table/<model>_spec.py` (+ its simulator), found by `load_builtin_drivers`.
 """
@@ -16,9 +16,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from bench.engine.safety import SAFE_PARTS
 from bench.validation import KIND_WORDS, ValidationError, convert, missing_key, unknown_name
 
+#: the parts of a station's safe state, in the order they are done; each device's spec says which
+#: part it plays.  A part holds a list of devices, so with several gyros on one table every slot's
+#: drive is cut before the one shared table is brought to rest, and then every slot's outputs go off
+SAFE_PARTS: tuple[str, ...] = ("drive-cut", "table-to-rest", "outputs-off")
 #: the roles a station file may name (`[devices.<role>]`); the several-gyros issue adds slots of
 #: `frontend`/`fpga` (N front ends and N links per station) beside the one shared `table`
 ROLES = ("table", "frontend", "fpga")
@@ -168,8 +171,8 @@ def unregister_driver(name: str) -> None:
 
 def load_builtin_drivers() -> None:
     """Import every `drivers/<kind>/spec.py` and `drivers/<kind>/*_spec.py`: each registers itself."""
-    import drivers
-
+    # found by name, like entry points: the registry (a data contract) imports no driver module
+    drivers = importlib.import_module("drivers")
     for kind in sorted(pkgutil.iter_modules(drivers.__path__), key=lambda m: m.name):
         if not kind.ispkg:
             continue

@@ -26,7 +26,7 @@ def sim_world():
 def sim_station(request):
     """An opened simulated station (built-in `sim-hrg`, seed 0, lockstep), closed afterwards.
     Choose another with `@pytest.mark.parametrize("sim_station", ["sim-mems"], indirect=True)`."""
-    from bench.station import SimStation
+    from bench.composition.sim_station import SimStation
 
     name = getattr(request, "param", "sim-hrg")
     station = SimStation(name, seed=0).open()

@@ -1,7 +1,7 @@
 """Raw data of a run: one HDF5 file, written as the events arrive, readable after a crash.
 
 Layout: `/streams/<name>` (rows x columns float64, chunked; attributes `columns`, `units`,
-`dtypes` and `source` from the stream's declaration, bench.engine.streams),
+`dtypes` and `source` from the stream's declaration, bench.streams),
 `/legends/<stream>/<column>` (a coded column's legend as a named HDF5 enum type, which h5dump
 shows with its meanings; files written before these hold `legend_<column>` JSON attributes,
 still read), `/parameters/<name>` (scalars with `units`), `/log` and `/measurements` (one JSON
@@ -42,7 +42,7 @@ import numpy as np
 
 from bench.engine import events as ev
 from bench.engine.context import RunAborted
-from bench.engine.streams import StreamSchema, schema_of, unit_from_name
+from bench.streams import StreamSchema, schema_of, unit_from_name
 
 CHUNK_ROWS = 4096
 FLUSH_EVERY_S = 1.0

@@ -24,7 +24,7 @@ from bench.devices import DRIVERS, StationError, close_devices
 from bench.engine.context import GuardedClock
 from bench.engine.safety import SafeStateReport, by_part
 from bench.station import Station
-from bench.station_config import StationConfig, load_config
+from bench.station_config import StationConfig
 from drivers.errors import DeviceError, LinkLostError, SafetyTripError
 
 #: roles only batch steps drive (run once for every slot)
@@ -203,18 +203,6 @@ class BatchStation:
         self._check_lock = threading.Lock()
         self._last_shared_check = -math.inf
         self._on_lock_broken: Callable[[int, threading.Thread, str], None] | None = None
-
-    @classmethod
-    def load(cls, name_or_path: Any, **overrides: Any) -> BatchStation:
-        config = load_config(name_or_path)
-        if config.simulation is not None:
-            from simulators.rig_station import SimBatchStation
-
-            return SimBatchStation(config, **overrides)
-        if overrides:
-            raise StationError(f"{config.source}: a real station; {', '.join('--' + k for k in overrides)} "
-                               "apply only to a simulated one")
-        return cls(config)
 
     def _make_clock(self) -> Any:
         from bench.clock import RealClock

@@ -6,11 +6,12 @@ model lives in its spec next to its driver (`drivers/<kind>/<model>_spec.py`): k
 health, stream, safe-state step and part.  This module only composes them and never names a role
 or a model: a new rate-table model is one new spec file (+ its simulator), a second FPGA or N
 front ends are more `[devices.*]` entries whose specs say the same parts.  The safe-state order is
-the engine's rule (bench.engine.safety.SAFE_PARTS: every drive cut, then the table to rest, then
+the engine's rule (bench.devices.SAFE_PARTS: every drive cut, then the table to rest, then
 every output off); each part is a list of devices, so the several-gyros station makes every
 slot's drive safe before the shared table is brought to rest.  With a `[simulation]` table the
-station is a `simulators.station_sim.SimStation` (World + SimClock, simulators on loopback, faults
-of simulators.faults).  Example (`bench/stations/sim-hrg.toml`):
+station is a `bench.composition.sim_station.SimStation` (World + SimClock, simulators on loopback,
+faults of simulators.faults), built by the composition root `bench.composition.load_station`.
+Example (`bench/stations/sim-hrg.toml`):
 
     [station]
     id = "sim-hrg"
@@ -33,54 +34,17 @@ import math
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bench.devices import (  # noqa: F401 - re-exported: the station's public names
-    DRIVERS,
-    ROLES,
-    DriverSpec,
-    Key,
-    StationError,
-    StreamSpec,
-    check_table,
-    close_devices,
-    register_driver,
-)
+from bench.devices import DRIVERS, DriverSpec, StreamSpec, close_devices
 from bench.engine.context import GuardedClock
 from bench.engine.safety import SafeStateReport, by_part
-from bench.station_config import (  # noqa: F401 - re-exported
-    BUILTIN_DIR,
-    PRESET_KINDS,
-    SIM_KEYS,
-    STATION_KEYS,
-    StationConfig,
-    builtin_stations,
-    find_station_file,
-    load_config,
-)
+from bench.station_config import PRESET_KINDS, StationConfig
 from drivers.errors import DeviceError, LinkLostError, SafetyTripError
 
 _log = logging.getLogger(__name__)
-#: names that live with the simulators, importable from here as before (loaded on first use)
-_SIMULATED = {
-    "SimStation": "simulators.station_sim",
-    "FAULTS": "simulators.faults",
-    "FRONTEND_HANG_WALL_S": "simulators.faults",
-    "parse_fault": "simulators.faults",
-}
-
-
-def __getattr__(name: str) -> Any:
-    if name in _SIMULATED:
-        import importlib
-
-        return getattr(importlib.import_module(_SIMULATED[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 class Station:
     """Devices by role, the bench clock, the safe state and the link checks of one station."""
 
@@ -108,24 +72,6 @@ class Station:
         self._lock = threading.RLock()
         #: each streaming device's counters (lost/corrupt frames...) when this run's stream began, by role
         self._stream_since: dict[str, Any] = {}
-
-    @classmethod
-    def load(cls, name_or_path: str | Path, **overrides: Any) -> Station:
-        """Check a station file and build its (unopened) station; simulated ones become SimStation."""
-        config = load_config(name_or_path)
-        if config.slots:  # several gyros on one table (bench.slots)
-            from bench.slots import BatchStation
-
-            return BatchStation.load(config.source, **overrides)
-        if config.simulation is not None:
-            from simulators.station_sim import SimStation
-
-            return SimStation(config, **overrides)
-        if overrides:
-            options = ", ".join(f"--{k}" for k in sorted(overrides))
-            verb = "applies" if len(overrides) == 1 else "apply"
-            raise StationError(f"{config.source}: a real station; {options} {verb} only to a simulated one")
-        return cls(config)
 
     def spec(self, role: str) -> DriverSpec:
         """The spec of the model this station's `role` uses."""

@@ -17,11 +17,11 @@ import time
 import numpy as np
 
 from bench.analysis.slow_model import orbit_elements, state_from_elements
+from bench.composition.sim_station import SimStation
 from bench.engine import Runner
 from bench.line.compensation import from_runs
 from bench.line.fpga_cli import load_trims
 from bench.results import ResultsStore
-from bench.station import SimStation
 from procedures.hrg_damping import HrgDamping
 from procedures.hrg_free_decay import HrgFreeDecay
 

@@ -115,8 +115,8 @@ def device_world(hours: float, seed: int = 1) -> tuple[float, float]:
 
 def procedure(hours: float, runs_dir: str, seed: int = 0) -> tuple[float, dict]:
     """(b) simulated hours per wall minute of the whole cvg-allan run (its record and the rest)."""
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.station import SimStation
     from procedures.cvg_allan import CvgAllan
 
     station = SimStation("sim-hrg-wa", seed=seed).open()

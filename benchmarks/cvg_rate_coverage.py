@@ -90,9 +90,9 @@ def bias_coverage(n: int, rng: np.random.Generator) -> None:
 
 
 def end_to_end(seeds: int, stations: tuple[str, ...] = ("sim-hrg", "sim-hrg-ftr")) -> None:
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
     from bench.results import ResultsStore
-    from bench.station import SimStation
     from procedures.cvg_bias import CvgBias
     from procedures.cvg_scale_factor import CvgScaleFactor
 

@@ -16,8 +16,8 @@ import time
 import numpy as np
 
 from bench.analysis.damping_design import design_hrg_damping
+from bench.composition.sim_station import SimStation
 from bench.engine import Runner
-from bench.station import SimStation
 from procedures.hrg_damping import HrgDamping
 
 

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.composition.sim_station import SimStation
 from bench.engine import Runner, events
 from bench.engine.context import GuardedClock
 from bench.recorder import Recorder
-from bench.station import SimStation
 from procedures.examples.table_spin import TableSpin
 
 

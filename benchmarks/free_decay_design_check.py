@@ -24,8 +24,8 @@ import numpy as np
 from scipy.stats import chi2
 
 from bench.analysis.damping_design import design_hrg_free_decay
+from bench.composition.sim_station import SimStation
 from bench.engine import Runner
-from bench.station import SimStation
 from procedures.hrg_free_decay import HrgFreeDecay
 from simulators.physics.params import preset
 

@@ -46,17 +46,17 @@ def _cpu_s() -> float:
 
 def one_batch(n: int, sequence: str, seed: int, folder: Path) -> dict:
     """The sequence on n slots at once: bench seconds, wall and CPU seconds, outcomes."""
+    from bench.composition import load_station
     from bench.line.batch_run import run_batch_attempt
     from bench.line.limits import load_limits
     from bench.line.run import LineContext
     from bench.line.sequence import load_sequence
-    from bench.station import Station
 
     station_file = folder / f"sim-hrg-{n}.toml"
     station_file.write_text(HEAD.format(n=n, seed=seed) + "".join(SLOT.format(n=k) for k in range(1, n + 1)))
     seq = load_sequence(sequence)
     ctx = LineContext(seq, load_limits(seq.limits), f"sim-hrg-{n}", "bench", folder / f"runs{n}")
-    station = Station.load(station_file).open()
+    station = load_station(station_file).open()
     try:
         t0_bench, t0_wall, t0_cpu = station.base_clock.now(), time.monotonic(), _cpu_s()
         records = run_batch_attempt(ctx, station, {k: f"B{n}-{k}" for k in range(1, n + 1)}, _Yes())

@@ -99,7 +99,7 @@ def timed(fn: Callable[[], object], n: int) -> tuple[float, float]:
 
 def station_checks(n: int) -> dict[str, tuple[float, float]]:
     """Each link check of an open sim-hrg station (stream running, world still) per call."""
-    from bench.station import SimStation
+    from bench.composition.sim_station import SimStation
 
     station = SimStation("sim-hrg", seed=0).open()
     try:

@@ -113,9 +113,10 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
     from bench.engine.context import GuardedClock
-    from bench.station import SimStation, Station
+    from bench.station import Station
     from bench.validation import parse_assignment
     from drivers.fpga.link import FpgaLink
     from procedures import find_procedure

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import h5py
 
+from bench.fault_kinds import FAULTS
 from bench.results import ResultsStore
-from bench.station import FAULTS
 
 ROOT = Path(__file__).resolve().parents[1]
 #: (procedure, station, --set values, fault times in simulated s within the run)

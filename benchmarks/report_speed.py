@@ -22,8 +22,8 @@ TARGET_S = 3.0
 
 
 def record_run(runs_dir: str) -> Path:
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.station import SimStation
     from procedures.hrg_damping import HrgDamping
 
     station = SimStation("sim-hrg", seed=0).open()
@@ -51,7 +51,8 @@ def main() -> None:
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         cli.append(time.perf_counter() - t0)
         cpu.append(r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime)  # what a machine to itself would take
-    from bench.reporting import render_html, write_pdf
+    from bench.pdf import write_pdf
+    from bench.reporting import render_html
 
     inproc = []
     with open_run(raw) as data:

@@ -20,8 +20,8 @@ import tempfile
 
 
 def run(cycles: int, seed: int, runs_dir: str, noise_free: bool = False) -> tuple[float, float, dict]:
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.station import SimStation
     from procedures.hrg_selfcal import HrgSelfcal
 
     resonator = None

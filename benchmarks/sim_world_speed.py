@@ -200,8 +200,8 @@ def device_world(duration_s: float = 120.0, seed: int = 1) -> tuple[float, float
 
 def damping_procedure(runs_dir: str, seed: int = 0) -> tuple[float, float]:
     """(c) x real time of the whole hrg-damping procedure (its defaults) on sim-hrg."""
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.station import SimStation
     from procedures.hrg_damping import HrgDamping
 
     station = SimStation("sim-hrg", seed=seed).open()

@@ -42,9 +42,9 @@ import tempfile
 import time
 
 from bench.analysis.damping import fit_drift_harmonics
+from bench.composition.sim_station import SimStation
 from bench.engine import Runner
 from bench.recorder import RunData
-from bench.station import SimStation
 from procedures.hrg_damping import HrgDamping
 
 

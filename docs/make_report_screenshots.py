@@ -25,8 +25,8 @@ STATIONS = {"hrg-damping": "sim-hrg", "hrg-free-decay": "sim-hrg", "mems-sweep":
 
 def record(name: str, runs_dir: Path, seed: int) -> Path:
     """One full default-parameter run of the procedure on its simulated station."""
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.station import SimStation
     from procedures import find_procedure
 
     station = SimStation(STATIONS[name], seed=seed).open()

@@ -37,6 +37,8 @@ def all_procedures() -> dict[str, type]:
     """Every procedure in this package by name; a module that fails to import is skipped."""
     found: dict[str, type] = {}
     for info in pkgutil.walk_packages(__path__, prefix=__name__ + "."):
+        if info.name.startswith(f"{__name__}.figures"):  # the procedures' figures: no procedure there
+            continue
         try:
             module = importlib.import_module(info.name)
         except Exception:  # noqa: BLE001 - one broken module must not hide the others

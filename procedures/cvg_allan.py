@@ -18,7 +18,7 @@ import numpy as np
 
 from bench.analysis.allan import NoiseTerms, adev_band, allan_deviation, read_noise_terms
 from bench.engine import Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 from .hrg_damping import _StreamTap
 from .hrg_excitation import HrgExcitation
@@ -165,7 +165,7 @@ class CvgAllan(HrgExcitation, Procedure):
 
     def figures(self, data) -> list:
         """The log-log Allan deviation with its band, the read-offs and the slope lines."""
-        from bench.reporting.cvg_allan import figures
+        from procedures.figures.cvg_allan import figures
 
         return figures(self, data)
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from bench.analysis.cvg_rate import static_bias, turn_on_repeatability
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 from .cvg_output import MODES, CvgOutput, static_bias_truth, turn_on_sigma_truth
 
@@ -33,6 +33,8 @@ class CvgBias(CvgOutput, Procedure):
     """Bias at rest (Earth's rate removed) and its turn-on to turn-on repeatability."""
 
     name = "cvg-bias"
+    #: the turn-on windows' stream (its figures read it here)
+    windows_schema = WINDOWS
     requires = ("fpga",)
     kinds = ("hrg",)
 
@@ -122,6 +124,6 @@ class CvgBias(CvgOutput, Procedure):
 
     def figures(self, data) -> list:
         """Each turn-on's input-referred rate (batch means) with its bias and interval."""
-        from bench.reporting.cvg import bias_figures
+        from procedures.figures.cvg import bias_figures
 
         return bias_figures(self, data)

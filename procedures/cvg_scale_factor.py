@@ -22,7 +22,7 @@ import numpy as np
 
 from bench.analysis.cvg_rate import fit_scale_factor
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 from .cvg_output import MODES, CvgOutput, mean_bias_truth, scale_factor_truth, window_outputs
 
@@ -57,6 +57,8 @@ class CvgScaleFactor(CvgOutput, Procedure):
     """Scale factor, bias, nonlinearity and asymmetry from a rate series in both directions."""
 
     name = "cvg-scale-factor"
+    #: the rate windows' stream (its figures read it here)
+    windows_schema = WINDOWS
     requires = ("table", "fpga")
     kinds = ("hrg",)
 
@@ -148,6 +150,6 @@ class CvgScaleFactor(CvgOutput, Procedure):
 
     def figures(self, data) -> list:
         """The output against the rate with the fitted line, and the residuals in ppm of full scale."""
-        from bench.reporting.cvg import scale_factor_figures
+        from procedures.figures.cvg import scale_factor_figures
 
         return scale_factor_figures(self, data)

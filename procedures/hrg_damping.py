@@ -20,7 +20,7 @@ import numpy as np
 from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_drift_harmonics, fit_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
 from .hrg_excitation import HrgExcitation
@@ -149,6 +149,9 @@ class HrgDamping(HrgExcitation, Procedure):
     """HRG damping non-uniformity from a free decay on a rate table (the patent), with compensation."""
 
     name = "hrg-damping"
+    #: the record windows' stream and the decay window's kind in it (its figures read them here)
+    windows_stream = WINDOWS
+    decay_kind = DECAY
     requires = ("table", "frontend", "fpga")
     kinds = ("hrg",)
 
@@ -409,8 +412,8 @@ class HrgDamping(HrgExcitation, Procedure):
         return out
 
     def figures(self, data) -> list:
-        """The figures this run's results need (bench.reporting.damping): the report and
+        """The figures this run's results need (procedures.figures.hrg_damping): the report and
         `gyrobench analyze --figures` draw these."""
-        from bench.reporting.damping import figures
+        from procedures.figures.hrg_damping import figures
 
         return figures(self, data)

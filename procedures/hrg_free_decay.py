@@ -20,7 +20,7 @@ import numpy as np
 from bench.analysis.maslov import derived_ci95, free_param_names, identify_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
 from .hrg_excitation import HrgExcitation
@@ -167,6 +167,9 @@ class HrgFreeDecay(HrgExcitation, Procedure):
     """HRG free decay on a rate table, identified with Maslov's slow-variable model."""
 
     name = "hrg-free-decay"
+    #: the identified record's window stream and its columns (its figures read them here)
+    window_stream = WINDOW
+    window_columns = WINDOW_COLUMNS
     requires = ("table", "fpga")
     kinds = ("hrg",)
 
@@ -244,8 +247,8 @@ class HrgFreeDecay(HrgExcitation, Procedure):
         return self._analyse(data)[0]
 
     def figures(self, data) -> list:
-        """The figures this run's results need (bench.reporting.free_decay): the report and
+        """The figures this run's results need (procedures.figures.hrg_free_decay): the report and
         `gyrobench analyze --figures` draw these."""
-        from bench.reporting.free_decay import figures
+        from procedures.figures.hrg_free_decay import figures
 
         return figures(self, data)

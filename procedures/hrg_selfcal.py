@@ -17,7 +17,7 @@ import numpy as np
 
 from bench.analysis import selfcal as sc
 from bench.engine import Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 from drivers.fpga import protocol as fp
 
 from .hrg_damping import _StreamTap
@@ -263,7 +263,7 @@ class HrgSelfcal(HrgExcitation, Procedure):
         return _analyse(c, r, self.smooth_s, dt, self.confidence)
 
     def figures(self, data) -> list:
-        from bench.reporting.selfcal import figures
+        from procedures.figures.hrg_selfcal import figures
 
         return figures(self, data)
 

@@ -25,12 +25,13 @@ import numpy as np
 
 from bench.analysis.maslov import (
     PAPER_NATURAL_FREQ_HZ,
+    choose_model,
     derived_ci95,
     forced_param_names,
     identify_forced,
 )
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 SWEEP = declare(StreamSchema("sweep", "mems-sweep", (
     Column("t_s", "s", quantity="time t"), Column("freq_hz", "Hz", quantity="drive frequency f"),
@@ -86,18 +87,6 @@ def _declarations() -> tuple[Measurement, ...]:
                            "sweeps at one frequency (model units)", when=lambda proc: proc.both_directions,
                            when_doc="both_directions"))
     return tuple(out)
-
-
-def choose_model(sigmas: dict[str, float], improvement: float) -> str:
-    """The simplest model that the next richer one does not beat by more than `improvement`
-    (relative reduction of the residual sigma)."""
-    chosen = "linear"
-    for richer in ("cubic", "quintic"):
-        if sigmas[richer] < (1.0 - improvement) * sigmas[chosen]:
-            chosen = richer
-        else:
-            break
-    return chosen
 
 
 def sweep_analysis(
@@ -304,8 +293,8 @@ class MemsSweep(Procedure):
         return results
 
     def figures(self, data) -> list:
-        """The figures this run's results need (bench.reporting.sweep): the report and
+        """The figures this run's results need (procedures.figures.mems_sweep): the report and
         `gyrobench analyze --figures` draw these."""
-        from bench.reporting.sweep import figures
+        from procedures.figures.mems_sweep import figures
 
         return figures(self, data)

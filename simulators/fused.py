@@ -15,7 +15,7 @@ per-block path makes, in the same order, so seeded runs are bit-identical either
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -27,10 +27,11 @@ from .frontend.model import FrontEndModel
 from .fused_kernel import closed_loop_blocks
 from .physics.averaged import damping_terms
 from .rate_table.mechanics import TableMechanics
-from .world import WorldBlock
+from .world_block import WorldBlock
 
-if TYPE_CHECKING:
-    from .world import World
+#: the World (simulators.world) a fused run advances: typed Any here, as the world imports this
+#: module and this module never imports the world
+World = Any
 
 #: at most this many blocks in one fused call (a lockstep grid step is 8 loop periods)
 MAX_FUSED_BLOCKS = 64

@@ -9,8 +9,8 @@ import time
 
 import pytest
 
+from bench.composition.sim_station import SimStation
 from bench.engine import Procedure, Runner, step
-from bench.station import SimStation
 
 
 class SpinThenThink(Procedure):

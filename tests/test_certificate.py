@@ -111,11 +111,11 @@ def test_the_run_report_with_the_certificate_as_its_first_page(tmp_path):
     """A short table-spin run's report with the unit's certificate in the report's `certificate`
     block: the certificate comes before the report's heading, the report follows unchanged, and
     the PDF has the certificate on a page of its own."""
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.line.certificate import report_with_certificate
     from bench.recorder import open_run
     from bench.reporting import render_html as report_html
-    from bench.station import SimStation
+    from bench.reporting.unit_certificate import report_with_certificate
     from procedures import find_procedure
 
     station = SimStation("sim-hrg", seed=3).open()

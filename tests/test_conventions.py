@@ -22,9 +22,10 @@ from types import SimpleNamespace
 import pytest
 
 import procedures
+from bench.devices import DRIVERS, ROLES, Key, StationError
 from bench.engine.demands import KINDS, Demand
 from bench.engine.params import Param
-from bench.station import DRIVERS, ROLES, SIM_KEYS, STATION_KEYS, Key, StationError, builtin_stations, load_config
+from bench.station_config import SIM_KEYS, STATION_KEYS, builtin_stations, load_config
 from bench.validation import LimitError, fmt_value
 from procedures import all_procedures
 

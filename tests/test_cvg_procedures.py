@@ -23,9 +23,9 @@ BIAS_SF = {"sim-hrg": {}, "sim-hrg-ftr": {"scale_factor": 0.9972}}
 
 
 def _run(station_name: str, procedure, params, tmp):
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
     from bench.results import ResultsStore
-    from bench.station import SimStation
 
     station = SimStation(station_name, seed=0).open()
     store = ResultsStore(tmp / "results.sqlite")

@@ -34,9 +34,9 @@ def _within(res, truth: float, factor: float = 2.0) -> bool:
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     """One run shared by the checks below (the procedure is the expensive part)."""
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
     from bench.results import ResultsStore
-    from bench.station import SimStation
 
     tmp = tmp_path_factory.mktemp("hrg_damping")
     station = SimStation("sim-hrg", seed=0).open()

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from bench.composition.sim_station import SimStation
 from bench.engine import Runner
 from bench.recorder import open_run
-from bench.station import SimStation
 from procedures.hrg_free_decay import HrgFreeDecay
 
 PARAMS = {"record_s": 5.0, "rate_dps": 100.0, "amplitude_timeout_s": 60.0}

@@ -260,9 +260,9 @@ def test_abort_requested_before_the_run_starts_still_aborts():
 
 def test_a_failing_recorder_makes_the_run_an_error_and_the_record_is_still_written(tmp_path, monkeypatch):
     """Disk full, h5py error...: the run must not end COMPLETE with raw data missing."""
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
     from bench.recorder import Recorder
-    from bench.station import SimStation
     from procedures.examples.table_spin import TableSpin
 
     real = Recorder.on_event

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from bench.station import SimStation
+from bench.composition.sim_station import SimStation
 from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
 from drivers.frontend.sr865_pair import Sr865PairFrontEnd
 from simulators.frontend.sr865_server import Sr865Model

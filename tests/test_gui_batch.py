@@ -12,9 +12,9 @@ import numpy as np
 def test_batch_view_shows_a_column_per_slot():
     from PySide6.QtWidgets import QApplication
 
+    from bench.composition import load_station
     from bench.engine.batch import Batch
     from bench.gui.batch_view import BatchView
-    from bench.station import Station
     from procedures.hrg_damping import HrgDamping
 
     app = QApplication.instance() or QApplication([])
@@ -22,7 +22,7 @@ def test_batch_view_shows_a_column_per_slot():
     view = BatchView(serials)
     view.resize(1200, 420)
     view.show()
-    station = Station.load("sim-hrg-4", seed=0).open()
+    station = load_station("sim-hrg-4", seed=0).open()
     try:
         station.schedule_fault("link-drop", 20.0, slot=3)
         batch = Batch(station, serials)

@@ -11,11 +11,12 @@ import pytest
 
 pytest.importorskip("pytestqt")
 
+import bench.composition as composition
 from bench.cli import main  # noqa: E402
+from bench.devices import StationError
 from bench.engine import procedure as procedure_module  # noqa: E402
 from bench.engine.params import Param, ParamError  # noqa: E402
 from bench.gui.param_form import ParameterForm  # noqa: E402
-from bench.station import Station, StationError  # noqa: E402
 from procedures import find_procedure  # noqa: E402
 
 NUMBERS = ["0x10", "1e3", "abc", "", " 5 ", "nan", "inf", "-inf", "-0", "+7", "1_000", "99999", "-5000",
@@ -96,7 +97,7 @@ def _via_cli(procedure: str, name: str, text: str, capsys, monkeypatch) -> objec
         raise StationError(ACCEPTED)
 
     monkeypatch.setattr(procedure_module, "resolve_params", spy)
-    monkeypatch.setattr(Station, "load", staticmethod(no_station))
+    monkeypatch.setattr(composition, "load_station", no_station)
     code = main(["run", procedure, "--set", f"{name}={text}"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and err.startswith("gyrobench: "), err

@@ -10,9 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.composition.sim_station import SimStation
+from bench.devices import StationError
 from bench.engine import Runner
 from bench.recorder import open_run
-from bench.station import SimStation, StationError, load_config
+from bench.station_config import load_config
 from drivers.errors import DeviceError, LimitError, LinkLostError
 from drivers.instrument.station_device import InstrumentDevice
 from simulators.instruments import keithley2200 as k2200

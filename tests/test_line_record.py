@@ -28,12 +28,12 @@ class Yes:
 
 
 def _run(tmp_path, sequence, limits_text, serial="SN-1"):
-    from bench.station import Station
+    from bench.composition import load_station
 
     lim = tmp_path / "limits.toml"
     lim.write_text(limits_text)
     ctx = LineContext(load_sequence(sequence), load_limits(lim), "sim-hrg", "ann", tmp_path, lot="L7")
-    return run_unit(ctx, lambda: Station.load("sim-hrg"), serial, Yes())
+    return run_unit(ctx, lambda: load_station("sim-hrg"), serial, Yes())
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +136,7 @@ def test_a_run_that_errors_is_recorded_and_retested(tmp_path):
     """The table's emergency stop in the first attempt: the run ends ERROR in the safe state, the
     unit's record says ERROR (its limited measurement never measured), and the retest policy runs a
     second attempt, which passes; both records are kept."""
-    from bench.station import Station
+    from bench.composition import load_station
 
     seq = tmp_path / "retest.toml"
     seq.write_text('[sequence]\nname="retest"\n[retest]\nmax_attempts=2\non=["ERROR"]\n'
@@ -147,7 +147,7 @@ def test_a_run_that_errors_is_recorded_and_retested(tmp_path):
     opened = []
 
     def open_station():
-        st = Station.load("sim-hrg")
+        st = load_station("sim-hrg")
         if not opened:
             st.schedule_fault("table-estop", 1.0)
         opened.append(st)
@@ -163,9 +163,9 @@ def test_a_run_that_errors_is_recorded_and_retested(tmp_path):
 
 def test_a_record_the_database_refuses_is_kept_and_imported_later(tmp_path, capsys):
     from bench.cli import main
+    from bench.composition import load_station
     from bench.line import LineError
     from bench.line.db import LineDB
-    from bench.station import Station
 
     class Down:
         def save(self, record):
@@ -174,7 +174,7 @@ def test_a_record_the_database_refuses_is_kept_and_imported_later(tmp_path, caps
     lim = tmp_path / "limits.toml"
     lim.write_text('[product]\nname="p"\n[limits.table_rate_dps]\nlow=99.5\nhigh=100.5\n')
     ctx = LineContext(load_sequence("ci-spin"), load_limits(lim), "sim-hrg", "ann", tmp_path, db=Down(), lot="L9")
-    (rec,) = run_unit(ctx, lambda: Station.load("sim-hrg"), "SN-3", Yes())
+    (rec,) = run_unit(ctx, lambda: load_station("sim-hrg"), "SN-3", Yes())
     on_disk = json.loads(Path(rec["record_file"]).read_text())
     assert "connection refused" in on_disk["db_error"] and on_disk["outcome"] == "PASS"
     jsonschema.validate(on_disk, json.loads(SCHEMA_PATH.read_text()))

@@ -13,7 +13,8 @@ from bench.cli import main
 from bench.line.db import LineDB
 from bench.line.record import SCHEMA_PATH
 from bench.line.report import render_html, summarize
-from bench.line.simulate import check_lot, draw_units, expected_outcome
+from bench.line.simulate import check_lot, expected_outcome
+from simulators.lot import draw_units
 
 SEED, UNITS = 1, 5
 

@@ -10,8 +10,8 @@ import math
 import pytest
 
 from bench.clock import SimClock
+from bench.composition.sim_station import SimStation
 from bench.engine.context import GuardedClock
-from bench.station import SimStation
 from simulators.physics.params import preset
 from simulators.world import World
 

@@ -8,12 +8,13 @@ import math
 import numpy as np
 import pytest
 
+from bench.analysis.maslov import choose_model
+from bench.composition.sim_station import SimStation
 from bench.engine import Runner
 from bench.engine.params import ParamError
 from bench.recorder import open_run
-from bench.station import SimStation
 from procedures.hrg_free_decay import HrgFreeDecay
-from procedures.mems_sweep import MemsSweep, choose_model
+from procedures.mems_sweep import MemsSweep
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,8 @@ from scipy import stats
 
 from bench.analysis.allan import allan_deviation
 from bench.analysis.slow_model import orbit_elements, state_from_elements
-from bench.station import StationError, load_config
+from bench.devices import StationError
+from bench.station_config import load_config
 from simulators.physics.noise import (
     EARTH_RATE_DPH,
     FLICKER_FLOOR,
@@ -156,7 +157,7 @@ def test_station_keys_for_earth_are_checked(tmp_path):
 
 
 def test_sim_hrg_wa_truth_has_the_noise_terms_and_earth():
-    from bench.station import SimStation
+    from bench.composition.sim_station import SimStation
 
     st = SimStation("sim-hrg-wa")
     try:

@@ -278,7 +278,7 @@ def test_limits_are_written_into_the_controller(bench_tcp):
 
 
 def test_station_sim_hrg_acutronic_builds_the_acutrol_driver():
-    from bench.station import SimStation
+    from bench.composition.sim_station import SimStation
 
     with SimStation("sim-hrg-acutronic").open() as station:
         table = station.devices["table"]

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from bench.station import Station, StationError
+from bench.composition import load_station
+from bench.devices import StationError
 from drivers.frontend.sr865_pair import Sr865PairFrontEnd
 from drivers.rate_table.acutronic_driver import AcutrolRateTable
 from simulators.frontend.sr865_server import serve_sr865_pair
@@ -50,7 +51,7 @@ def test_a_lab_station_file_opens_its_instruments(tmp_path, instruments, via):
     path = tmp_path / "lab.toml"
     master, slave = lockins.resources
     path.write_text(LAB_FILE.format(table_address=address, master=master, slave=slave))
-    station = Station.load(path)
+    station = load_station(path)
     with station.open():
         t, fe = station.devices["table"], station.devices["frontend"]
         assert isinstance(t, AcutrolRateTable) and isinstance(fe, Sr865PairFrontEnd)
@@ -68,13 +69,13 @@ def test_a_table_without_an_address_is_one_clear_message(tmp_path, instruments):
     path = tmp_path / "lab.toml"
     path.write_text(LAB_FILE.format(table_address="", master=master, slave=slave))
     with pytest.raises(StationError, match="needs host"):
-        Station.load(path).open()
+        load_station(path).open()
 
 
 def test_the_example_in_docs_real_instruments_is_a_valid_station_file(tmp_path):
     from pathlib import Path
 
-    from bench.station import load_config
+    from bench.station_config import load_config
 
     text = (Path(__file__).resolve().parents[1] / "docs" / "real_instruments.md").read_text()
     example = text.split("```toml\n", 1)[1].split("```", 1)[0]

@@ -12,9 +12,9 @@ import pytest
 
 from bench.cli import main
 from bench.clock import SimClock
+from bench.composition.sim_station import SimStation
 from bench.engine import GuardedClock, Runner
 from bench.recorder import open_run
-from bench.station import SimStation
 from procedures import find_procedure
 from simulators.physics.params import preset
 from simulators.world import World

@@ -210,8 +210,8 @@ def test_the_closed_file_has_its_streams_compressed_and_reads_back_the_same(tmp_
 def test_a_runs_dir_that_cannot_hold_files_ends_the_run_before_its_first_step(tmp_path, case):
     """The raw file cannot be created: the run ends ERROR at its first checkpoint, in the safe
     state, with one message naming the path (it used to be a FileExistsError traceback)."""
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.station import SimStation
     from procedures.examples.table_spin import TableSpin
 
     blocker = tmp_path / "runs"

@@ -15,13 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.figures import NO_UNIT, envelope
+from bench.numbers import error_in_intervals, limits, plain, pretty_unit, sig, with_interval
 from bench.recorder import open_run
 from bench.reporting import figures_for, render_html
 from bench.reporting.browser import chromium, load, screenshot
-from bench.reporting.damping import drift_model
-from bench.reporting.figures import NO_UNIT, envelope
-from bench.reporting.free_decay import trajectory
-from bench.reporting.numbers import error_in_intervals, limits, plain, pretty_unit, sig, with_interval
+from procedures.figures.hrg_damping import drift_model
+from procedures.figures.hrg_free_decay import trajectory
 from tests.needs import need
 
 #: short runs, seconds each (the report, not the physics, is under test here)
@@ -59,7 +59,7 @@ def test_a_value_without_an_interval_gets_four_significant_digits_and_empty_fiel
 def test_the_table_angle_is_unwrapped_with_the_rate_readings():
     """At 500 deg/s read every 0.39 s the angle moves 195 deg a reading: the angle alone cannot be
     unwrapped (np.unwrap gets it wrong), with the rate readings it comes back exactly."""
-    from bench.reporting.figures import unwrap_angle_deg
+    from bench.figures import unwrap_angle_deg
 
     t = np.arange(0.0, 40.0, 0.39)
     rate = np.clip(t * 200.0, 0.0, 500.0)  # 200 deg/s^2 up to 500 deg/s
@@ -102,8 +102,8 @@ def test_linear_trajectory_matches_an_adaptive_integration():
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     """One short run of each procedure: {name: raw file}."""
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.station import SimStation
     from procedures import find_procedure
 
     tmp = tmp_path_factory.mktemp("report_runs")
@@ -290,7 +290,7 @@ def test_every_table_row_is_written_as_a_calibration_file_writes_it(pages, name)
 def test_hrg_free_decay_model_trajectory_follows_the_record(runs):
     """The identified model integrated from the first sample stays on the measured slow variables:
     residual rms below 1 % of the amplitude over the record."""
-    from bench.reporting.free_decay import _params, _record
+    from procedures.figures.hrg_free_decay import _params, _record
     from procedures.hrg_free_decay import HrgFreeDecay
 
     with open_run(runs["hrg-free-decay"]) as data:

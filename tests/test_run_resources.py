@@ -52,7 +52,7 @@ def test_every_procedure_is_covered():
 
 @pytest.mark.parametrize("name", sorted(SHORT))
 def test_a_fault_in_any_step_leaves_nothing_subscribed_and_no_thread(name, tmp_path, monkeypatch):
-    from bench.station import SimStation
+    from bench.composition.sim_station import SimStation
 
     cls = all_procedures()[name]
     station_name, params = SHORT[name]

@@ -12,9 +12,11 @@ from pathlib import Path
 
 import pytest
 
+from bench.composition import load_station
+from bench.devices import StationError
 from bench.engine.batch import Batch, BatchError, check_batchable
 from bench.slots import BATCH_ROLES, SlotLock
-from bench.station import Station, StationError, load_config
+from bench.station_config import load_config
 from drivers.fpga import protocol as p
 from procedures.hrg_damping import HrgDamping
 
@@ -88,7 +90,7 @@ def line_batch(tmp_path_factory):
     store, db = ResultsStore(url, offline_ok=True, spool_dir=tmp / "spool"), LineDB(url)
     ctx = LineContext(load_sequence(seq_file), load_limits(tmp / "limits.toml"), "sim-hrg-4", "tester", tmp,
                       store=store, db=db)
-    station = Station.load("sim-hrg-4", seed=0).open()  # slots in spec: 1, 2 and 4 must PASS
+    station = load_station("sim-hrg-4", seed=0).open()  # slots in spec: 1, 2 and 4 must PASS
     try:
         station.schedule_fault("link-drop", 150.0, slot=3)
         records = run_batch_attempt(ctx, station, {1: "S1", 2: "S2", 3: "S3", 4: "S4"}, _Yes())
@@ -150,7 +152,7 @@ def test_the_batch_is_one_run_with_four_duts_in_the_store(line_batch):
 
 
 def test_abort_stops_all_four_safely(tmp_path):
-    station = Station.load("sim-hrg-4", seed=2).open()
+    station = load_station("sim-hrg-4", seed=2).open()
     try:
         batch = Batch(station, {1: "A1", 2: "A2", 3: "A3", 4: "A4"}, runs_dir=tmp_path)
         asked: dict[str, float] = {}
@@ -179,7 +181,7 @@ def test_abort_stops_all_four_safely(tmp_path):
 def test_seeded_batches_are_the_same_whatever_the_thread_scheduling(tmp_path):
     results = []
     for _ in range(2):
-        station = Station.load("sim-hrg-4", seed=5).open()
+        station = load_station("sim-hrg-4", seed=5).open()
         try:
             recs = Batch(station, {1: "D1", 2: "D2", 3: "D3", 4: "D4"}).run(
                 lambda: HrgDamping({"record_s": 30.0, "compensate": False}))
@@ -327,7 +329,7 @@ def test_a_slot_that_dies_holding_the_front_end_lock_in_a_batch_leaves_the_other
             ctx.sleep(1.0)
             ctx.devices.frontend.set_drive(1, output_on=False)  # its turn, switched to its slot
 
-    station = Station.load("sim-hrg-4", seed=3).open()
+    station = load_station("sim-hrg-4", seed=3).open()
     try:
         records = Batch(station, {1: "L1", 2: "L2", 3: "L3", 4: "L4"}).run(Grab)
         lock = station.locks["frontend"]

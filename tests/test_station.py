@@ -6,8 +6,12 @@ from __future__ import annotations
 
 import pytest
 
+from bench.composition import load_station
+from bench.composition.sim_station import SimStation
+from bench.devices import StationError
 from bench.engine import Runner, events
-from bench.station import FAULTS, SimStation, Station, StationError, load_config, parse_fault
+from bench.fault_kinds import FAULTS, parse_fault
+from bench.station_config import load_config
 from procedures.examples.table_spin import TableSpin
 from simulators.physics.params import preset
 
@@ -32,7 +36,7 @@ def test_real_station_file_is_checked_not_connected(tmp_path):
     cfg = load_config(_write(tmp_path, GOOD))
     assert cfg.id == "lab-1" and cfg.simulation is None
     assert cfg.devices["table"]["max_rate_dps"] == 800.0 and cfg.devices["table"]["port"] == 502
-    st = Station.load(_write(tmp_path, GOOD))
+    st = load_station(_write(tmp_path, GOOD))
     assert not st.simulated and st.truth() is None
 
 
@@ -146,7 +150,7 @@ def test_same_procedure_on_an_ascii_table_only_station(tmp_path):
         '[station]\nid = "ascii"\n[simulation]\npreset = "mems"\n'
         '[devices.table]\ndriver = "ascii-table"\nmax_rate_dps = 500.0\nmax_accel_dps2 = 300.0\n',
     )
-    st = Station.load(path)
+    st = load_station(path)
     assert isinstance(st, SimStation)
     with st:
         rec = Runner(st, runs_dir=tmp_path / "runs").run(TableSpin, {"rate_dps": -80.0, "hold_s": 0.5})
@@ -157,7 +161,7 @@ def test_same_procedure_on_an_ascii_table_only_station(tmp_path):
 def test_opening_an_open_station_keeps_its_devices_and_simulators():
     """`with SimStation(...).open() as st` used to open twice: a second set of simulators and
     drivers, the first table's heartbeat left beating against a stopped simulator."""
-    from bench.station import SimStation
+    from bench.composition.sim_station import SimStation
 
     with SimStation("sim-hrg").open() as station:
         devices, handles = dict(station.devices), dict(station.handles)
@@ -184,7 +188,7 @@ def test_the_fpga_output_mode_keys_are_checked(tmp_path, extra, expect):
 def test_the_force_to_rebalance_station_sets_the_fpga_at_connect():
     """sim-hrg-ftr: its output mode, hold angle and gain reach the FPGA when the link connects; its
     truth carries them (the scale factor G K follows), sim-hrg's truth has none of them."""
-    from bench.station import SimStation
+    from bench.composition.sim_station import SimStation
 
     cfg = load_config("sim-hrg-ftr")
     assert cfg.devices["fpga"]["output_mode"] == "force-to-rebalance" and cfg.devices["fpga"]["ftr_gain"] == 3.6

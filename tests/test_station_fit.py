@@ -6,8 +6,10 @@ from __future__ import annotations
 import pytest
 
 from bench.cli import main
+from bench.composition import load_station
+from bench.composition.sim_station import SimStation
 from bench.engine import Runner, StationMismatch
-from bench.station import SimStation, load_config
+from bench.station_config import load_config
 from procedures import find_procedure
 
 SLOW_TABLE = """
@@ -115,7 +117,7 @@ def test_station_kind_from_its_file_or_its_preset(tmp_path):
 
 
 def test_a_bad_kind_in_a_station_file_names_the_key(tmp_path):
-    from bench.station import StationError
+    from bench.devices import StationError
 
     with pytest.raises(StationError, match="kind='ring' is not one of '', hrg, mems-ring"):
         load_config(_station_file(tmp_path, kind='kind = "ring"'))
@@ -154,12 +156,11 @@ def test_the_window_does_not_offer_a_procedure_for_another_kind(tmp_path, monkey
 
 def test_an_existing_real_station_file_without_kind_takes_any_procedure(tmp_path):
     from bench.engine import check_station
-    from bench.station import Station
 
     path = tmp_path / "lab.toml"
     path.write_text('[station]\nid = "lab-1"\n\n[devices.frontend]\ndriver = "scpi-frontend"\n'
                     'resource = "TCPIP::10.0.0.5::5025::SOCKET"\nmax_amplitude_v = 2.0\n')
-    station = Station.load(path)
+    station = load_station(path)
     assert station.kind == ""  # not said: nothing refused for its kind
     check_station(find_procedure("mems-sweep")({}), station)
     with pytest.raises(StationMismatch, match="drive1_v=2.5 V is above the station's limit 2 V"):

@@ -9,9 +9,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from bench.devices import DRIVERS, DriverSpec, Key, register_driver, unregister_driver
-from bench.engine.safety import SAFE_PARTS, by_part
-from bench.station import SimStation, Station, StationError, load_config
+from bench.composition import load_station
+from bench.composition.sim_station import SimStation
+from bench.devices import DRIVERS, SAFE_PARTS, DriverSpec, Key, StationError, register_driver, unregister_driver
+from bench.engine.safety import by_part
+from bench.station_config import load_config
 from drivers.rate_table.station_keys import TABLE_HEALTH_COLUMNS, table_health, table_keys
 
 
@@ -60,7 +62,7 @@ def test_a_new_rate_table_model_is_one_registered_spec(toy_table, tmp_path):
     config = load_config(path)
     assert config.devices["table"]["max_rate_dps"] == 90.0 and config.devices["table"]["bus"] == "b1"
     recorded: list[tuple[str, tuple, np.ndarray]] = []
-    with Station.load(path) as station:
+    with load_station(path) as station:
         table = station.devices["table"]
         assert isinstance(table, _ToyTable) and table.cfg["bus"] == "b1"
         assert station.limit("table", "max_rate_dps") == 90.0

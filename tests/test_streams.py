@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from bench.engine import events as ev
-from bench.engine.streams import Column, StreamSchema, declare, schema_of, unit_from_name
+from bench.streams import Column, StreamSchema, declare, schema_of, unit_from_name
 
 SHORT_DAMPING = {"rate_dps": 20.0, "record_s": 2.0, "stream_hz": 200.0, "verify_rate_dps": 4.0,
                  "verify_s": 8.0, "verify_settle_s": 0.5, "drift_block_s": 0.5}
@@ -22,8 +22,8 @@ SHORT_DAMPING = {"rate_dps": 20.0, "record_s": 2.0, "stream_hz": 200.0, "verify_
 
 @pytest.fixture(scope="module")
 def damping_run(tmp_path_factory):
+    from bench.composition.sim_station import SimStation
     from bench.engine import Runner
-    from bench.station import SimStation
     from procedures.hrg_damping import HrgDamping
 
     tmp = tmp_path_factory.mktemp("streams")
@@ -119,8 +119,8 @@ def test_h5dump_shows_units_and_legends(damping_run):
 
 
 def test_reader_and_report_show_declared_units_and_meanings(damping_run):
+    from bench.figures import stream_figure
     from bench.recorder import open_run
-    from bench.reporting.figures import stream_figure
 
     record, _ = damping_run
     with open_run(record.raw_file) as d:
@@ -134,8 +134,8 @@ def test_reader_and_report_show_declared_units_and_meanings(damping_run):
 def test_legends_of_a_file_written_before_enum_types_are_still_read(tmp_path):
     """An older raw file kept each legend as a `legend_<column>` JSON attribute: the reader and
     the window's replay still find it; a new file's legend is the enum type alone."""
-    from bench.engine.streams import schema_from_attrs
     from bench.recorder import open_run, stored_legends
+    from bench.streams import schema_from_attrs
 
     path = tmp_path / "old.h5"
     with h5py.File(path, "w") as f:

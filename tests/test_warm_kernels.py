@@ -15,7 +15,7 @@ _SCRIPT = r"""
 import gc, json, sys, tempfile
 from numba.core.registry import CPUDispatcher
 from bench.engine import Runner
-from bench.station import SimStation
+from bench.composition.sim_station import SimStation
 from procedures import find_procedure
 
 def signatures():

@@ -92,7 +92,7 @@ def test_lockstep_writes_on_the_publishing_thread_after_what_real_time_queued():
 
 
 def _spin(tmp_path, monkeypatch, speed: float | None, delay_s: float):
-    from bench.station import SimStation
+    from bench.composition.sim_station import SimStation
 
     monkeypatch.setattr(bw, "QUEUE_EVENTS", 2)
     real = Recorder.on_event

@@ -73,6 +73,7 @@ __all__ = [
     "PAPER_NATURAL_FREQ_HZ",
     "PAPER_SIGMA",
     "PAPER_W_RAD_S",
+    "choose_model",
     "ForcedIdentification",
     "ForcedResponse",
     "Identification",
@@ -91,3 +92,15 @@ __all__ = [
     "simpson_regressors",
     "steady_states",
 ]
+
+
+def choose_model(sigmas: dict[str, float], improvement: float) -> str:
+    """The simplest model that the next richer one does not beat by more than `improvement`
+    (relative reduction of the residual sigma)."""
+    chosen = "linear"
+    for richer in ("cubic", "quintic"):
+        if sigmas[richer] < (1.0 - improvement) * sigmas[chosen]:
+            chosen = richer
+        else:
+            break
+    return chosen

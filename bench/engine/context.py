@@ -10,9 +10,10 @@ from typing import Any
 
 import numpy as np
 
+from bench.streams import StreamSchema, schema_of
+
 from . import events as ev
 from .measurement import Limits, Result
-from .streams import StreamSchema, schema_of
 
 
 class RunAborted(Exception):
@@ -241,7 +242,7 @@ class RunContext:
     # --- data ------------------------------------------------------------------------------
     def declare_stream(self, stream: str | StreamSchema) -> StreamSchema:
         """Announce a stream's schema (once a run, before its first block); a name is looked up
-        among the declared streams (bench.engine.streams.declare)."""
+        among the declared streams (bench.streams.declare)."""
         schema = stream if isinstance(stream, StreamSchema) else schema_of(stream)
         with self._streams_lock:
             known = self._streams.get(schema.name)

@@ -56,7 +56,7 @@ class Progress(Event):
 
 @dataclass(frozen=True)
 class StreamDeclared(Event):
-    """A stream's schema (bench.engine.streams.StreamSchema), announced once a run before the
+    """A stream's schema (bench.streams.StreamSchema), announced once a run before the
     stream's first block: its source and each column's name, unit, type and legend."""
 
     schema: Any = None

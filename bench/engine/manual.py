@@ -23,12 +23,12 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any
 
+from bench.streams import Column, StreamSchema, declare
 from bench.validation import LimitError, ValidationError, unknown_name
 
 from .demands import Demand, StationMismatch, check_demands
 from .params import Param
 from .procedure import Procedure, step
-from .streams import Column, StreamSchema, declare
 
 #: what each code of the `action` column means
 ACTIONS: dict[int, str] = {0: "start", 1: "table_rate", 2: "table_stop", 3: "drive_on", 4: "drive_off",

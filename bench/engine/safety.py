@@ -7,12 +7,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
+from bench.devices import SAFE_PARTS
+
 #: roles in the order the safe state visits them; a role not listed goes last
 SAFE_ORDER: tuple[str, ...] = ("fpga", "table", "frontend")
-#: the parts of a station's safe state, in the order they are done; each device's spec says which
-#: part it plays.  A part holds a list of devices, so with several gyros on one table every slot's
-#: drive is cut before the one shared table is brought to rest, and then every slot's outputs go off
-SAFE_PARTS: tuple[str, ...] = ("drive-cut", "table-to-rest", "outputs-off")
 
 
 @dataclass

@@ -34,11 +34,12 @@ class EngineBackend(ManualBackendMixin):
 
     def __init__(self, station: str, *, seed: int | None = None, runs_dir: str | Path | None = None,
                  results_url: str | None = None, record: bool = True) -> None:
+        from bench.composition import load_station
+        from bench.composition.sim_station import SimStation
         from bench.engine import Runner
-        from bench.station import SimStation, Station
 
         overrides = {"seed": seed} if seed is not None else {}
-        self.station = Station.load(station, **overrides)
+        self.station = load_station(station, **overrides)
         self.simulated = isinstance(self.station, SimStation)
         self.station_name = self.station.id
         self.bus = ev.EventBus()

@@ -397,11 +397,11 @@ class MainWindow(QMainWindow):
         if not raw:
             return None
         from bench.recorder import open_run
-        from bench.report import render_report
+        from bench.reporting import render_html
 
         out = Path(raw).with_suffix(".html")
         with open_run(raw) as data:
-            out.write_text(render_report(data, None))
+            out.write_text(render_html(data, None))
         return str(out)
 
     def _open_report(self) -> None:

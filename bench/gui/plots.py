@@ -17,7 +17,7 @@ from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import QGridLayout, QLabel, QWidget
 
 from bench.analysis.slow_model import orbit_elements
-from bench.engine.streams import StreamSchema
+from bench.streams import StreamSchema
 
 from .ringbuffer import MinMaxHistory, RingBuffer
 
@@ -86,7 +86,7 @@ class LivePlots(QWidget):
             return w.getPlotItem()
 
         # legends are the titles (above the data, never over it); units are the streams' declared
-        # ones (bench.engine.streams; the FPGA's slow variables are in AGC setpoint units: "1")
+        # ones (bench.streams; the FPGA's slow variables are in AGC setpoint units: "1")
         self.p_q = add_plot(0, 0, legend_title(*zip(("cx", "sx", "cy", "sy"), PEN_COLOURS, strict=True)))
         self.p_q.setLabel("left", "cx..sy", units="1")
         self.c_q = [self.p_q.plot(pen=pg.mkPen(c, width=1), name=n)

@@ -18,8 +18,8 @@ import numpy as np
 
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import events as ev
-from bench.engine.streams import StreamSchema, schema_from_attrs
 from bench.recorder import stored_legends
+from bench.streams import StreamSchema, schema_from_attrs
 
 CHUNK_ROWS = 20_000
 

@@ -14,7 +14,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from bench.reporting.numbers import DASH, limits, plain, sig, with_interval
+from bench.numbers import DASH, limits, plain, sig, with_interval
 
 from .compensation import COEFFICIENTS, Compensation, CompensationError, from_record
 
@@ -146,31 +146,14 @@ def render_html(record: dict[str, Any], compensation: Compensation | None = None
 
 def certificate_section(record: dict[str, Any], compensation: Compensation | None = None) -> str:
     """The certificate's body (one <section>, a page of its own before what follows when printed),
-    for the run report's `certificate` block (`report_with_certificate`)."""
+    for the run report's `certificate` block (bench.reporting.unit_certificate)."""
     return _env().get_template("certificate.html.j2").render(standalone=False, **context(record, compensation))
-
-
-def report_with_certificate(data: Any, record: dict[str, Any], row: dict[str, Any] | None = None,
-                            compensation: Compensation | None = None) -> str:
-    """The run report (bench.reporting) with the unit's certificate as its first page: the report's
-    `certificate` block filled by templates/report_certificate.html.j2."""
-    import jinja2
-    from markupsafe import Markup
-
-    from bench import reporting
-
-    loader = jinja2.ChoiceLoader([jinja2.FileSystemLoader(TEMPLATES), jinja2.FileSystemLoader(reporting.TEMPLATES)])
-    env = jinja2.Environment(loader=loader, autoescape=True, trim_blocks=True, lstrip_blocks=True,
-                             undefined=jinja2.StrictUndefined)
-    section = Markup(certificate_section(record, compensation))  # rendered (and escaped) by its own template
-    return env.get_template("report_certificate.html.j2").render(**reporting.context(data, row),
-                                                                 certificate_html=section)
 
 
 def write_certificate(record: dict[str, Any], path: str | Path, *, pdf: bool = False,
                       compensation: Compensation | None = None) -> list[Path]:
     """Write the HTML certificate to path and, with pdf, the PDF beside it (same name, .pdf)."""
-    from bench.reporting import write_pdf
+    from bench.pdf import write_pdf
 
     path = Path(path)
     html = render_html(record, compensation)

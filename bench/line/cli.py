@@ -60,7 +60,7 @@ def check_steps(seq: Any, station: Any) -> None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """One unit (scanned or --dut) through a sequence; its record(s); exit 0 on PASS."""
-    from bench.station import Station
+    from bench.composition import load_station
 
     from .prompts import make_operator, stdin_is_terminal
     from .sequence import load_sequence
@@ -70,7 +70,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     seq = load_sequence(args.sequence)
     station_name = _station_of(args, seq.station)
     overrides = {} if args.seed is None else {"seed": args.seed}
-    station = Station.load(station_name, **overrides)  # the file checked before anything opens
+    station = load_station(station_name, **overrides)  # the file checked before anything opens
     duts = args.dut or []
     faults = [_parse_slot_fault(f) for f in args.fault or []]
     if hasattr(station, "slots"):  # several gyros on one table: one unit a slot
@@ -97,7 +97,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if not operator.confirm(f"unit {serial} is in the fixture of station {station_name!r}?"):
             raise LineError(f"unit {serial}: the fixture was not confirmed; nothing was run")
         def open_station():
-            st = Station.load(station_name, **overrides)
+            st = load_station(station_name, **overrides)
             for kind, at_s, _ in faults:
                 st.schedule_fault(kind, at_s)
             return st
@@ -117,7 +117,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _parse_slot_fault(text: str) -> tuple[str, float, int | None]:
     """`KIND@SECONDS` or `KIND@SECONDS:slotN` -> (kind, seconds, slot or None)."""
-    from bench.station import parse_fault
+    from bench.fault_kinds import parse_fault
 
     head, sep, where = text.rpartition(":slot")
     slot = None
@@ -201,7 +201,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     from .prompts import make_operator
     from .sequence import load_sequence
-    from .simulate import SPREADS, check_lot, draw_units, simulate_lot, undecided
+    from .simulate import check_lot, draw_lot, simulate_lot, undecided
 
     if args.units < 1:
         raise LineError(f"--units={args.units} is below the limit 1")
@@ -211,13 +211,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if cfg.simulation is None:
         raise LineError(f"--station {station_name}: a real station; `line simulate` needs a simulated one")
     preset = cfg.simulation["preset"]
-    if preset not in SPREADS:
-        raise LineError(f"preset {preset!r} has no spread to draw units from (known: {', '.join(SPREADS)})")
     args.lot = args.lot or f"sim-{args.seed}"
+    try:
+        units = draw_lot(preset, args.units, args.seed, args.lot)
+    except ValueError as exc:
+        raise LineError(str(exc)) from None
     args.runs_dir = args.runs_dir or cfg.station["runs_dir"]
     args.db = args.db or (cfg.station["results"] if args.runs_dir == cfg.station["runs_dir"] else None)
     ctx = _context(args, station_name=cfg.id, operator=args.operator or "simulator", db_url=args.db)
-    units = draw_units(preset, args.units, args.seed, args.lot)
     operator = make_operator(serial=None, assume_yes=True, interactive=False)
     if not args.json:
         operator.show_outcome = lambda serial, outcome, summary: print(f"{serial}: {outcome}  {summary}", flush=True)

@@ -58,9 +58,9 @@ def load_trims(link: Any, trims: dict[str, float]) -> dict[str, Any]:
 
 
 def _open(station_name: str):
-    from bench.station import Station
+    from bench.composition import load_station
 
-    station = Station.load(station_name)
+    station = load_station(station_name)
     if "fpga" not in station.config.devices:
         roles = ", ".join(sorted(station.config.devices))
         raise CompensationError(f"station {station.id!r} has no FPGA ([devices.fpga]) to hold trims; it has: {roles}")

@@ -49,7 +49,7 @@ def summarize(db: Any, lot: str | None = None) -> dict[str, Any]:
 
 def _figures(measure: dict[str, Any]) -> tuple[str, str]:
     """(histogram, control chart) of one measurement as inline SVG."""
-    from bench.reporting.figures import ReportFigure, new_figure
+    from bench.figures import ReportFigure, new_figure
 
     unit = f" ({measure['unit']})" if measure["unit"] else ""
     vals = np.array([r["value"] for r in measure["final"] if r["value"] is not None and math.isfinite(r["value"])])
@@ -108,10 +108,10 @@ def _pct(x: float) -> str:
 def write_line_report(db: Any, *, lot: str | None = None, output: str | Path | None = None,
                       pdf: bool = False, runs_dir: str | Path = "runs") -> list[Path]:
     """The HTML report (and with pdf the PDF beside it); their paths."""
-    from bench.reporting import _weasyprint, write_pdf
+    from bench.pdf import require_weasyprint, write_pdf
 
     if pdf:
-        _weasyprint()  # a missing PDF library is said before anything is written
+        require_weasyprint()  # a missing PDF library is said before anything is written
     summary = summarize(db, lot)
     out = Path(output) if output else Path(runs_dir) / "line" / (f"report-{lot}.html" if lot else "report.html")
     out.parent.mkdir(parents=True, exist_ok=True)

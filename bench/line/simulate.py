@@ -11,46 +11,13 @@ to the line: truth cannot say what it must be (`undecided` counts those units)."
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
+from simulators.lot import SPREADS, DrawnUnit, draw_units
+
 from .verdict import ERROR, FAIL, MARGINAL, PASS
-
-#: per preset: (parameter, mean, sd, out-of-spec value pushed to) -- sd chosen so that a few
-#: units of a lot fall out of the shipped limits by chance, besides those pushed out on purpose
-SPREADS: dict[str, list[tuple[str, float, float, float]]] = {
-    "hrg": [("tau_s", 300.0, 25.0, 215.0), ("delta_inv_tau_per_s", 1.6e-4, 0.3e-4, 3.2e-4),
-            ("split_hz", 0.005, 0.001, 0.0105)],
-    "mems": [("tau_s", 0.04648, 0.0015, 0.0395), ("split_hz", 2.75, 0.15, 3.7)],
-}
-OUT_OF_SPEC_EVERY = 4  # unit 2, 6, 10 ... has one parameter pushed out of the limits
-
-
-@dataclass(frozen=True)
-class DrawnUnit:
-    serial: str
-    params: Any  # ResonatorParams
-    pushed: str | None  # the parameter pushed out of spec on purpose
-
-
-def draw_units(preset_name: str, n: int, seed: int, lot: str) -> list[DrawnUnit]:
-    """n units around a preset, reproducible from the seed."""
-    from simulators.physics.params import PRESETS
-
-    base = PRESETS[preset_name]
-    spread = SPREADS[preset_name]
-    rng = np.random.default_rng(seed)
-    units = []
-    for i in range(n):
-        values = {name: float(abs(rng.normal(mean, sd))) for name, mean, sd, _ in spread}
-        pushed = None
-        if i % OUT_OF_SPEC_EVERY == 1:
-            name, _, _, out = spread[(i // OUT_OF_SPEC_EVERY) % len(spread)]
-            values[name], pushed = out, name
-        units.append(DrawnUnit(f"{lot}-{i + 1:03d}", replace(base, **values), pushed))
-    return units
 
 
 def expected_outcome(record: dict[str, Any]) -> tuple[str | None, list[str]]:
@@ -96,6 +63,14 @@ def check_lot(records: list[dict[str, Any]]) -> list[str]:
     return wrong
 
 
+def draw_lot(preset: str, n: int, seed: int, lot: str) -> list[DrawnUnit]:
+    """n units of a simulated lot around `preset` (simulators.lot); ValueError naming the presets
+    that have a spread when `preset` has none."""
+    if preset not in SPREADS:
+        raise ValueError(f"preset {preset!r} has no spread to draw units from (known: {', '.join(SPREADS)})")
+    return draw_units(preset, n, seed, lot)
+
+
 def undecided(records: list[dict[str, Any]]) -> list[str]:
     """Serials whose final outcome was decided by a limited measurement that has no true value."""
     last: dict[str, dict[str, Any]] = {}
@@ -109,8 +84,8 @@ def undecided(records: list[dict[str, Any]]) -> list[str]:
 def simulate_lot(ctx: Any, station_file: str, units: list[DrawnUnit], seed: int, operator: Any) -> list[dict]:
     """Each unit through the sequence on its own simulated station (on a station with slots, as many
     units at once as it has slots); every attempt's record."""
+    from bench.composition.sim_station import SimStation
     from bench.station_config import load_config
-    from simulators.station_sim import SimStation
 
     from .run import run_unit
 
@@ -136,8 +111,8 @@ def _simulate_batches(ctx: Any, config: Any, units: list[DrawnUnit], seed: int, 
     """The lot in batches of the station's slots: each batch on a fresh simulated several-gyros
     station whose slots hold the batch's drawn resonators (a last, short batch leaves slots empty:
     their resonators are the preset's, with no unit judged)."""
+    from bench.composition.sim_batch_station import SimBatchStation
     from simulators.physics.params import preset
-    from simulators.rig_station import SimBatchStation
 
     from .batch_run import run_batch_attempt
 

@@ -53,8 +53,8 @@ def main(argv: list[str] | None = None) -> int:
             db.save(rec)
             serials.append(rec["serial"])
     else:
+        from bench.composition import load_station
         from bench.results import ResultsStore
-        from bench.station import Station
 
         from .limits import load_limits
         from .run import LineContext, run_unit
@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
                           lot="concurrent")
         for k in range(args.units):
             serial = f"S{args.station}-{k}"
-            for rec in run_unit(ctx, lambda: Station.load(station, seed=args.station), serial, _Yes(),
+            for rec in run_unit(ctx, lambda: load_station(station, seed=args.station), serial, _Yes(),
                                 first_attempt=db.next_attempt(serial)):
                 serials.append(rec["serial"])
         store.close()

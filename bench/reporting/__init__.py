@@ -8,8 +8,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-from .figures import ReportFigure, generic_figures
-from .numbers import DASH, error_in_intervals, limits, plain, pretty_unit, sig, truth_text, with_interval
+from bench.figures import ReportFigure, generic_figures
+from bench.numbers import DASH, error_in_intervals, limits, plain, pretty_unit, sig, truth_text, with_interval
+from bench.pdf import require_weasyprint, write_pdf
 
 TEMPLATES = Path(__file__).with_name("templates")
 
@@ -150,28 +151,6 @@ def render_html(data: Any, row: dict[str, Any] | None = None, ctx: dict[str, Any
     return env.get_template(template).render(**(ctx or context(data, row)), **(extra or {}))
 
 
-class PdfUnavailable(RuntimeError):
-    """WeasyPrint (the `pdf` extra) is not installed."""
-
-
-def _weasyprint() -> Any:
-    try:
-        import weasyprint
-    except (ImportError, OSError) as exc:  # not installed, or its system libraries (Pango) missing
-        raise PdfUnavailable(f"a PDF report needs WeasyPrint: pip install 'gyrobench[pdf]' ({exc})") from None
-    return weasyprint
-
-
-def write_pdf(html: str, path: str | Path) -> Path:
-    """The report page as a PDF (WeasyPrint renders the inline SVG figures as vectors)."""
-    weasyprint = _weasyprint()
-    import logging
-
-    logging.getLogger("fontTools").setLevel(logging.WARNING)
-    weasyprint.HTML(string=html).write_pdf(str(path))
-    return Path(path)
-
-
 def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output: str | Path | None = None,
                  pdf: bool = False, *, template: str = "report.html.j2",
                  extra: dict[str, Any] | None = None) -> list[Path]:
@@ -180,7 +159,7 @@ def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output
     from bench.recorder import open_run
 
     if pdf:
-        _weasyprint()  # a missing PDF library is said before anything is written
+        require_weasyprint()  # a missing PDF library is said before anything is written
     with open_run(raw_file) as data:
         html = render_html(data, row, template=template, extra=extra)
         out = Path(output or data.path.with_suffix(".html"))

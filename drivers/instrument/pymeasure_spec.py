@@ -7,7 +7,7 @@ import importlib
 from typing import Any
 
 from bench.devices import DriverSpec, Key, StationError, register_driver
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 
 def _build(cfg: dict[str, Any], clock: Any) -> Any:

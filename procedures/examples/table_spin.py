@@ -1,7 +1,7 @@
 """Spin the table at a rate, hold it there, and check the rate the table reports."""
 
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
-from bench.engine.streams import Column, StreamSchema, declare
+from bench.streams import Column, StreamSchema, declare
 
 HOLD = declare(StreamSchema("hold", "table-spin", (Column("t_s", "s", quantity="time t"),
                                                     Column("rate_dps", "deg/s", quantity="table rate Ω"))))
@@ -55,8 +55,8 @@ class TableSpin(Procedure):
         return [Result("table_rate_dps", mean, ci95=(mean - half, mean + half))]  # of the mean of the readings
 
     def figures(self, data) -> list:
-        """The figures this run's results need (bench.reporting.table_spin): the report and
+        """The figures this run's results need (procedures.figures.table_spin): the report and
         `gyrobench analyze --figures` draw these."""
-        from bench.reporting.table_spin import figures
+        from procedures.figures.table_spin import figures
 
         return figures(self, data)

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .figures import (
+from bench.figures import (
     ReportFigure,
     axis_label,
     declared,
@@ -22,7 +22,7 @@ from .figures import (
     stream_figure,
     table_figure,
 )
-from .numbers import with_interval
+from bench.numbers import with_interval
 
 HARMONICS = (4, 8, 12)
 _ENERGY, _RESIDUALS, _THETA, _QUAD = ("hrg-damping energy", "hrg-damping residuals", "hrg-damping theta",
@@ -77,17 +77,16 @@ def energy_figure(data: Any) -> list[ReportFigure]:
     return [ReportFigure("hrg-damping_energy", "Free decay: ln E with the fit and residuals", fig, note)]
 
 
-def _decay_elements(data: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def _decay_elements(proc: Any, data: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(t_s, theta_deg unwrapped, k/a) at every FPGA sample of the decay window, or None when the
     run recorded no window (the live curves are thinned by dropping samples, which aliases the 4θ
     pumping of the quadrature; the report reduces the full record by envelopes instead)."""
     from bench.analysis.slow_model import orbit_elements
-    from procedures.hrg_damping import DECAY, WINDOWS
-
-    if WINDOWS not in data or "fpga" not in data:
+    windows, decay = proc.windows_stream, proc.decay_kind
+    if windows not in data or "fpga" not in data:
         return None
-    win = data.table(WINDOWS)
-    sel = win["kind"] == DECAY
+    win = data.table(windows)
+    sel = win["kind"] == decay
     if not sel.any():
         return None
     fpga = data.table("fpga")
@@ -100,13 +99,13 @@ def _decay_elements(data: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray] | No
     return t[rows], theta, el["k"] / np.maximum(el["a"], 1e-300)
 
 
-def theta_figure(data: Any) -> list[ReportFigure]:
+def theta_figure(proc: Any, data: Any) -> list[ReportFigure]:
     fits = data.fits()
     th = fits.get(_THETA)
     if not th:
         return []
     quad = fits.get(_QUAD)
-    full = _decay_elements(data)
+    full = _decay_elements(proc, data)
     if full is not None:
         t, theta, k = full
         th, quad = {"t_s": t, "theta_deg": theta}, {"t_s": t, "quadrature_rel": k}
@@ -199,7 +198,7 @@ def drift_figure(data: Any) -> list[ReportFigure]:
 
 def figures(proc: Any, data: Any) -> list[ReportFigure]:
     """Every figure an hrg-damping run's results need, in the report's order."""
-    out = energy_figure(data) + theta_figure(data) + drift_figure(data) + table_figure(data)
+    out = energy_figure(data) + theta_figure(proc, data) + drift_figure(data) + table_figure(data)
     if "fpga" in data:
         fig = stream_figure(data, "fpga", ["cx", "sx", "cy", "sy"], title="FPGA stream: slow variables",
                             key="hrg-damping_fpga")

@@ -167,7 +167,7 @@ def schema_of(name: str) -> StreamSchema:
         return _REGISTRY[name]
     except KeyError:
         raise KeyError(
-            f"stream {name!r} is not declared: declare it once with bench.engine.streams.declare(StreamSchema(...))"
+            f"stream {name!r} is not declared: declare it once with bench.streams.declare(StreamSchema(...))"
         ) from None
 
 

@@ -1,6 +1,7 @@
 """The simulated station: one World + SimClock, each device's simulator served on loopback (the
 `serve` its driver's spec names, next to the simulator) and the real drivers pointed at them;
-`--fault` kinds injected through simulators.faults."""
+`--fault` kinds injected through simulators.faults.  Part of the composition root
+(bench.composition): the one place the engine's station meets the simulators."""
 
 from __future__ import annotations
 
@@ -10,11 +11,11 @@ from pathlib import Path
 from typing import Any
 
 from bench.devices import DRIVERS, StationError
+from bench.fault_kinds import check_kind
 from bench.station import Station
 from bench.station_config import SIM_KEYS, StationConfig, load_config
-
-from .faults import FAULTS, FaultScheduler, check_kind, stop_simulators
-from .faults import inject as inject_fault
+from simulators.faults import FaultScheduler, stop_simulators
+from simulators.faults import inject as inject_fault
 
 
 class SimStation(Station):
@@ -138,6 +139,3 @@ class SimStation(Station):
             raise StationError(f"--fault {kind}: station {self.id!r} has no {role} to fault")
         with self.world.lock:
             self.faults.add(kind, at_s)
-
-
-__all__ = ["FAULTS", "SimStation"]

@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from .numbers import pretty_unit  # noqa: E402
+from bench.numbers import pretty_unit  # noqa: E402
 
 #: points of a record drawn as a line; longer records are drawn as a min/max envelope of this many bins
 ENVELOPE_BINS = 1200
@@ -48,7 +48,7 @@ def unit_text(unit: str | None) -> str:
 
 def declared(data: Any, source: str, column: str) -> tuple[str, str]:
     """(quantity, unit) of a stream's column or a fit's curve as the run declared it (the raw
-    file's declaration, bench.engine.streams); the unit is "" where nothing was declared."""
+    file's declaration, bench.streams); the unit is "" where nothing was declared."""
     try:
         return data.declared(source).get(column, (column, ""))
     except KeyError:

@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from .figures import ReportFigure, measurement, new_figure
-from .numbers import with_interval
+from bench.figures import ReportFigure, measurement, new_figure
+from bench.numbers import with_interval
 
 FLOOR = 0.664
 

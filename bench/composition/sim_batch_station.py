@@ -1,6 +1,7 @@
 """The simulated several-gyros station: one Rig (a World per slot, one table), the shared
 devices' simulators (the table; a front end behind its switch) and each slot's own (its FPGA, its
-front end) on loopback, the real drivers pointed at them; faults aimed at one slot."""
+front end) on loopback, the real drivers pointed at them; faults aimed at one slot.  Part of the
+composition root (bench.composition)."""
 
 from __future__ import annotations
 
@@ -9,17 +10,17 @@ import threading
 from typing import Any
 
 from bench.devices import DRIVERS, StationError
+from bench.fault_kinds import check_kind
 from bench.slots import BatchStation
 from bench.station_config import SIM_KEYS, StationConfig
-
-from .faults import FaultScheduler, check_kind, stop_simulators
-from .faults import inject as inject_fault
+from simulators.faults import FaultScheduler, stop_simulators
+from simulators.faults import inject as inject_fault
 
 
 def slot_params(preset_name: str, seed: int) -> Any:
-    """A slot's resonator: drawn from the preset's production spread (bench.line.simulate) with the
+    """A slot's resonator: drawn from the preset's production spread (simulators.lot) with the
     slot's own seed; the preset itself when it has no spread."""
-    from bench.line.simulate import SPREADS, draw_units
+    from simulators.lot import SPREADS, draw_units
     from simulators.physics.params import preset
 
     if preset_name not in SPREADS:
@@ -43,8 +44,7 @@ class SimBatchStation(BatchStation):
         if resonators is not None and len(resonators) != n:
             raise StationError(f"{config.source}: {len(resonators)} resonators given for {n} slots")
         from simulators.physics.noise import NOISE_PRESETS
-
-        from .rig import Rig
+        from simulators.rig import Rig
 
         seeds = [self._seed_of(sim["seed"], k) for k in range(1, n + 1)]
         params = resonators or [slot_params(sim["preset"], s) for s in seeds]
@@ -71,7 +71,7 @@ class SimBatchStation(BatchStation):
         return SlotClock(SimClock(self.rig, speed=math.inf if speed == 0 else speed))
 
     def _serve(self, slot: int | None, role: str, cfg: dict[str, Any]) -> None:
-        from .rig import SwitchedWorld
+        from simulators.rig import SwitchedWorld
 
         spec = DRIVERS[cfg["driver"]]
         if spec.serve is None:

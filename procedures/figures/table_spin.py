@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from .figures import ReportFigure, axis_label, measurement, new_figure, table_figure
-from .numbers import plain, sig
+from bench.figures import ReportFigure, axis_label, measurement, new_figure, table_figure
+from bench.numbers import plain, sig
 
 
 def figures(proc: Any, data: Any) -> list[ReportFigure]:

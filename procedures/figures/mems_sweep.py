@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from .figures import ReportFigure, axis_label, equal_aspect, new_figure
-from .numbers import sig
+from bench.figures import ReportFigure, axis_label, equal_aspect, new_figure
+from bench.numbers import sig
 
 MODELS = ("linear", "cubic", "quintic")
 _COLOR = {"linear": "C2", "cubic": "C3", "quintic": "C4"}
@@ -33,8 +33,7 @@ def _amp_phase(q: np.ndarray, ch: int) -> tuple[np.ndarray, np.ndarray]:
 
 def sweep_models(proc: Any, data: Any) -> dict[str, Any]:
     """The sweep's steady states and the three identified models evaluated on it and on a grid."""
-    from bench.analysis.maslov import identify_forced
-    from procedures.mems_sweep import choose_model
+    from bench.analysis.maslov import choose_model, identify_forced
 
     tab = data.table("sweep")
     f, d, q = tab["freq_hz"], tab["direction"], np.column_stack([tab[c] for c in ("q1", "p1", "q2", "p2")])

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .figures import ReportFigure, new_figure
+from bench.figures import ReportFigure, new_figure
 
 
 def _cycles(data: Any) -> dict[str, np.ndarray] | None:

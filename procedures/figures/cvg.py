@@ -8,14 +8,12 @@ from typing import Any
 
 import numpy as np
 
-from .figures import ReportFigure, new_figure
+from bench.figures import ReportFigure, new_figure
 
 
 def scale_factor_figures(proc: Any, data: Any) -> list[ReportFigure]:
     """Output against the table rate with the least-squares line; the residuals in ppm of full scale."""
-    from procedures.cvg_scale_factor import WINDOWS
-
-    if WINDOWS.name not in data or "fpga" not in data:
+    if proc.windows_schema.name not in data or "fpga" not in data:
         return []
     fit = proc._analyse(data)
     fig, ax = new_figure(2, 1, height_in=4.6, sharex=True, gridspec_kw={"height_ratios": [3, 2]})
@@ -43,9 +41,7 @@ def scale_factor_figures(proc: Any, data: Any) -> list[ReportFigure]:
 
 def bias_figures(proc: Any, data: Any) -> list[ReportFigure]:
     """Each turn-on's batch rates (input-referred) and its bias with its 95 % interval."""
-    from procedures.cvg_bias import WINDOWS
-
-    if WINDOWS.name not in data or "fpga" not in data:
+    if proc.windows_schema.name not in data or "fpga" not in data:
         return []
     est = proc._estimates(data)
     fig, ax = new_figure(1, 1, height_in=3.0)

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .figures import (
+from bench.figures import (
     ReportFigure,
     axis_label,
     declared,
@@ -57,12 +57,10 @@ def trajectory(t_s: np.ndarray, q0: np.ndarray, params: dict[str, float], lam_ra
 
 
 def _record(proc: Any, data: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t_s, q, window row in WINDOW_COLUMNS order) of the identified record, decimated as the
+    """(t_s, q, window row in the order of the procedure's window_columns) of the identified record, decimated as the
     procedure's analysis does; columns by name."""
-    from procedures.hrg_free_decay import WINDOW, WINDOW_COLUMNS
-
-    window = data.table(WINDOW)
-    win = np.array([window[c][-1] for c in WINDOW_COLUMNS])
+    window = data.table(proc.window_stream)
+    win = np.array([window[c][-1] for c in proc.window_columns])
     fpga = data.table("fpga")
     sel = (fpga["t_s"] >= window["t_start_s"][-1]) & (fpga["t_s"] <= window["t_end_s"][-1])
     period = float(np.median(np.diff(fpga["t_s"][sel])))
@@ -74,10 +72,8 @@ def _record(proc: Any, data: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def figures(proc: Any, data: Any) -> list[ReportFigure]:
     """Every figure an hrg-free-decay run's results need, in the report's order."""
     from bench.analysis.slow_model import orbit_elements
-    from procedures.hrg_free_decay import WINDOW
-
     out: list[ReportFigure] = []
-    if WINDOW in data and "fpga" in data:
+    if proc.window_stream in data and "fpga" in data:
         t, q, win = _record(proc, data)
         if len(t) >= 8:
             params, source = _params(proc, data, t, q)
