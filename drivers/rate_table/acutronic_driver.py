@@ -1,7 +1,7 @@
 """Acutronic ACUTROL3000/3000e table controller, one axis, speaking ACL (TM-8004) over Ethernet
 TCP (port 9878) or over GPIB through a VISA resource (docs/rate_table_acutronic.md).
 
-The answers come in the framing of the link (acutronic_framing): on TCP every message is answered
+The answers come in the framing of the link (acutronic_protocol, "answer framing"): on TCP every message is answered
 with an error code and a length before the text, commands with `OK`; on GPIB only queries answer,
 so a command message ends in `*ESR?`, whose error bits (2, 4, 5 only) turn a refusal into a
 DeviceError.  At connect the driver sets and checks ASCII numbers (`:U:F F`) and the axis's units
@@ -16,7 +16,6 @@ import threading
 
 from drivers.errors import DeviceError, LinkLostError, ProtocolError
 
-from . import acutronic_framing as af
 from . import acutronic_protocol as ap
 from .acutronic_links import AclLink, SocketBytes, VisaBytes
 from .base import DEFAULT_POLL_S, RateTable, TableLimits, TableStatus
@@ -53,7 +52,7 @@ class AcutrolRateTable(RateTable):
         self.axis = int(axis)
         self.resource = resource
         self.where = resource or f"{host}:{port}"
-        self.framing = af.framing_for(resource, framing)
+        self.framing = ap.framing_for(resource, framing)
         self.vtrip_dps = float(vtrip_dps) if vtrip_dps else 1.1 * limits.max_rate_dps
         self.lockout = bool(lockout)
         self.timeout_s = float(timeout_s)
@@ -203,8 +202,8 @@ class AcutrolRateTable(RateTable):
             if self.framing == "tcp":
                 if code != ap.ERR_NONE:
                     raise DeviceError(f"rate table refused {command!r}: {self._error_text(code)}")
-                if text != af.COMMAND_OK:
-                    last = ProtocolError(f"rate table: {command!r} answered {text!r}, not {af.COMMAND_OK!r}")
+                if text != ap.COMMAND_OK:
+                    last = ProtocolError(f"rate table: {command!r} answered {text!r}, not {ap.COMMAND_OK!r}")
                     continue
                 return
             try:

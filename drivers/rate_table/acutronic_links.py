@@ -1,5 +1,5 @@
 """The Acutrol's links: a TCP socket or a VISA resource carrying raw bytes, and `AclLink`, which
-sends one ACL message and reads its answer in the link's framing (acutronic_framing: GPIB lines
+sends one ACL message and reads its answer in the link's framing (acutronic_protocol: GPIB lines
 or the TCP header).  Stale input is dropped before each request, so an answer that came after
 its timeout is never taken for the answer to a later one."""
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 import socket
 import time
 
-from . import acutronic_framing as af
+from . import acutronic_protocol as ap
 
 
 class AnswerTimeout(OSError):
@@ -172,8 +172,8 @@ class AclLink:
     framing only messages with a query are answered (the code is then always 0)."""
 
     def __init__(self, io: SocketBytes | VisaBytes, framing: str, timeout_s: float) -> None:
-        if framing not in af.FRAMINGS:
-            raise ValueError(f"framing {framing!r}: expected one of {af.FRAMINGS}")
+        if framing not in ap.FRAMINGS:
+            raise ValueError(f"framing {framing!r}: expected one of {ap.FRAMINGS}")
         self.io, self.framing, self.timeout_s = io, framing, float(timeout_s)
 
     def open(self) -> None:
@@ -185,11 +185,11 @@ class AclLink:
     def transact(self, message: str) -> tuple[int, str]:
         """Send one message and read its answer; AnswerTimeout or OSError when none comes,
         ValueError when the bytes are not an answer (a bad header, non-ASCII text)."""
-        data = af.message_bytes(message)
+        data = ap.message_bytes(message)
         self.io.flush()
         self.io.write(data)
         deadline = time.monotonic() + self.timeout_s
         if self.framing == "gpib":
             return 0, self.io.read_line(deadline).decode("ascii").strip()
-        code, length = af.parse_tcp_header(self.io.read_exact(af.HEADER_SIZE, deadline))
+        code, length = ap.parse_tcp_header(self.io.read_exact(ap.HEADER_SIZE, deadline))
         return code, self.io.read_exact(length, deadline).decode("ascii").strip()

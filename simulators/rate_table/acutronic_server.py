@@ -21,7 +21,6 @@ import math
 import time
 from typing import Any
 
-from drivers.rate_table import acutronic_framing as af
 from drivers.rate_table import acutronic_protocol as ap
 from drivers.rate_table import modbus_protocol as mp
 from simulators.line_server import LineServer
@@ -104,7 +103,7 @@ class AcutrolController:
     def handle_line(self, line: str, interface: str = "tcp") -> tuple[int, str | None]:
         """One received line (with its terminator) from `interface` ("tcp" or "gpib")."""
         self.log.append(line)
-        message = af.message_text(line)
+        message = ap.message_text(line)
         if message is None:
             return ap.ERR_NONE, None  # lost (too long) or not a whole message
         commands = ap.split_message(message, strict=False)
@@ -416,7 +415,7 @@ class AcutrolTableServer(TableFaultControls):
         self.mechanics = controller.mech
         self.link_faults = _LinkFaults()
         self._late_s = 0.0
-        max_line = af.MAX_MESSAGE_CHARS + 2  # the message, a CR and its LF (TM-8004 2.5)
+        max_line = ap.MAX_MESSAGE_CHARS + 2  # the message, a CR and its LF (TM-8004 2.5)
         self._tcp = LineServer(lambda line: self._reply(line, "tcp"), host, port, name="acutrol-tcp",
                                max_line=max_line, drop_long_lines=True)  # fmt: skip
         self._gpib = LineServer(lambda line: self._reply(line, "gpib"), host, 0, name="acutrol-gpib-standin",
@@ -462,11 +461,11 @@ class AcutrolTableServer(TableFaultControls):
         if interface == "gpib":
             if text is None:
                 return None  # IEEE-488: only a message with a query is answered
-            data = af.gpib_answer(text)
-        elif af.message_text(line) is None:
+            data = ap.gpib_answer(text)
+        elif ap.message_text(line) is None:
             return None  # a lost message is not answered
         else:
-            data = af.tcp_answer(code, text if text is not None else (af.COMMAND_OK if code == ap.ERR_NONE else ""))
+            data = ap.tcp_answer(code, text if text is not None else (ap.COMMAND_OK if code == ap.ERR_NONE else ""))
         late, self._late_s = self._late_s, 0.0
         if late > 0:
             time.sleep(late)
