@@ -306,3 +306,72 @@ def test_a_late_reply_is_not_taken_for_the_next_answer(model):
         table.close()
         server.stop()
         clock.close()
+
+
+# --- axes other than 1; the door told apart from the e-stop ---------------------------------------
+@pytest.mark.parametrize("model", ["acutrol-tcp", "acutrol-gpib"])
+def test_a_door_is_an_open_interlock_not_an_estop(model):
+    """SI bit 0 sums every interlock input and the master interlock: the axis's own register
+    (A1INTLK) tells the door (INTLK1) from the e-stop (master interlock)."""
+    world, clock, server, table = make_acutrol(model)
+    try:
+        table.enable()
+        server.inject("interlock")
+        st = table.status()
+        assert st.interlock_open and not st.estop and not st.enabled and st.fault_code == mp.FAULT_INTERLOCK
+        assert server.controller.system_interlocks() & ap.SI_G1INTLK  # the summary bit once taken for an e-stop
+        server.clear("interlock")
+        table.fault_reset()
+        server.inject("estop")
+        st = table.status()
+        assert st.estop and not st.interlock_open and st.fault_code == mp.FAULT_ESTOP
+    finally:
+        table.close()
+        server.stop()
+        clock.close()
+
+
+@pytest.mark.parametrize("model", ["acutrol-tcp", "acutrol-gpib"])
+def test_axis_2_reads_its_own_bits_and_moves_its_own_axis(model):
+    """The gyro on axis 1, the driver on axis 2: a door on axis 1 is not axis 2's; a door on axis
+    2 is; the e-stop (master interlock) is every axis's.  Axis 2 spins without turning the gyro."""
+    world, clock, server, table = make_acutrol(model, axis=2)
+    c = server.controller
+    try:
+        assert c.limits["RATE"][2]["R"] == LIMITS.max_rate_dps and c.limit_rate["R"] != LIMITS.max_rate_dps
+        table.enable()
+        table.set_rate(50.0, 200.0)
+        st = table.wait_at_rate(0.1, 0.1, 5.0)
+        assert st.rate_dps == pytest.approx(50.0, abs=0.1) and st.enabled
+        assert c.axes[2].rate_dps == pytest.approx(50.0, abs=0.01) and world.case_rate_dps == 0.0
+        server.inject("interlock", axis=1)
+        st = table.status()
+        assert st.enabled and not st.interlock_open and not st.estop
+        server.inject("interlock", axis=2)
+        st = table.status()
+        assert st.interlock_open and not st.estop and not st.enabled
+        assert table.safe_state() is True
+        server.clear("interlock", axis=2)
+        table.fault_reset()
+        server.inject("estop")
+        st = table.status()
+        assert st.estop and not st.interlock_open
+    finally:
+        table.close()
+        server.stop()
+        clock.close()
+
+
+def test_the_simulator_serves_axes_1_to_3():
+    world, clock, server, table = make_acutrol("acutrol-tcp", axis=3)
+    try:
+        for axis in (1, 2, 3):
+            assert table._query(f":MODE? {axis}") == "O"
+        with pytest.raises(DeviceError, match="out of range"):
+            table._query(":MODE? 4")
+        table.enable()
+        assert table._query(":INT? 3") == "Close" and table._query(":INT? 1") == "Open"
+    finally:
+        table.close()
+        server.stop()
+        clock.close()
