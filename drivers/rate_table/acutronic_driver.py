@@ -27,8 +27,9 @@ IN_POSITION_TOL_DEG = 0.005
 
 
 class AcutrolRateTable(RateTable):
-    """One axis of an ACUTROL3000 over TCP (`host`, `port`) or a VISA `resource`; `framing` is
-    "auto" (GPIB resources speak lines, sockets the TCP header), "tcp" or "gpib"."""
+    """One axis of an ACUTROL3000 over TCP (`host`, `port`) or a VISA `resource` (through
+    `visa_library` when given); `framing` is "auto" (GPIB resources speak lines, sockets the TCP
+    header), "tcp" or "gpib"."""
 
     def __init__(
         self,
@@ -37,6 +38,7 @@ class AcutrolRateTable(RateTable):
         *,
         resource: str = "",
         framing: str = "auto",
+        visa_library: str = "",
         axis: int = 1,
         limits: TableLimits,
         clock,
@@ -58,7 +60,10 @@ class AcutrolRateTable(RateTable):
         self.timeout_s = float(timeout_s)
         self.read_retries = int(read_retries)
         lines = self.framing == "gpib"
-        io = VisaBytes(resource, timeout_s, lines=lines) if resource else SocketBytes(host, port, timeout_s)
+        if resource:
+            io: VisaBytes | SocketBytes = VisaBytes(resource, timeout_s, lines=lines, visa_library=visa_library)
+        else:
+            io = SocketBytes(host, port, timeout_s)
         self._link = AclLink(io, self.framing, timeout_s)
         self._io_lock = threading.Lock()
         self._connected = False

@@ -87,17 +87,20 @@ class SocketBytes:
 class VisaBytes:
     """A VISA resource (GPIB0::1::INSTR, or TCPIP::host::port::SOCKET) through pyvisa."""
 
-    def __init__(self, resource: str, timeout_s: float, *, lines: bool) -> None:
-        """lines: answers are LF-terminated lines (the gpib framing), else counted bytes."""
+    def __init__(self, resource: str, timeout_s: float, *, lines: bool, visa_library: str = "") -> None:
+        """lines: answers are LF-terminated lines (the gpib framing), else counted bytes;
+        visa_library: pyvisa's library ("@py", a vendor VISA's path, "file.yaml@sim"); "" = pyvisa-py
+        for a socket resource, pyvisa's default otherwise."""
         self.resource, self.timeout_s, self.lines = resource, float(timeout_s), lines
+        self.visa_library = visa_library
         self._inst = None
         self._stale = False  # an answer timed out: it may still come, drain it before the next request
 
     def open(self) -> None:
         import pyvisa
 
-        socket_resource = "::SOCKET" in self.resource.upper()
-        rm = pyvisa.ResourceManager("@py") if socket_resource else pyvisa.ResourceManager()
+        library = self.visa_library or ("@py" if "::SOCKET" in self.resource.upper() else "")
+        rm = pyvisa.ResourceManager(library) if library else pyvisa.ResourceManager()
         inst = rm.open_resource(self.resource)
         inst.timeout = int(self.timeout_s * 1000)
         inst.read_termination = "\n" if self.lines else None

@@ -22,6 +22,7 @@ def _build(cfg: dict[str, Any], clock: Any) -> Any:
         cfg["port"],
         resource=cfg["visa_resource"],
         framing=cfg["framing"],
+        visa_library=cfg["visa_library"],
         axis=cfg["axis"],
         limits=limits,
         clock=clock,
@@ -48,6 +49,9 @@ SPEC = register_driver(
                     "auto",
                     choices=("auto", "tcp", "gpib"),
                     doc="answer framing: auto = GPIB resources lines, sockets the TCP header (TM-8004 2)",
+                ),
+                "visa_library": Key(
+                    str, "", doc="pyvisa library for visa_resource: '' = the default, '@py', a vendor VISA's path"
                 ),
                 "axis": Key(int, 1, 1, 6, doc="controller axis the gyro is mounted on"),
                 "vtrip_dps": Key(float, 0.0, 0.0, 40000.0, doc="velocity trip; 0: 1.1 x max_rate_dps", unit="deg/s"),
