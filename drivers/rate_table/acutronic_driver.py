@@ -170,6 +170,10 @@ class AcutrolRateTable(RateTable):
         """One message, its answer (error code, text); LinkLostError if none, ProtocolError if not an answer."""
         if not self._connected:
             raise LinkLostError("rate table: not connected")
+        try:
+            ap.message_bytes(line)
+        except ValueError as exc:
+            raise ProtocolError(f"rate table: not sent, the controller would lose it: {exc}") from None
         with self._io_lock:
             try:
                 return self._link.transact(line)
