@@ -375,3 +375,19 @@ def test_the_simulator_serves_axes_1_to_3():
         table.close()
         server.stop()
         clock.close()
+
+
+def test_the_ethernet_port_through_a_visa_socket_speaks_the_tcp_framing():
+    """A VISA `TCPIP::host::9878::SOCKET` resource reaches the Ethernet port: framing auto -> tcp,
+    counted bytes read through pyvisa, a refusal's empty text included."""
+    world, clock, server, table = make_acutrol("acutrol-visa-tcp")
+    try:
+        assert table.framing == "tcp" and table.idn.startswith("Acutronic")
+        with pytest.raises(DeviceError, match="error code 3"):
+            table._send(":DEM:POS 1,400", idempotent=False)
+        table.enable()
+        assert table.status().enabled
+    finally:
+        table.close()
+        server.stop()
+        clock.close()

@@ -195,4 +195,5 @@ class AclLink:
         if self.framing == "gpib":
             return 0, self.io.read_line(deadline).decode("ascii").strip()
         code, length = ap.parse_tcp_header(self.io.read_exact(ap.HEADER_SIZE, deadline))
-        return code, self.io.read_exact(length, deadline).decode("ascii").strip()
+        text = self.io.read_exact(length, deadline) if length else b""
+        return code, text.decode("ascii").strip()
