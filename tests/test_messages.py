@@ -184,11 +184,12 @@ def test_messages_name_the_value_and_what_was_expected(tmp_path, capsys, monkeyp
 def test_unexpected_errors_are_one_line_and_a_saved_traceback(tmp_path, capsys, monkeypatch):
     """A bug is one line with the path of its saved traceback; --debug prints the traceback."""
     import bench.cli as cli
+    import bench.cli.listing
 
     def boom(_args):
         raise ZeroDivisionError("float division by zero")
 
-    monkeypatch.setattr(cli, "_cmd_list", boom)
+    monkeypatch.setattr(bench.cli.listing, "cmd", boom)
     monkeypatch.setenv("TMPDIR", str(tmp_path))
     import tempfile
 
