@@ -47,12 +47,31 @@ def station():
 
 
 def test_slave_follows_the_master_reference(station):
+    """Truth: the SR865 keeps 6 digits of an asked frequency (12345.678 -> 12345.7)."""
     fe = station.devices["frontend"]
-    fe.set_frequency_hz(12_345.678)
+    assert fe.set_frequency_hz(12_345.678) == 12_345.7
     master, slave = fe.devices[1], fe.devices[2]
-    assert float(master.ask("FREQ?")) == pytest.approx(12_345.678, abs=1e-6)
-    assert float(slave.ask("FREQ?")) == pytest.approx(12_345.678, abs=1e-6)
+    assert float(master.ask("FREQ?")) == 12_345.7
+    assert float(slave.ask("FREQ?")) == 12_345.7
     assert slave.ask("RSRC?") == "1" and master.ask("RSRC?") == "0"
+
+
+def test_frequency_goes_through_pymeasures_setter_and_is_read_back(station):
+    """PyMeasure's SR860 `frequency` setter ("FREQ %0.6e") sends 1.364664e+04; the instrument
+    keeps 6 digits; the front end answers (and keeps) FREQ?'s 13646.6, not the asked 13646.637."""
+    fe = station.devices["frontend"]
+    handle = station.handles["frontend"]
+    sent: list[str] = []
+    server = handle.servers[0]
+    execute = server.execute
+    server.execute = lambda line: (sent.append(line.strip()), execute(line))[1]
+    try:
+        used = fe.set_frequency_hz(13_646.637)
+    finally:
+        server.execute = execute
+    assert sent[:2] == ["FREQ 1.364664e+04", "FREQ?"]
+    assert used == 13_646.6 and fe.frequency_hz == 13_646.6
+    assert handle.models[0].freq_int_hz == 13_646.6
 
 
 def test_limits_are_checked_before_anything_is_sent(station):
@@ -176,19 +195,30 @@ def test_lockin_settles_with_its_time_constant_in_virtual_time():
 
 
 def test_mems_sweep_on_the_sr865_station_finds_the_truth(tmp_path):
-    """mems-sweep unmodified on sim-mems-sr865 (17 points): the same truth checks as on sim-mems."""
+    """mems-sweep unmodified on sim-mems-sr865 (17 points) with the SR865's 6-digit frequency
+    rounding modelled: every measurement with a truth holds it inside its 95 % interval (recording
+    the asked frequency put freq_offset_hz at 1.949 and c_m at 24.49, truth 1.938 and 24.36), and
+    the sweep records the frequencies the master read back."""
     from bench.engine import Runner
+    from bench.recorder import open_run
     from procedures.mems_sweep import MemsSweep
 
     station = SimStation("sim-mems-sr865", seed=0).open()
     try:
         record = Runner(station, runs_dir=tmp_path / "runs").run(MemsSweep, {"n_points": 17})
-        truth = station.truth()
+        truth = MemsSweep.truth_for(station.truth())
     finally:
         station.close()
     assert record.outcome == "COMPLETE", record.traceback
     m = {r.name: r for r in record.measurements}
     assert m["chosen_model_order"].value == 3.0
-    for name, value in {"Q": truth["q_factor"], "split_hz": truth["split_hz"], "gamma": 43.029}.items():
+    checked = [name for name in truth if name in m and m[name].ci95 is not None]
+    assert {"freq_offset_hz", "c_m", "Q", "split_hz", "gamma", "xi"} <= set(checked)
+    for name in checked:
         lo, hi = m[name].ci95
-        assert abs(value - 0.5 * (lo + hi)) <= 0.75 * (hi - lo), (name, m[name].value, value, (lo, hi))
+        assert lo <= truth[name] <= hi, (name, m[name].value, truth[name], (lo, hi))
+    freq_hz = open_run(record.raw_file).table("sweep")["freq_hz"]
+    asked = MemsSweep({"n_points": 17}).frequencies()
+    assert len(freq_hz) == 34
+    np.testing.assert_array_equal(freq_hz[:17], [float(f"{f:.6g}") for f in asked])
+    assert np.any(freq_hz[:17] != asked)
