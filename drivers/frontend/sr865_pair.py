@@ -155,8 +155,10 @@ class Sr865PairFrontEnd:
         self.irng = {ch: list(INPUT_RANGES_V).index(self.setup.input_range_v) for ch in CHANNELS}
         self.scal = {ch: _sensitivity_index(self.setup.sensitivity_v) for ch in CHANNELS}
         self.devices = {
-            1: PyMeasureDevice(instrument_class, master_resource, timeout_s=timeout_s, name="SR865 #1 (master)"),
-            2: PyMeasureDevice(instrument_class, slave_resource, timeout_s=timeout_s, name="SR865 #2 (locked)"),
+            1: PyMeasureDevice(instrument_class, master_resource, timeout_s=timeout_s, name="SR865 #1 (master)",
+                               status_query="*ESR?"),
+            2: PyMeasureDevice(instrument_class, slave_resource, timeout_s=timeout_s, name="SR865 #2 (locked)",
+                               status_query="*ESR?"),
         }
         self.channels = {ch: _Channel() for ch in CHANNELS}
         self.frequency_hz = 1000.0
