@@ -147,6 +147,7 @@ class Sr865PairFrontEnd:
         setup: Sr865Setup | None = None,
         timeout_s: float = 2.0,
         instrument_class: str = SR860_CLASS,
+        visa_library: str = "",
     ) -> None:
         self.clock = clock
         self.limits = limits or Sr865Limits()
@@ -154,11 +155,12 @@ class Sr865PairFrontEnd:
         # each lock-in's input range and sensitivity in use (indices into the tables, 0 = largest)
         self.irng = {ch: list(INPUT_RANGES_V).index(self.setup.input_range_v) for ch in CHANNELS}
         self.scal = {ch: _sensitivity_index(self.setup.sensitivity_v) for ch in CHANNELS}
+        visa = {"visa_library": visa_library} if visa_library else {}
         self.devices = {
             1: PyMeasureDevice(instrument_class, master_resource, timeout_s=timeout_s, name="SR865 #1 (master)",
-                               status_query="*ESR?"),
+                               status_query="*ESR?", **visa),
             2: PyMeasureDevice(instrument_class, slave_resource, timeout_s=timeout_s, name="SR865 #2 (locked)",
-                               status_query="*ESR?"),
+                               status_query="*ESR?", **visa),
         }
         self.channels = {ch: _Channel() for ch in CHANNELS}
         self.frequency_hz = 1000.0

@@ -27,6 +27,7 @@ def _build(cfg: dict[str, Any], clock: Any) -> Any:
         ),
         timeout_s=cfg["timeout_s"],
         instrument_class=cfg["instrument_class"],
+        visa_library=cfg["visa_library"],
     )
     try:
         fe.connect()
@@ -52,14 +53,16 @@ SPEC = register_driver(
             "instrument_class": Key(str, "pymeasure.instruments.srs.SR860", doc="PyMeasure class of both"),
             "max_amplitude_v": Key(float, 2.0, 0.0, 2.8284, doc="largest sine-out amplitude asked", unit="V"),
             "timeout_s": Key(float, 2.0, 0.05, 60.0, doc="deadline of one query", unit="s"),
-            "input_range_v": Key(float, 1.0, doc="input range of both (IRNG)", unit="V",
-                                 choices=(1.0, 0.3, 0.1, 0.03, 0.01)),
+            "input_range_v": Key(float, 1.0, 0.01, 1.0, doc="input range of both (IRNG: 1, 0.3, 0.1, 0.03, 0.01)",
+                                 unit="V"),
             "sensitivity_v": Key(float, 1.0, 1e-9, 1.0, doc="full-scale sensitivity of both (SCAL, 1-2-5)", unit="V"),
             "range_policy": Key(str, "step-up", doc="on overload: one range up and the point again, or keep",
                                 choices=("step-up", "fixed")),
             "ref_trigger": Key(str, "POS", doc="#2's reference trigger (RTRG): sine, TTL rising, TTL falling",
                                choices=("SIN", "POS", "NEG")),
             "ref_impedance": Key(str, "1MEG", doc="#2's reference input impedance (REFZ)", choices=("1MEG", "50OHMS")),
+            "visa_library": Key(str, "", doc="pyvisa backend: '' (a vendor VISA if installed, else pyvisa-py), "
+                                "'@py' (pyvisa-py), '@ivi'"),
             "simulated_visa": Key(str, "socket", doc="simulated stations: the lock-ins' VISA transport",
                                   choices=("socket", "vxi11")),
         },

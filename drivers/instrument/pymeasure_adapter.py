@@ -5,6 +5,7 @@ rules hold (docs/frontend_sr865.md).  PyMeasure is an optional extra: `gyrobench
 from __future__ import annotations
 
 import importlib
+import re
 import warnings
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -12,6 +13,8 @@ from typing import Any, TypeVar
 from drivers.errors import DeviceError, LinkLostError, ProtocolError
 
 T = TypeVar("T")
+#: `TCPIP[n]::host,port::...INSTR`: pyvisa-py's VXI-11 resource with the core channel's port
+_INSTR_WITH_PORT = re.compile(r"^TCPIP\d*::[^:]+,\d+::", re.IGNORECASE)
 #: IEEE 488.2 *ESR? bit 5: a command (or query) the instrument could not parse
 ESR_COMMAND_ERROR = 1 << 5
 
@@ -52,8 +55,10 @@ class PyMeasureDevice:
             "timeout": int(round(self.timeout_s * 1000)),
             **self.kwargs,
         }
-        if "::SOCKET" in self.resource.upper():
-            kw.setdefault("visa_library", "@py")  # pyvisa-py speaks raw sockets without a vendor VISA
+        if "::SOCKET" in self.resource.upper() or _INSTR_WITH_PORT.match(self.resource):
+            # raw sockets, and VXI-11 with the core channel's port given (no portmapper): pyvisa-py's
+            # resource forms, spoken without a vendor VISA
+            kw.setdefault("visa_library", "@py")
         try:
             with warnings.catch_warnings():  # PyMeasure warns that it does not know if a class speaks SCPI
                 warnings.simplefilter("ignore", FutureWarning)

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from simulators.line_server import TextLineServer
+from simulators.vxi11 import Vxi11Server
 
 #: OFLT index -> time constant (s), the SR86x table (1 us .. 30 ks, 1-3-10 steps)
 TIME_CONSTANTS_S = tuple(m * 10.0**e for e in range(-6, 5) for m in (1.0, 3.0))
@@ -346,11 +347,22 @@ class Sr865Model:
 
 
 class Sr865PairServer:
-    """Handle of the two simulated lock-ins: `.resources` (master, slave), `.models`, `inject`, `stop`."""
+    """Handle of the two simulated lock-ins: `.resources` (master, slave), `.models`, `inject`, `stop`.
+    `visa`: "socket" (raw LF lines, `TCPIP::host::port::SOCKET`) or "vxi11" (the VXI-11 core
+    channel, `TCPIP::host,port::inst0::INSTR`); `host` one for both, or one each."""
 
-    def __init__(self, world: Any, models: tuple[Sr865Model, Sr865Model], host: str = "127.0.0.1") -> None:
+    def __init__(self, world: Any, models: tuple[Sr865Model, Sr865Model], host: str | tuple[str, str] = "127.0.0.1",
+                 visa: str = "socket") -> None:
         self.world, self.models = world, models
-        self.servers = [TextLineServer(world, m.execute, host, name="sr865-sim") for m in models]
+        hosts = (host, host) if isinstance(host, str) else tuple(host)
+        if visa == "socket":
+            self.servers: list[Any] = [TextLineServer(world, m.execute, h, name="sr865-sim")
+                                       for m, h in zip(models, hosts, strict=True)]
+        elif visa == "vxi11":
+            self.servers = [Vxi11Server(world, m.execute, host=h, status_byte=m.stb)
+                            for m, h in zip(models, hosts, strict=True)]
+        else:
+            raise ValueError(f"unknown simulated VISA transport {visa!r}; known: socket, vxi11")
 
     @property
     def resources(self) -> tuple[str, str]:
@@ -375,7 +387,8 @@ class Sr865PairServer:
 
 
 def serve_sr865_pair(
-    world: Any, *, host: str = "127.0.0.1", drive_gain: float = 50.0, pickoff_gain_v: float = 1.0
+    world: Any, *, host: str | tuple[str, str] = "127.0.0.1", drive_gain: float = 50.0,
+    pickoff_gain_v: float = 1.0, visa: str = "socket",
 ) -> Sr865PairServer:
     """Attach two SR865 models (channel 1 = reference master, channel 2 wired to its reference
     output) to the world and serve them on loopback."""
@@ -385,11 +398,18 @@ def serve_sr865_pair(
     with world.lock:
         world.attach(master)
         world.attach(slave)
-    return Sr865PairServer(world, (master, slave), host)
+    try:
+        return Sr865PairServer(world, (master, slave), host, visa)
+    except Exception:
+        with world.lock:
+            world.detach(master)
+            world.detach(slave)
+        raise
 
 
 def serve_station(world: Any, cfg: dict[str, Any]) -> tuple[Sr865PairServer, dict[str, Any]]:
-    """A simulated station's `sr865-pair-frontend`; (handle, both lock-ins' VISA resources)."""
-    handle = serve_sr865_pair(world)
+    """A simulated station's `sr865-pair-frontend`; (handle, both lock-ins' VISA resources),
+    over the transport its `simulated_visa` names."""
+    handle = serve_sr865_pair(world, visa=cfg.get("simulated_visa") or "socket")
     master, slave = handle.resources
     return handle, {"resource": master, "resource2": slave}
