@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import socket
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -72,43 +73,61 @@ def _portmappers(hosts: tuple[str, ...], programs: list[dict]) -> tuple[int, lis
     raise RuntimeError("no port free for the portmappers on both loopback addresses")
 
 
-LAB_FILE = """
-[station]
-id = "lab-mems-sr865-vxi11"
+def _doc_station_files() -> dict[str, str]:
+    """The lab station files docs/frontend_sr865.md gives, by station id."""
+    import tomllib
 
-[devices.frontend]
-driver = "sr865-pair-frontend"
-resource = "TCPIP::127.0.0.1::INSTR"
-resource2 = "TCPIP::127.0.0.2::INSTR"
-visa_library = "@py"
-max_amplitude_v = 1.0
-"""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "frontend_sr865.md").read_text()
+    blocks = [b.split("```", 1)[0] for b in text.split("```toml\n")[1:]]
+    return {tomllib.loads(b)["station"]["id"]: b for b in blocks}
 
 
-def test_a_lab_station_file_reaches_both_lock_ins_through_the_portmapper(tmp_path, monkeypatch):
-    """The resource strings a lab writes (`TCPIP::<ip>::INSTR`): pyvisa-py asks the portmapper
-    (port 111, or wherever it was put) for the core channel, then speaks VXI-11 to it."""
+def _open_lab_station(tmp_path, text: str, pair) -> None:
+    """Open a lab's station file against the simulated pair and use it once."""
+    path = tmp_path / "lab.toml"
+    path.write_text(text)
+    with Station.load(path).open() as station:
+        fe = station.devices["frontend"]
+        assert isinstance(fe, Sr865PairFrontEnd)
+        assert fe.idn.count("SR865") == 2
+        assert fe.set_frequency_hz(13_646.637) == 13_646.6
+        assert pair.models[0].freq_int_hz == 13_646.6
+        assert (pair.models[1].rsrc, pair.models[1].rtrg, pair.models[1].refz) == (1, 1, 1)
+        assert station.safe_state().confirmed
+
+
+def test_the_docs_vxi11_station_file_reaches_both_lock_ins_through_the_portmapper(tmp_path, monkeypatch):
+    """The resource strings a lab writes (`TCPIP::<ip>::INSTR`, the docs' file with its two
+    addresses made loopback ones): pyvisa-py asks the portmapper (port 111, or wherever it was
+    put) for each core channel, then speaks VXI-11 to it."""
     from pyvisa_py.protocols import rpc
 
+    text = _doc_station_files()["lab-mems-sr865-vxi11"]
+    assert 'resource = "TCPIP::192.168.1.20::INSTR"' in text
     hosts = ("127.0.0.1", "127.0.0.2")
     world = World(preset("mems"), seed=1)
     pair = serve_sr865_pair(world, host=hosts, visa="vxi11")
     port, maps = _portmappers(hosts, [{(CORE_PROG, CORE_VERS): s.port} for s in pair.servers])
     monkeypatch.setattr(rpc, "PMAP_PORT", port)
-    path = tmp_path / "lab.toml"
-    path.write_text(LAB_FILE)
     try:
-        with Station.load(path).open() as station:
-            fe = station.devices["frontend"]
-            assert isinstance(fe, Sr865PairFrontEnd)
-            assert fe.idn.count("SR865") == 2
-            assert fe.set_frequency_hz(13_646.637) == 13_646.6
-            assert pair.models[0].freq_int_hz == 13_646.6
-            assert (pair.models[1].rsrc, pair.models[1].rtrg, pair.models[1].refz) == (1, 1, 1)
-            assert station.safe_state().confirmed
+        _open_lab_station(tmp_path, text.replace("192.168.1.20", hosts[0]).replace("192.168.1.21", hosts[1]), pair)
     finally:
         for m in maps:
             m.stop()
+        pair.stop()
+
+
+def test_the_docs_socket_station_file_opens_the_pair(tmp_path):
+    text = _doc_station_files()["lab-mems-sr865-socket"]
+    world = World(preset("mems"), seed=1)
+    pair = serve_sr865_pair(world)
+    try:
+        for doc_resource, resource in zip(("TCPIP::192.168.1.20::5025::SOCKET", "TCPIP::192.168.1.21::5025::SOCKET"),
+                                          pair.resources, strict=True):
+            assert doc_resource in text
+            text = text.replace(doc_resource, resource)
+        _open_lab_station(tmp_path, text, pair)
+    finally:
         pair.stop()
 
 
