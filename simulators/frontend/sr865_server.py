@@ -1,6 +1,9 @@
-"""Two simulated SR865 lock-in amplifiers on loopback sockets (VISA `TCPIP::...::SOCKET`), each a
-World device: its sine output drives one electrode channel, its input reads one pickoff
-(docs/frontend_sr865.md).  The second one's reference is the first one's (RSRC 1, external).
+"""Two simulated SR865 lock-in amplifiers on loopback sockets (VISA `TCPIP::...::SOCKET`) or over
+VXI-11 (`TCPIP::host,port::inst0::INSTR`), each a World device: its sine output drives one
+electrode channel, its input reads one pickoff (docs/frontend_sr865.md).  The second one's
+reference is the first one's (RSRC 1, external).  As the instrument: 6-digit frequencies, unit
+suffixes, status registers (*ESR/*STB, LIAS, CUROVLDSTAT), an unknown query answered by a status
+bit and silence, an input beyond its range clipped.
 
 Conventions (the SR86x's, see the doc): sine out = sqrt(2) SLVL sin(wt + PHAS), on the master's
 oscillator timebase; the demodulator reference is sin(wt + PHAS), and X, Y are rms volts.  The
