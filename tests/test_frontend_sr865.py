@@ -354,3 +354,18 @@ def test_points_taken_in_overload_are_refused_not_fitted(tmp_path):
     assert len(missing) >= 1 and all(asked[3] < f < asked[-3] for f in missing), missing
     record, freq_hz, scal = _sweep_on(tmp_path / "step", 'sensitivity_v = 0.5\nrange_policy = "step-up"')
     assert len(freq_hz) == 34 and scal == [0, 1]
+
+
+@pytest.mark.parametrize("sensitivity_v, scal", [(1.0, 0), (0.5, 1), (5e-5, 13), (5e-6, 16), (2e-7, 20), (1e-9, 27)])
+def test_sensitivity_goes_to_its_own_scal_index(pair, sensitivity_v, scal):
+    """Truth: the SR86x's SCAL table (0 = 1 V .. 27 = 1 nV); PyMeasure's setter truncates up, so
+    a table value off by one ulp would land one step higher."""
+    from drivers.frontend.sr865_pair import Sr865Setup
+
+    world, clock, server, _ = pair
+    fe = Sr865PairFrontEnd(*server.resources, clock=clock, setup=Sr865Setup(sensitivity_v=sensitivity_v))
+    try:
+        fe.connect()
+        assert [m.scal for m in server.models] == [scal, scal]
+    finally:
+        fe.close()

@@ -38,8 +38,9 @@ PHASE_RANGE_DEG = (-360.0, 360.0)
 CHANNELS = (1, 2)
 #: voltage input ranges (V peak) -> PyMeasure's `input_range` names (IRNG 0..4), largest first
 INPUT_RANGES_V = {1.0: "1V", 0.3: "300M", 0.1: "100M", 0.03: "30M", 0.01: "10M"}
-#: full-scale sensitivities (V rms, SCAL 0..27), largest first: PyMeasure's own table
-SENSITIVITIES_V = (1.0, *(m * 10.0**-e for e in range(1, 10) for m in (5.0, 2.0, 1.0)))
+#: full-scale sensitivities (V rms, SCAL 0..27), largest first: PyMeasure's table, as the same
+#: decimal literals (its setter truncates up: 5.000000000000001e-05 would be taken as 1e-4)
+SENSITIVITIES_V = (1.0, *(float(f"{m}e-{e}") for e in range(1, 10) for m in (5, 2, 1)))
 #: the locked lock-in's reference trigger (RTRG 0, 1, 2) and input impedance (REFZ 0, 1)
 REF_TRIGGERS = ("SIN", "POS", "NEG")
 REF_IMPEDANCES = ("50OHMS", "1MEG")
