@@ -48,6 +48,8 @@ SWEEP_COLUMNS = SWEEP.names
 STATE = StreamSchema("mems_sweep_state", "frontend",
                      tuple(SWEEP.columns[SWEEP.index(c)] for c in ("q1", "p1", "q2", "p2")))
 MODEL_ORDER = {"linear": 1, "cubic": 3, "quintic": 5}
+#: a point that overloads is taken again this many times while the front end steps a range up
+MAX_RETAKES = 4
 #: the derived quantities of the chosen model: unit, what it is
 DERIVED = {
     "Q": ("", "quality factor w0 / gamma"),
@@ -248,31 +250,51 @@ class MemsSweep(Procedure):
 
     def _sweep(self, ctx, freqs: np.ndarray, direction: float) -> None:
         fe = ctx.devices.frontend
-        for j, f in enumerate(freqs):
-            fe.set_frequency_hz(float(f))
+        overload = getattr(fe, "lockin_overload", None)  # front ends that report overloads
+        for j, f_asked in enumerate(freqs):
+            # the frequency in use as the front end reads it back (the SR865 keeps 6 digits)
+            used = fe.set_frequency_hz(float(f_asked))
+            f = float(used) if used is not None else float(f_asked)
             ctx.sleep(self.settle_time_s())
-            settled = False
-            for _attempt in range(4):
-                win = self._window(ctx)
-                half = len(win) // 2
-                drift = np.abs(win[half:].mean(axis=0) - win[:half].mean(axis=0))
-                scatter = win.std(axis=0, ddof=1) / math.sqrt(max(half, 1))
-                tol = 5.0 * scatter + 2e-3 * np.max(np.abs(win.mean(axis=0)))
-                if np.all(drift <= tol):
-                    settled = True
+            for _take in range(1 + MAX_RETAKES):
+                if overload is not None:
+                    overload(act=False)  # forget what the settling latched: only the window counts
+                win, settled, drift = self._settled_window(ctx)
+                over = overload() if overload is not None else None
+                if not (over and over.changed):
                     break
-                ctx.sleep(2.0 * self.tau_s)
+                ctx.log.warning("%.4f Hz: overload (%s): taking the point again", f, over)
+                ctx.sleep(self.settle_time_s())
+            if over:
+                ctx.log.warning("%.4f Hz: taken in overload (%s): refused, not fitted", f, over)
+                ctx.progress((j + 1) / len(freqs), f"{'up' if direction > 0 else 'down'} {f:.3f} Hz  overload")
+                continue
             if not settled:
                 ctx.log.warning("%.4f Hz: not settled after 3 extra waits (drift %s)", f, np.array2string(drift))
             q1, p1, q2, p2 = (float(v) for v in STATE.columns_of(win.mean(axis=0), "q1", "p1", "q2", "p2"))
             amp_x = math.hypot(q1, p1)
-            row = SWEEP.row(t_s=ctx.clock.now(), freq_hz=float(f), direction=direction, q1=q1, p1=p1, q2=q2, p2=p2,
+            row = SWEEP.row(t_s=ctx.clock.now(), freq_hz=f, direction=direction, q1=q1, p1=p1, q2=q2, p2=p2,
                             amplitude=amp_x, phase_deg=math.degrees(math.atan2(p1, q1)),
                             amplitude_y=math.hypot(q2, p2), phase_y_deg=math.degrees(math.atan2(p2, q2)),
                             settled=float(settled))
             self.rows.append(row)
             ctx.record("sweep", SWEEP_COLUMNS, np.array(row))
             ctx.progress((j + 1) / len(freqs), f"{'up' if direction > 0 else 'down'} {f:.3f} Hz  A={amp_x:.4f}")
+
+    def _settled_window(self, ctx) -> tuple[np.ndarray, bool, np.ndarray]:
+        """One averaging window, taken again (after 2 tau) while its halves disagree, up to 3 times."""
+        settled = False
+        for _attempt in range(4):
+            win = self._window(ctx)
+            half = len(win) // 2
+            drift = np.abs(win[half:].mean(axis=0) - win[:half].mean(axis=0))
+            scatter = win.std(axis=0, ddof=1) / math.sqrt(max(half, 1))
+            tol = 5.0 * scatter + 2e-3 * np.max(np.abs(win.mean(axis=0)))
+            if np.all(drift <= tol):
+                settled = True
+                break
+            ctx.sleep(2.0 * self.tau_s)
+        return win, settled, drift
 
     def _analyse(self, rows: np.ndarray, compute=None):
         """Identify the sweep rows; with `compute` (a run's `ctx.compute`) in a worker the engine can end."""

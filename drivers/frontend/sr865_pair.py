@@ -7,6 +7,11 @@ It serves the front-end role the procedures use (`set_drive`, `set_frequency_hz`
 drive v = A cos(wt + phase) with A in peak volts, readings (X, Y) = peak volts of the pickoff's
 cos(wt) and sin(wt) parts.  The lock-ins work in rms volts against sin(wt + PHAS); the conversion
 is here.  The two channels are read one after the other: the skew is measured on each read.
+
+At connect every setting the readings depend on is set and read back (reference source, trigger
+and input impedance, harmonic, sine-out DC level, input range, sensitivity, filter slope); the
+frequency recorded is the one the master reads back (`FREQ?`, 6 digits), and `lockin_overload`
+reads the latched overload bits (`LIAS?`) so that a point taken in overload is refused.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from typing import Any
 
 from drivers.errors import DeviceError, LimitError, LinkLostError, ProtocolError
 from drivers.instrument.pymeasure_adapter import PyMeasureDevice
+from drivers.instrument.station_device import same
 
 log = logging.getLogger(__name__)
 SR860_CLASS = "pymeasure.instruments.srs.SR860"
@@ -30,6 +36,23 @@ MAX_AMPLITUDE_V = 2.0 * SQRT2
 FREQUENCY_RANGE_HZ = (1e-3, 500_000.0)
 PHASE_RANGE_DEG = (-360.0, 360.0)
 CHANNELS = (1, 2)
+#: voltage input ranges (V peak) -> PyMeasure's `input_range` names (IRNG 0..4), largest first
+INPUT_RANGES_V = {1.0: "1V", 0.3: "300M", 0.1: "100M", 0.03: "30M", 0.01: "10M"}
+#: full-scale sensitivities (V rms, SCAL 0..27), largest first: PyMeasure's table, as the same
+#: decimal literals (its setter truncates up: 5.000000000000001e-05 would be taken as 1e-4)
+SENSITIVITIES_V = (1.0, *(float(f"{m}e-{e}") for e in range(1, 10) for m in (5, 2, 1)))
+#: the locked lock-in's reference trigger (RTRG 0, 1, 2) and input impedance (REFZ 0, 1)
+REF_TRIGGERS = ("SIN", "POS", "NEG")
+REF_IMPEDANCES = ("50OHMS", "1MEG")
+#: what to do when a point overloads: keep the ranges (the point is refused), or step the
+#: overloaded range up one and take the point again (refused only at the largest range)
+RANGE_POLICIES = ("fixed", "step-up")
+#: LIAS? bits read at every point (SR86x LIA status register)
+LIA_OVERLOADS = {1 << 0: "output X beyond full scale", 1 << 1: "output Y beyond full scale",
+                 1 << 3: "reference unlocked", 1 << 4: "input beyond its range"}
+LIA_OUTPUT, LIA_INPUT = (1 << 0) | (1 << 1), 1 << 4
+#: *ESR? bits that mean the instrument refused something: query, execution, command error
+ESR_ERRORS = (1 << 3) | (1 << 4) | (1 << 5)
 
 
 @dataclass(frozen=True)
@@ -42,6 +65,42 @@ class Sr865Limits:
     def __post_init__(self) -> None:
         if not 0.0 <= self.max_amplitude_v <= MAX_AMPLITUDE_V:
             raise LimitError("max_amplitude_v", self.max_amplitude_v, f"[0, {MAX_AMPLITUDE_V:.4f}]", "V")
+
+
+@dataclass(frozen=True)
+class Sr865Setup:
+    """The input and reference settings written and read back at connect."""
+
+    input_range_v: float = 1.0
+    sensitivity_v: float = 1.0
+    range_policy: str = "step-up"
+    ref_trigger: str = "POS"
+    ref_impedance: str = "1MEG"
+
+    def __post_init__(self) -> None:
+        if self.input_range_v not in INPUT_RANGES_V:
+            raise LimitError("input_range_v", self.input_range_v, "one of " + ", ".join(map(str, INPUT_RANGES_V)), "V")
+        if not any(math.isclose(self.sensitivity_v, v, rel_tol=1e-9) for v in SENSITIVITIES_V):
+            raise LimitError("sensitivity_v", self.sensitivity_v, "a 1-2-5 step from 1 nV to 1 V", "V")
+        for name, value, allowed in (("range_policy", self.range_policy, RANGE_POLICIES),
+                                     ("ref_trigger", self.ref_trigger, REF_TRIGGERS),
+                                     ("ref_impedance", self.ref_impedance, REF_IMPEDANCES)):
+            if value not in allowed:
+                raise LimitError(name, value, "one of " + ", ".join(allowed))
+
+
+@dataclass(frozen=True)
+class Overload:
+    """What `lockin_overload` found: the conditions latched, and the range steps it took."""
+
+    conditions: tuple[str, ...] = ()
+    changed: tuple[str, ...] = ()
+
+    def __bool__(self) -> bool:
+        return bool(self.conditions)
+
+    def __str__(self) -> str:
+        return "; ".join(self.conditions) + (f" (then {'; '.join(self.changed)})" if self.changed else "")
 
 
 @dataclass
@@ -86,14 +145,23 @@ class Sr865PairFrontEnd:
         *,
         clock: Any,
         limits: Sr865Limits | None = None,
+        setup: Sr865Setup | None = None,
         timeout_s: float = 2.0,
         instrument_class: str = SR860_CLASS,
+        visa_library: str = "",
     ) -> None:
         self.clock = clock
         self.limits = limits or Sr865Limits()
+        self.setup = setup or Sr865Setup()
+        # each lock-in's input range and sensitivity in use (indices into the tables, 0 = largest)
+        self.irng = {ch: list(INPUT_RANGES_V).index(self.setup.input_range_v) for ch in CHANNELS}
+        self.scal = {ch: _sensitivity_index(self.setup.sensitivity_v) for ch in CHANNELS}
+        visa = {"visa_library": visa_library} if visa_library else {}
         self.devices = {
-            1: PyMeasureDevice(instrument_class, master_resource, timeout_s=timeout_s, name="SR865 #1 (master)"),
-            2: PyMeasureDevice(instrument_class, slave_resource, timeout_s=timeout_s, name="SR865 #2 (locked)"),
+            1: PyMeasureDevice(instrument_class, master_resource, timeout_s=timeout_s, name="SR865 #1 (master)",
+                               status_query="*ESR?", **visa),
+            2: PyMeasureDevice(instrument_class, slave_resource, timeout_s=timeout_s, name="SR865 #2 (locked)",
+                               status_query="*ESR?", **visa),
         }
         self.channels = {ch: _Channel() for ch in CHANNELS}
         self.frequency_hz = 1000.0
@@ -116,14 +184,44 @@ class Sr865PairFrontEnd:
                 raise ProtocolError(f"{dev.name} at {dev.resource}: *IDN? answered {idn!r}, not an SR86x")
             dev.write("*CLS")
         m, s = self.devices[1], self.devices[2]
-        m.call(lambda i: setattr(i, "reference_source", "INT"), "RSRC")
-        s.call(lambda i: setattr(i, "reference_source", "EXT"), "RSRC")
+        self._set(m, "reference_source", "INT", "RSRC")
+        self._set(s, "reference_source", "EXT", "RSRC")
+        self._set(s, "reference_triggermode", self.setup.ref_trigger, "RTRG")
+        # PyMeasure's `reference_externalinput` setter writes "REFZ&d" (no value): its getter reads
+        s.write(f"REFZ {REF_IMPEDANCES.index(self.setup.ref_impedance)}")
+        self._verify(s, "reference_externalinput", self.setup.ref_impedance, "REFZ")
         for ch, dev in self.devices.items():
-            dev.call(lambda i: setattr(i, "filter_slope", 0), "OFSL")  # 6 dB/oct: one first-order stage
+            self._set(dev, "harmonic", 1, "HARM")
+            self._write_dc_level(dev)
+            self._set(dev, "filter_slope", 0, "OFSL")  # 6 dB/oct: one first-order stage
             dev.call(lambda i: setattr(i, "sine_voltage", 0.0), "SLVL")
+            self._write_ranges(ch)
             self._write_phase(ch)
         self._check(m, s)
         return self
+
+    def _set(self, dev: PyMeasureDevice, prop: str, value: Any, what: str) -> None:
+        """A PyMeasure property written, then read back and compared (DeviceError if it differs)."""
+        dev.call(lambda i: setattr(i, prop, value), what)
+        self._verify(dev, prop, value, what)
+
+    def _verify(self, dev: PyMeasureDevice, prop: str, value: Any, what: str) -> None:
+        read = dev.call(lambda i: getattr(i, prop), f"{what}?")
+        if not same(value, read):
+            raise DeviceError(f"{dev.name}: {what} reads back {read!r} after writing {value!r}")
+
+    def _write_dc_level(self, dev: PyMeasureDevice) -> None:
+        """Sine-out DC level 0 V (`SOFF`: PyMeasure's SR860 has no property for it), read back."""
+        dev.write("SOFF 0")
+        level = float(dev.ask("SOFF?"))
+        if abs(level) > 1e-6:
+            raise DeviceError(f"{dev.name}: SOFF reads back {level!r} V after writing 0")
+
+    def _write_ranges(self, ch: int) -> None:
+        """Input range (IRNG) and sensitivity (SCAL) of one lock-in as held in `irng`/`scal`."""
+        dev = self.devices[ch]
+        self._set(dev, "input_range", list(INPUT_RANGES_V.values())[self.irng[ch]], "IRNG")
+        self._set(dev, "sensitivity", SENSITIVITIES_V[self.scal[ch]], "SCAL")
 
     def close(self) -> None:
         if self.skew.count:
@@ -144,7 +242,7 @@ class Sr865PairFrontEnd:
         """*ESR? of each: an error bit means the instrument refused something just sent."""
         for dev in devs:
             esr = int(float(dev.ask("*ESR?")))
-            if esr & 0b0011_1100:
+            if esr & ESR_ERRORS:
                 raise DeviceError(f"{dev.name} refused a setting (*ESR?={esr})")
 
     # --- drive ----------------------------------------------------------------------------------------
@@ -192,14 +290,19 @@ class Sr865PairFrontEnd:
         if not (math.isfinite(frequency_hz) and lo <= frequency_hz <= hi):
             raise LimitError("frequency_hz", frequency_hz, f"[{lo:g}, {hi:g}]", "Hz")
 
-    def set_frequency_hz(self, frequency_hz: float) -> None:
-        """Both channels' frequency: the master's internal reference (the other lock-in follows)."""
+    def set_frequency_hz(self, frequency_hz: float) -> float:
+        """Both channels' frequency: the master's internal reference (the other lock-in follows).
+        Returns the frequency in use as the master reads it back (`FREQ?`): the SR865 keeps 6
+        digits (0.1 Hz at 13.6 kHz), and that, not the asked value, is what a point was taken at."""
         self._check_frequency(frequency_hz)
-        # PyMeasure's `frequency` setter writes "%0.6e": 7 digits, 1.6 mHz steps at 13.6 kHz, enough
-        # to spoil a resonance fit (sigma 6x, docs/frontend_sr865.md); the same command, full precision
-        self.devices[1].write(f"FREQ {float(frequency_hz):.12g}")
-        self._check(self.devices[1])
-        self.frequency_hz = float(frequency_hz)
+        m = self.devices[1]
+        m.call(lambda i: setattr(i, "frequency", float(frequency_hz)), "FREQ")
+        used = float(m.call(lambda i: i.frequency, "FREQ?"))
+        self._check(m)
+        if not (math.isfinite(used) and math.isclose(used, frequency_hz, rel_tol=1e-5, abs_tol=1e-4)):
+            raise DeviceError(f"{m.name}: FREQ? reads {used!r} Hz after asking {frequency_hz!r} Hz")
+        self.frequency_hz = used
+        return used
 
     def _write_phase(self, ch: int) -> None:
         """PHAS = phase + 90: a sine output sin(wt + PHAS) is cos(wt + phase)."""
@@ -248,15 +351,47 @@ class Sr865PairFrontEnd:
         self.skew.add(t2 - t1, self.clock.now() - v0)
         return x1, y1, x2, y2
 
+    def lockin_overload(self, act: bool = True) -> Overload:
+        """The overloads either lock-in latched since the last call (`LIAS?`, which clears on
+        reading): output beyond the sensitivity, input beyond its range, reference unlocked.
+        With `act` under the step-up policy an overloaded input range or sensitivity is stepped
+        up one (and read back); `changed` says so, and the caller takes the point again."""
+        conditions: list[str] = []
+        changed: list[str] = []
+        for ch, dev in self.devices.items():
+            bits = int(float(dev.ask("LIAS?")))
+            conditions += [f"#{ch} {name}" for bit, name in LIA_OVERLOADS.items() if bits & bit]
+            if not act or self.setup.range_policy != "step-up":
+                continue
+            if bits & LIA_INPUT and self.irng[ch] > 0:
+                self.irng[ch] -= 1
+                changed.append(f"#{ch} input range {list(INPUT_RANGES_V)[self.irng[ch]]:g} V")
+            if bits & LIA_OUTPUT and self.scal[ch] > 0:
+                self.scal[ch] -= 1
+                changed.append(f"#{ch} sensitivity {SENSITIVITIES_V[self.scal[ch]]:g} V")
+            if bits & (LIA_INPUT | LIA_OUTPUT):
+                self._write_ranges(ch)
+        if changed:
+            log.warning("SR865 pair: %s; ranges stepped up: %s", "; ".join(conditions), "; ".join(changed))
+        return Overload(tuple(conditions), tuple(changed))
+
     # --- safety --------------------------------------------------------------------------------------------
     def safe_state(self) -> bool:
-        """Both sine outputs to their minimum; True only when read back as such."""
+        """Both sine outputs to their minimum and their DC level to 0 V (a DC offset left on
+        the electrodes too); True only when both read back as such on both lock-ins."""
         ok = True
         for ch, dev in self.devices.items():
             self.channels[ch].output_on = False
             try:
                 dev.call(lambda i: setattr(i, "sine_voltage", 0.0), "SLVL")
-                ok = ok and float(dev.call(lambda i: i.sine_voltage, "SLVL?")) <= 1e-8
-            except (LinkLostError, DeviceError):
+                dev.write("SOFF 0")
+                ok = float(dev.call(lambda i: i.sine_voltage, "SLVL?")) <= 1e-8 and ok
+                ok = abs(float(dev.ask("SOFF?"))) <= 1e-6 and ok
+            except (LinkLostError, DeviceError, ProtocolError, ValueError):
                 ok = False
         return ok
+
+
+def _sensitivity_index(sensitivity_v: float) -> int:
+    """SCAL index of a full-scale sensitivity in the table."""
+    return min(range(len(SENSITIVITIES_V)), key=lambda k: abs(math.log(SENSITIVITIES_V[k] / sensitivity_v)))
