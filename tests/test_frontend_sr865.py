@@ -322,16 +322,16 @@ def test_an_input_beyond_its_range_is_reported_and_clips(pair):
 
 
 def _sweep_on(tmp_path, extra: str):
+    from bench.composition import load_station
     from bench.engine import Runner
     from bench.recorder import open_run
-    from bench.station import Station
     from procedures.mems_sweep import MemsSweep
 
     text = (Path(__file__).resolve().parents[1] / "bench" / "stations" / "sim-mems-sr865.toml").read_text()
     path = tmp_path / "station.toml"
     tmp_path.mkdir(parents=True)
     path.write_text(text.replace('max_amplitude_v = 2.0', 'max_amplitude_v = 2.0\n' + extra))
-    station = Station.load(path, seed=0).open()
+    station = load_station(path, seed=0).open()
     try:
         record = Runner(station, runs_dir=tmp_path / "runs").run(MemsSweep, {"n_points": 17})
         scal = [m.scal for m in station.handles["frontend"].models]

@@ -114,7 +114,7 @@ def test_an_unknown_query_on_the_socket_leaves_the_link_in_step():
 def test_the_driver_names_an_unknown_query_instead_of_losing_the_link():
     """The front end's query the instrument does not know: a ProtocolError saying so (its *ESR?
     answered 32), not a LinkLostError that would take the station to its safe state."""
-    from bench.station import SimStation
+    from bench.composition.sim_station import SimStation
 
     with SimStation("sim-mems-sr865").open() as station:
         fe = station.devices["frontend"]

@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.station import SimStation, Station
+from bench.composition import load_station
+from bench.composition.sim_station import SimStation
 from drivers.frontend.sr865_pair import Sr865PairFrontEnd
 from simulators.frontend.sr865_server import serve_sr865_pair
 from simulators.physics.params import preset
@@ -86,7 +87,7 @@ def _open_lab_station(tmp_path, text: str, pair) -> None:
     """Open a lab's station file against the simulated pair and use it once."""
     path = tmp_path / "lab.toml"
     path.write_text(text)
-    with Station.load(path).open() as station:
+    with load_station(path).open() as station:
         fe = station.devices["frontend"]
         assert isinstance(fe, Sr865PairFrontEnd)
         assert fe.idn.count("SR865") == 2
