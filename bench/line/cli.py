@@ -17,21 +17,38 @@ def _context(args: argparse.Namespace, *, station_name: str, operator: str, db_u
     from bench.results import ResultsStore
 
     from .db import LineDB
-    from .limits import load_limits
     from .run import LineContext
     from .sequence import load_sequence
 
     seq = load_sequence(args.sequence)
-    limits_name = args.limits or seq.limits
-    if not limits_name:
-        raise LineError(f"sequence {seq.name!r} names no limits file: give --limits FILE")
-    limits = load_limits(limits_name)
+    limits = _limits_of(args, seq)
     runs_dir = Path(args.runs_dir)
     runs_dir.mkdir(parents=True, exist_ok=True)
     url = db_url or str(runs_dir / "results.sqlite")
     store = ResultsStore(url, offline_ok=True, spool_dir=runs_dir / "spool")
     db = LineDB(url)
     return LineContext(seq, limits, station_name, operator, runs_dir, store=store, db=db, lot=args.lot or "")
+
+
+def _limits_of(args: argparse.Namespace, seq: Any):
+    """The product limits of a command: --limits, else the sequence's."""
+    from .limits import load_limits
+
+    limits_name = args.limits or seq.limits
+    if not limits_name:
+        raise LineError(f"sequence {seq.name!r} names no limits file: give --limits FILE")
+    return load_limits(limits_name)
+
+
+def check_inputs(args: argparse.Namespace, limits: Any, station_id: str) -> list[str]:
+    """Operator, lot, station id and serials (--dut) checked against the product's formats and
+    length limits before anything runs (bench/line/inputs.py); the serials, normalised."""
+    from .inputs import check_lot, check_operator, check_serial, check_text
+
+    args.operator = check_operator(args.operator)
+    args.lot = check_lot(args.lot or "", limits.lot_format)
+    check_text("station", station_id)
+    return [check_serial(d, limits.serial_format) for d in getattr(args, "dut", None) or []]
 
 
 def _station_of(args: argparse.Namespace, seq_station: str) -> str:
@@ -68,10 +85,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not args.operator.strip():
         raise LineError("--operator NAME is required on a line (the record names who tested the unit)")
     seq = load_sequence(args.sequence)
+    limits = _limits_of(args, seq)
     station_name = _station_of(args, seq.station)
     overrides = {} if args.seed is None else {"seed": args.seed}
     station = Station.load(station_name, **overrides)  # the file checked before anything opens
-    duts = args.dut or []
+    duts = check_inputs(args, limits, station.id)
     faults = [_parse_slot_fault(f) for f in args.fault or []]
     if hasattr(station, "slots"):  # several gyros on one table: one unit a slot
         return _run_batch(args, seq, station, duts, faults)
@@ -87,7 +105,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.runs_dir is None:  # the station's folder and store, as `gyrobench run` uses them
         args.runs_dir = station.runs_dir
     db_url = args.db or (station.results_url if args.runs_dir == station.runs_dir else None)
-    operator = make_operator(serial=args.dut, assume_yes=args.yes, interactive=stdin_is_terminal())
+    operator = make_operator(serial=args.dut, assume_yes=args.yes, interactive=stdin_is_terminal(),
+                             serial_format=limits.serial_format)
     serial = operator.scan_serial()
     ctx = _context(args, station_name=station.id, operator=args.operator, db_url=db_url)
     records = []
@@ -139,14 +158,14 @@ def _run_batch(args: argparse.Namespace, seq: Any, station: Any, duts: list[str]
     from procedures import find_procedure
 
     from .batch_run import run_batch_attempt
-    from .prompts import check_serial, make_operator, stdin_is_terminal
+    from .prompts import make_operator, stdin_is_terminal
 
     if not duts:
         raise LineError(f"station {station.id!r} holds {station.n_slots} units: give one --dut SERIAL per slot "
                         "in slot order (slot 1 first)")
     if len(duts) > station.n_slots:
         raise LineError(f"{len(duts)} --dut given; station {station.id!r} has {station.n_slots} slots")
-    serials = {n: check_serial(s) for n, s in enumerate(duts, 1)}
+    serials = dict(enumerate(duts, 1))  # checked by check_inputs
     if len(set(serials.values())) != len(serials):
         raise LineError(f"--dut {', '.join(duts)}: a serial is given twice")
     check_steps(seq, station.slot(1))
@@ -214,6 +233,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if preset not in SPREADS:
         raise LineError(f"preset {preset!r} has no spread to draw units from (known: {', '.join(SPREADS)})")
     args.lot = args.lot or f"sim-{args.seed}"
+    check_inputs(args, _limits_of(args, seq), cfg.id)
     args.runs_dir = args.runs_dir or cfg.station["runs_dir"]
     args.db = args.db or (cfg.station["results"] if args.runs_dir == cfg.station["runs_dir"] else None)
     ctx = _context(args, station_name=cfg.id, operator=args.operator or "simulator", db_url=args.db)
