@@ -1,4 +1,5 @@
-"""`gyrobench line run | simulate | report | export`: the production line's commands."""
+"""`gyrobench line run | simulate | report | import | verify | keygen | export`: the production line's commands
+(exit codes and routing: docs/line.md)."""
 
 from __future__ import annotations
 

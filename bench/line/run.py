@@ -117,6 +117,11 @@ def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, opera
             step_outcomes = judge_run(cls, step, rec, step_limits, t0, runs, measurements, matched)
             if step.stop_on_fail and step_outcomes and worst(step_outcomes) in STOP_OUTCOMES:
                 stopped_by = worst(step_outcomes)
+    except BaseException:  # no record: the attempt's row stops beating and becomes INTERRUPTED
+        opened = ctx.attempt_ids.pop(serial, None)
+        if opened is not None:
+            opened.stop()
+        raise
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
