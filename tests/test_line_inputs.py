@@ -67,3 +67,17 @@ def test_certificate_escapes_what_it_shows():
     html = render_html(record)
     assert "<script>alert(4)</script>" not in html and "&lt;script&gt;alert(4)&lt;/script&gt;" in html
     assert "<b>L</b>" not in html
+
+
+def test_a_bad_format_in_the_limits_file_is_one_clear_message(tmp_path):
+    from bench.line.limits import load_limits
+
+    path = tmp_path / "bad.toml"
+    path.write_text('[product]\nname="p"\nserial_format="HRG-[0-9"\n[limits.table_rate_dps]\nlow=1\n')
+    with pytest.raises(LineError, match=r"\[product\] serial_format='HRG-\[0-9' is not a regular expression"):
+        load_limits(path)
+
+
+def test_verify_refuses_a_lot_that_is_a_path(tmp_path, capsys):
+    assert main(["line", "verify", "../../etc", "--runs-dir", str(tmp_path)]) == 2
+    assert "lot '../../etc' is not valid" in capsys.readouterr().err
