@@ -37,6 +37,7 @@ def keyed_station(tmp_path, speed=None):
 
 
 def _run(tmp_path, url, station, serial, limits_text, *extra):
+    tmp_path.mkdir(parents=True, exist_ok=True)
     limits = tmp_path / f"limits-{hashlib.sha256(limits_text.encode()).hexdigest()[:6]}.toml"
     limits.write_text(limits_text)
     return main(["line", "run", "ci-spin", "--station", str(station), "--dut", serial, "--operator", "ann",
@@ -167,3 +168,13 @@ def test_kill_9_mid_unit_leaves_an_interrupted_attempt(tmp_path, store_url):
     # the unit tested again (by another sequence): attempt 2, the interrupted attempt counts
     assert _run(tmp_path, store_url, station, "K9", PASS_LIMITS) == 0
     assert json.loads((tmp_path / "line" / "L1" / "K9-a2.json").read_text())["attempt"] == 2
+
+
+def test_a_station_chain_continues_from_the_database_in_another_runs_dir(tmp_path):
+    url = f"sqlite:///{tmp_path / 'line.sqlite'}"
+    station, _ = keyed_station(tmp_path)
+    assert _run(tmp_path / "a", url, station, "C1", PASS_LIMITS) == 0
+    assert _run(tmp_path / "b", url, station, "C2", PASS_LIMITS) == 0  # a new runs dir: no chain head there
+    first, second = (json.loads((tmp_path / d / "line" / "L1" / f"{s}-a1.json").read_text())
+                     for d, s in (("a", "C1"), ("b", "C2")))
+    assert second["chain"] == {"station": "sim-hrg", "index": 2, "prev_sha256": first["integrity"]["sha256"]}

@@ -260,6 +260,17 @@ class LineDB:
         with self.engine.connect() as conn:
             return [r[0] for r in conn.execute(q)]
 
+    def chain_head(self, station: str) -> tuple[int, str | None]:
+        """The station's last chained record in the database: (its index, its hash), (0, None) if none."""
+        c = line_attempts.c
+        q = select(c.chain_index, c.record).where(c.station == station, c.chain_index.is_not(None)).order_by(
+            c.chain_index.desc()).limit(1)
+        with self.engine.connect() as conn:
+            row = conn.execute(q).first()
+        if row is None:
+            return 0, None
+        return int(row.chain_index), (row.record.get("integrity") or {}).get("sha256")
+
     def records_at(self, station: str, index: int) -> list[dict[str, Any]]:
         """The records a station's chain holds at one index (normally one)."""
         q = select(line_attempts.c.record).where(line_attempts.c.station == station,

@@ -152,9 +152,18 @@ class Chain:
         tmp.replace(self.path)
 
 
-def seal(record: dict[str, Any], chain: Chain, signer: Signer | None) -> None:
-    """Link the record after its station's chain head and sign its hash (the caller holds the chain)."""
+def seal(record: dict[str, Any], chain: Chain, signer: Signer | None, db: Any = None) -> None:
+    """Link the record after its station's chain head and sign its hash (the caller holds the chain).
+    The head is the later of the runs dir's and the line database's (a runs dir lost or another
+    one used by the same station continues the station's chain)."""
     index, prev = chain.head()
+    if db is not None and hasattr(db, "chain_head"):
+        try:
+            db_index, db_prev = db.chain_head(chain.station)
+        except Exception:  # noqa: BLE001 - the database down: the runs dir's head
+            db_index, db_prev = 0, None
+        if db_index > index:
+            index, prev = db_index, db_prev
     record["chain"] = {"station": chain.station, "index": index + 1, "prev_sha256": prev}
     digest = record_hash(record)
     record["integrity"] = {"sha256": digest, "algorithm": ALGORITHM if signer else None,

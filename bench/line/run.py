@@ -234,7 +234,7 @@ def _write_sealed(ctx: LineContext, record: dict[str, Any], folder: Path) -> Non
             except Exception as exc:  # noqa: BLE001 - a document that cannot be written must not lose the record
                 record.pop("documents", None)
                 record["documents_error"] = f"{type(exc).__name__}: {exc}"
-            seal(record, chain, ctx.signer)
+            seal(record, chain, ctx.signer, ctx.db)
             try:
                 write_new_record(record, folder)
             except FileExistsError:  # another process of this runs dir took the name meanwhile
