@@ -17,6 +17,8 @@ STATION_KEYS = {
     "id": Key(str, required=True, doc="the station's name in runs and results"),
     "results": Key(str, "runs/results.sqlite", doc="SQLite file or database URL"),
     "runs_dir": Key(str, "runs", doc="folder of the raw files"),
+    # the line signs its unit records with this key (docs/line.md); kept out of the repository
+    "line_key": Key(str, "", doc="Ed25519 private key file (PEM) signing the line's unit records"),
     "description": Key(str, "", doc="one line for people"),
     "kind": Key(str, "", choices=("", "hrg", "mems-ring"), doc="gyro held: hrg, mems-ring ('' = not said)"),
     # where the sensitive axis points, for Earth's rate on it (docs/noise_model.md)

@@ -101,7 +101,7 @@ def test_line_run_window_shows_the_batch_and_its_units_outcomes(tmp_path, monkey
                  "--operator", "ann", "--yes", "--fault", "link-drop@20:slot3", "--window", "--close-when-done",
                  "--runs-dir", str(tmp_path / "runs"), "--db", f"sqlite:///{tmp_path / 'line.sqlite'}"])
     out = capsys.readouterr().out
-    assert code == 1  # one unit in ERROR
+    assert code == 4  # the worst unit ERROR (docs/line.md: exit codes)
     assert "batch of 4 units on sim-hrg-4: ERROR 1, PASS 3" in out
     assert shown["W3"] == "ERROR" and all(shown[s] == "PASS" for s in ("W1", "W2", "W4"))
     assert shown["status"].startswith("batch done: ERROR 1, PASS 3")
@@ -147,7 +147,7 @@ def test_line_run_window_abort_button_aborts_every_slot(tmp_path, monkeypatch, c
                  "--operator", "ann", "--yes", "--window", "--close-when-done",
                  "--runs-dir", str(tmp_path / "runs"), "--db", f"sqlite:///{tmp_path / 'line.sqlite'}"])
     out = capsys.readouterr().out
-    assert code == 1
+    assert code == 5  # ABORTED (docs/line.md: exit codes)
     assert all(shown[s] == "ABORTED" for s in ("A1", "A2", "A3", "A4")), (shown, out[-3000:])
     assert "batch of 4 units on sim-hrg-4: ABORTED 4" in out
     import json

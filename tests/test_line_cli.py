@@ -13,9 +13,9 @@ def test_line_run_headless(tmp_path, capsys):
     assert code == 0 and rec["outcome"] == "PASS" and rec["station"] == "sim-hrg" and rec["attempt"] == 1
     cert = tmp_path / "line" / "L1" / "SN-9-a1.certificate.html"  # every unit gets its certificate
     assert rec["documents"] == {"certificate": str(cert)} and "SN-9" in cert.read_text()
-    # the same unit again: attempt 2 in the line database
+    # the same unit again (a passed unit: with a reason): attempt 2 in the line database
     code = main(["line", "run", "ci-spin", "--dut", "SN-9", "--operator", "ann", "--yes", "--lot", "L1",
-                 "--runs-dir", str(tmp_path), "--json"])
+                 "--runs-dir", str(tmp_path), "--json", "--retest-reason", "audit sample"])
     (rec,) = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert code == 0 and rec["attempt"] == 2
     # and its export in OpenHTF's layout

@@ -91,7 +91,7 @@ def test_line_schema_matches_declared_beside_the_results_store(store_url):
         indexes = {i["name"] for i in insp.get_indexes(table.name) if not i.get("duplicates_constraint")}
         assert indexes == {i.name for i in table.indexes}, table.name  # PostgreSQL lists UNIQUE as an index too
     with db.engine.connect() as conn:
-        assert conn.execute(text(f"SELECT version_num FROM {VERSION_TABLE}")).scalar_one() == "line0001"
+        assert conn.execute(text(f"SELECT version_num FROM {VERSION_TABLE}")).scalar_one() == "line0002"
     assert store.revision() == ResultsStore.head()  # the run store's chain is untouched
     LineDB(store_url).close()  # re-opening an up-to-date database is a no-op
     db.close()

@@ -162,26 +162,37 @@ def test_a_run_that_errors_is_recorded_and_retested(tmp_path):
 
 
 def test_a_record_the_database_refuses_is_kept_and_imported_later(tmp_path, capsys):
+    """The database down at the end of a unit: the signed record is kept on disk (the error beside
+    it, the record file itself never rewritten), `line import` takes it once; a retest of the unit
+    meanwhile is attempt 2 in a new file, never over the kept one."""
     from bench.cli import main
     from bench.composition import load_station
     from bench.line import LineError
     from bench.line.db import LineDB
+    from bench.line.integrity import Signer, generate_key
 
     class Down:
         def save(self, record):
             raise LineError("line database postgresql://line/db: connection refused")
 
+    key, pub = generate_key(tmp_path / "station.key")
     lim = tmp_path / "limits.toml"
     lim.write_text('[product]\nname="p"\n[limits.table_rate_dps]\nlow=99.5\nhigh=100.5\n')
-    ctx = LineContext(load_sequence("ci-spin"), load_limits(lim), "sim-hrg", "ann", tmp_path, db=Down(), lot="L9")
+    ctx = LineContext(load_sequence("ci-spin"), load_limits(lim), "sim-hrg", "ann", tmp_path, db=Down(), lot="L9",
+                      signer=Signer(key))
     (rec,) = run_unit(ctx, lambda: load_station("sim-hrg"), "SN-3", Yes())
-    on_disk = json.loads(Path(rec["record_file"]).read_text())
-    assert "connection refused" in on_disk["db_error"] and on_disk["outcome"] == "PASS"
+    kept = Path(rec["record_file"])
+    text = kept.read_text()
+    on_disk = json.loads(text)
+    assert "connection refused" in rec["db_error"] and on_disk["outcome"] == "PASS" and "db_error" not in on_disk
+    assert "connection refused" in kept.with_suffix(".db_error.txt").read_text()
     jsonschema.validate(on_disk, json.loads(SCHEMA_PATH.read_text()))
+    (again,) = run_unit(ctx, lambda: load_station("sim-hrg"), "SN-3", Yes())  # the database still down
+    assert again["attempt"] == 2 and again["record_file"] != str(kept) and kept.read_text() == text
     url = str(tmp_path / "line.sqlite")
     for added in (1, 0):  # imported once; a second import finds it there
-        assert main(["line", "import", rec["record_file"], "--db", url]) == 0
+        assert main(["line", "import", str(kept), "--db", url, "--key", str(pub)]) == 0
         assert f"imported {added} record(s)" in capsys.readouterr().out
     db = LineDB(url)
-    assert [(a["serial"], a["outcome"]) for a in db.attempts()] == [("SN-3", "PASS")]
+    assert [(a["serial"], a["attempt"], a["outcome"]) for a in db.attempts()] == [("SN-3", 1, "PASS")]
     db.close()

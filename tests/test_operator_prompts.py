@@ -106,7 +106,7 @@ def test_headless_without_pre_answers_names_the_flag(capsys):
 @pytest.mark.parametrize("bad", ["", "-AB1", "A B1", "A" * 41, "HRG/1", "_X"])
 def test_serial_rule(bad):
     assert check_serial(" x ") == "X" and check_serial("sn-9.b_2") == "SN-9.B_2"
-    with pytest.raises(OperatorError, match="is not valid: 1 to 40 letters"):
+    with pytest.raises(OperatorError, match="is not valid: "):
         check_serial(bad)
     with pytest.raises(OperatorError):
         make_operator(serial=bad, assume_yes=True, interactive=False)

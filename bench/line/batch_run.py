@@ -8,7 +8,8 @@ import signal
 from typing import Any
 
 from .record import now_iso
-from .run import STOP_OUTCOMES, LineContext, abort_on_signals, finish_record, judge_run
+from .routing import history, next_attempt
+from .run import STOP_OUTCOMES, LineContext, abort_on_signals, begin_attempt, finish_record, judge_run
 from .verdict import ABORTED, worst
 
 
@@ -21,6 +22,11 @@ def run_batch_attempt(ctx: LineContext, station: Any, serials: dict[int, str], o
 
     seq, limits = ctx.sequence, ctx.limits
     started = now_iso()
+    asked = attempts or {}
+    attempts = {}  # each unit's RUNNING row as it starts, numbered after every attempt on disk and in the database
+    for s in serials.values():
+        attempts[s] = begin_attempt(ctx, s, max(asked.get(s, 1), next_attempt(history(ctx.db, ctx.runs_dir, s))),
+                                    started)
     per: dict[int, dict[str, Any]] = {n: {"runs": [], "measurements": [], "matched": set(), "stopped_by": None}
                                       for n in serials}
     asked_spin = False
@@ -68,7 +74,7 @@ def run_batch_attempt(ctx: LineContext, station: Any, serials: dict[int, str], o
     batch_info = {"station": station.id, "serials": {str(n): s for n, s in serials.items()}}
     for n, serial in serials.items():
         u = per[n]
-        attempt = (attempts or {}).get(serial, 1)
+        attempt = attempts[serial]
         rec = finish_record(ctx, station.slot(n), serial, attempt, started, u["runs"], u["measurements"],
                             u["matched"], u["stopped_by"], extra={"slot": n, "batch": batch_info})
         operator.show_outcome(serial, rec["outcome"], rec["summary"])

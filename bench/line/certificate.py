@@ -135,7 +135,8 @@ def context(record: dict[str, Any], compensation: Compensation | None = None) ->
 def _env():
     import jinja2
 
-    return jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=jinja2.select_autoescape(),
+    # autoescape=True: select_autoescape() goes by extension and `.html.j2` is not `.html`
+    return jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True,
                               trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
 
 

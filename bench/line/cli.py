@@ -1,4 +1,5 @@
-"""`gyrobench line run | simulate | report | export`: the production line's commands."""
+"""`gyrobench line run | simulate | report | import | verify | keygen | export`: the production line's commands
+(exit codes and routing: docs/line.md)."""
 
 from __future__ import annotations
 
@@ -11,27 +12,73 @@ from typing import Any
 from . import LineError
 
 EXIT_OK, EXIT_BAD, EXIT_USAGE = 0, 1, 2
+#: `line run`'s exit code by the unit's final outcome (docs/line.md); a batch exits by its worst unit
+EXIT_PASS, EXIT_FAIL, EXIT_MARGINAL, EXIT_ERROR, EXIT_ABORTED, EXIT_NOT_SAVED = 0, 1, 3, 4, 5, 6
+OUTCOME_EXIT = {"PASS": EXIT_PASS, "FAIL": EXIT_FAIL, "MARGINAL": EXIT_MARGINAL, "ERROR": EXIT_ERROR,
+                "ABORTED": EXIT_ABORTED}
 
 
-def _context(args: argparse.Namespace, *, station_name: str, operator: str, db_url: str | None):
+def exit_code(records: list[dict[str, Any]]) -> int:
+    """The exit code of a `line run`: its units' worst final outcome (PASS 0, FAIL 1, MARGINAL 3,
+    ERROR 4, ABORTED 5); all PASS but a record the line database did not take: 6."""
+    from .verdict import worst
+
+    last: dict[str, dict[str, Any]] = {}
+    for r in records:
+        last[r["serial"]] = r
+    if not last:
+        return EXIT_ERROR
+    code = OUTCOME_EXIT.get(worst(r["outcome"] for r in last.values()), EXIT_ERROR)
+    if code == EXIT_PASS and any(r.get("db_error") for r in records):
+        return EXIT_NOT_SAVED
+    return code
+
+
+def _context(args: argparse.Namespace, *, station_name: str, operator: str, db_url: str | None,
+             config: Any = None):
     from bench.results import ResultsStore
 
     from .db import LineDB
-    from .limits import load_limits
     from .run import LineContext
     from .sequence import load_sequence
 
     seq = load_sequence(args.sequence)
-    limits_name = args.limits or seq.limits
-    if not limits_name:
-        raise LineError(f"sequence {seq.name!r} names no limits file: give --limits FILE")
-    limits = load_limits(limits_name)
+    limits = _limits_of(args, seq)
     runs_dir = Path(args.runs_dir)
     runs_dir.mkdir(parents=True, exist_ok=True)
     url = db_url or str(runs_dir / "results.sqlite")
     store = ResultsStore(url, offline_ok=True, spool_dir=runs_dir / "spool")
     db = LineDB(url)
-    return LineContext(seq, limits, station_name, operator, runs_dir, store=store, db=db, lot=args.lot or "")
+    from .integrity import station_signer
+
+    signer = station_signer(config) if config is not None else None
+    return LineContext(seq, limits, station_name, operator, runs_dir, store=store, db=db, lot=args.lot or "",
+                       signer=signer)
+
+
+def _limits_of(args: argparse.Namespace, seq: Any):
+    """The product limits of a command: --limits, else the sequence's."""
+    from .limits import load_limits
+
+    limits_name = args.limits or seq.limits
+    if not limits_name:
+        raise LineError(f"sequence {seq.name!r} names no limits file: give --limits FILE")
+    return load_limits(limits_name)
+
+
+def check_inputs(args: argparse.Namespace, limits: Any, station_id: str) -> list[str]:
+    """Operator, lot, station id and serials (--dut) checked against the product's formats and
+    length limits before anything runs (bench/line/inputs.py); the serials, normalised."""
+    from .inputs import check_lot, check_operator, check_reason, check_rework, check_serial, check_text
+
+    if getattr(args, "rework", None) is not None:
+        args.rework = check_rework(args.rework)
+    if getattr(args, "retest_reason", None) is not None:
+        args.retest_reason = check_reason(args.retest_reason)
+    args.operator = check_operator(args.operator)
+    args.lot = check_lot(args.lot or "", limits.lot_format)
+    check_text("station", station_id)
+    return [check_serial(d, limits.serial_format) for d in getattr(args, "dut", None) or []]
 
 
 def _station_of(args: argparse.Namespace, seq_station: str) -> str:
@@ -39,6 +86,18 @@ def _station_of(args: argparse.Namespace, seq_station: str) -> str:
     if not name:
         raise LineError("no station: give --station NAME|FILE (the sequence names none)")
     return name
+
+
+def check_limits_measured(seq: Any, limits: Any) -> None:
+    """Every limit names a measurement some step of the sequence measures (else the unit could only
+    end in ERROR): refused before a unit is scanned."""
+    from procedures import find_procedure
+
+    measured = {(m.name, step.procedure) for step in seq.steps for m in find_procedure(step.procedure).measurements}
+    for lim in limits.limits:
+        if not any(name == lim.name and lim.procedure in (None, proc) for name, proc in measured):
+            raise LineError(f"{limits.source}: [limits.{lim.name}] names a measurement no step of sequence "
+                            f"{seq.name!r} measures (its steps: {', '.join(s.procedure for s in seq.steps)})")
 
 
 def check_steps(seq: Any, station: Any) -> None:
@@ -68,10 +127,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not args.operator.strip():
         raise LineError("--operator NAME is required on a line (the record names who tested the unit)")
     seq = load_sequence(args.sequence)
+    limits = _limits_of(args, seq)
     station_name = _station_of(args, seq.station)
     overrides = {} if args.seed is None else {"seed": args.seed}
     station = load_station(station_name, **overrides)  # the file checked before anything opens
-    duts = args.dut or []
+    duts = check_inputs(args, limits, station.id)
     faults = [_parse_slot_fault(f) for f in args.fault or []]
     if hasattr(station, "slots"):  # several gyros on one table: one unit a slot
         return _run_batch(args, seq, station, duts, faults)
@@ -84,16 +144,21 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise LineError(f"station {station.id!r} has no slots: --fault KIND@SECONDS without :slotN")
     args.dut = duts[0] if duts else None
     check_steps(seq, station)
+    check_limits_measured(seq, limits)
     if args.runs_dir is None:  # the station's folder and store, as `gyrobench run` uses them
         args.runs_dir = station.runs_dir
     db_url = args.db or (station.results_url if args.runs_dir == station.runs_dir else None)
-    operator = make_operator(serial=args.dut, assume_yes=args.yes, interactive=stdin_is_terminal())
-    serial = operator.scan_serial()
-    ctx = _context(args, station_name=station.id, operator=args.operator, db_url=db_url)
+    operator = make_operator(serial=args.dut, assume_yes=args.yes, interactive=stdin_is_terminal(),
+                             serial_format=limits.serial_format)
+    ctx = _context(args, station_name=station.id, operator=args.operator, db_url=db_url, config=station.config)
     records = []
     try:
+        from .routing import history, route
         from .run import run_unit
 
+        serial = operator.scan_serial()
+        ctx.routing[serial], tries = route(history(ctx.db, ctx.runs_dir, serial), serial, seq, rework=args.rework,
+                                           retest_reason=args.retest_reason)
         if not operator.confirm(f"unit {serial} is in the fixture of station {station_name!r}?"):
             raise LineError(f"unit {serial}: the fixture was not confirmed; nothing was run")
         def open_station():
@@ -102,7 +167,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 st.schedule_fault(kind, at_s)
             return st
 
-        records = run_unit(ctx, open_station, serial, operator, first_attempt=ctx.db.next_attempt(serial))
+        records = run_unit(ctx, open_station, serial, operator, max_tries=tries)
     finally:
         ctx.store.close()
         ctx.db.close()
@@ -110,9 +175,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     for r in records:
         if r.get("db_error"):
             print(f"gyrobench: {r['db_error']}", file=sys.stderr)
-            return EXIT_BAD
-    final = records[-1]["outcome"] if records else "ERROR"
-    return EXIT_OK if final == "PASS" else EXIT_BAD
+    return exit_code(records)
 
 
 def _parse_slot_fault(text: str) -> tuple[str, float, int | None]:
@@ -139,17 +202,18 @@ def _run_batch(args: argparse.Namespace, seq: Any, station: Any, duts: list[str]
     from procedures import find_procedure
 
     from .batch_run import run_batch_attempt
-    from .prompts import check_serial, make_operator, stdin_is_terminal
+    from .prompts import make_operator, stdin_is_terminal
 
     if not duts:
         raise LineError(f"station {station.id!r} holds {station.n_slots} units: give one --dut SERIAL per slot "
                         "in slot order (slot 1 first)")
     if len(duts) > station.n_slots:
         raise LineError(f"{len(duts)} --dut given; station {station.id!r} has {station.n_slots} slots")
-    serials = {n: check_serial(s) for n, s in enumerate(duts, 1)}
+    serials = dict(enumerate(duts, 1))  # checked by check_inputs
     if len(set(serials.values())) != len(serials):
         raise LineError(f"--dut {', '.join(duts)}: a serial is given twice")
     check_steps(seq, station.slot(1))
+    check_limits_measured(seq, _limits_of(args, seq))
     for step in seq.steps:
         try:
             check_batchable(find_procedure(step.procedure), BATCH_ROLES)
@@ -161,9 +225,14 @@ def _run_batch(args: argparse.Namespace, seq: Any, station: Any, duts: list[str]
         args.runs_dir = station.runs_dir
     db_url = args.db or (station.results_url if args.runs_dir == station.runs_dir else None)
     operator = make_operator(serial=serials[1], assume_yes=args.yes, interactive=stdin_is_terminal())
-    ctx = _context(args, station_name=station.id, operator=args.operator, db_url=db_url)
+    ctx = _context(args, station_name=station.id, operator=args.operator, db_url=db_url, config=station.config)
     records: list[dict[str, Any]] = []
     try:
+        from .routing import history, route
+
+        for s in serials.values():  # every unit's routing before the batch starts
+            ctx.routing[s], _ = route(history(ctx.db, ctx.runs_dir, s), s, seq, rework=args.rework,
+                                      retest_reason=args.retest_reason)
         placed = ", ".join(f"{s} in slot {n}" for n, s in serials.items())
         if not operator.confirm(f"units {placed} are in the fixtures of station {station.id!r}?"):
             raise LineError("the fixtures were not confirmed; nothing was run")
@@ -172,7 +241,7 @@ def _run_batch(args: argparse.Namespace, seq: Any, station: Any, duts: list[str]
         except Exception as exc:  # noqa: BLE001 - a station that does not open is one line
             raise LineError(f"station {station.id!r} did not open: {type(exc).__name__}: {exc}") from None
         try:
-            attempts = {s: ctx.db.next_attempt(s) for s in serials.values()}
+            attempts = {s: 1 for s in serials.values()}  # numbered after every attempt on disk and in the database
             if args.window:  # the batch in a worker thread, its columns in a window on this thread
                 from bench.gui.batch_window import run_batch_in_window
 
@@ -190,9 +259,10 @@ def _run_batch(args: argparse.Namespace, seq: Any, station: Any, duts: list[str]
     if not args.json:
         counts = _counts(records)
         print(f"batch of {len(records)} units on {station.id}: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
-    if any(r.get("db_error") for r in records):
-        return EXIT_BAD
-    return EXIT_OK if records and all(r["outcome"] == "PASS" for r in records) else EXIT_BAD
+    for r in records:
+        if r.get("db_error"):
+            print(f"gyrobench: {r['db_error']}", file=sys.stderr)
+    return exit_code(records)
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -212,13 +282,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise LineError(f"--station {station_name}: a real station; `line simulate` needs a simulated one")
     preset = cfg.simulation["preset"]
     args.lot = args.lot or f"sim-{args.seed}"
+    check_inputs(args, _limits_of(args, seq), cfg.id)
     try:
         units = draw_lot(preset, args.units, args.seed, args.lot)
     except ValueError as exc:
         raise LineError(str(exc)) from None
     args.runs_dir = args.runs_dir or cfg.station["runs_dir"]
     args.db = args.db or (cfg.station["results"] if args.runs_dir == cfg.station["runs_dir"] else None)
-    ctx = _context(args, station_name=cfg.id, operator=args.operator or "simulator", db_url=args.db)
+    check_limits_measured(seq, _limits_of(args, seq))
+    ctx = _context(args, station_name=cfg.id, operator=args.operator or "simulator", db_url=args.db, config=cfg)
     operator = make_operator(serial=None, assume_yes=True, interactive=False)
     if not args.json:
         operator.show_outcome = lambda serial, outcome, summary: print(f"{serial}: {outcome}  {summary}", flush=True)
@@ -284,26 +356,108 @@ def cmd_export(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _trusted(args: argparse.Namespace) -> set[str] | None:
+    from .integrity import load_public_key
+
+    return {load_public_key(k) for k in args.key} if args.key else None
+
+
+def import_problems(record: dict[str, Any], db: Any, runs_dir: str, trusted: set[str] | None,
+                    allow_unsigned: bool) -> list[str]:
+    """Why a record may not enter the line database (empty: it may): its hash and signature, its
+    raw files re-hashed, its verdicts judged again against its limits file, its chain."""
+    from .integrity import raw_file_problems, rejudge_problems, signature_problem
+    from .verify import _Predecessors, chain_problem
+
+    sig = signature_problem(record, trusted)
+    if sig and not (allow_unsigned and "not signed" in sig):
+        return [sig]
+    problems = raw_file_problems(record) + rejudge_problems(record)
+    chain = chain_problem(record, _Predecessors(db, runs_dir))
+    if chain and "is missing" not in chain:  # a predecessor not imported yet is no reason to refuse
+        problems.append(chain)
+    return problems
+
+
 def cmd_import(args: argparse.Namespace) -> int:
-    """Unit records (JSON files) into the line database; those already there are left alone."""
+    """Unit records (JSON files) into the line database, each checked first (import_problems);
+    those already there are left alone, those that do not verify are refused (exit 1)."""
     from .db import LineDB
 
     args.runs_dir = args.runs_dir or "runs"
+    trusted = _trusted(args)
     db = LineDB(args.db or str(Path(args.runs_dir) / "results.sqlite"))
-    added = 0
+    added, there, refused = 0, 0, []
     try:
         for f in args.records:
             try:
                 record = json.loads(Path(f).read_text())
+                if not isinstance(record, dict) or "serial" not in record or "started_at" not in record:
+                    raise ValueError("not a unit record")
             except (OSError, ValueError) as exc:
                 raise LineError(f"{f}: not a readable unit record ({exc})") from None
-            if not db.has(record):
-                record.pop("db_error", None)
-                db.save(record)
+            record.pop("db_error", None)
+            problems = import_problems(record, db, args.runs_dir, trusted, args.allow_unsigned)
+            if problems:
+                refused.append(f"{f}: refused: " + "; ".join(problems))
+                continue
+            row = db.find(record)
+            try:
+                if row is not None and row["outcome"] not in ("RUNNING", "INTERRUPTED"):
+                    there += 1
+                    continue
+                if row is not None:  # its attempt row began and was left open: it gets its record
+                    db.finish_attempt(row["id"], record)
+                else:
+                    db.save(record)
                 added += 1
+            except LineError as exc:
+                refused.append(f"{f}: refused: {exc}")
     finally:
         db.close()
-    print(f"imported {added} record(s); {len(args.records) - added} already in the line database")
+    for line in refused:
+        print(f"gyrobench: {line}", file=sys.stderr)
+    print(f"imported {added} record(s); {there} already in the line database"
+          + (f"; {len(refused)} refused" if refused else ""))
+    return EXIT_BAD if refused else EXIT_OK
+
+
+def cmd_verify(args: argparse.Namespace) -> int:
+    """A lot's records: hashes, signatures, raw files and each station's chain; the first break named."""
+    from .db import LineDB
+    from .inputs import check_lot
+    from .verify import verify_lot
+
+    lot = check_lot(args.lot) or ""
+    args.runs_dir = args.runs_dir or "runs"
+    trusted = _trusted(args)
+    url = args.db or str(Path(args.runs_dir) / "results.sqlite")
+    db = LineDB(url)
+    try:
+        v = verify_lot(db, args.runs_dir, lot, trusted)
+    finally:
+        db.close()
+    if v.records == 0 and not v.breaks:
+        raise LineError(f"lot {lot or '(none)'}: no records in {Path(args.runs_dir) / 'line'} or {url}")
+    head = f"lot {lot or '(none)'}: {v.records} record(s) from {len(v.stations)} station(s)"
+    if v.breaks:
+        print(f"{head}: BROKEN; first break: {v.breaks[0]}")
+        for b in v.breaks[1:]:
+            print(f"  also: {b}")
+    else:
+        print(f"{head}: chain, signatures and raw files hold")
+    for n in v.notes:
+        print(f"  note: {n}")
+    return EXIT_BAD if v.breaks else EXIT_OK
+
+
+def cmd_keygen(args: argparse.Namespace) -> int:
+    """A station's Ed25519 key pair: the private key (0600) and PATH.pub to give `verify --key`."""
+    from .integrity import Signer, generate_key
+
+    key, pub = generate_key(args.path)
+    print(f"private key {key} (name it in the station file: [station] line_key = \"{key}\"; keep it out of "
+          f"the repository)\npublic key  {pub} (key id {Signer(key).key_id}; give it to `line verify --key`)")
     return EXIT_OK
 
 
@@ -347,6 +501,10 @@ def add_line_subcommand(sub: Any) -> None:
     run.add_argument("--station", default=None, help="built-in station name or station TOML (default: the sequence's)")
     run.add_argument("--limits", default=None, help="product limits (shipped name or TOML; default: the sequence's)")
     run.add_argument("--lot", default="")
+    run.add_argument("--rework", default=None, metavar="CODE",
+                     help="the rework done to a unit that FAILED (needed to test it again)")
+    run.add_argument("--retest-reason", default=None, metavar="TEXT",
+                     help="why a unit that PASSED is tested again (needed to test it again)")
     run.add_argument("--yes", action="store_true", help="answer yes to the fixture and table-spin questions")
     run.add_argument("--seed", type=int, default=None, help="simulation seed (simulated stations)")
     run.add_argument("--json", action="store_true", help="print the records as JSON")
@@ -379,8 +537,23 @@ def add_line_subcommand(sub: Any) -> None:
 
     imp = lsub.add_parser("import", help="unit records (JSON) the line database did not take, into it")
     imp.add_argument("records", nargs="+")
+    imp.add_argument("--key", action="append", default=None, metavar="PUB.pem",
+                     help="a station's public key: only records signed by these keys are taken")
+    imp.add_argument("--allow-unsigned", action="store_true",
+                     help="take records of a station without a line_key (hash, chain, raw files and limits checked)")
     _common(imp)
     imp.set_defaults(func=cmd_import)
+
+    ver = lsub.add_parser("verify", help="a lot's records: hashes, signatures, raw files and chains; the first break")
+    ver.add_argument("lot")
+    ver.add_argument("--key", action="append", default=None, metavar="PUB.pem",
+                     help="a station's public key: records signed by any other key are breaks")
+    _common(ver)
+    ver.set_defaults(func=cmd_verify)
+
+    key = lsub.add_parser("keygen", help="a station's Ed25519 key pair for signing unit records")
+    key.add_argument("path", help="the private key file to create (PATH.pub beside it)")
+    key.set_defaults(func=cmd_keygen)
 
     exp = lsub.add_parser("export", help="a unit record in OpenHTF's JSON test-record layout")
     exp.add_argument("record", help="a unit record JSON file")

@@ -3,6 +3,8 @@
     [product]
     name = "hrg-5500"
     rule = "guard-band"        # the default rule: guard-band (on the 95 % interval) or value
+    serial_format = "HRG-[0-9]{6}"   # optional: a regex every serial matches whole (upper case)
+    lot_format = "L[0-9]{4}"         # optional: the same for lots (never a path)
 
     [limits.tau_s]
     low = 250.0                # either side may be left out (a one-sided limit)
@@ -20,10 +22,12 @@ message naming the file, the key, the value and what was allowed.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from . import LineError
+from .inputs import LOT_FORMAT, SERIAL_FORMAT
 from .tomlfile import find_file, read_toml, table
 from .verdict import GUARD_BAND, RULES, Limit
 
@@ -31,6 +35,8 @@ PRODUCT_KEYS = {
     "name": (str, "", None, None, None, True),
     "description": (str, "", None, None, None, False),
     "rule": (str, GUARD_BAND, None, None, RULES, False),
+    "serial_format": (str, SERIAL_FORMAT, None, None, None, False),
+    "lot_format": (str, LOT_FORMAT, None, None, None, False),
 }
 
 
@@ -54,6 +60,8 @@ class ProductLimits:
     name: str
     description: str
     limits: tuple[Limit, ...]
+    serial_format: str = SERIAL_FORMAT  # a regex a serial matches whole (after upper-casing)
+    lot_format: str = LOT_FORMAT
 
     def for_procedure(self, procedure: str, declared: set[str]) -> list[Limit]:
         """The limits that apply to one procedure's declared measurements."""
@@ -81,6 +89,11 @@ def load_limits(name_or_path: str | Path) -> ProductLimits:
     if "product" not in raw:
         raise LineError(f'{path}: missing table [product] with name = "..."')
     product = table(f"{path}: [product]", raw["product"], PRODUCT_KEYS, name="product")
+    for key in ("serial_format", "lot_format"):
+        try:
+            re.compile(product[key])
+        except re.error as exc:
+            raise LineError(f"{path}: [product] {key}={product[key]!r} is not a regular expression ({exc})") from None
     entries = raw.get("limits")
     if not isinstance(entries, dict) or not entries:
         raise LineError(f"{path}: missing table [limits.<measurement>] (at least one measurement's limits)")
@@ -112,4 +125,5 @@ def load_limits(name_or_path: str | Path) -> ProductLimits:
                 raise LineError(f"{where} {side}={m:g} lies outside {bound}={b:g} (the band is inside the limits)")
         limits.append(Limit(mname, t["low"], t["high"], t["rule"], t["marginal_low"], t["marginal_high"],
                             t["unit"], t["procedure"]))
-    return ProductLimits(str(path), product["name"], product["description"], tuple(limits))
+    return ProductLimits(str(path), product["name"], product["description"], tuple(limits),
+                         product["serial_format"], product["lot_format"])

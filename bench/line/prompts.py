@@ -4,12 +4,12 @@ table spin, show the unit's outcome as one big coloured line (rich).
 Headless runs are pre-answered by flags (`--dut SERIAL`, `--yes`); a prompt that is needed with
 neither a terminal nor a pre-answer is one clear error naming the flag to pass (OperatorError).
 
-A serial is 1 to 40 characters of letters, digits, '.', '_' and '-', starting with a letter or
-digit (SERIAL_PATTERN; what a barcode scanner types); it is upper-cased and stripped of spaces."""
+A serial is upper-cased, stripped of spaces and checked against the product's format (its limits
+file's `serial_format`; by default 1 to 40 letters, digits, '.', '_' or '-', starting with a letter
+or digit: what a barcode scanner types), within 40 characters, no control character (bench/line/inputs.py)."""
 
 from __future__ import annotations
 
-import re
 import sys
 from typing import Protocol, TextIO
 
@@ -17,8 +17,6 @@ from rich.markup import escape
 
 from bench.validation import ValidationError
 
-SERIAL_PATTERN = re.compile(r"[A-Z0-9][A-Z0-9._-]{0,39}")
-SERIAL_RULE = "1 to 40 letters, digits, '.', '_' or '-', starting with a letter or digit"
 OUTCOME_STYLES = {"PASS": "bold white on green", "FAIL": "bold white on red", "MARGINAL": "bold black on yellow"}
 
 
@@ -36,20 +34,24 @@ class Operator(Protocol):
     def show_outcome(self, serial: str, outcome: str, summary: str) -> None: ...
 
 
-def check_serial(text: str) -> str:
+def check_serial(text: str, fmt: str | None = None) -> str:
     """The serial, normalised (stripped, upper case); OperatorError names it and the rule."""
-    serial = str(text).strip().upper()
-    if not SERIAL_PATTERN.fullmatch(serial):
-        raise OperatorError(f"serial {str(text).strip()!r} is not valid: {SERIAL_RULE}")
-    return serial
+    from . import LineError
+    from .inputs import check_serial as checked
+
+    try:
+        return checked(text, fmt)
+    except LineError as exc:
+        raise OperatorError(str(exc)) from None
 
 
 class CliOperator:
     """The operator at a terminal, or none (headless: only pre-answers)."""
 
     def __init__(self, *, serial: str | None, assume_yes: bool, interactive: bool,
-                 stdin: TextIO | None = None, stdout: TextIO | None = None) -> None:
-        self.serial = None if serial is None else check_serial(serial)  # a bad --dut is refused at once
+                 stdin: TextIO | None = None, stdout: TextIO | None = None, serial_format: str | None = None) -> None:
+        self.serial_format = serial_format
+        self.serial = None if serial is None else check_serial(serial, serial_format)  # a bad --dut is refused at once
         self.assume_yes = bool(assume_yes)
         self.stdin = stdin or sys.stdin
         self.stdout = stdout or sys.stdout
@@ -69,7 +71,7 @@ class CliOperator:
             if not line:  # end of input: nobody is there
                 raise OperatorError("no serial scanned (input closed): give --dut SERIAL")
             try:
-                self.serial = check_serial(line)
+                self.serial = check_serial(line, self.serial_format)
                 return self.serial
             except OperatorError as exc:
                 self.console.print(f"[red]{escape(str(exc))}[/red]")
@@ -117,7 +119,8 @@ def _isatty(stream: TextIO) -> bool:
         return False
 
 
-def make_operator(*, serial: str | None, assume_yes: bool, interactive: bool) -> Operator:
+def make_operator(*, serial: str | None, assume_yes: bool, interactive: bool,
+                  serial_format: str | None = None) -> Operator:
     """The line's operator: pre-answered by `serial` (--dut) and `assume_yes` (--yes); asks on the
-    terminal only when `interactive` and stdin/stdout are one."""
-    return CliOperator(serial=serial, assume_yes=assume_yes, interactive=interactive)
+    terminal only when `interactive` and stdin/stdout are one; serials in the product's format."""
+    return CliOperator(serial=serial, assume_yes=assume_yes, interactive=interactive, serial_format=serial_format)

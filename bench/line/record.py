@@ -96,15 +96,26 @@ def summary(record: dict[str, Any]) -> str:
     return f"{record['outcome']}: " + "; ".join(words) + (f"; +{len(bad) - 4} more" if len(bad) > 4 else "")
 
 
-def write_record(record: dict[str, Any], folder: str | Path) -> Path:
-    """The record as JSON in folder/<serial>-a<attempt>.json (written whole, then renamed)."""
+def record_path(folder: str | Path, record: dict[str, Any]) -> Path:
+    """Where a record lies: folder/<serial>-a<attempt>.json."""
+    return Path(folder) / f"{_safe(record['serial'])}-a{record['attempt']}.json"
+
+
+def write_new_record(record: dict[str, Any], folder: str | Path) -> Path:
+    """The record as JSON in folder/<serial>-a<attempt>.json, created whole and never over an
+    existing file (written to a temporary name, then hard-linked: FileExistsError if taken)."""
+    import os
+
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{_safe(record['serial'])}-a{record['attempt']}.json"
-    record["record_file"] = str(path)  # the record names its own file
-    tmp = path.with_suffix(".json.tmp")
+    path = record_path(folder, record)
+    record["record_file"] = str(path)  # the record names its own file (not covered by its hash)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(json.dumps(record, indent=1))
-    tmp.replace(path)
+    try:
+        os.link(tmp, path)
+    finally:
+        tmp.unlink()
     return path
 
 

@@ -12,7 +12,7 @@ from typing import Any
 
 from . import LineError
 from .limits import ProductLimits
-from .record import SCHEMA_VERSION, judged, now_iso, sha256_of, summary, write_record
+from .record import SCHEMA_VERSION, judged, now_iso, record_path, sha256_of, summary, write_new_record
 from .sequence import Sequence
 from .verdict import ABORTED, ERROR, FAIL, SKIPPED, worst
 
@@ -34,6 +34,45 @@ class LineContext:
     on_record: Callable[[dict[str, Any]], None] | None = None
     aborted: list[str] = field(default_factory=list)
     on_batch: Callable[[Any], None] | None = None  # told each bench.engine.batch.Batch before it runs (the window)
+    signer: Any = None  # bench.line.integrity.Signer: the station's key (None: records chained, not signed)
+    routing: dict[str, dict[str, Any]] = field(default_factory=dict)  # serial -> its routing (bench/line/routing.py)
+    attempt_ids: dict[str, Any] = field(default_factory=dict)  # serial -> its open attempt (begin_attempt)
+
+
+@dataclass
+class OpenAttempt:
+    """An attempt begun: its row in the line database (None when the database was down) and heartbeat."""
+
+    row_id: int | None
+    heartbeat: Any = None
+    db_error: str | None = None
+
+    def stop(self) -> None:
+        if self.heartbeat is not None:
+            self.heartbeat.stop()
+            self.heartbeat = None
+
+
+def begin_attempt(ctx: LineContext, serial: str, attempt: int, started: str) -> int:
+    """The attempt's RUNNING row in the line database (kept alive by a heartbeat) as it starts, so
+    a process killed mid-unit leaves an INTERRUPTED attempt, not nothing; the attempt number
+    (another station may have taken the one asked for)."""
+    stub = {"schema_version": SCHEMA_VERSION, "serial": serial, "attempt": attempt, "lot": ctx.lot,
+            "station": ctx.station_name, "operator": ctx.operator_name, "sequence": ctx.sequence.name,
+            "product": ctx.limits.name, "started_at": started, "ended_at": started, "outcome": "RUNNING",
+            "routing": ctx.routing.get(serial), "measurements": [], "runs": []}
+    opened = OpenAttempt(None)
+    if ctx.db is not None and hasattr(ctx.db, "begin_attempt"):
+        try:
+            opened.row_id = ctx.db.begin_attempt(stub)
+            from bench.results.liveness import Heartbeat
+
+            db, row_id = ctx.db, opened.row_id
+            opened.heartbeat = Heartbeat(lambda: db.beat(row_id), name=f"line-heartbeat-{serial}")
+        except LineError as exc:  # the database is down: the record on disk is what counts
+            opened.db_error = str(exc)
+    ctx.attempt_ids[serial] = opened
+    return int(stub["attempt"])
 
 
 def _table_question(station: Any) -> str:
@@ -47,6 +86,7 @@ def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, opera
 
     seq, limits = ctx.sequence, ctx.limits
     started = now_iso()
+    attempt = begin_attempt(ctx, serial, attempt, started)
     runs, measurements = [], []
     matched: set[tuple[str, str | None]] = set()
     stopped_by: str | None = None
@@ -77,6 +117,11 @@ def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, opera
             step_outcomes = judge_run(cls, step, rec, step_limits, t0, runs, measurements, matched)
             if step.stop_on_fail and step_outcomes and worst(step_outcomes) in STOP_OUTCOMES:
                 stopped_by = worst(step_outcomes)
+    except BaseException:  # no record: the attempt's row stops beating and becomes INTERRUPTED
+        opened = ctx.attempt_ids.pop(serial, None)
+        if opened is not None:
+            opened.stop()
+        raise
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
@@ -118,9 +163,10 @@ def judge_run(cls: Any, step: Any, rec: Any, step_limits: list, t0: str, runs: l
 def finish_record(ctx: LineContext, station: Any, serial: str, attempt: int, started: str, runs: list,
                   measurements: list, matched: set, stopped_by: str | None,
                   extra: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The unit's record from its runs and judged measurements: outcome, written beside its
-    certificate (and compensation file), saved in the line database."""
-    from bench.engine.runner import software_version
+    """The unit's record from its runs and judged measurements: outcome, provenance, chained and
+    signed (bench/line/integrity.py), written once beside its certificate (and compensation file)
+    under the first attempt number free on disk, then saved in the line database."""
+    from .provenance import provenance
 
     seq, limits = ctx.sequence, ctx.limits
     for lim in limits.limits:  # named by the limits file, measured by no step of the sequence
@@ -136,10 +182,8 @@ def finish_record(ctx: LineContext, station: Any, serial: str, attempt: int, sta
         "lot": ctx.lot,
         "station": ctx.station_name,
         "operator": ctx.operator_name,
-        "software_version": software_version(),
+        **provenance(seq.source, limits.source),
         "sequence": seq.name,
-        "sequence_file": seq.source,
-        "limits_file": limits.source,
         "product": limits.name,
         "attempt": attempt,
         "started_at": started,
@@ -148,50 +192,85 @@ def finish_record(ctx: LineContext, station: Any, serial: str, attempt: int, sta
         "stopped_by": stopped_by,
         "abort_reason": "; ".join(ctx.aborted) or None,
         "simulated": bool(getattr(station, "simulated", False)),
+        "routing": ctx.routing.get(serial),
         "measurements": measurements,
         "runs": runs,
         **(extra or {}),
     }
     record["summary"] = summary(record)
     folder = ctx.runs_dir / "line" / (ctx.lot or "no-lot")
-    record["record_file"] = str(write_record(record, folder))  # on disk first: nothing is lost
-    try:  # the unit's certificate and, when it has trims, its compensation file beside the record
-        from .certificate import write_unit_documents
-
-        record["documents"] = {k: str(v) for k, v in write_unit_documents(record, folder).items()}
-    except Exception as exc:  # noqa: BLE001 - a document that cannot be written must not lose the record
-        record["documents_error"] = f"{type(exc).__name__}: {exc}"
-    write_record(record, folder)
+    opened = ctx.attempt_ids.pop(serial, None) or OpenAttempt(None)
+    opened.stop()
+    _write_sealed(ctx, record, folder)
     if ctx.db is not None:
         try:
-            ctx.db.save(record)
+            if opened.row_id is not None:
+                ctx.db.finish_attempt(opened.row_id, record)
+            else:
+                ctx.db.save(record)
         except LineError as exc:  # the database is down or refused it: the file waits for `line import`
             record["db_error"] = f"{exc}; `gyrobench line import {record['record_file']}` submits it later"
-            write_record(record, folder)
+            Path(record["record_file"]).with_suffix(".db_error.txt").write_text(record["db_error"] + "\n")
     if ctx.on_record is not None:
         ctx.on_record(record)
     return record
 
 
+def _write_sealed(ctx: LineContext, record: dict[str, Any], folder: Path) -> None:
+    """The record's documents, its place in the station's chain and its signature, then its file
+    SERIAL-aN.json created once (never over another): a name already on disk takes the next N."""
+    from .integrity import Chain, seal
+
+    folder.mkdir(parents=True, exist_ok=True)
+    with Chain(ctx.runs_dir, ctx.station_name).held() as chain:
+        while True:
+            while record_path(folder, record).exists():
+                record["attempt"] += 1
+            try:  # the unit's certificate and, when it has trims, its compensation file beside the record
+                from .certificate import write_unit_documents
+
+                record.pop("documents_error", None)
+                record["documents"] = {k: str(v) for k, v in write_unit_documents(record, folder).items()}
+            except Exception as exc:  # noqa: BLE001 - a document that cannot be written must not lose the record
+                record.pop("documents", None)
+                record["documents_error"] = f"{type(exc).__name__}: {exc}"
+            seal(record, chain, ctx.signer, ctx.db)
+            try:
+                write_new_record(record, folder)
+            except FileExistsError:  # another process of this runs dir took the name meanwhile
+                record["attempt"] += 1
+                continue
+            chain.advance(record["chain"]["index"], record["integrity"]["sha256"])
+            return
+
+
 def run_unit(ctx: LineContext, open_station: Callable[[], Any], serial: str, operator: Any,
-             first_attempt: int = 1) -> list[dict[str, Any]]:
+             first_attempt: int | None = None, max_tries: int | None = None) -> list[dict[str, Any]]:
     """A unit's attempts: the first, then a retest while its outcome is one the sequence retests
-    (up to max_attempts); the station opened for each attempt and closed after it, whatever happens."""
+    (at most max_tries, default the sequence's max_attempts; never after a FAIL, which needs
+    rework); the station opened for each attempt and closed after it, whatever happens.  Attempt
+    numbers follow every attempt of the serial on disk and in the database."""
+    from .routing import history, next_attempt
+
     records = []
     seq = ctx.sequence
-    for k in range(seq.max_attempts):
+    tries = seq.max_attempts if max_tries is None else max_tries
+    for k in range(tries):
+        attempt = next_attempt(history(ctx.db, ctx.runs_dir, serial))
+        if first_attempt is not None:
+            attempt = max(attempt, first_attempt + k)
         station = open_station()
         try:
             try:
                 station.open()
             except Exception as exc:  # noqa: BLE001 - a station that does not open is one line
                 raise LineError(f"station {station.id!r} did not open: {type(exc).__name__}: {exc}") from None
-            rec = run_attempt(ctx, station, serial, first_attempt + k, operator)
+            rec = run_attempt(ctx, station, serial, attempt, operator)
         finally:
             station.close()
         records.append(rec)
         operator.show_outcome(serial, rec["outcome"], rec["summary"])
-        if rec["outcome"] not in seq.retest_on or ctx.aborted:
+        if rec["outcome"] not in seq.retest_on or rec["outcome"] == FAIL or ctx.aborted:
             break
     return records
 

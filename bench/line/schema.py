@@ -34,10 +34,16 @@ line_attempts = Table(
     Column("started_at", String(40), nullable=False),  # ISO 8601 UTC: sorts as text on both engines
     Column("ended_at", String(40), nullable=False),
     Column("outcome", String(16), nullable=False),
-    Column("record", JSON, nullable=False),
+    Column("record", JSON, nullable=False),  # the whole record; a stub while RUNNING / INTERRUPTED
+    Column("host", String(255)),  # where a RUNNING attempt runs (with pid and heartbeat: is it alive?)
+    Column("pid", Integer),
+    Column("heartbeat_at", String(40)),
+    Column("chain_index", Integer),  # its place in its station's record chain (bench/line/integrity.py)
     UniqueConstraint("serial", "attempt", name="uq_line_attempts_serial_attempt"),
     Index("ix_line_attempts_lot", "lot"),
     Index("ix_line_attempts_ended_at", "ended_at"),
+    Index("ix_line_attempts_station", "station"),
+    Index("ix_line_attempts_serial", "serial"),
 )
 
 line_measurements = Table(

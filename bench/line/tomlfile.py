@@ -20,7 +20,7 @@ def find_file(text: str | Path, folder: str, what: str) -> Path:
         return shipped[str(text)]
     path = Path(text)
     if path.is_file():
-        return path
+        return path.resolve()  # the record names the file wherever the command ran
     raise LineError(f"{text}: no such {what} file or shipped {what} (shipped: {', '.join(shipped) or 'none'})")
 
 
