@@ -168,7 +168,7 @@ def _keys_table(keys: dict[str, Any]) -> list[str]:
 def stations_page() -> str:
     """The keys of a station file: [station], [simulation] and each registered driver's table."""
     from bench.devices import DRIVERS, INSTRUMENT, ROLES, load_builtin_drivers
-    from bench.station_config import STATION_KEYS, SIM_KEYS, builtin_stations
+    from bench.station_config import SIM_KEYS, STATION_KEYS, builtin_stations
 
     load_builtin_drivers()
     lines = [
@@ -276,7 +276,6 @@ def streams_page() -> str:
     """Every stream the procedures, drivers and the engine declare, with columns, units and legends."""
     from bench.devices import load_builtin_drivers
     from bench.streams import declared
-
     from procedures import all_procedures
 
     all_procedures()

@@ -123,3 +123,17 @@ def test_tutorial_commands_run_as_shown(page, tmp_path):
             output = run.stdout
             assert run.returncode == 0, f"{page.name}: `{cmd}` exited {run.returncode}:\n{output}"
             check_output(cmd, output, expected)
+
+
+def test_the_readme_pytest_snippet_runs(tmp_path):
+    """The README's example test (the pytest plugin's fixtures) passes as written."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    snippet = text.split("```python\n", 1)[1].split("```", 1)[0]
+    (tmp_path / "test_spin.py").write_text(snippet, encoding="utf-8")
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
+    env.pop("PYTEST_ADDOPTS", None)
+    run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "test_spin.py"],
+                         cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                         timeout=240)
+    assert run.returncode == 0 and "1 passed" in run.stdout, run.stdout
