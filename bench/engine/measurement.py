@@ -122,7 +122,7 @@ class Measurement:
     truth: TruthRule = None
     limits: Limits | tuple | Callable[[Any], Any] | None = None
     when: Callable[[Any], bool] | None = None
-    when_doc: str = ""  # the condition in words, for `gyrobench list` and the README
+    when_doc: str = ""  # the condition in words, for `gyrobench list` and the docs' reference
 
     def applies(self, proc: Any) -> bool:
         """Whether the run measures it (its condition, on the procedure's parameters and state)."""
