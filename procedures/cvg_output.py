@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from bench.analysis.cvg_rate import earth_rate_projection_dph, window_output
-from bench.engine import Param
+from bench.engine import Param, recorded_text
 
 from .hrg_excitation import HrgExcitation
 
@@ -83,6 +83,7 @@ class CvgOutput(HrgExcitation):
     settle_s = Param(5.0, unit="s", low=0.0, high=3600.0, doc="wait after the rate is stable, before averaging")
 
     _mode: str = "whole-angle"
+    pause_in_record = "restart"  # a window's mean is of one continuous stretch
 
     def earth_rate_on_axis_dph(self, data) -> float:
         """Earth's rate to remove: the parameter when set, else the projection on the sensitive
@@ -131,16 +132,16 @@ class CvgOutput(HrgExcitation):
         ctx.sleep(settle_s)
         ctx.log.info(f"wave precessed {learn_deg:g} deg for the FPGA to learn the split; settled {settle_s:g} s")
 
-    def _record_window(self, ctx, seconds: float) -> tuple[float, float]:
-        """Let the bench clock run `seconds` (in slices, for progress and abort); (t_start, t_end)."""
+    def _record_window(self, ctx, seconds: float, label: str = "window") -> tuple[float, float]:
+        """Let the bench clock run `seconds` to an absolute deadline (ctx.record_for; a pause inside
+        restarts the window, pause_in_record) and log what the stream holds; (t_start, t_end)."""
         fpga = ctx.devices.fpga
         fpga.sync()
-        t0 = ctx.clock.now()
-        n = max(1, int(np.ceil(seconds / 10.0)))
-        for _ in range(n):
-            ctx.sleep(seconds / n)
+        span = ctx.record_for(seconds, label, progress=lambda _f, _m: ctx.checkpoint())  # the series' progress
         fpga.sync()
-        return t0, ctx.clock.now()
+        t = ctx.data().table("fpga")["t_s"]
+        ctx.log.info(recorded_text(label, t[span.keep(t)], span))
+        return span.t_start_s, span.t_end_s
 
     def _turn_on(self, ctx, quench_s: float) -> None:
         """A turn-on from a quiet resonator, as a cold start: the amplitude loop alone, proportional

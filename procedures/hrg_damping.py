@@ -19,7 +19,8 @@ import numpy as np
 
 from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_drift_harmonics, fit_free_decay
 from bench.analysis.slow_model import orbit_elements
-from bench.engine import Measurement, Param, Procedure, Result, step
+from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
+from bench.engine.recording import in_spans
 from bench.engine.streams import Column, StreamSchema, declare
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
@@ -182,6 +183,7 @@ class HrgDamping(HrgExcitation, Procedure):
         self._tap = _StreamTap()
         self._decay: np.ndarray | None = None
         self._fit = None
+        self._spans: dict[float, Any] = {}
 
     # --- helpers -----------------------------------------------------------------------------
     def _sample_period_s(self, ctx) -> float:
@@ -193,20 +195,20 @@ class HrgDamping(HrgExcitation, Procedure):
         return rows[idx % dec == 0]
 
     def _record(self, ctx, kind: float, duration_s: float, label: str) -> np.ndarray:
+        """duration_s of the tap's rows to an absolute deadline (ctx.record_for), a pause inside
+        excluded; the window goes to the raw file and the log says what the data hold."""
         fpga = ctx.devices.fpga
         fpga.sync()
-        t0 = ctx.clock.now()
         self._tap.take(-math.inf, -math.inf)  # drop anything older
         self._tap.on = True
-        n = max(1, int(math.ceil(duration_s / 10.0)))
-        for k in range(n):
-            ctx.sleep(duration_s / n)
-            ctx.progress((k + 1) / n, f"{label}: {(k + 1) * duration_s / n:.0f} / {duration_s:.0f} s")
+        span = ctx.record_for(duration_s, label)
         fpga.sync()
         self._tap.on = False
-        t1 = ctx.clock.now()
-        ctx.record(WINDOWS, WINDOW_COLUMNS, np.array([[kind, t0, t1]]))
-        return self._tap.take(t0, t1)
+        ctx.record(WINDOWS, WINDOW_COLUMNS, np.array([[kind, span.t_start_s, span.t_end_s]]))
+        rows = self._tap.take(span.t_start_s, span.t_end_s)
+        rows = rows[span.keep(TAP.column(rows, "t_s"))]
+        self._spans[kind] = span
+        return rows
 
     # --- steps -------------------------------------------------------------------------------
     @step("Excite and hold the amplitude", uses=("fpga",))
@@ -246,7 +248,7 @@ class HrgDamping(HrgExcitation, Procedure):
             if dec != old:
                 fpga.start_stream(old)
         self._decay = self._decimate(rows, period)
-        ctx.log.info(f"recorded {len(self._decay)} samples over {self.record_s:g} s at {1 / (dec * period):g} Hz")
+        ctx.log.info(recorded_text("free decay", TAP.column(self._decay, "t_s"), self._spans[DECAY]))
 
     @step("Compute E, theta and the quadrature", uses=())
     def elements(self, ctx):
@@ -302,9 +304,11 @@ class HrgDamping(HrgExcitation, Procedure):
         self._hold_amplitude(ctx)
         ctx.sleep(self.verify_settle_s)
         off = self._record(ctx, VERIFY_OFF, self.verify_s, "drift, compensation off")
+        ctx.log.info(recorded_text("drift, compensation off", TAP.column(off, "t_s"), self._spans[VERIFY_OFF]))
         fpga.set_drift_compensation(True, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
         ctx.sleep(self.verify_settle_s)
         on = self._record(ctx, VERIFY_ON, self.verify_s, "drift, compensation on")
+        ctx.log.info(recorded_text("drift, compensation on", TAP.column(on, "t_s"), self._spans[VERIFY_ON]))
         fpga.set_drift_compensation(False, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
         fpga.set_drive_enabled(False)
         results, curves = self._verify_results(off, on, fit)
@@ -387,13 +391,16 @@ class HrgDamping(HrgExcitation, Procedure):
         rows = np.column_stack([fpga[c] for c in _TAP])
         period = float(np.median(np.diff(fpga["t_s"]) / np.maximum(np.diff(fpga["index"]), 1)))
 
+        pauses = data.pauses() if hasattr(data, "pauses") else []
+
         def window(kind: float) -> np.ndarray | None:
             sel = win["kind"] == kind
             if not sel.any():
                 return None
             t0, t1 = win["t_start_s"][sel][-1], win["t_end_s"][sel][-1]
             t_s = TAP.column(rows, "t_s")
-            return rows[(t_s > t0) & (t_s <= t1)]  # as the live tap: after t0, up to t1
+            # as the live tap: after t0, up to t1, the paused spans left out
+            return rows[(t_s > t0) & (t_s <= t1) & ~in_spans(t_s, pauses)]
 
         decay = self._decimate(window(DECAY), period)
         fit = fit_free_decay(*_decay_columns(decay), method=self.fit_method, model=self.fit_model)

@@ -95,6 +95,9 @@ class Procedure:
     kinds: ClassVar[tuple[str, ...]] = ()
     #: the measurements the procedure reports (their names are its results' stable public names)
     measurements: ClassVar[tuple[Measurement, ...]] = ()
+    #: a pause inside a record (`ctx.record_for`): "exclude" cuts the paused span out and runs the
+    #: record on by as much, "restart" records again from the resume (bench.engine.recording)
+    pause_in_record: ClassVar[str] = "exclude"
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
