@@ -17,6 +17,7 @@ import numpy as np
 
 from bench.analysis import selfcal as sc
 from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
+from bench.engine.recording import window_end
 from bench.engine.streams import Column, StreamSchema, declare
 from drivers.fpga import protocol as fp
 
@@ -188,7 +189,7 @@ class HrgSelfcal(HrgExcitation, Procedure):
                 for k in range(1, n + 1):
                     ctx.sleep_until(t0 + (h + k / n) * half_s)
             fpga.sync()
-            t1 = ctx.clock.now()
+            t1 = window_end(ctx.clock, t0 + 2.0 * half_s)  # the deadline, not the clock after it (paced)
             paused = ctx.pauses.since(seen)
             if not paused:
                 return t0, t1

@@ -111,6 +111,13 @@ def sleep_until(clock: Any, t_abs_s: float) -> float:
     return clock.now()
 
 
+def window_end(clock: Any, t_end_s: float) -> float:
+    """A record's end after waiting for its deadline t_end_s: the deadline, or the clock's own
+    time when it is on it (within `clock_tolerance_s`: lockstep lands on the sample)."""
+    now = clock.now()
+    return now if abs(now - t_end_s) <= clock_tolerance_s(clock) else float(t_end_s)
+
+
 def record_for(ctx: Any, record_s: float, label: str = "record", *, progress_every_s: float = 10.0,
                policy: str | None = None, progress: Callable[[float, str], None] | None = None) -> RecordSpan:
     """Let the bench clock run record_s seconds from now, to an absolute deadline, in equal waits
