@@ -155,7 +155,7 @@ def record_for(ctx: Any, record_s: float, label: str = "record", *, progress_eve
                 continue
             if policy == RESTART:
                 restarts += 1
-                t_start = clock.now()
+                t_start = b  # the data from the resume on are whole
                 t_end = t_start + float(record_s)
                 excluded.clear()
                 ctx.log.warning(f"{label}: paused inside the record (t = {a:.3f} .. {b:.3f} s): the record "
