@@ -132,6 +132,7 @@ class CvgAllan(HrgExcitation, Procedure):
         fpga.sync()
         self._tap.on = False
         t0, t1 = span.t_start_s, span.t_end_s
+        self._refuse_saturation(t0, t1, "static record")
         stream_hz = 1.0 / (dec * period)
         ctx.record(WINDOW, WINDOW_COLUMNS, np.array([[t0, t1, stream_hz, float(self._ftr), self._scale]]))
         self._rows = self._tap.take(t0, t1)

@@ -139,6 +139,7 @@ class CvgOutput(HrgExcitation):
         fpga.sync()
         span = ctx.record_for(seconds, label, progress=lambda _f, _m: ctx.checkpoint())  # the series' progress
         fpga.sync()
+        self._refuse_saturation(span.t_start_s, span.t_end_s, label)
         t = ctx.data().table("fpga")["t_s"]
         ctx.log.info(recorded_text(label, t[span.keep(t)], span))
         return span.t_start_s, span.t_end_s

@@ -24,7 +24,7 @@ from bench.engine.recording import in_spans
 from bench.engine.streams import Column, StreamSchema, declare
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
-from .hrg_excitation import HrgExcitation
+from .hrg_excitation import HrgExcitation, refuse_above_precession_limit
 
 WINDOWS = "damping_windows"
 DECAY, VERIFY_OFF, VERIFY_ON = 0.0, 1.0, 2.0
@@ -185,6 +185,11 @@ class HrgDamping(HrgExcitation, Procedure):
         self._fit = None
         self._spans: dict[float, Any] = {}
 
+    def preflight(self, devices) -> None:
+        """The verification's precession command within the FPGA's force limit (read-only)."""
+        if self.compensate:
+            refuse_above_precession_limit(self, devices, "verify_rate_dps", self.verify_rate_dps, "deg/s ")
+
     # --- helpers -----------------------------------------------------------------------------
     def _sample_period_s(self, ctx) -> float:
         return float(ctx.devices.fpga.read_register("SAMPLE_PERIOD_S"))
@@ -208,6 +213,7 @@ class HrgDamping(HrgExcitation, Procedure):
         rows = self._tap.take(span.t_start_s, span.t_end_s)
         rows = rows[span.keep(TAP.column(rows, "t_s"))]
         self._spans[kind] = span
+        self._refuse_saturation(span.t_start_s, span.t_end_s, label)
         return rows
 
     # --- steps -------------------------------------------------------------------------------

@@ -205,6 +205,7 @@ class HrgFreeDecay(HrgExcitation, Procedure):
         fpga.sync()
         span = ctx.record_for(self.record_s, "free decay")  # a pause inside restarts it (pause_in_record)
         fpga.sync()
+        self._refuse_saturation(span.t_start_s, span.t_end_s, "free decay")
         ref = float(fpga.read_register("PLL_FREQ_HZ"))
         ctx.record(WINDOW, WINDOW_COLUMNS, np.array([[span.t_start_s, span.t_end_s, ref, self.rate_dps]]))
         t = ctx.data().table("fpga")["t_s"]

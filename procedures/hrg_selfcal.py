@@ -22,7 +22,7 @@ from bench.engine.streams import Column, StreamSchema, declare
 from drivers.fpga import protocol as fp
 
 from .hrg_damping import _StreamTap
-from .hrg_excitation import HrgExcitation
+from .hrg_excitation import HrgExcitation, refuse_above_precession_limit
 
 TAP_COLUMNS = ("t_s", "angle_out_deg", "amp_ctrl", "freq_ctrl", "prec_ctrl")
 CYCLES = "hrg_selfcal_cycles"
@@ -147,6 +147,10 @@ class HrgSelfcal(HrgExcitation, Procedure):
     def demands(self) -> list:
         return []
 
+    def preflight(self, devices) -> None:
+        """The cycles' precession command within the FPGA's force limit (read-only)."""
+        refuse_above_precession_limit(self, devices, "precession_dps", self.precession_dps, "deg/s ")
+
     @step("Excite, hold the amplitude, whole-angle mode with FM")
     def excite(self, ctx):
         fpga = ctx.devices.fpga
@@ -192,6 +196,7 @@ class HrgSelfcal(HrgExcitation, Procedure):
             t1 = window_end(ctx.clock, t0 + 2.0 * half_s)  # the deadline, not the clock after it (paced)
             paused = ctx.pauses.since(seen)
             if not paused:
+                self._refuse_saturation(t0, t1, f"cycle {c + 1}")
                 return t0, t1
             self._tap.take(-math.inf, t1)  # drop the paused cycle's rows
             ctx.log.warning(f"cycle {c + 1}: paused inside it (t = {paused[0][0]:.3f} .. {paused[-1][1]:.3f} s): "

@@ -112,6 +112,11 @@ class Procedure:
         parameters; the engine checks them against the station's limits before the first step."""
         return []
 
+    def preflight(self, devices: Any) -> None:
+        """Read-only checks of the parameters against the devices' own limits (an FPGA loop's
+        force limit), on an opened station before anything moves: raise
+        bench.engine.demands.StationMismatch naming the value and the limit."""
+
     # --- introspection -------------------------------------------------------------------
     @classmethod
     def param_specs(cls) -> dict[str, Param]:
