@@ -24,7 +24,7 @@ from bench.engine.recording import in_spans
 from bench.engine.streams import Column, StreamSchema, declare
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
-from .hrg_excitation import HrgExcitation, refuse_above_precession_limit
+from .hrg_excitation import SPLIT_LEARN_DEG, HrgExcitation, refuse_above_precession_limit, settle_time_s
 
 WINDOWS = "damping_windows"
 DECAY, VERIFY_OFF, VERIFY_ON = 0.0, 1.0, 2.0
@@ -162,7 +162,10 @@ class HrgDamping(HrgExcitation, Procedure):
     compensate = Param(True, doc="write the coefficients to the FPGA and verify the drift off and on")
     verify_rate_dps = Param(2.0, unit="deg/s", low=0.01, high=100.0, doc="whole-angle precession while verifying")
     verify_s = Param(90.0, unit="s", low=1.0, high=100000.0, doc="drift record per verification (off, on)")
-    verify_settle_s = Param(5.0, unit="s", low=0.0, high=600.0, doc="settling before each verification record")
+    verify_settle_s = Param(0.0, unit="s", low=0.0, high=600.0,
+                            doc="settling before each verification record; 0: from the loops' bandwidth and the "
+                                "command (4.6 time constants of the slowest loop, plus the wave's turn of 22.5 deg "
+                                "for the split observer before the first record)")
     drift_block_s = Param(1.0, unit="s", low=0.01, high=100.0, doc="block over which the drift rate is measured")
     bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: refers the wave's drift to the gyro output")
 
@@ -308,11 +311,11 @@ class HrgDamping(HrgExcitation, Procedure):
         fpga.set_agc(True, self.amplitude)
         fpga.set_drive_enabled(True)
         self._hold_amplitude(ctx)
-        ctx.sleep(self.verify_settle_s)
+        ctx.sleep(self._settle_s(ctx, "the precession starts", self.verify_rate_dps))
         off = self._record(ctx, VERIFY_OFF, self.verify_s, "drift, compensation off")
         ctx.log.info(recorded_text("drift, compensation off", TAP.column(off, "t_s"), self._spans[VERIFY_OFF]))
         fpga.set_drift_compensation(True, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
-        ctx.sleep(self.verify_settle_s)
+        ctx.sleep(self._settle_s(ctx, "the compensation is on"))
         on = self._record(ctx, VERIFY_ON, self.verify_s, "drift, compensation on")
         ctx.log.info(recorded_text("drift, compensation on", TAP.column(on, "t_s"), self._spans[VERIFY_ON]))
         fpga.set_drift_compensation(False, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
@@ -322,6 +325,16 @@ class HrgDamping(HrgExcitation, Procedure):
             ctx.fit(f"hrg-damping drift {name}", theta_deg=np.degrees(th), drift_dph=rate)
         for res in results:
             ctx.report(res)
+
+    def _settle_s(self, ctx, why: str, precession_dps: float = 0.0) -> float:
+        """verify_settle_s, or (0) the loops' settle time after this command (settle_time_s); logged."""
+        if self.verify_settle_s > 0:
+            return self.verify_settle_s
+        settle = settle_time_s(ctx.devices.fpga, precession_dps)
+        ctx.log.info(f"settling {settle:.3g} s after {why} (loops' bandwidth"
+                     + (f", the wave's turn of {SPLIT_LEARN_DEG:g} deg at {precession_dps:g} deg/s)" if precession_dps
+                        else ")"))
+        return settle
 
     # --- results, shared by the run and by `analysis` -----------------------------------------
     def _f0_hz(self, ctx) -> float:

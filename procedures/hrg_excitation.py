@@ -78,6 +78,40 @@ def refuse_above_precession_limit(proc, devices, name: str, wave_rate_dps: float
             "turn slower than commanded; nothing was moved")
 
 
+#: a loop has settled when its error is this share of the step it was given (ln 100 = 4.6 time constants)
+SETTLE_FRACTION = 0.01
+#: whole-angle: the wave turns this far before the FPGA's split observer has seen both components
+#: of the 4 theta quadrature pattern (a quarter of its period; docs/fpga_link.md)
+SPLIT_LEARN_DEG = 22.5
+
+
+def pi_loop_time_constant_s(kp: float, ki: float, plant_gain: float) -> float:
+    """The slowest time constant of a PI loop around an integrator x' = g F (closed loop
+    s^2 + g kp s + g ki = 0): 1 / the smallest |real part| of its poles."""
+    a, b = plant_gain * kp, plant_gain * ki
+    if a <= 0.0:
+        return math.inf
+    disc = a * a - 4.0 * b
+    slowest = 0.5 * a if disc <= 0.0 else 0.5 * (a - math.sqrt(disc))
+    return math.inf if slowest <= 0.0 else 1.0 / slowest
+
+
+def loops_time_constant_s(fpga) -> float:
+    """The slowest of the FPGA's amplitude and quadrature loops (da/dt = F_a / 2, dk/dt = F_q / 2;
+    docs/fpga_link.md "The loops"), from their gain registers."""
+    reg = fpga.read_register
+    return max(pi_loop_time_constant_s(float(reg("AGC_KP")), float(reg("AGC_KI")), 0.5),
+               pi_loop_time_constant_s(float(reg("QUAD_KP")), float(reg("QUAD_KI")), 0.5))
+
+
+def settle_time_s(fpga, precession_dps: float = 0.0) -> float:
+    """The wait after a command before a record: the slowest loop's time constant times
+    ln(1 / SETTLE_FRACTION), plus, when a whole-angle precession starts, the time the wave takes to
+    turn SPLIT_LEARN_DEG (the split observer's learning)."""
+    learn_s = SPLIT_LEARN_DEG / abs(precession_dps) if precession_dps else 0.0
+    return loops_time_constant_s(fpga) * math.log(1.0 / SETTLE_FRACTION) + learn_s
+
+
 def saturation_refusal(label: str, n: int, bits: int, t_first: float, t_last: float) -> str:
     """The error a saturated record ends the run with."""
     return (f"{label}: the {saturation_text(bits)} loop saturated (force held at FPGA FORCE_LIMIT) in {n} "

@@ -91,3 +91,25 @@ def test_a_record_that_saw_saturation_ends_the_run_in_error(station, tmp_path):
     assert rec.outcome == "ERROR" and rec.failed_step == "compensate_step"
     assert "LoopSaturated" in rec.end_reason and "precession loop saturated" in rec.end_reason
     assert "drift_reduction_ratio" not in {r.name for r in rec.measurements if r.measured}
+
+
+def test_settle_times_follow_from_the_loops_bandwidth_and_the_command(station):
+    """A PI loop around an integrator x' = g F settles with its slowest pole; the wait before a
+    record is ln(100) of those time constants (1 % of the step left), plus the wave's turn of
+    22.5 deg when a whole-angle precession starts (the split observer's learning)."""
+    import math
+
+    from procedures.hrg_excitation import pi_loop_time_constant_s, settle_time_s
+
+    assert pi_loop_time_constant_s(2.0, 1.0, 0.5) == pytest.approx(2.0)  # the FPGA's AGC: s^2 + s + 1/2
+    assert pi_loop_time_constant_s(4.0, 4.0, 1.0) == pytest.approx(0.5)  # the rebalance loop: (s + 2)^2
+    assert pi_loop_time_constant_s(10.0, 1.0, 1.0) == pytest.approx(2.0 / (10.0 - math.sqrt(96.0)))  # overdamped
+    fpga = station.devices["fpga"]
+    assert settle_time_s(fpga) == pytest.approx(2.0 * math.log(100.0))
+    assert settle_time_s(fpga, 2.0) == pytest.approx(2.0 * math.log(100.0) + 22.5 / 2.0)
+    for reg in ("AGC_KP", "AGC_KI"):  # a faster amplitude loop, s^2 + 2 s + 2: the quadrature loop is slowest
+        fpga.write_register(reg, 4.0)
+    assert settle_time_s(fpga) == pytest.approx(2.0 * math.log(100.0))
+    for reg in ("QUAD_KP", "QUAD_KI"):
+        fpga.write_register(reg, 4.0)
+    assert settle_time_s(fpga) == pytest.approx(1.0 * math.log(100.0))
