@@ -24,7 +24,13 @@ from bench.engine.recording import in_spans
 from bench.engine.streams import Column, StreamSchema, declare
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
-from .hrg_excitation import SPLIT_LEARN_DEG, HrgExcitation, refuse_above_precession_limit, settle_time_s
+from .hrg_excitation import (
+    SPLIT_LEARN_DEG,
+    HrgExcitation,
+    refuse_above_precession_limit,
+    saturation_refusal,
+    settle_time_s,
+)
 
 WINDOWS = "damping_windows"
 DECAY, VERIFY_OFF, VERIFY_ON = 0.0, 1.0, 2.0
@@ -411,6 +417,7 @@ class HrgDamping(HrgExcitation, Procedure):
         period = float(np.median(np.diff(fpga["t_s"]) / np.maximum(np.diff(fpga["index"]), 1)))
 
         pauses = data.pauses() if hasattr(data, "pauses") else []
+        sat = fpga.get("sat_flags")  # absent in raw files of protocol 2
 
         def window(kind: float) -> np.ndarray | None:
             sel = win["kind"] == kind
@@ -418,8 +425,17 @@ class HrgDamping(HrgExcitation, Procedure):
                 return None
             t0, t1 = win["t_start_s"][sel][-1], win["t_end_s"][sel][-1]
             t_s = TAP.column(rows, "t_s")
-            # as the live tap: after t0, up to t1, the paused spans left out
-            return rows[(t_s > t0) & (t_s <= t1) & ~in_spans(t_s, pauses)]
+            inside = (t_s > t0) & (t_s <= t1)  # as the live tap: after t0, up to t1
+            label = {DECAY: "free decay", VERIFY_OFF: "drift, compensation off",
+                                        VERIFY_ON: "drift, compensation on"}[kind]
+            if sat is not None and np.any(sat[inside] != 0):
+                hit = inside & (sat != 0)
+                raise ValueError(saturation_refusal(label, int(hit.sum()), int(np.bitwise_or.reduce(
+                    sat[hit].astype(np.int64))), float(t_s[hit][0]), float(t_s[hit][-1])))
+            paused = inside & in_spans(t_s, pauses)
+            if paused.any():  # the live run excluded them too (pause_in_record): said, never silent
+                data.notes.append(f"{label}: {int(paused.sum())} samples inside a pause left out of the fit")
+            return rows[inside & ~paused]
 
         decay = self._decimate(window(DECAY), period)
         fit = fit_free_decay(*_decay_columns(decay), method=self.fit_method, model=self.fit_model)

@@ -91,6 +91,10 @@ def test_a_record_that_saw_saturation_ends_the_run_in_error(station, tmp_path):
     assert rec.outcome == "ERROR" and rec.failed_step == "compensate_step"
     assert "LoopSaturated" in rec.end_reason and "precession loop saturated" in rec.end_reason
     assert "drift_reduction_ratio" not in {r.name for r in rec.measurements if r.measured}
+    from bench.recorder import RunData
+
+    with RunData(rec.raw_file) as data, pytest.raises(ValueError, match="precession loop saturated"):
+        HrgDamping(rec.params).analysis(data)  # a re-fit of the raw file refuses it too
 
 
 def test_settle_times_follow_from_the_loops_bandwidth_and_the_command(station):
