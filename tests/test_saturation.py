@@ -117,3 +117,13 @@ def test_settle_times_follow_from_the_loops_bandwidth_and_the_command(station):
     for reg in ("QUAD_KP", "QUAD_KI"):
         fpga.write_register(reg, 4.0)
     assert settle_time_s(fpga) == pytest.approx(1.0 * math.log(100.0))
+
+
+def test_the_cli_refuses_the_precession_with_the_limit_and_exit_2(tmp_path, capsys):
+    from bench.cli import main
+
+    code = main(["run", "hrg-damping", "--station", "sim-hrg", "--set", "verify_rate_dps=20",
+                 "--runs-dir", str(tmp_path / "runs"), "--results", str(tmp_path / "r.sqlite")])
+    err = capsys.readouterr().err
+    assert code == 2 and "verify_rate_dps=20" in err and "14.3 deg/s" in err and "internal error" not in err
+    assert not list((tmp_path / "runs").glob("*.h5"))  # refused before the run began
