@@ -146,3 +146,55 @@ def test_recorded_length_from_the_samples():
     t = 10.0 + 0.01 * np.arange(1, 501)
     length, n, period = recorded_length_s(t)
     assert (n, length) == (500, pytest.approx(5.0)) and period == pytest.approx(0.01)
+
+
+def test_hrg_damping_excludes_a_pause_from_its_decay_and_its_refit(tmp_path):
+    """End to end on sim-hrg: a pause 6 s into a 12 s decay (2 s of bench time passing, as at a
+    real-time speed) is cut out of the decay the fit takes, the record runs on by 2 s, the log and
+    the raw file say so, and `analysis` of the raw file leaves the same samples out."""
+    from bench.recorder import RunData
+    from bench.station import SimStation
+    from procedures.hrg_damping import TAP, HrgDamping
+
+    station = SimStation("sim-hrg", seed=4).open()
+    try:
+        runner = Runner(station, runs_dir=tmp_path)
+        held = {"s": 0.0}
+        check = station.check_links
+
+        def check_links() -> None:  # while paused, bench time passes (real time would)
+            if runner.paused:
+                station.world.advance(0.5)
+                held["s"] += 0.5
+                if held["s"] >= PAUSED_S - 1e-9:
+                    runner.resume()
+            check()
+
+        station.check_links = check_links
+        seen: list = []
+
+        def on_event(e):
+            seen.append(e)
+            if isinstance(e, events.Progress) and e.message.startswith("free decay: 6 ") and held["s"] == 0.0:
+                runner.pause()
+
+        runner.bus.subscribe(on_event)
+        proc = HrgDamping({"rate_dps": 20.0, "record_s": 12.0, "stream_hz": 200.0, "compensate": False})
+        rec = runner.run(proc)
+    finally:
+        station.close()
+    assert rec.outcome == "COMPLETE", rec.end_reason
+    t = TAP.column(proc._decay, "t_s")
+    length, n, period = recorded_length_s(t)
+    assert abs(length - 12.0) <= period  # record_s of data, the paused span excluded
+    gap = np.diff(t).max()
+    assert gap == pytest.approx(PAUSED_S + period, abs=2 * period)
+    with RunData(rec.raw_file) as data:
+        (a, b), = data.pauses()
+        assert b - a == pytest.approx(PAUSED_S, abs=1e-6) and not in_spans(t, [(a, b)]).any()
+        assert any("excluded" in r["msg"] and r["level"] == "WARNING" for r in data.log())
+        assert any("paused inside the record excluded" in r["msg"] for r in data.log())
+        live = {r.name: r.value for r in rec.measurements if r.measured}
+        refit = {r.name: r.value for r in proc.analysis(data)}
+        assert any("inside a pause left out" in note for note in data.notes)
+    assert refit["tau_s"] == pytest.approx(live["tau_s"], rel=1e-9)

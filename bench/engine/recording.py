@@ -49,12 +49,13 @@ class RecordSpan:
 
 
 def in_spans(t_s: np.ndarray, spans: Sequence[tuple[float, float]]) -> np.ndarray:
-    """Boolean mask of the times inside any span [a, b] (a pause: from its start to its resume)."""
+    """Boolean mask of the times inside any span (a, b] (a pause: the sample at its start was taken
+    before it, the one at its resume while it lasted), so a span excludes (b - a) / dt samples."""
     t = np.asarray(t_s, dtype=float)
     out = np.zeros(t.shape, dtype=bool)
     for a, b in spans:
         if b > a:
-            out |= (t >= a) & (t <= b)
+            out |= (t > a) & (t <= b)
     return out
 
 
