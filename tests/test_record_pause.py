@@ -148,13 +148,10 @@ def test_recorded_length_from_the_samples():
     assert (n, length) == (500, pytest.approx(5.0)) and period == pytest.approx(0.01)
 
 
-def test_hrg_damping_excludes_a_pause_from_its_decay_and_its_refit(tmp_path):
-    """End to end on sim-hrg: a pause 6 s into a 12 s decay (2 s of bench time passing, as at a
-    real-time speed) is cut out of the decay the fit takes, the record runs on by 2 s, the log and
-    the raw file say so, and `analysis` of the raw file leaves the same samples out."""
-    from bench.recorder import RunData
+def _paused_sim_run(tmp_path, proc, trigger: str):
+    """proc on sim-hrg, paused once at the Progress message starting with `trigger` for PAUSED_S
+    of bench time (passing as at a real-time speed, but deterministically)."""
     from bench.station import SimStation
-    from procedures.hrg_damping import TAP, HrgDamping
 
     station = SimStation("sim-hrg", seed=4).open()
     try:
@@ -171,18 +168,41 @@ def test_hrg_damping_excludes_a_pause_from_its_decay_and_its_refit(tmp_path):
             check()
 
         station.check_links = check_links
-        seen: list = []
 
         def on_event(e):
-            seen.append(e)
-            if isinstance(e, events.Progress) and e.message.startswith("free decay: 6 ") and held["s"] == 0.0:
+            if isinstance(e, events.Progress) and e.message.startswith(trigger) and held["s"] == 0.0:
                 runner.pause()
 
         runner.bus.subscribe(on_event)
-        proc = HrgDamping({"rate_dps": 20.0, "record_s": 12.0, "stream_hz": 200.0, "compensate": False})
-        rec = runner.run(proc)
+        return runner.run(proc)
     finally:
         station.close()
+
+
+def test_hrg_free_decay_restarts_its_decay_after_a_pause(tmp_path):
+    """hrg-free-decay declares "restart": its decay window starts at the resume and holds record_s."""
+    from bench.recorder import RunData
+    from procedures.hrg_free_decay import HrgFreeDecay
+
+    proc = HrgFreeDecay({"rate_dps": 20.0, "record_s": 12.0, "method": "equation-error"})
+    rec = _paused_sim_run(tmp_path, proc, "free decay: 6 ")
+    assert rec.outcome == "COMPLETE", rec.end_reason
+    with RunData(rec.raw_file) as data:
+        (a, b), = data.pauses()
+        win = data.table("decay_window")
+        assert win["t_start_s"][-1] == pytest.approx(b) and win["t_end_s"][-1] - win["t_start_s"][-1] == pytest.approx(12.0, abs=1e-9)
+        assert any("restarts" in r["msg"] and r["level"] == "WARNING" for r in data.log())
+
+
+def test_hrg_damping_excludes_a_pause_from_its_decay_and_its_refit(tmp_path):
+    """End to end on sim-hrg: a pause 6 s into a 12 s decay (2 s of bench time passing, as at a
+    real-time speed) is cut out of the decay the fit takes, the record runs on by 2 s, the log and
+    the raw file say so, and `analysis` of the raw file leaves the same samples out."""
+    from bench.recorder import RunData
+    from procedures.hrg_damping import TAP, HrgDamping
+
+    proc = HrgDamping({"rate_dps": 20.0, "record_s": 12.0, "stream_hz": 200.0, "compensate": False})
+    rec = _paused_sim_run(tmp_path, proc, "free decay: 6 ")
     assert rec.outcome == "COMPLETE", rec.end_reason
     t = TAP.column(proc._decay, "t_s")
     length, n, period = recorded_length_s(t)
