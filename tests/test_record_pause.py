@@ -190,7 +190,8 @@ def test_hrg_free_decay_restarts_its_decay_after_a_pause(tmp_path):
     with RunData(rec.raw_file) as data:
         (a, b), = data.pauses()
         win = data.table("decay_window")
-        assert win["t_start_s"][-1] == pytest.approx(b) and win["t_end_s"][-1] - win["t_start_s"][-1] == pytest.approx(12.0, abs=1e-9)
+        assert win["t_start_s"][-1] == pytest.approx(b)
+        assert win["t_end_s"][-1] - win["t_start_s"][-1] == pytest.approx(12.0, abs=1e-9)
         assert any("restarts" in r["msg"] and r["level"] == "WARNING" for r in data.log())
 
 
