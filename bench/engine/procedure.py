@@ -39,6 +39,13 @@ the run ERROR; one declared and never reported is recorded NOT_MEASURED, when it
                         truth=None, limits=lambda p: (p.rate_dps - 0.5, p.rate_dps + 0.5)),
         )
 
+Records: `span = ctx.record_for(record_s, "label")` lets the bench clock run to the absolute
+deadline t_start + record_s (never a sum of relative waits, whose overshoots add up when paced)
+and returns the span to keep (`span.keep(t_s)`); a pause inside it is excluded or restarts it as
+the class declares (`pause_in_record = "exclude"` or `"restart"`); `recorded_text(label, t_s,
+span)` is the log's sentence on what the data hold.  `preflight(devices)` may refuse, before
+anything moves, a command above a device's own limit (an FPGA loop's force limit).
+
 An optional analysis hook `analysis(self, data) -> list[Result]` works on recorded data (a
 `bench.recorder.RunData`, the same during a run via `ctx.data()` and afterwards from the HDF5
 file), so `gyrobench analyze RUN` re-fits a recorded run with the same code.
