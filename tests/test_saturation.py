@@ -48,12 +48,20 @@ def test_the_stream_flags_a_saturated_precession_loop(station):
     clamps, the wave turns at the limit (14.3 deg/s) and the frames carry SAT_PREC."""
     fpga = station.devices["fpga"]
     fpga.start_stream(10)
+    S = p.STREAM_SCHEMA
+    rows: list[np.ndarray] = []
+    unsubscribe = fpga.subscribe(lambda b: rows.append(b.copy()))
     fpga.set_pll(True)
     fpga.set_quadrature_loop(True)
     fpga.set_agc(True, 1.0)
     fpga.set_drive_enabled(True)
     station.clock.sleep(30.0)
-    S = p.STREAM_SCHEMA
+    fpga.sync()
+    unsubscribe()
+    start = np.vstack(rows)
+    amp = start[:, S.index("sat_flags")].astype(int) & p.SAT_AMP
+    t = start[:, S.index("t_s")]
+    assert amp[t < t[0] + 1.0].mean() > 0.9 and not amp[t > t[-1] - 10.0].any()  # the AGC at its limit from rest
     slow = _precess(station, 10.0, 5.0)
     fast = _precess(station, 20.0, 5.0)
     assert not slow[:, S.index("sat_flags")].any()
