@@ -135,3 +135,21 @@ def test_the_cli_refuses_the_precession_with_the_limit_and_exit_2(tmp_path, caps
     err = capsys.readouterr().err
     assert code == 2 and "verify_rate_dps=20" in err and "14.3 deg/s" in err and "internal error" not in err
     assert not list((tmp_path / "runs").glob("*.h5"))  # refused before the run began
+
+
+def test_force_to_rebalance_beyond_its_range_ends_the_series_in_error(tmp_path):
+    """cvg-scale-factor on a force-to-rebalance unit at 80 deg/s: the wave's rate K Omega = 22 deg/s
+    is beyond what the rebalance force can hold (14.3 deg/s at FORCE_LIMIT 1), the loop saturates and
+    the run ends ERROR naming it, where it used to report a scale factor."""
+    from bench.engine import Runner
+    from bench.station import SimStation
+    from procedures.cvg_scale_factor import CvgScaleFactor
+
+    station = SimStation("sim-hrg-ftr", seed=1).open()
+    try:
+        rec = Runner(station, runs_dir=tmp_path).run(CvgScaleFactor, {"max_rate_dps": 80.0, "steps": 1,
+                                                                      "average_s": 2.0, "settle_s": 1.0})
+    finally:
+        station.close()
+    assert rec.outcome == "ERROR" and "rebalance loop saturated" in rec.end_reason
+    assert "scale_factor" not in {r.name for r in rec.measurements if r.measured}
