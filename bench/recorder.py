@@ -42,6 +42,7 @@ import numpy as np
 
 from bench.engine import events as ev
 from bench.engine.context import RunAborted
+from bench.engine.recording import PAUSE_LEVEL
 from bench.streams import StreamSchema, schema_of, unit_from_name
 
 CHUNK_ROWS = 4096
@@ -591,6 +592,23 @@ class RunData:
             else:
                 end = r["t_sim_s"]
         return start, end
+
+    def pauses(self) -> list[tuple[float, float]]:
+        """The run's pauses as (bench time paused, bench time resumed), from the log's PAUSE rows
+        (a pause the run never resumed from runs to the last row's time)."""
+        spans, start, last = [], None, None
+        for r in self.log():
+            last = r.get("t_sim_s", last)
+            if r.get("level") != PAUSE_LEVEL:
+                continue
+            if str(r.get("msg", "")).startswith("paused"):
+                start = r["t_sim_s"]
+            elif start is not None:
+                spans.append((float(start), float(r["t_sim_s"])))
+                start = None
+        if start is not None and last is not None:
+            spans.append((float(start), float(last)))
+        return spans
 
     @property
     def params(self) -> dict[str, Any]:

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from bench.analysis.allan import NoiseTerms, adev_band, allan_deviation, read_noise_terms
-from bench.engine import Measurement, Param, Procedure, Result, step
+from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
 from bench.streams import Column, StreamSchema, declare
 
 from .hrg_damping import _StreamTap
@@ -72,6 +72,7 @@ class CvgAllan(HrgExcitation, Procedure):
                               "of its time constants, 0.5 s at FTR_KP = FTR_KI = 4; docs/noise_model.md)")
     confidence = Param(0.95, unit="", low=0.5, high=0.999, doc="level of the read-offs' intervals")
 
+    pause_in_record = "restart"  # the Allan deviation takes one continuous record
     measurements = (
         Measurement("arw_deg_rth", "deg/sqrt(h)", "angle random walk N: sigma = N / sqrt(tau), the -1/2 slope "
                     "line's value at tau = 1 h (60 N deg/h at tau = 1 s), input-referred (the rebalance loop's "
@@ -124,22 +125,19 @@ class CvgAllan(HrgExcitation, Procedure):
         dec = max(1, int(round(1.0 / (self.stream_hz * period))))
         fpga.start_stream(dec)
         fpga.sync()
-        t0 = ctx.clock.now()
         self._tap.take(-math.inf, -math.inf)
         self._tap.on = True
-        n = max(1, int(math.ceil(self.record_s / 60.0)))
-        for k in range(n):
-            ctx.sleep(self.record_s / n)
-            ctx.progress((k + 1) / n, f"static record: {(k + 1) * self.record_s / n / 3600:.2f} / "
-                                      f"{self.record_s / 3600:.2f} h")
+        # to an absolute deadline; a pause inside restarts the record (pause_in_record)
+        span = ctx.record_for(self.record_s, "static record", progress_every_s=60.0)
         fpga.sync()
         self._tap.on = False
-        t1 = ctx.clock.now()
+        t0, t1 = span.t_start_s, span.t_end_s
+        self._refuse_saturation(t0, t1, "static record")
         stream_hz = 1.0 / (dec * period)
         ctx.record(WINDOW, WINDOW_COLUMNS, np.array([[t0, t1, stream_hz, float(self._ftr), self._scale]]))
         self._rows = self._tap.take(t0, t1)
         self._stream_hz = stream_hz
-        ctx.log.info(f"recorded {len(self._rows)} samples over {(t1 - t0) / 3600:.3f} h at {stream_hz:g} Hz")
+        ctx.log.info(recorded_text("static record", self._rows[:, 0], span))
 
     @step("Allan deviation and noise terms")
     def allan(self, ctx):

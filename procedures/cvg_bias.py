@@ -76,7 +76,7 @@ class CvgBias(CvgOutput, Procedure):
         for i in range(self.turn_ons):
             self._turn_on(ctx, self.quench_s)
             ctx.sleep(self.settle_s)
-            t0, t1 = self._record_window(ctx, self.record_s)
+            t0, t1 = self._record_window(ctx, self.record_s, f"turn-on {i + 1} record")
             ctx.record(WINDOWS, WINDOWS.names, np.array([[t0, t1, i, code, sf]]))
             ctx.progress((i + 1) / self.turn_ons, f"turn-on {i + 1} / {self.turn_ons}")
 

@@ -5,14 +5,15 @@ top of `HrgExcitation` (excite, hold the amplitude)."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from bench.analysis.cvg_rate import earth_rate_projection_dph, window_output
-from bench.engine import Param
+from bench.engine import Param, recorded_text
 
-from .hrg_excitation import HrgExcitation
+from .hrg_excitation import SETTLE_FRACTION, HrgExcitation, loops_time_constant_s, pi_loop_time_constant_s
 
 MODES = ("whole-angle", "force-to-rebalance")
 
@@ -80,9 +81,12 @@ class CvgOutput(HrgExcitation):
     earth_rate_dph = Param(0.0, unit="deg/h", low=-20.0, high=20.0,
                            doc="Earth's rate on the sensitive axis, removed from the bias; 0 = from the station "
                                "file's latitude_deg and axis (earth_rate_projection_dph), 0 when it gives none")
-    settle_s = Param(5.0, unit="s", low=0.0, high=3600.0, doc="wait after the rate is stable, before averaging")
+    settle_s = Param(0.0, unit="s", low=0.0, high=3600.0,
+                     doc="wait after the rate is stable, before averaging; 0: from the loops' bandwidth (4.6 time "
+                         "constants of the slowest FPGA loop, the rebalance loop's too in force-to-rebalance)")
 
     _mode: str = "whole-angle"
+    pause_in_record = "restart"  # a window's mean is of one continuous stretch
 
     def earth_rate_on_axis_dph(self, data) -> float:
         """Earth's rate to remove: the parameter when set, else the projection on the sensitive
@@ -131,16 +135,28 @@ class CvgOutput(HrgExcitation):
         ctx.sleep(settle_s)
         ctx.log.info(f"wave precessed {learn_deg:g} deg for the FPGA to learn the split; settled {settle_s:g} s")
 
-    def _record_window(self, ctx, seconds: float) -> tuple[float, float]:
-        """Let the bench clock run `seconds` (in slices, for progress and abort); (t_start, t_end)."""
+    def _settle_s(self, ctx) -> float:
+        """settle_s, or (0) the loops' settle time from their gain registers (settle_time_s)."""
+        if self.settle_s > 0:
+            return self.settle_s
+        fpga = ctx.devices.fpga
+        tau = loops_time_constant_s(fpga)
+        if self._mode == "force-to-rebalance":  # e'' + kp e' + ki e: an integrator of gain 1 around the PI
+            tau = max(tau, pi_loop_time_constant_s(float(fpga.read_register("FTR_KP")),
+                                                   float(fpga.read_register("FTR_KI")), 1.0))
+        return tau * math.log(1.0 / SETTLE_FRACTION)
+
+    def _record_window(self, ctx, seconds: float, label: str = "window") -> tuple[float, float]:
+        """Let the bench clock run `seconds` to an absolute deadline (ctx.record_for; a pause inside
+        restarts the window, pause_in_record) and log what the stream holds; (t_start, t_end)."""
         fpga = ctx.devices.fpga
         fpga.sync()
-        t0 = ctx.clock.now()
-        n = max(1, int(np.ceil(seconds / 10.0)))
-        for _ in range(n):
-            ctx.sleep(seconds / n)
+        span = ctx.record_for(seconds, label, progress=lambda _f, _m: ctx.checkpoint())  # the series' progress
         fpga.sync()
-        return t0, ctx.clock.now()
+        self._refuse_saturation(span.t_start_s, span.t_end_s, label)
+        t = ctx.data().table("fpga")["t_s"]
+        ctx.log.info(recorded_text(label, t[span.keep(t)], span))
+        return span.t_start_s, span.t_end_s
 
     def _turn_on(self, ctx, quench_s: float) -> None:
         """A turn-on from a quiet resonator, as a cold start: the amplitude loop alone, proportional

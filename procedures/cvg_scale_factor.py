@@ -109,9 +109,9 @@ class CvgScaleFactor(CvgOutput, Procedure):
         for i, rate in enumerate(rates):
             table.set_rate(float(rate), self.accel_dps2)
             table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
-            ctx.sleep(self.settle_s)
+            ctx.sleep(self._settle_s(ctx))
             length_s, box_s = window_s(float(rate), self.average_s, self.whole_turns)
-            t0, t1 = self._record_window(ctx, length_s)
+            t0, t1 = self._record_window(ctx, length_s, f"window at {rate:+.6g} deg/s")
             ctx.record(WINDOWS, WINDOWS.names, np.array([[t0, t1, rate, code, box_s]]))
             ctx.progress((i + 1) / len(rates), f"rate {i + 1} / {len(rates)}: {rate:+.3g} deg/s")
         table.set_rate(0.0, self.accel_dps2)

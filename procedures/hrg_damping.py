@@ -19,11 +19,18 @@ import numpy as np
 
 from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_drift_harmonics, fit_free_decay
 from bench.analysis.slow_model import orbit_elements
-from bench.engine import Measurement, Param, Procedure, Result, step
+from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
+from bench.engine.recording import in_spans
 from bench.streams import Column, StreamSchema, declare
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
-from .hrg_excitation import HrgExcitation
+from .hrg_excitation import (
+    SPLIT_LEARN_DEG,
+    HrgExcitation,
+    refuse_above_precession_limit,
+    saturation_refusal,
+    settle_time_s,
+)
 
 WINDOWS = "damping_windows"
 DECAY, VERIFY_OFF, VERIFY_ON = 0.0, 1.0, 2.0
@@ -164,7 +171,10 @@ class HrgDamping(HrgExcitation, Procedure):
     compensate = Param(True, doc="write the coefficients to the FPGA and verify the drift off and on")
     verify_rate_dps = Param(2.0, unit="deg/s", low=0.01, high=100.0, doc="whole-angle precession while verifying")
     verify_s = Param(90.0, unit="s", low=1.0, high=100000.0, doc="drift record per verification (off, on)")
-    verify_settle_s = Param(5.0, unit="s", low=0.0, high=600.0, doc="settling before each verification record")
+    verify_settle_s = Param(0.0, unit="s", low=0.0, high=600.0,
+                            doc="settling before each verification record; 0: from the loops' bandwidth and the "
+                                "command (4.6 time constants of the slowest loop, plus the wave's turn of 22.5 deg "
+                                "for the split observer before the first record)")
     drift_block_s = Param(1.0, unit="s", low=0.01, high=100.0, doc="block over which the drift rate is measured")
     bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: refers the wave's drift to the gyro output")
 
@@ -185,6 +195,12 @@ class HrgDamping(HrgExcitation, Procedure):
         self._tap = _StreamTap()
         self._decay: np.ndarray | None = None
         self._fit = None
+        self._spans: dict[float, Any] = {}
+
+    def preflight(self, devices) -> None:
+        """The verification's precession command within the FPGA's force limit (read-only)."""
+        if self.compensate:
+            refuse_above_precession_limit(self, devices, "verify_rate_dps", self.verify_rate_dps, "deg/s ")
 
     # --- helpers -----------------------------------------------------------------------------
     def _sample_period_s(self, ctx) -> float:
@@ -196,20 +212,21 @@ class HrgDamping(HrgExcitation, Procedure):
         return rows[idx % dec == 0]
 
     def _record(self, ctx, kind: float, duration_s: float, label: str) -> np.ndarray:
+        """duration_s of the tap's rows to an absolute deadline (ctx.record_for), a pause inside
+        excluded; the window goes to the raw file and the log says what the data hold."""
         fpga = ctx.devices.fpga
         fpga.sync()
-        t0 = ctx.clock.now()
         self._tap.take(-math.inf, -math.inf)  # drop anything older
         self._tap.on = True
-        n = max(1, int(math.ceil(duration_s / 10.0)))
-        for k in range(n):
-            ctx.sleep(duration_s / n)
-            ctx.progress((k + 1) / n, f"{label}: {(k + 1) * duration_s / n:.0f} / {duration_s:.0f} s")
+        span = ctx.record_for(duration_s, label)
         fpga.sync()
         self._tap.on = False
-        t1 = ctx.clock.now()
-        ctx.record(WINDOWS, WINDOW_COLUMNS, np.array([[kind, t0, t1]]))
-        return self._tap.take(t0, t1)
+        ctx.record(WINDOWS, WINDOW_COLUMNS, np.array([[kind, span.t_start_s, span.t_end_s]]))
+        rows = self._tap.take(span.t_start_s, span.t_end_s)
+        rows = rows[span.keep(TAP.column(rows, "t_s"))]
+        self._spans[kind] = span
+        self._refuse_saturation(span.t_start_s, span.t_end_s, label)
+        return rows
 
     # --- steps -------------------------------------------------------------------------------
     @step("Excite and hold the amplitude", uses=("fpga",))
@@ -249,7 +266,7 @@ class HrgDamping(HrgExcitation, Procedure):
             if dec != old:
                 fpga.start_stream(old)
         self._decay = self._decimate(rows, period)
-        ctx.log.info(f"recorded {len(self._decay)} samples over {self.record_s:g} s at {1 / (dec * period):g} Hz")
+        ctx.log.info(recorded_text("free decay", TAP.column(self._decay, "t_s"), self._spans[DECAY]))
 
     @step("Compute E, theta and the quadrature", uses=())
     def elements(self, ctx):
@@ -303,11 +320,13 @@ class HrgDamping(HrgExcitation, Procedure):
         fpga.set_agc(True, self.amplitude)
         fpga.set_drive_enabled(True)
         self._hold_amplitude(ctx)
-        ctx.sleep(self.verify_settle_s)
+        ctx.sleep(self._settle_s(ctx, "the precession starts", self.verify_rate_dps))
         off = self._record(ctx, VERIFY_OFF, self.verify_s, "drift, compensation off")
+        ctx.log.info(recorded_text("drift, compensation off", TAP.column(off, "t_s"), self._spans[VERIFY_OFF]))
         fpga.set_drift_compensation(True, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
-        ctx.sleep(self.verify_settle_s)
+        ctx.sleep(self._settle_s(ctx, "the compensation is on"))
         on = self._record(ctx, VERIFY_ON, self.verify_s, "drift, compensation on")
+        ctx.log.info(recorded_text("drift, compensation on", TAP.column(on, "t_s"), self._spans[VERIFY_ON]))
         fpga.set_drift_compensation(False, fit.delta_inv_tau_per_s, fit.theta_tau_deg)
         fpga.set_drive_enabled(False)
         results, curves = self._verify_results(off, on, fit)
@@ -315,6 +334,16 @@ class HrgDamping(HrgExcitation, Procedure):
             ctx.fit(f"hrg-damping drift {name}", theta_deg=np.degrees(th), drift_dph=rate)
         for res in results:
             ctx.report(res)
+
+    def _settle_s(self, ctx, why: str, precession_dps: float = 0.0) -> float:
+        """verify_settle_s, or (0) the loops' settle time after this command (settle_time_s); logged."""
+        if self.verify_settle_s > 0:
+            return self.verify_settle_s
+        settle = settle_time_s(ctx.devices.fpga, precession_dps)
+        ctx.log.info(f"settling {settle:.3g} s after {why} (loops' bandwidth"
+                     + (f", the wave's turn of {SPLIT_LEARN_DEG:g} deg at {precession_dps:g} deg/s)" if precession_dps
+                        else ")"))
+        return settle
 
     # --- results, shared by the run and by `analysis` -----------------------------------------
     def _f0_hz(self, ctx) -> float:
@@ -390,13 +419,26 @@ class HrgDamping(HrgExcitation, Procedure):
         rows = np.column_stack([fpga[c] for c in _TAP])
         period = float(np.median(np.diff(fpga["t_s"]) / np.maximum(np.diff(fpga["index"]), 1)))
 
+        pauses = data.pauses() if hasattr(data, "pauses") else []
+        sat = fpga.get("sat_flags")  # absent in raw files of protocol 2
+
         def window(kind: float) -> np.ndarray | None:
             sel = win["kind"] == kind
             if not sel.any():
                 return None
             t0, t1 = win["t_start_s"][sel][-1], win["t_end_s"][sel][-1]
             t_s = TAP.column(rows, "t_s")
-            return rows[(t_s > t0) & (t_s <= t1)]  # as the live tap: after t0, up to t1
+            inside = (t_s > t0) & (t_s <= t1)  # as the live tap: after t0, up to t1
+            label = {DECAY: "free decay", VERIFY_OFF: "drift, compensation off",
+                                        VERIFY_ON: "drift, compensation on"}[kind]
+            if sat is not None and np.any(sat[inside] != 0):
+                hit = inside & (sat != 0)
+                raise ValueError(saturation_refusal(label, int(hit.sum()), int(np.bitwise_or.reduce(
+                    sat[hit].astype(np.int64))), float(t_s[hit][0]), float(t_s[hit][-1])))
+            paused = inside & in_spans(t_s, pauses)
+            if paused.any():  # the live run excluded them too (pause_in_record): said, never silent
+                data.notes.append(f"{label}: {int(paused.sum())} samples inside a pause left out of the fit")
+            return rows[inside & ~paused]
 
         decay = self._decimate(window(DECAY), period)
         fit = fit_free_decay(*_decay_columns(decay), method=self.fit_method, model=self.fit_model)

@@ -5,11 +5,118 @@ self-calibration procedures of the next wave stand on the same pieces."""
 
 from __future__ import annotations
 
+import math
+import threading
+
 import numpy as np
 
 from bench.analysis.slow_model import orbit_elements
-from bench.engine import Demand, Param
+from bench.engine import Demand, Param, StationMismatch
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
+from drivers.fpga.protocol import saturation_text
+
+
+class LoopSaturated(RuntimeError):
+    """A loop's force sat at FORCE_LIMIT during a record: the record is not a measurement."""
+
+
+class SaturationWatch:
+    """FPGA stream subscriber (the link's reader thread): the time and the saturation bits of every
+    frame that has any (`sat_flags`), so a record can be checked for them afterwards."""
+
+    def __init__(self) -> None:
+        self._i_t, self._i_f = FPGA.indices("t_s", "sat_flags")
+        self._t: list[np.ndarray] = []
+        self._flags: list[np.ndarray] = []
+        self._lock = threading.Lock()
+
+    def __call__(self, block: np.ndarray) -> None:
+        flags = block[:, self._i_f]
+        hit = flags != 0
+        if hit.any():
+            with self._lock:
+                self._t.append(block[hit, self._i_t])
+                self._flags.append(flags[hit])
+
+    def within(self, t_start_s: float, t_end_s: float) -> tuple[int, int, float, float]:
+        """(saturated frames, their bits or-ed, first and last time) in (t_start_s, t_end_s]."""
+        with self._lock:
+            t = np.concatenate(self._t) if self._t else np.empty(0)
+            f = np.concatenate(self._flags) if self._flags else np.empty(0)
+        sel = (t > t_start_s) & (t <= t_end_s)
+        if not sel.any():
+            return 0, 0, np.nan, np.nan
+        bits = int(np.bitwise_or.reduce(f[sel].astype(np.int64)))
+        return int(sel.sum()), bits, float(t[sel][0]), float(t[sel][-1])
+
+
+#: the share of the force limit a command may use (the rest: the drift compensation's force, the
+#: loops' transients); above it the loop would run at its clamp
+FORCE_HEADROOM = 0.95
+
+
+def precession_limit_dps(force_limit: float, amplitude: float) -> float:
+    """The wave rate whole-angle precession (or the rebalance loop) can force at amplitude a: the
+    force 4 a Omega at FORCE_LIMIT, Omega = FORCE_LIMIT / (4 a) (docs/fpga_link.md, "Saturation")."""
+    return math.degrees(force_limit / (4.0 * amplitude))
+
+
+def refuse_above_precession_limit(proc, devices, name: str, wave_rate_dps: float, what: str = "") -> None:
+    """StationMismatch when a commanded wave rate |wave_rate_dps| (from parameter `name`) is above
+    FORCE_HEADROOM of the FPGA's precession limit at the procedure's amplitude; reads FORCE_LIMIT."""
+    fpga = devices.get("fpga") if hasattr(devices, "get") else None
+    if fpga is None:
+        return
+    force = float(fpga.read_register("FORCE_LIMIT"))
+    full = precession_limit_dps(force, proc.amplitude)
+    usable = FORCE_HEADROOM * full
+    if abs(wave_rate_dps) > usable:
+        raise StationMismatch(
+            f"{proc.name}: {name}={getattr(proc, name):g} {what}is above the FPGA's precession limit "
+            f"{usable:.3g} deg/s ({FORCE_HEADROOM:.0%} of FORCE_LIMIT / (4 x amplitude) = {force:g} / (4 x "
+            f"{proc.amplitude:g}) rad/s = {full:.3g} deg/s): the precession force would saturate and the wave "
+            "turn slower than commanded; nothing was moved")
+
+
+#: a loop has settled when its error is this share of the step it was given (ln 100 = 4.6 time constants)
+SETTLE_FRACTION = 0.01
+#: whole-angle: the wave turns this far before the FPGA's split observer has seen both components
+#: of the 4 theta quadrature pattern (a quarter of its period; docs/fpga_link.md)
+SPLIT_LEARN_DEG = 22.5
+
+
+def pi_loop_time_constant_s(kp: float, ki: float, plant_gain: float) -> float:
+    """The slowest time constant of a PI loop around an integrator x' = g F (closed loop
+    s^2 + g kp s + g ki = 0): 1 / the smallest |real part| of its poles."""
+    a, b = plant_gain * kp, plant_gain * ki
+    if a <= 0.0:
+        return math.inf
+    disc = a * a - 4.0 * b
+    slowest = 0.5 * a if disc <= 0.0 else 0.5 * (a - math.sqrt(disc))
+    return math.inf if slowest <= 0.0 else 1.0 / slowest
+
+
+def loops_time_constant_s(fpga) -> float:
+    """The slowest of the FPGA's amplitude and quadrature loops (da/dt = F_a / 2, dk/dt = F_q / 2;
+    docs/fpga_link.md "The loops"), from their gain registers."""
+    reg = fpga.read_register
+    return max(pi_loop_time_constant_s(float(reg("AGC_KP")), float(reg("AGC_KI")), 0.5),
+               pi_loop_time_constant_s(float(reg("QUAD_KP")), float(reg("QUAD_KI")), 0.5))
+
+
+def settle_time_s(fpga, precession_dps: float = 0.0) -> float:
+    """The wait after a command before a record: the slowest loop's time constant times
+    ln(1 / SETTLE_FRACTION), plus, when a whole-angle precession starts, the time the wave takes to
+    turn SPLIT_LEARN_DEG (the split observer's learning)."""
+    learn_s = SPLIT_LEARN_DEG / abs(precession_dps) if precession_dps else 0.0
+    return loops_time_constant_s(fpga) * math.log(1.0 / SETTLE_FRACTION) + learn_s
+
+
+def saturation_refusal(label: str, n: int, bits: int, t_first: float, t_last: float) -> str:
+    """The error a saturated record ends the run with."""
+    return (f"{label}: the {saturation_text(bits)} loop saturated (force held at FPGA FORCE_LIMIT) in {n} "
+            f"stream frames, t = {t_first:.3f} .. {t_last:.3f} s; a loop at its limit does not do what it "
+            "is asked, so this record is no measurement")
 
 
 class HrgExcitation:
@@ -24,6 +131,7 @@ class HrgExcitation:
     rate_timeout_s = Param(120.0, unit="s", low=1.0, high=3600.0, doc="time allowed to become stable at rate")
 
     _latest_row: np.ndarray | None = None
+    _saturation: SaturationWatch | None = None
 
     def demands(self) -> list[Demand]:
         """The table's rate and acceleration (the procedure's `rate_dps`, `accel_dps2`)."""
@@ -44,6 +152,9 @@ class HrgExcitation:
     def _start_loops(self, ctx) -> None:
         """AGC (at the amplitude setpoint), PLL and quadrature loop on, drive on."""
         fpga = ctx.devices.fpga
+        if self._saturation is None:  # every record is checked for a saturated loop
+            self._saturation = SaturationWatch()
+            ctx.subscribe(fpga, self._saturation)
         if hasattr(fpga, "reload_trims") and fpga.read_register("TRIM_EN"):
             # a trimmed unit (a retest): identify the raw resonator; its trims come back from NVM at the end
             fpga.write_register("TRIM_EN", 0)
@@ -55,6 +166,14 @@ class HrgExcitation:
         fpga.set_quadrature_loop(True)
         fpga.set_agc(True, self.amplitude)
         fpga.set_drive_enabled(True)
+
+    def _refuse_saturation(self, t_start_s: float, t_end_s: float, label: str) -> None:
+        """LoopSaturated (the run ends ERROR) when any loop sat at its limit in (t_start_s, t_end_s]."""
+        if self._saturation is None:
+            return
+        n, bits, t_first, t_last = self._saturation.within(t_start_s, t_end_s)
+        if n:
+            raise LoopSaturated(saturation_refusal(label, n, bits, t_first, t_last))
 
     def _hold_amplitude(self, ctx) -> float:
         """Wait (bench clock) until the amplitude is within tolerance of the setpoint; returns it."""

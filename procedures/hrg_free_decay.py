@@ -19,7 +19,7 @@ import numpy as np
 
 from bench.analysis.maslov import derived_ci95, free_param_names, identify_free_decay
 from bench.analysis.slow_model import orbit_elements
-from bench.engine import Measurement, Param, Procedure, Result, step
+from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
 from bench.streams import Column, StreamSchema, declare
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
@@ -185,6 +185,7 @@ class HrgFreeDecay(HrgExcitation, Procedure):
     table_ripple = Param(True, doc="output-error: also fit the wave's turn by the table's angle ripple (1x, 2x/rev)")
 
     measurements = _decay_declarations()
+    pause_in_record = "restart"  # the identification takes one continuous decay
 
     @step("Excite and hold the amplitude", uses=("fpga",))
     def excite(self, ctx):
@@ -205,14 +206,13 @@ class HrgFreeDecay(HrgExcitation, Procedure):
     def record(self, ctx):
         fpga = ctx.devices.fpga
         fpga.sync()
-        t0 = ctx.clock.now()
-        n = max(1, int(math.ceil(self.record_s / 10.0)))
-        for k in range(n):
-            ctx.sleep(self.record_s / n)
-            ctx.progress((k + 1) / n, f"free decay {(k + 1) * self.record_s / n:.0f} / {self.record_s:.0f} s")
+        span = ctx.record_for(self.record_s, "free decay")  # a pause inside restarts it (pause_in_record)
         fpga.sync()
+        self._refuse_saturation(span.t_start_s, span.t_end_s, "free decay")
         ref = float(fpga.read_register("PLL_FREQ_HZ"))
-        ctx.record(WINDOW, WINDOW_COLUMNS, np.array([[t0, ctx.clock.now(), ref, self.rate_dps]]))
+        ctx.record(WINDOW, WINDOW_COLUMNS, np.array([[span.t_start_s, span.t_end_s, ref, self.rate_dps]]))
+        t = ctx.data().table("fpga")["t_s"]
+        ctx.log.info(recorded_text("free decay", t[(t >= span.t_start_s) & (t <= span.t_end_s)], span))
 
     @step("Identify", uses=())
     def identify(self, ctx):

@@ -16,12 +16,13 @@ from typing import Any
 import numpy as np
 
 from bench.analysis import selfcal as sc
-from bench.engine import Measurement, Param, Procedure, Result, step
+from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
+from bench.engine.recording import window_end
 from bench.streams import Column, StreamSchema, declare
 from drivers.fpga import protocol as fp
 
 from .hrg_damping import _StreamTap
-from .hrg_excitation import HrgExcitation
+from .hrg_excitation import HrgExcitation, refuse_above_precession_limit
 
 TAP_COLUMNS = ("t_s", "angle_out_deg", "amp_ctrl", "freq_ctrl", "prec_ctrl")
 CYCLES = "hrg_selfcal_cycles"
@@ -101,6 +102,7 @@ class HrgSelfcal(HrgExcitation, Procedure):
     trim_gains = Param(1, unit="", low=0, high=1, doc="1: trim the identified gain difference out after each cycle")
     confidence = Param(0.95, unit="", low=0.5, high=0.999, doc="level of the intervals")
 
+    pause_in_record = "restart"  # a cycle's identification takes one continuous cycle
     measurements = (
         Measurement("q_factor", "", "Q = w0 / gamma, last cycle", truth="Q"),
         Measurement("delta_inv_tau_per_s", "1/s", "damping anisotropy D = Delta(1/tau), last cycle",
@@ -145,6 +147,10 @@ class HrgSelfcal(HrgExcitation, Procedure):
     def demands(self) -> list:
         return []
 
+    def preflight(self, devices) -> None:
+        """The cycles' precession command within the FPGA's force limit (read-only)."""
+        refuse_above_precession_limit(self, devices, "precession_dps", self.precession_dps, "deg/s ")
+
     @step("Excite, hold the amplitude, whole-angle mode with FM")
     def excite(self, ctx):
         fpga = ctx.devices.fpga
@@ -173,6 +179,29 @@ class HrgSelfcal(HrgExcitation, Procedure):
         for name, v in self._trim0.items():
             fpga.write_register(name, v)
 
+    def _cycle(self, ctx, c: int, half_s: float) -> tuple[float, float]:
+        """One cycle's precession, +90 deg then -90 deg, each half to an absolute deadline on the
+        bench clock; a pause inside restarts the cycle (pause_in_record).  (t_start, t_end)."""
+        fpga = ctx.devices.fpga
+        n = max(1, int(math.ceil(half_s / 300.0)))
+        while True:
+            seen = len(ctx.pauses.spans)
+            fpga.sync()
+            t0 = ctx.clock.now()
+            for h, sign in enumerate((1.0, -1.0)):
+                fpga.set_whole_angle(True, sign * self.precession_dps)
+                for k in range(1, n + 1):
+                    ctx.sleep_until(t0 + (h + k / n) * half_s)
+            fpga.sync()
+            t1 = window_end(ctx.clock, t0 + 2.0 * half_s)  # the deadline, not the clock after it (paced)
+            paused = ctx.pauses.since(seen)
+            if not paused:
+                self._refuse_saturation(t0, t1, f"cycle {c + 1}")
+                return t0, t1
+            self._tap.take(-math.inf, t1)  # drop the paused cycle's rows
+            ctx.log.warning(f"cycle {c + 1}: paused inside it (t = {paused[0][0]:.3f} .. {paused[-1][1]:.3f} s): "
+                            "the cycle restarts")
+
     @step("Forced-precession cycles: identify, trim, compensate")
     def run_cycles(self, ctx):
         fpga = ctx.devices.fpga
@@ -184,16 +213,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
         self._tap.take(-math.inf, math.inf)
         self._tap.on = True
         for c in range(self.cycles):
-            fpga.sync()
-            t0 = ctx.clock.now()
-            for sign in (1.0, -1.0):
-                fpga.set_whole_angle(True, sign * self.precession_dps)
-                n = max(1, int(math.ceil(half_s / 300.0)))
-                for _ in range(n):
-                    ctx.sleep(half_s / n)
-            fpga.sync()
-            t1 = ctx.clock.now()
+            t0, t1 = self._cycle(ctx, c, half_s)
             rows = self._tap.take(t0, t1)
+            ctx.log.info(recorded_text(f"cycle {c + 1}", rows[:, TAP_COLUMNS.index("t_s")], asked_s=2.0 * half_s))
             cols = {name: rows[:, i] for i, name in enumerate(TAP_COLUMNS)}
             t = cols["t_s"]
             th = np.radians(cols["angle_out_deg"])

@@ -243,8 +243,9 @@ class MemsSweep(Procedure):
         fe = ctx.devices.frontend
         dt = self.window_s / self.reads
         out = []
-        for _ in range(self.reads):
-            ctx.sleep(dt)
+        t0 = ctx.clock.now()
+        for k in range(1, self.reads + 1):  # absolute deadlines: a slow read does not stretch the window
+            ctx.sleep_until(t0 + k * dt)
             out.append(fe.lockin_all())
         return np.array(out) / self.pickoff_gain_v
 

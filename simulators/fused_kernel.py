@@ -1,7 +1,11 @@
 """Compiled core of the world's fused blocks (simulators.fused): K blocks of the FPGA firmware's
 loops closed around the linear resonator in one call, each block exactly as the per-block path
 computes it (firmware before_block, the resonator's exact step, firmware after_block), in the
-same order of floating-point operations, so a seeded run gives the same arrays bit for bit."""
+same order of floating-point operations, so a seeded run gives the same arrays bit for bit.
+
+numba's cache keys a compiled function on its own file only: the firmware kernels it inlines
+(simulators.fpga.kernels, drivers.fpga.protocol.put_stream_frame) are not watched, so a change
+to them must touch this file too (here: the loops' saturation bits, protocol version 3)."""
 
 from __future__ import annotations
 

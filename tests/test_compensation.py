@@ -237,7 +237,7 @@ def test_an_identification_on_a_trimmed_unit_runs_untrimmed_and_restores_the_tri
         trims = from_record(RECORD).trims()
         load_trims(link, trims)
         ctx = SimpleNamespace(devices=SimpleNamespace(fpga=link), defer=lambda fn, what="": deferred.append(fn),
-                              log=logging.getLogger("test"))
+                              log=logging.getLogger("test"), subscribe=lambda device, callback: None)
         proc = HrgExcitation()
         proc.amplitude = 1.0
         proc._start_loops(ctx)

@@ -324,7 +324,7 @@ def test_a_protocol_version_mismatch_is_one_clear_message():
     try:
         server.firmware.regs["VERSION"] = 1
         link = FpgaLink(server.url, clock=clock, timeout_s=0.5)
-        with pytest.raises(ProtocolError, match=r"protocol VERSION is 1, this driver speaks 2") as err:
+        with pytest.raises(ProtocolError, match=r"protocol VERSION is 1, this driver speaks 3") as err:
             link.connect()
         assert "\n" not in str(err.value) and not link.connected
     finally:

@@ -14,8 +14,9 @@ from drivers.fpga import protocol as p
 def _stream(n: int, seed: int = 0, seq0: int = 0) -> tuple[bytes, np.ndarray]:
     rng = np.random.default_rng(seed)
     index = np.arange(1, n + 1, dtype=np.int64)
-    ch = rng.normal(size=(n, 10)).astype(np.float32).astype(float)
+    ch = rng.normal(size=(n, 11)).astype(np.float32).astype(float)
     ch[:, 8] = rng.normal(size=n) * 1e3  # the angle output travels as float64
+    ch[:, 10] = rng.integers(0, 16, size=n)  # the loops' saturation bits (the address field)
     return p.encode_stream(seq0, index, index * 1e-3, ch), ch
 
 
@@ -47,7 +48,7 @@ def test_stream_round_trip_in_random_chunks():
         cmds += f
         pos += k
     rows = np.vstack(blocks)
-    assert rows.shape == (500, 12) and len(p.STREAM_COLUMNS) == 12
+    assert rows.shape == (500, 13) and len(p.STREAM_COLUMNS) == 13
     np.testing.assert_array_equal(rows[:, 0], np.arange(1, 501))
     np.testing.assert_array_equal(rows[:, 2:], ch)  # float32 values survive exactly
     assert len(cmds) == 1 and parser.corrupt == 0 and parser.resyncs == 0
@@ -101,19 +102,21 @@ def test_register_map_is_consistent():
 def test_compiled_stream_encoder_matches_the_layout_byte_for_byte():
     """encode_stream (compiled, position-table CRC) against struct packing and crc_hqx, across the
     32-bit sequence wrap, with float64 channels rounded to float32 as the frame carries them (the
-    angle output stays float64): protocol version 2's 72-byte frame."""
+    angle output stays float64): protocol version 3's 72-byte frame, the saturation bits in addr."""
     rng = np.random.default_rng(5)
     n, seq0 = 7, p.SEQ_MOD - 3
     index = np.array([0, 1, 2**40, 5, 6, 2**63 - 1, 9], dtype=np.int64)
     t_s = rng.normal(size=n) * 1e3
-    ch = rng.normal(size=(n, 10))
+    ch = rng.normal(size=(n, 11))
+    ch[:, 10] = [0, p.SAT_PREC, 15, 1, 2, 8, 0]
     want = b""
     for i in range(n):
-        body = struct.pack("<BBIHQd8fdf", p.STREAM, p.STREAM_PAYLOAD, (seq0 + i) % p.SEQ_MOD, 0, int(index[i]),
+        body = struct.pack("<BBIHQd8fdf", p.STREAM, p.STREAM_PAYLOAD, (seq0 + i) % p.SEQ_MOD, int(ch[i, 10]),
+                           int(index[i]),
                            float(t_s[i]), *ch[i, :8].astype(np.float32), float(ch[i, 8]),
                            np.float32(ch[i, 9]))  # fmt: skip
         want += b"\xa5\x5a" + body + struct.pack("<H", crc_hqx(body, 0xFFFF))
     assert p.encode_stream(seq0, index, t_s, ch) == want
-    assert p.STREAM_FRAME_SIZE == 72 and p.PROTOCOL_VERSION == 2
+    assert p.STREAM_FRAME_SIZE == 72 and p.PROTOCOL_VERSION == 3
     rows = np.frombuffer(want, np.uint8).reshape(n, p.STREAM_FRAME_SIZE)
     assert p.crc16_frames(rows).tolist() == [crc_hqx(r[2:-2].tobytes(), 0xFFFF) for r in rows]

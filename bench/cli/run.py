@@ -113,6 +113,11 @@ def cmd(args: argparse.Namespace) -> int:
             _err(f"station {station.id!r} did not open: {type(exc).__name__}: {exc}")
             station.close()
             return EXIT_BAD_OUTCOME
+        try:  # the opened devices' own limits (an FPGA loop's force limit), before anything moves
+            check_station(proc, station)
+        except ValueError as exc:
+            _err(str(exc))
+            return EXIT_USAGE
         for kind, at_s in faults:
             station.schedule_fault(kind, at_s)
         if not args.json and sys.stdout.isatty():

@@ -20,6 +20,7 @@ from .measurement import (
 )
 from .params import Param, ParamError
 from .procedure import Procedure, step
+from .recording import EXCLUDE, RESTART, RecordSpan, recorded_length_s, recorded_text
 from .runner import Runner, RunRecord, software_version
 from .safety import SAFE_ORDER, SafeStateReport, bring_to_safe_state
 
@@ -31,6 +32,11 @@ __all__ = [
     "check_station",
     "COMPLETE",
     "ERROR",
+    "EXCLUDE",
+    "RESTART",
+    "RecordSpan",
+    "recorded_length_s",
+    "recorded_text",
     "FAIL",
     "MARGINAL",
     "OUTCOMES",

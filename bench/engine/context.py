@@ -14,6 +14,7 @@ from bench.streams import StreamSchema, schema_of
 
 from . import events as ev
 from .measurement import Limits, Result
+from .recording import PauseLog, RecordSpan, record_for, sleep_until
 
 
 class RunAborted(Exception):
@@ -168,6 +169,9 @@ class RunContext:
         self._finalizers_lock = threading.Lock()
         self._streams: dict[str, StreamSchema] = {}  # declared in this run (StreamDeclared sent)
         self._streams_lock = threading.Lock()
+        self.pauses = PauseLog()  # the run's pauses (bench times), as the engine saw them
+        self._pause_lock = threading.Lock()
+        self._paused_at: float | None = None
 
     # --- events --------------------------------------------------------------------------
     def publish(self, cls: type[ev.Event], **fields: Any) -> None:
@@ -226,6 +230,35 @@ class RunContext:
 
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
         return self.clock.wait_until(condition, timeout_s, poll_s)
+
+    def sleep_until(self, t_abs_s: float) -> float:
+        """Wait until the bench clock reads t_abs_s (an absolute deadline); its time then."""
+        return sleep_until(self.clock, t_abs_s)
+
+    def record_for(self, record_s: float, label: str = "record", *, progress_every_s: float = 10.0,
+                   policy: str | None = None, progress: Callable[[float, str], None] | None = None) -> RecordSpan:
+        """Let the bench clock run record_s seconds to an absolute deadline (progress between, a
+        pause excluded or restarting the record as the procedure declares); the span to keep."""
+        return record_for(self, record_s, label, progress_every_s=progress_every_s, policy=policy, progress=progress)
+
+    def paused(self) -> None:
+        """The engine holds at a checkpoint: a Paused event (log row PAUSE) at the bench time now."""
+        with self._pause_lock:
+            if self._paused_at is not None:
+                return
+            self._paused_at = t = self.clock.now()
+        self.bus.publish(ev.Paused(run_id=self.run_id, t_sim_s=t, message=f"paused at t = {t:.3f} s"))
+
+    def resumed(self) -> None:
+        """The engine goes on: a Resumed event and the span kept in `pauses`."""
+        with self._pause_lock:
+            t0, self._paused_at = self._paused_at, None
+            if t0 is None:
+                return
+            t1 = self.clock.now()
+            self.pauses.spans.append((t0, t1))
+        self.bus.publish(ev.Resumed(run_id=self.run_id, t_sim_s=t1, paused_from_s=t0,
+                                    message=f"resumed at t = {t1:.3f} s after {t1 - t0:.3f} s of bench time paused"))
 
     def compute(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
         """fn(*args, **kwargs) for a long computation (a fit, an identification): it runs in a

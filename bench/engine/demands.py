@@ -73,3 +73,12 @@ def check_station(proc: Any, station: Any) -> None:
     if why is not None:
         raise StationMismatch(f"procedure {proc.name!r} cannot run on station {getattr(station, 'id', '?')!r}: {why}")
     check_demands(proc.demands(), station, proc.name)
+    preflight = getattr(proc, "preflight", None)
+    devices = getattr(station, "devices", None)
+    if preflight is not None and devices:  # an opened station: the devices' own limits (read only)
+        try:
+            preflight(devices)
+        except StationMismatch:
+            raise
+        except Exception:  # noqa: BLE001, S110 - a device that cannot answer now: the run's steps meet it
+            pass

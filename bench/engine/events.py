@@ -102,6 +102,25 @@ class Log(Event):
 
 
 @dataclass(frozen=True)
+class Paused(Log):
+    """The run held at a checkpoint (the operator paused it); a log row of level PAUSE, so the
+    window, the CLI and the raw file's log all show it.  The bench clock may go on meanwhile
+    (real time): a record that spans it excludes it or restarts (bench.engine.recording)."""
+
+    level: str = "PAUSE"
+    message: str = "paused"
+
+
+@dataclass(frozen=True)
+class Resumed(Log):
+    """The run went on after a pause; paused_from_s is the bench time the pause began."""
+
+    level: str = "PAUSE"
+    message: str = "resumed"
+    paused_from_s: float = float("nan")
+
+
+@dataclass(frozen=True)
 class StationStatus(Event):
     """Device summary for the station panel: {device: {key: value}}."""
 

@@ -39,6 +39,13 @@ the run ERROR; one declared and never reported is recorded NOT_MEASURED, when it
                         truth=None, limits=lambda p: (p.rate_dps - 0.5, p.rate_dps + 0.5)),
         )
 
+Records: `span = ctx.record_for(record_s, "label")` lets the bench clock run to the absolute
+deadline t_start + record_s (never a sum of relative waits, whose overshoots add up when paced)
+and returns the span to keep (`span.keep(t_s)`); a pause inside it is excluded or restarts it as
+the class declares (`pause_in_record = "exclude"` or `"restart"`); `recorded_text(label, t_s,
+span)` is the log's sentence on what the data hold.  `preflight(devices)` may refuse, before
+anything moves, a command above a device's own limit (an FPGA loop's force limit).
+
 An optional analysis hook `analysis(self, data) -> list[Result]` works on recorded data (a
 `bench.recorder.RunData`, the same during a run via `ctx.data()` and afterwards from the HDF5
 file), so `gyrobench analyze RUN` re-fits a recorded run with the same code.
@@ -95,6 +102,9 @@ class Procedure:
     kinds: ClassVar[tuple[str, ...]] = ()
     #: the measurements the procedure reports (their names are its results' stable public names)
     measurements: ClassVar[tuple[Measurement, ...]] = ()
+    #: a pause inside a record (`ctx.record_for`): "exclude" cuts the paused span out and runs the
+    #: record on by as much, "restart" records again from the resume (bench.engine.recording)
+    pause_in_record: ClassVar[str] = "exclude"
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -108,6 +118,11 @@ class Procedure:
         """What this run will ask of each device (rates, accelerations, amplitudes), from the
         parameters; the engine checks them against the station's limits before the first step."""
         return []
+
+    def preflight(self, devices: Any) -> None:
+        """Read-only checks of the parameters against the devices' own limits (an FPGA loop's
+        force limit), on an opened station before anything moves: raise
+        bench.engine.demands.StationMismatch naming the value and the limit."""
 
     # --- introspection -------------------------------------------------------------------
     @classmethod

@@ -141,6 +141,7 @@ class Runner:
         self._running.set()
         self._in_run = False
         self.record: RunRecord | None = None
+        self._ctx: RunContext | None = None  # the run's context while a run goes on (pause events)
 
     # --- control, from any thread ------------------------------------------------------------
     def abort(self, reason: str = "abort requested") -> None:
@@ -177,15 +178,22 @@ class Runner:
     def checkpoint(self) -> None:
         """Raise RunAborted after an abort, hold while paused, raise a lost link the station saw."""
         check = getattr(self.station, "check_links", None)
+        ctx = self._ctx
+        held = False
         while True:
             if self._fatal is not None:
                 raise self._fatal
             if self._abort_reason is not None:
                 raise RunAborted(self._abort_reason)
-            if self._running.wait(0.05):
+            if self._running.is_set() or self._running.wait(0.05):
                 break
+            if not held and ctx is not None:  # a pause is an event in the log and the raw file
+                held = True
+                ctx.paused()
             if check is not None:  # paused: a trip or a lost link still ends the run (real time)
                 check()
+        if held:
+            ctx.resumed()
         if self._fatal is not None:
             raise self._fatal
         if self._abort_reason is not None:
@@ -278,6 +286,7 @@ class Runner:
             station=st,
             procedure=proc,
         )
+        self._ctx = ctx
         spool_dir = None if self.runs_dir is None else self.runs_dir / "spool"  # records the store refused
         if self.store is not None:  # the run's RUNNING row (and heartbeat); never raises
             for note in self.store.begin_run(rec, spool_dir):
@@ -327,6 +336,7 @@ class Runner:
             self._step_failed(ctx, steps, current, "error")
         finally:
             clock.guard = None
+            self._ctx = None
             if outcome is not None:
                 rec.failed_step = current
             with _sigint_deferred(ctx):  # what the procedure acquired, before the safe state; never raises

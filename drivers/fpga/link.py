@@ -343,7 +343,7 @@ class FpgaLink:
         self._streaming = False
 
     def subscribe(self, callback: StreamCallback) -> Callable[[], None]:
-        """callback(block) for every parsed block, shape (n, 12) in STREAM_COLUMNS order;
+        """callback(block) for every parsed block, shape (n, 13) in STREAM_COLUMNS order;
         returns the function that unsubscribes it."""
         with self._cond:
             self._subscribers.append(callback)

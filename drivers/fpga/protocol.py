@@ -6,7 +6,7 @@ Every frame, little-endian:
     type  u8   READ=1, WRITE=2, ACK=3, NACK=4, STREAM=5
     len   u8   payload length in bytes
     seq   u32  command sequence number (echoed by ACK/NACK) or stream frame counter
-    addr  u16  register address (0 for stream frames)
+    addr  u16  register address (stream frames: the loops' saturation bits SAT_*)
     payload    len bytes
     crc   u16  CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor)
                over type..payload (everything after the sync word)
@@ -71,9 +71,23 @@ ST_AGC_SETTLED = 0x02  # amplitude within 1 % of the setpoint
 ST_PLL_LOCKED = 0x04  # phase error under 0.05 rad
 ST_STREAMING = 0x08
 
+# --- loop saturation bits (a stream frame's address field; the stream's sat_flags column) -----
+#: a loop force held at FORCE_LIMIT over the frame's block: the loop is not doing what it is asked
+SAT_AMP = 0x1  # amplitude (AGC, or the open-loop DRIVE_FORCE)
+SAT_QUAD = 0x2  # quadrature loop
+SAT_PREC = 0x4  # whole-angle precession force (a precession command above FORCE_LIMIT / (4 a))
+SAT_FTR = 0x8  # force-to-rebalance loop (a rate above its range)
+SAT_NAMES = {SAT_AMP: "amplitude (AGC)", SAT_QUAD: "quadrature", SAT_PREC: "precession", SAT_FTR: "rebalance"}
+
+
+def saturation_text(flags: int) -> str:
+    """The loops a sat_flags value names, e.g. 'precession, quadrature'."""
+    return ", ".join(name for bit, name in SAT_NAMES.items() if int(flags) & bit) or "none"
+
 FPGA_ID = 0x46504741  # "FPGA"
 #: 2: the stream frame gained the gyro's outputs (angle_out_deg, rate_out_dps); 72 bytes (was 60)
-PROTOCOL_VERSION = 2
+#: 3: a stream frame's address field carries the loops' saturation bits (SAT_*)
+PROTOCOL_VERSION = 3
 
 # --- output modes (register OUTPUT_MODE, docs/fpga_link.md "Output modes") --------------------
 MODE_WHOLE_ANGLE = 0  # rate-integrating: the wave turns freely (WHOLE_ANGLE adds a precession command)
@@ -313,10 +327,13 @@ STREAM_SCHEMA = declare(StreamSchema("fpga", "fpga", (
            quantity="wave angle output"),
     Column("rate_out_dps", "deg/s", "f4", doc="force-to-rebalance rate output G degrees(F_p / (4 a_set)); 0 otherwise",
            quantity="rate output"),
+    Column("sat_flags", "1", "u2", doc="loops whose force was held at FORCE_LIMIT over the frame's block: bits "
+           "1 amplitude (AGC), 2 quadrature, 4 precession, 8 rebalance (0: none saturated)",
+           quantity="loop saturation"),
 )))
 STREAM_COLUMNS = STREAM_SCHEMA.names
 STREAM_PAYLOAD = 60
-N_CHANNELS = 10  # 8 float32 channels, the angle (f64) and the rate output (f32)
+N_CHANNELS = 11  # 8 float32 channels, the angle (f64), the rate output (f32) and the saturation bits (u16)
 STREAM_DTYPE = np.dtype(
     [
         ("sync", "<u2"),
@@ -377,6 +394,10 @@ def put_stream_frame(
     r_bits = np.float32(ch[9]).view(np.uint32)
     for j in range(4):
         frame[66 + j] = (r_bits >> np.uint32(8 * j)) & np.uint32(0xFF)
+    if ch.shape[0] > 10:  # the saturation bits, in the address field
+        flags = int(ch[10])
+        frame[8] = flags & 0xFF
+        frame[9] = (flags >> 8) & 0xFF
     crc = _frame_crc(frame, table, crc_zeros)
     frame[70] = crc & 0xFF
     frame[71] = crc >> 8
@@ -399,8 +420,8 @@ def stream_frame_buffer(n: int) -> np.ndarray:
 
 
 def encode_stream(seq0: int, index: np.ndarray, t_s: np.ndarray, channels: np.ndarray) -> bytes:
-    """Encode n stream frames at once (one compiled pass, CRC per frame): channels is (n, 10) in
-    stream order after t_s, or (n, 8) with the outputs (angle, rate) zero."""
+    """Encode n stream frames at once (one compiled pass, CRC per frame): channels is (n, 11) in
+    stream order after t_s, or (n, 10) with no saturation bits, or (n, 8) with the outputs zero too."""
     frames = stream_frame_buffer(len(index))
     _encode_frames(frames, int(seq0) % SEQ_MOD, np.asarray(index, np.int64), np.asarray(t_s, float),
                    np.asarray(channels, float), STREAM_CRC_TABLE, STREAM_CRC_ZEROS)  # fmt: skip
@@ -408,13 +429,14 @@ def encode_stream(seq0: int, index: np.ndarray, t_s: np.ndarray, channels: np.nd
 
 
 def stream_rows(arr: np.ndarray) -> np.ndarray:
-    """Decoded stream frames -> (n, 12) float64 block in STREAM_COLUMNS order."""
+    """Decoded stream frames -> (n, 13) float64 block in STREAM_COLUMNS order."""
     out = np.empty((len(arr), len(STREAM_COLUMNS)))
     out[:, 0] = arr["index"]
     out[:, 1] = arr["t_s"]
     out[:, 2:10] = arr["ch"]
     out[:, 10] = arr["angle_out_deg"]
     out[:, 11] = arr["rate_out_dps"]
+    out[:, 12] = arr["addr"]
     return out
 
 

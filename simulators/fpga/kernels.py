@@ -57,13 +57,17 @@ S_OBS_K, S_OBS_FQ, S_OBS_N, S_OBS_OK, S_M_CC, S_M_CS, S_M_SS, S_V_C, S_V_S, S_H_
 # angle and whether there is one (the unwrapping restarts with the stream), the rebalance integrator
 S_RATE_OUT, S_ANGLE_OUT, S_ANGLE_OK, S_FTR_INT = range(37, 41)
 S_SPAN = 41  # the span between the last two wave estimates (the rates' baseline)
-N_STATE = 42
+# loop saturation (drivers.fpga.protocol SAT_*): the clamps the last update hit (S_SAT_NEXT), and
+# those of the forces held over this block (S_SAT: that update's and wave_force's), streamed
+S_SAT_NEXT, S_SAT = 42, 43
+N_STATE = 44
 MODE_FTR = 1  # OUTPUT_MODE's force-to-rebalance (drivers.fpga.protocol.MODE_FORCE_TO_REBALANCE)
 OBS_MEMORY_S = 100.0  # the observer forgets data older than this (exponential weight)
 OBS_RIDGE = 0.05**3  # damping of the solve: one 50 ms block's weight (weights are span^3: 1/variance)
 
 # control bits (drivers.fpga.protocol), repeated here as compile-time constants
 _DRIVE_EN, _AGC_EN, _PLL_EN, _QUAD_EN, _WHOLE_ANGLE, _DRIFT_COMP_EN = 0x01, 0x02, 0x04, 0x08, 0x10, 0x40
+_SAT_AMP, _SAT_QUAD, _SAT_PREC, _SAT_FTR = 0x1, 0x2, 0x4, 0x8  # drivers.fpga.protocol SAT_*
 
 
 @njit(cache=True)
@@ -184,23 +188,29 @@ def update_loops(
     if ctrl & _PLL_EN and a > 0.01 * max(setpoint, 1e-12):
         st[S_PLL_INT_HZ] += prm[P_PLL_KI] * phase_err * t_block_s
         st[S_PLL_FREQ_HZ] = st[S_PLL_INT_HZ] + prm[P_PLL_KP] * phase_err
+    st[S_SAT_NEXT] = 0.0
     if not ctrl & _DRIVE_EN:
         return
     limit = prm[P_FORCE_LIMIT]
+    sat = 0
     st[S_WEAK] = 1.0 if weak else 0.0
     if ctrl & _AGC_EN:
         err = setpoint - a
         f_a = prm[P_AGC_KP] * err + st[S_AGC_INT]
         if abs(f_a) < limit or f_a * err < 0:  # anti-windup: integrate only off the stop
             st[S_AGC_INT] += prm[P_AGC_KI] * err * t_block_s
-        f_a = _clamp(f_a, limit)
     else:
-        f_a = _clamp(prm[P_DRIVE_FORCE], limit)
+        f_a = prm[P_DRIVE_FORCE]
+    if abs(f_a) > limit:
+        sat |= _SAT_AMP
+    f_a = _clamp(f_a, limit)
     f_q = 0.0
     if ctrl & _QUAD_EN and not weak:
         f_q = -(prm[P_QUAD_KP] * k + st[S_QUAD_INT])
         if abs(f_q) < limit or f_q * k > 0:
             st[S_QUAD_INT] += prm[P_QUAD_KI] * k * t_block_s
+        if abs(f_q) > limit:
+            sat |= _SAT_QUAD
         f_q = _clamp(f_q, limit)
     f_p = 0.0
     if prm[P_OUTPUT_MODE] == MODE_FTR:
@@ -209,12 +219,15 @@ def update_loops(
             f_p = -4.0 * a * (prm[P_FTR_KP] * err + st[S_FTR_INT])
             if abs(f_p) < limit or f_p * err > 0:  # anti-windup: integrate only off the stop
                 st[S_FTR_INT] += prm[P_FTR_KI] * err * t_block_s
+            if abs(f_p) > limit:
+                sat |= _SAT_FTR
             f_p = _clamp(f_p, limit)
     elif ctrl & _WHOLE_ANGLE and not weak:
         f_p = 4.0 * a * math.radians(prm[P_PRECESSION_RATE_DPS])
     st[S_F_A] = f_a
     st[S_F_Q_P] = f_q
     st[S_F_P] = f_p
+    st[S_SAT_NEXT] = sat
 
 
 @njit(cache=True)
@@ -248,7 +261,9 @@ def wave_force(
     if abs(st[S_T_END] - t_start_s) >= 0.5 * dt_s:  # no update from the block just before (a drive cut)
         st[S_U : S_U + 4] = 0.0
         st[S_OUT + 0] = st[S_OUT + 2] = st[S_OUT + 3] = 0.0
+        st[S_SAT] = 0.0
         return
+    sat = int(st[S_SAT_NEXT])
     ftr = prm[P_OUTPUT_MODE] == MODE_FTR
     if st[S_WEAK] > 0 or st[S_EST] <= 0:  # no wave to lock onto yet: excite along the x pickoff axis, in phase
         theta, chi, f_q, f_p = 0.0, 0.0, 0.0, 0.0
@@ -272,10 +287,17 @@ def wave_force(
         s1 = math.sin(n_est * x) / (n_est * math.sin(x)) if x != 0.0 and n_est > 0 else 1.0
         s2 = math.sin(n * x) / (n * x) if x != 0.0 else 1.0
         if not ftr:  # the rebalance force is the loop's own (its integrator absorbs any such factor)
-            f_p = _clamp(f_p / (s1 * s2), limit)
+            f_p = f_p / (s1 * s2)
+            if abs(f_p) > limit:
+                sat |= _SAT_PREC
+            f_p = _clamp(f_p, limit)
         if ctrl & _QUAD_EN:  # cancel the split's quadrature pumping at the predicted angle
             c4, s4 = math.cos(4.0 * theta), math.sin(4.0 * theta)
-            f_q = _clamp(f_q - 2.0 * st[S_A] * (st[S_H_C] * c4 + st[S_H_S] * s4), limit)
+            f_q = f_q - 2.0 * st[S_A] * (st[S_H_C] * c4 + st[S_H_S] * s4)
+            if abs(f_q) > limit:
+                sat |= _SAT_QUAD
+            f_q = _clamp(f_q, limit)
+    st[S_SAT] = sat
     c2, s2 = math.cos(2 * theta), math.sin(2 * theta)
     cc, sc = math.cos(chi), math.sin(chi)
     # u = f_a e_a + f_q e_k + f_p e_p with the unit forces along a, k and theta
@@ -325,10 +347,11 @@ def emit_frames(
     against the last frame's (S_ANGLE_OUT) and the rate output (S_RATE_OUT).  Returns (frames
     written, new carry_n) and updates carry."""
     n = q_meas.shape[0]
-    row = np.empty(10)
+    row = np.empty(11)
     for c in range(4):
         row[4 + c] = st[S_OUT + c]
     row[9] = st[S_RATE_OUT]
+    row[10] = st[S_SAT]
     if dec <= 1:
         for i in range(n):
             for c in range(4):
