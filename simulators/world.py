@@ -321,8 +321,7 @@ class World:
         if self.environment is not None:
             truth |= self.environment.truth()
         if self.errors is not None:
-            p = self.params
-            truth |= self.errors.truth(self.t_s, self.temperature_c, p.f0_hz, p.q_factor, p.freq_offset_hz)
+            truth |= self.errors.truth(self.t_s, self.temperature_c, truth)
         return truth
 
     def set_temperature(self, temperature_c: float) -> None:

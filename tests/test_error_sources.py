@@ -148,6 +148,10 @@ def test_frequency_and_q_follow_the_temperature():
     assert truth["temperature_c"] == REFERENCE_TEMPERATURE_C + 10.0
     assert truth["f0_at_temperature_hz"] == pytest.approx(1000.0 * (1 + 55e-6 * 10.0))
     assert truth["q_factor_at_temperature"] == pytest.approx(FAST.q_factor * 0.97)
+    # the resonator's keys are the unit's at its temperature now, the reference's kept as *_ref
+    assert truth["tau_s"] == pytest.approx(FAST.tau_s * 0.97) and truth["tau_s_ref"] == FAST.tau_s
+    assert truth["freq_offset_hz"] == pytest.approx(1000.0 * 55e-6 * 10.0)
+    assert truth["c_m"] == pytest.approx(4 * math.pi * 1000.0 * 55e-6 * 10.0)
 
 
 def test_set_temperature_is_an_input():
@@ -191,3 +195,28 @@ def test_realistic_stations_differ_from_their_nominal():
         assert st.world.errors is None
         assert st.truth()["bryan_factor"] == st.nominal["bryan_factor"]
         assert st.truth()["f0_hz"] == pytest.approx(st.nominal["f0_hz"], rel=1e-15)
+
+
+@pytest.mark.parametrize("errors, depth", [
+    (ErrorSources(pickoff_gain_diff_ppm=750.0), 2 * 750e-6),  # E_m = E (1 + 2 d cos 4 theta)
+    (ErrorSources(pickoff_angle_x_deg=0.05, pickoff_angle_y_deg=-0.08), 2 * math.radians(0.13)),  # 2 (e_x - e_y)
+])
+def test_energy_modulation_reads_as_damping_anisotropy(errors, depth):
+    """A pickoff error that modulates the measured energy by m cos 4(theta - psi) is, to a free-decay
+    fit of a wave turning at theta' = -K Omega, a damping anisotropy D = 4 m K Omega (the log of
+    E_m gains m cos 4 theta, the model's D integral D sin 4 theta / (4 theta')): docs/sensitivity.md's
+    largest biases, in closed form, on a resonator with no anisotropy at all."""
+    from bench.analysis.damping import fit_free_decay_q
+
+    unit = IDEAL.with_(noise_sigma=1e-6)
+    world = World(unit, seed=0, errors=errors, sample_period_s=0.01, max_block_s=1.0)
+    world.resonator.set_state(_wave(1.0, 0.0))
+    world.case_rate_dps = 20.0
+    t, q = [], []
+    for _ in range(60):
+        world.advance(1.0)
+        t.append(world.last_block.t_s)
+        q.append(world.last_block.q_meas)
+    fit = fit_free_decay_q(np.concatenate(t), np.concatenate(q))
+    expected = 4 * depth * unit.bryan_factor * math.radians(20.0)
+    assert fit.delta_inv_tau_per_s == pytest.approx(expected, rel=0.02)

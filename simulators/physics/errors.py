@@ -131,19 +131,30 @@ class ErrorSources:
     def thermal_active(self) -> bool:
         return bool(self.freq_tc_ppm_k or self.q_tc_per_k)
 
-    def truth(self, t_s: float, temperature_c: float, f0_hz: float, q_factor: float, freq_offset_hz: float) -> dict:
+    def truth(self, t_s: float, temperature_c: float, resonator_truth: dict[str, float]) -> dict:
         """Each source under `err_<name>`, and what they make now: the pickoff gains, the
-        temperature, the natural frequency and Q there."""
+        temperature, the natural frequency and Q there; away from the reference temperature the
+        resonator's damping and frequency keys (tau_s, q_factor, Q, gamma, freq_offset_hz, c_m)
+        become the unit's at that temperature, their reference values kept as `<key>_ref`."""
         gx, gy = self.pickoff_gains(t_s, temperature_c)
         dt_k = temperature_c - REFERENCE_TEMPERATURE_C
-        f_true = f0_hz + freq_offset_hz
-        return {f"err_{k}": float(v) for k, v in asdict(self).items()} | {
+        r = resonator_truth
+        f0_hz = r["f0_hz"]
+        df_hz = f0_hz * 1e-6 * self.freq_tc_ppm_k * dt_k
+        q_scale = 1.0 + self.q_tc_per_k * dt_k
+        out = {f"err_{k}": float(v) for k, v in asdict(self).items()} | {
             "pickoff_gain_x": gx,
             "pickoff_gain_y": gy,
             "temperature_c": float(temperature_c),
-            "f0_at_temperature_hz": f_true + f0_hz * 1e-6 * self.freq_tc_ppm_k * dt_k,
-            "q_factor_at_temperature": q_factor * (1.0 + self.q_tc_per_k * dt_k),
+            "f0_at_temperature_hz": f0_hz + r["freq_offset_hz"] + df_hz,
+            "q_factor_at_temperature": r["q_factor"] * q_scale,
         }
+        if dt_k and self.thermal_active:
+            now = {"tau_s": r["tau_s"] * q_scale, "q_factor": r["q_factor"] * q_scale, "Q": r["Q"] * q_scale,
+                   "gamma": r["gamma"] / q_scale, "freq_offset_hz": r["freq_offset_hz"] + df_hz,
+                   "c_m": r["c_m"] + 2.0 * TWO_PI * df_hz}
+            out |= {f"{k}_ref": r[k] for k in now} | now
+        return out
 
 
 #: the error sources of each realistic preset (docs/error_sources.md gives each size's source)
