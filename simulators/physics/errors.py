@@ -40,7 +40,8 @@ class ErrorSources:
         amplitude squared): at the fundamental a relative gain of (3/4) e3 a^2.
     forcer_gain_x_ppm, forcer_gain_y_ppm: drive/control chain gain errors of the X and Y forcers.
     forcer_angle_x_deg, forcer_angle_y_deg: misalignment of the X and Y forcer electrodes.
-    freq_tc_ppm_k: df0/dT / f0 (ppm per K); q_tc_per_k: dQ/dT / Q (relative, per K).
+    freq_tc_ppm_k: df0/dT / f0 (ppm per K); q_tc_per_k: dtau/dT / tau (relative, per K; Q = pi f0 tau
+        moves by that and by f0's TCF).
     """
 
     pickoff_gain_cm_ppm: float = 0.0
@@ -122,7 +123,8 @@ class ErrorSources:
     # --- resonator ---------------------------------------------------------------------------
     def thermal(self, gamma: float, c_m: float, f0_hz: float, temperature_c: float) -> tuple[float, float]:
         """The damping gamma and mean mistuning c_m (1/s) at a temperature, from those at the
-        reference: f0 moves by f0 TCF dT (c_m by 2 x 2 pi of that), Q by (1 + q_tc dT)."""
+        reference: f0 moves by f0 TCF dT (c_m by 2 x 2 pi of that), the damping time tau by
+        (1 + q_tc dT) (so Q = pi f tau by that and by f's own change)."""
         dt_k = temperature_c - REFERENCE_TEMPERATURE_C
         df_hz = f0_hz * 1e-6 * self.freq_tc_ppm_k * dt_k
         return gamma / (1.0 + self.q_tc_per_k * dt_k), c_m + 2.0 * TWO_PI * df_hz
@@ -141,7 +143,8 @@ class ErrorSources:
         r = resonator_truth
         f0_hz = r["f0_hz"]
         df_hz = f0_hz * 1e-6 * self.freq_tc_ppm_k * dt_k
-        q_scale = 1.0 + self.q_tc_per_k * dt_k
+        tau_scale = 1.0 + self.q_tc_per_k * dt_k
+        q_scale = tau_scale * (1.0 + df_hz / f0_hz)  # Q = pi f tau: both move
         out = {f"err_{k}": float(v) for k, v in asdict(self).items()} | {
             "pickoff_gain_x": gx,
             "pickoff_gain_y": gy,
@@ -150,8 +153,8 @@ class ErrorSources:
             "q_factor_at_temperature": r["q_factor"] * q_scale,
         }
         if dt_k and self.thermal_active:
-            now = {"tau_s": r["tau_s"] * q_scale, "q_factor": r["q_factor"] * q_scale, "Q": r["Q"] * q_scale,
-                   "gamma": r["gamma"] / q_scale, "freq_offset_hz": r["freq_offset_hz"] + df_hz,
+            now = {"tau_s": r["tau_s"] * tau_scale, "q_factor": r["q_factor"] * q_scale, "Q": r["Q"] * q_scale,
+                   "gamma": r["gamma"] / tau_scale, "freq_offset_hz": r["freq_offset_hz"] + df_hz,
                    "c_m": r["c_m"] + 2.0 * TWO_PI * df_hz}
             out |= {f"{k}_ref": r[k] for k in now} | now
         return out
