@@ -186,7 +186,7 @@ def write_doc(summary: dict, seeds: int, wall_s: dict[str, float], path: pathlib
         "",
         f"Cost: {seeds} seeds x {len(srcs)} sources x 4 procedures, {total / 60:.1f} min of wall time on one core",
         "of this shared 2-core machine (" + ", ".join(f"{s} {w:.0f} s" for s, w in wall_s.items()) + ").",
-        "A world with error sources runs block by block (not the fused path), hence the longer columns.",
+        "A world with error sources runs block by block (not the fused path).",
         "",
     ]
     notes = ""
@@ -221,7 +221,7 @@ def main() -> None:
             wall = {k: (wall[k] if k in wall else old["wall_s"][k]) for k in raw}
     summary = summarise(raw)
     pathlib.Path(args.json).write_text(json.dumps({"seeds": args.seeds, "wall_s": wall, "raw": raw,
-                                                   "summary": summary}, indent=1), encoding="utf-8")
+                                                   "summary": summary}, separators=(",", ":")), encoding="utf-8")
     write_doc(summary, args.seeds, wall, pathlib.Path(args.doc))
 
 
