@@ -220,3 +220,66 @@ def test_energy_modulation_reads_as_damping_anisotropy(errors, depth):
     fit = fit_free_decay_q(np.concatenate(t), np.concatenate(q))
     expected = 4 * depth * unit.bryan_factor * math.radians(20.0)
     assert fit.delta_inv_tau_per_s == pytest.approx(expected, rel=0.02)
+
+
+class _TrueWave:
+    """The world's true state at the end of every block (a World device)."""
+
+    def __init__(self) -> None:
+        self.t_s: list[float] = []
+        self.q: list[np.ndarray] = []
+
+    def before_block(self, *args) -> None:
+        pass
+
+    def after_block(self, world, block) -> None:
+        self.t_s.append(float(block.t_s[-1]))
+        self.q.append(block.q_true[-1].copy())
+
+
+def _whole_angle_drift_wave_dph(params, errors: ErrorSources, rate_dps: float):
+    """The simulated FPGA's whole-angle loops (AGC, PLL, quadrature) on the World directly at a
+    commanded precession; the true wave's drift against its angle (deg/h of wave angle): mean and
+    4, 8 theta harmonics (as tests/test_wa_drift.py, not referred to the output)."""
+    from bench.analysis.damping import fit_drift_harmonics
+    from bench.analysis.slow_model import orbit_elements, state_from_elements
+    from drivers.fpga import protocol as p
+    from procedures.hrg_damping import block_drift
+    from simulators.fpga.firmware import FpgaFirmware
+
+    world = World(params, seed=1, errors=errors)
+    world.resonator.set_state(state_from_elements(1.0, 0.0, 0.0))
+    fw = FpgaFirmware(world)
+    world.attach(fw)
+    for name, value in (("REF_FREQ_HZ", params.f0_hz), ("AGC_SETPOINT", 1.0), ("PRECESSION_RATE_DPS", rate_dps)):
+        fw.write(p.BY_NAME[name], value)
+    fw.write(p.BY_NAME["CTRL"], p.DRIVE_EN | p.AGC_EN | p.PLL_EN | p.QUAD_EN | p.WHOLE_ANGLE)
+    world.advance(15.0)
+    wave = _TrueWave()
+    world.attach(wave)
+    world.advance(45.0)  # 180 deg of wave angle at 4 deg/s: whole periods of 4 theta
+    theta = np.unwrap(4.0 * orbit_elements(np.array(wave.q))["theta_rad"]) / 4.0
+    mids, rate = block_drift(np.array(wave.t_s), theta, 0.5)
+    return fit_drift_harmonics(mids, rate - math.radians(rate_dps), orders=(4, 8)).scaled(math.degrees(1.0) * 3600)
+
+
+def test_forcer_gains_scale_the_commanded_precession():
+    """Forcer gains g_x, g_y on the precession force along the wave: the wave turns at
+    Omega (1 + (g_x + g_y)/2 - (g_x - g_y)/2 cos 4 theta): a mean drift Omega (g_x + g_y)/2 and a
+    4 theta one of amplitude Omega |g_x - g_y| / 2 (docs/error_sources.md)."""
+    fit = _whole_angle_drift_wave_dph(IDEAL, ErrorSources(forcer_gain_x_ppm=800.0, forcer_gain_y_ppm=-400.0), 4.0)
+    omega_dph = 4.0 * 3600.0
+    assert fit.mean == pytest.approx(omega_dph * 200e-6, rel=0.01)
+    assert fit.harmonics[4].amplitude == pytest.approx(omega_dph * 600e-6, rel=0.01)
+
+
+def test_readout_phase_delay_turns_the_split_cancellation_into_drift():
+    """A phase delay p read by the loops turns their forces by p in phase: the quadrature force
+    that cancels the split's pumping (2 a (Dw/2) at 4 theta) leaks into the precession by sin p, a
+    4 theta drift of Dw sin p / 4 rad/s of wave angle (204 deg/h output-referred at 5 mHz and 2 deg:
+    docs/sensitivity.md's largest whole-angle term)."""
+    params = IDEAL.with_(split_hz=0.005, theta_w_deg=10.0)
+    fit = _whole_angle_drift_wave_dph(params, ErrorSources(pickoff_phase_x_deg=2.0, pickoff_phase_y_deg=2.0), 4.0)
+    dw = 2 * math.pi * 0.005
+    assert fit.harmonics[4].amplitude == pytest.approx(math.degrees(dw * math.sin(math.radians(2.0)) / 4) * 3600,
+                                                       rel=0.03)
