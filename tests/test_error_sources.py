@@ -283,3 +283,12 @@ def test_readout_phase_delay_turns_the_split_cancellation_into_drift():
     dw = 2 * math.pi * 0.005
     assert fit.harmonics[4].amplitude == pytest.approx(math.degrees(dw * math.sin(math.radians(2.0)) / 4) * 3600,
                                                        rel=0.03)
+
+
+def test_a_rig_of_several_gyros_carries_the_error_sources():
+    """Several gyros on one table (simulators.rig): each slot's world has the station's error sources."""
+    from simulators.rig import Rig
+
+    rig = Rig([IDEAL, IDEAL], seeds=[1, 2], errors=ERROR_PRESETS["hrg-realistic"])
+    assert all(w.errors is ERROR_PRESETS["hrg-realistic"] for w in rig.worlds)
+    assert all(w.errors is None for w in Rig([IDEAL], seeds=[1]).worlds)
