@@ -331,7 +331,8 @@ class SlotStation(Station):
         self.batch, self.slot_number = batch, n
         bc = batch.config
         station = {**bc.station, "id": f"{bc.id}/slot{n}"}
-        super().__init__(StationConfig(bc.source, station, bc.simulation, {**bc.devices, **bc.slots[n]}))
+        super().__init__(StationConfig(bc.source, station, bc.simulation, {**bc.devices, **bc.slots[n]},
+                                       nominal=bc.nominal))
         self.own_roles = list(bc.slots[n])
         self.simulated = batch.simulated
 

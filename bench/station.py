@@ -109,6 +109,14 @@ class Station:
         sim = self.config.simulation
         return self.config.station.get("kind", "") or (PRESET_KINDS.get(sim["preset"], "") if sim else "")
 
+    @property
+    def nominal(self) -> dict[str, float]:
+        """What procedures assume of the gyro held: bench.nominal's values for its kind, the
+        file's `[nominal]` over them (never the simulated unit's truth)."""
+        from bench.nominal import nominal_for
+
+        return nominal_for(self.kind, self.config.nominal)
+
     def limit(self, role: str, key: str) -> float | None:
         """A device's limit from the station file (`max_rate_dps` of the table), None if it has none."""
         value = self.config.devices.get(role, {}).get(key)

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.devices import DRIVERS, INSTRUMENT, ROLES, Key, StationError, check_table
+from bench.nominal import NOMINAL_KEYS
 from bench.validation import missing_key, not_a, not_one_of
 
 BUILTIN_DIR = Path(__file__).resolve().parent / "stations"
@@ -28,15 +29,22 @@ STATION_KEYS = {
     "axis_azimuth_deg": Key(float, 0.0, 0.0, 360.0, doc="sensitive axis from north toward east", unit="deg"),
 }
 #: the kind of gyro a simulated station holds when its file does not say
-PRESET_KINDS = {"hrg": "hrg", "hrg-wa": "hrg", "hrg-selfcal": "hrg", "mems": "mems-ring"}
+PRESET_KINDS = {"hrg": "hrg", "hrg-wa": "hrg", "hrg-selfcal": "hrg", "mems": "mems-ring",
+                "hrg-realistic": "hrg", "mems-realistic": "mems-ring"}
 SIM_KEYS = {
-    "preset": Key(str, "hrg", choices=("hrg", "hrg-wa", "hrg-selfcal", "mems"),
+    "preset": Key(str, "hrg", choices=tuple(PRESET_KINDS),
                   doc="simulated resonator (and its noise)"),
     "seed": Key(int, 0, 0, 2**63 - 1, doc="random seed of the simulation"),
     "speed": Key(float, 0.0, 0.0, 1e6, doc="0 = lockstep, else x real time"),
     "sample_period_s": Key(float, 1e-3, 1e-5, 0.1, doc="simulated sample period", unit="s"),
     "earth_rate": Key(bool, False, doc="simulate Earth's rate on the axis ([station] latitude and axis)"),
 }
+
+#: `[nominal]`: what the procedures assume of the gyro (bench.nominal), each key optional
+NOMINAL_LIMITS = {"bryan_factor": (0.01, 1.0, ""), "f0_hz": (1.0, 1e6, "Hz"), "pickoff_gain": (0.5, 2.0, ""),
+                  "forcer_gain": (0.5, 2.0, "")}
+NOMINAL_TABLE_KEYS = {name: Key(float, None, lo, hi, doc=NOMINAL_KEYS[name], unit=unit)
+                      for name, (lo, hi, unit) in NOMINAL_LIMITS.items()}
 
 
 @dataclass
@@ -50,6 +58,8 @@ class StationConfig:
     #: several gyros on one table: each slot's own devices by role (`[slots.N.<role>]`), slot
     #: numbers 1..N; `devices` then holds what the slots share (the table, a switched front end)
     slots: dict[int, dict[str, dict[str, Any]]] = field(default_factory=dict)
+    #: the file's `[nominal]` values (only those it sets; bench.nominal has the rest)
+    nominal: dict[str, float] = field(default_factory=dict)
 
     @property
     def id(self) -> str:
@@ -86,11 +96,11 @@ def load_config(name_or_path: str | Path) -> StationConfig:
     except OSError as exc:
         raise StationError(f"{path}: cannot be read: {exc.strerror or exc}") from None
     for top in raw:
-        if top not in ("station", "simulation", "devices", "slots"):
-            raise StationError(f"{path}: unknown table [{top}] (allowed: station, simulation, devices, slots)")
+        if top not in ("station", "simulation", "devices", "slots", "nominal"):
+            raise StationError(f"{path}: unknown table [{top}] (allowed: station, simulation, devices, slots, nominal)")
     if "station" not in raw:
         raise StationError(f'{path}: missing table [station] with id = "..."')
-    for top in ("station", "simulation", "devices", "slots"):
+    for top in ("station", "simulation", "devices", "slots", "nominal"):
         if top in raw and not isinstance(raw[top], dict):
             raise StationError(f"{path}: {not_a(top, raw[top], 'a table ([' + top + '])')}")
     station = check_table(f"{path}: [station]", raw["station"], STATION_KEYS)
@@ -100,7 +110,10 @@ def load_config(name_or_path: str | Path) -> StationConfig:
     slots = _check_slots(path, raw.get("slots") or {}, devices, sim)
     if not devices:
         raise StationError(f"{path}: no [devices.*] table (roles: {', '.join(ROLES)})")
-    return StationConfig(source=str(path), station=station, simulation=sim, devices=devices, slots=slots)
+    nominal = check_table(f"{path}: [nominal]", raw.get("nominal") or {}, NOMINAL_TABLE_KEYS)
+    nominal = {k: v for k, v in nominal.items() if v is not None}
+    return StationConfig(source=str(path), station=station, simulation=sim, devices=devices, slots=slots,
+                         nominal=nominal)
 
 
 def _check_device(path: Path, name: str, role: str, table: Any, sim: dict[str, Any] | None) -> dict[str, Any]:

@@ -66,7 +66,9 @@ class CvgAllan(HrgExcitation, Procedure):
     record_s = Param(14400.0, unit="s", low=60.0, high=1e6, doc="static record (hours of it for the rate random walk)")
     settle_s = Param(30.0, unit="s", low=0.0, high=3600.0, doc="loops settling in whole-angle mode before the record")
     stream_hz = Param(10.0, unit="Hz", low=0.01, high=1000.0, doc="rate of the samples analysed (boxcar stream)")
-    bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: the rate output is the wave's rate / -K")
+    bryan_factor = Param(0.0, unit="", low=0.0, high=1.0,
+                         doc="K: the rate output is the wave's rate / -K (0: the station's nominal K)")
+    nominal_params = {"bryan_factor": "bryan_factor"}
     ftr_min_tau_s = Param(1.6, unit="s", low=0.0, high=3600.0,
                           doc="force-to-rebalance: the shortest tau read (the rebalance loop shapes the rate below ~3 "
                               "of its time constants, 0.5 s at FTR_KP = FTR_KI = 4; docs/noise_model.md)")

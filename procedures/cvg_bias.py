@@ -47,7 +47,9 @@ class CvgBias(CvgOutput, Procedure):
                          doc="output per input rate (from cvg-scale-factor); 0: the mode's nominal one")
     settle_s = Param(30.0, unit="s", low=0.0, high=3600.0,
                      doc="warm-up after a turn-on holds the amplitude (the quadrature settles over tens of s)")
-    bryan_factor = Param(0.277, low=0.01, high=1.0, doc="nominal K: whole-angle's nominal scale factor is -K")
+    bryan_factor = Param(0.0, low=0.0, high=1.0,
+                         doc="nominal K: whole-angle's nominal scale factor is -K (0: the station's nominal K)")
+    nominal_params = {"bryan_factor": "bryan_factor"}
 
     measurements = (
         Measurement("bias_dph", "deg/h", "bias at rest, Earth's rate removed: mean over the turn-ons",

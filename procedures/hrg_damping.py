@@ -176,7 +176,9 @@ class HrgDamping(HrgExcitation, Procedure):
                                 "command (4.6 time constants of the slowest loop, plus the wave's turn of 22.5 deg "
                                 "for the split observer before the first record)")
     drift_block_s = Param(1.0, unit="s", low=0.01, high=100.0, doc="block over which the drift rate is measured")
-    bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: refers the wave's drift to the gyro output")
+    bryan_factor = Param(0.0, unit="", low=0.0, high=1.0,
+                         doc="K: refers the wave's drift to the gyro output (0: the station's nominal K)")
+    nominal_params = {"bryan_factor": "bryan_factor"}
 
     measurements = (
         Measurement("quadrature_rel_max", "", "largest |quadrature| / amplitude over the decay record"),

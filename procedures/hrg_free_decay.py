@@ -177,7 +177,9 @@ class HrgFreeDecay(HrgExcitation, Procedure):
     accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
     record_s = Param(300.0, unit="s", low=1.0, high=100000.0, doc="record duration")
     stream_hz = Param(100.0, unit="Hz", low=0.1, high=1e6, doc="rate of the samples fitted (boxcar-decimated stream)")
-    natural_freq_hz = Param(5500.0, unit="Hz", low=1.0, high=1e6, doc="nominal natural frequency w/2pi")
+    natural_freq_hz = Param(0.0, unit="Hz", low=0.0, high=1e6,
+                            doc="nominal natural frequency w/2pi (0: the station's nominal f0)")
+    nominal_params = {"natural_freq_hz": "f0_hz"}
     model = Param("linear", choices=("linear", "cubic", "quintic"), doc="slow-variable model")
     method = Param("output-error", choices=METHODS,
                    doc="output-error: maximum likelihood (the Cramer-Rao bound), the paper's fit reported beside "

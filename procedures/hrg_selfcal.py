@@ -98,7 +98,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
     bin_s = Param(20.0, unit="s", low=1.0, high=600.0, doc="least-squares bins (the loops' outputs are correlated "
                                                              "over a few seconds)")
     smooth_s = Param(100.0, unit="s", low=1.0, high=3600.0, doc="bias-stability smoothing (the paper's 100 s)")
-    bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: the rate is the wave's rate / -K")
+    bryan_factor = Param(0.0, unit="", low=0.0, high=1.0,
+                         doc="K: the rate is the wave's rate / -K (0: the station's nominal K)")
+    nominal_params = {"bryan_factor": "bryan_factor"}
     trim_gains = Param(1, unit="", low=0, high=1, doc="1: trim the identified gain difference out after each cycle")
     confidence = Param(0.95, unit="", low=0.5, high=0.999, doc="level of the intervals")
 

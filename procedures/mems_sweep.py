@@ -160,8 +160,9 @@ class MemsSweep(Procedure):
     stop_hz = Param(PAPER_NATURAL_FREQ_HZ + 1.94 + 12.0, unit="Hz", low=1.0, high=200_000.0, doc="sweep end")
     n_points = Param(61, low=5, high=2001, doc="frequencies per direction")
     both_directions = Param(True, doc="sweep back down as well (exposes hysteresis)")
-    natural_freq_hz = Param(PAPER_NATURAL_FREQ_HZ, unit="Hz", low=1.0, high=200_000.0,
-                            doc="characteristic frequency w/2pi of the model (lam = 2 pi (f - this))")
+    natural_freq_hz = Param(0.0, unit="Hz", low=0.0, high=200_000.0,
+                            doc="characteristic frequency w/2pi of the model (lam = 2 pi (f - this)); "
+                                "0: the station's nominal f0")
     drive1_v = Param(0.888, unit="V", low=0.0, high=10.0, doc="channel 1 drive amplitude")
     drive1_phase_deg = Param(46.43, unit="deg", low=-360.0, high=360.0, doc="channel 1 drive phase")
     drive2_v = Param(0.0308, unit="V", low=0.0, high=10.0, doc="channel 2 drive amplitude")
@@ -172,7 +173,8 @@ class MemsSweep(Procedure):
     window_s = Param(0.05, unit="s", low=1e-3, high=100.0, doc="averaging window at each point")
     reads = Param(10, low=2, high=1000, doc="lock-in readings per window")
     pickoff_gain_v = Param(1.0, unit="V", low=1e-9, high=1e6, doc="lock-in volts per model unit")
-    bryan_factor = Param(0.4, low=0.01, high=1.0, doc="K, for the zero-rate output")
+    bryan_factor = Param(0.0, low=0.0, high=1.0, doc="K, for the zero-rate output (0: the station's nominal K)")
+    nominal_params = {"natural_freq_hz": "f0_hz", "bryan_factor": "bryan_factor"}
     improvement = Param(0.05, low=0.0, high=0.9, doc="sigma reduction that justifies the richer model")
 
     measurements = _declarations()

@@ -73,7 +73,7 @@ def _parts(world: World) -> _Parts:
 def fused_blocks_possible(world: World, n: int, k: int) -> bool:
     """True when the next k blocks of n samples may take the fused path (module docstring)."""
     parts = _parts(world)
-    if not parts.ok or world.case_source is not None:
+    if not parts.ok or world.case_source is not None or world.errors is not None:  # error sources: per block
         return False
     res = world.resonator
     if not res._linear:

@@ -21,12 +21,12 @@ class Rig:
     """N slot worlds on one table, with the World interface the clock and the table use."""
 
     def __init__(self, slot_params: list[Any], *, seeds: list[int], sample_period_s: float = 1e-3,
-                 noise: Any = None, earth_rate_dph: float = 0.0) -> None:
+                 noise: Any = None, earth_rate_dph: float = 0.0, errors: Any = None) -> None:
         if not slot_params or len(slot_params) != len(seeds):
             raise ValueError(f"a rig needs one seed per slot ({len(slot_params)} slots, {len(seeds)} seeds)")
         self.lock = threading.RLock()
         self.worlds = [World(p, seed=s, sample_period_s=sample_period_s, noise=noise,
-                             earth_rate_dph=earth_rate_dph, lock=self.lock)
+                             earth_rate_dph=earth_rate_dph, lock=self.lock, errors=errors)
                        for p, s in zip(slot_params, seeds, strict=True)]
         for w in self.worlds[1:]:
             w.case_source = self.worlds[0]

@@ -19,6 +19,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from .physics.averaged import Resonator, use_single_thread_blas
+from .physics.errors import REFERENCE_TEMPERATURE_C, ErrorSources
 from .physics.noise import Environment, NoiseParams
 from .physics.params import ResonatorParams
 from .world_block import WorldBlock
@@ -48,6 +49,8 @@ class World:
         noise: NoiseParams | None = None,
         earth_rate_dph: float = 0.0,
         lock: threading.RLock | None = None,
+        errors: ErrorSources | None = None,
+        temperature_c: float = REFERENCE_TEMPERATURE_C,
     ) -> None:
         if not (math.isfinite(sample_period_s) and sample_period_s > 0):
             raise ValueError(f"sample_period_s={sample_period_s!r} must be > 0")
@@ -80,6 +83,11 @@ class World:
             self.environment = Environment(
                 noise, seed=seed, sample_period_s=self.sample_period_s, earth_rate_dph=earth_rate_dph
             )
+        #: the unit's error sources (simulators.physics.errors), None when all are off: the world then
+        #: computes what it did before they existed; they take the per-block path (not simulators.fused)
+        self.errors = errors if errors is not None and errors.active else None
+        #: the unit's temperature (deg C): an input, constant unless a chamber (or a test) sets it
+        self.temperature_c = float(temperature_c)
         self._advance_listeners: list[Any] = []
         #: runs of steady blocks take the compiled path (simulators.fused; the same numbers either way)
         self.fused = True
@@ -198,6 +206,12 @@ class World:
         else:
             force = self.total_force
         rate_rad_s = math.radians(rate)
+        errs = self.errors
+        if errs is not None:  # the forcers' gains and angles; f0 and Q at the temperature
+            force = errs.force(force)
+            if errs.thermal_active:
+                c = self.resonator.coeffs
+                self.resonator.set_thermal(*errs.thermal(c.gamma, c.c_m, self.params.f0_hz, self.temperature_c))
         env = self.environment
         gains = None
         if env is not None:
@@ -215,6 +229,8 @@ class World:
             ripple_angle_rad=self.ripple_angle_rad,
             gains=gains,
         )
+        if errs is not None:  # what the pickoff chains make of the states
+            q_meas = errs.measure(q_meas, t0, self.temperature_c)
         angle0 = self.case_angle_deg
         block = WorldBlock(i0 + 1, q_true, q_meas, rate, angle0, dt, self.ripple_angle_rad)
         self.sample_index = i0 + n
@@ -233,7 +249,16 @@ class World:
         truth = self.params.truth()
         if self.environment is not None:
             truth |= self.environment.truth()
+        if self.errors is not None:
+            truth |= self.errors.truth(self.t_s, self.temperature_c, truth)
         return truth
+
+    def set_temperature(self, temperature_c: float) -> None:
+        """The unit's temperature from the next block on (a thermal chamber's input)."""
+        if not math.isfinite(temperature_c):
+            raise ValueError(f"temperature_c={temperature_c!r} must be finite")
+        with self.lock:
+            self.temperature_c = float(temperature_c)
 
     def state(self) -> np.ndarray:
         with self.lock:

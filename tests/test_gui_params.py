@@ -162,7 +162,9 @@ def test_window_picks_only_what_the_engine_accepts(qtbot):
     for cls in (find_procedure("hrg-free-decay"), find_procedure("hrg-damping"), find_procedure("mems-sweep")):
         form.set_specs(tuple(cls.param_specs().values()))
         assert form.is_valid(), form.errors  # every default shows as valid text
-        assert form.values() == cls({}).params  # and reads back as the engine's defaults, exactly
+        # and reads back as the engine's defaults, exactly (a nominal parameter's 0 = the nominal value)
+        assert form.values() == {name: spec.convert(spec.default) for name, spec in cls.param_specs().items()}
+        assert cls(form.values()).params == cls({}).params
         for p in form.specs:
             for choice in p.choices or ():
                 form.set_value(p.name, choice)

@@ -39,7 +39,7 @@ class SimBatchStation(BatchStation):
             sim["seed"] = SIM_KEYS["seed"].check("", "--seed", seed)
         if speed is not None:
             sim["speed"] = SIM_KEYS["speed"].check("", "--speed", speed)
-        config = StationConfig(config.source, config.station, sim, config.devices, config.slots)
+        config = StationConfig(config.source, config.station, sim, config.devices, config.slots, config.nominal)
         n = len(config.slots)
         if resonators is not None and len(resonators) != n:
             raise StationError(f"{config.source}: {len(resonators)} resonators given for {n} slots")
@@ -48,8 +48,10 @@ class SimBatchStation(BatchStation):
 
         seeds = [self._seed_of(sim["seed"], k) for k in range(1, n + 1)]
         params = resonators or [slot_params(sim["preset"], s) for s in seeds]
+        from simulators.physics.errors import ERROR_PRESETS
+
         self.rig = Rig(params, seeds=seeds, sample_period_s=sim["sample_period_s"],
-                       noise=NOISE_PRESETS.get(sim["preset"]))
+                       noise=NOISE_PRESETS.get(sim["preset"]), errors=ERROR_PRESETS.get(sim["preset"]))
         self.handles: dict[tuple[int | None, str], Any] = {}
         self.addresses: dict[tuple[int | None, str], dict[str, Any]] = {}
         self.faults = FaultScheduler(self._inject_scheduled)

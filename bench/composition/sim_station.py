@@ -48,7 +48,7 @@ class SimStation(Station):
                 raise StationError(f"{exc} (allowed: 0 = lockstep, or 0 to 1e6 x real time)") from None
         if preset is not None:
             sim["preset"] = SIM_KEYS["preset"].check("", "preset", preset)
-        config = StationConfig(config.source, config.station, sim, config.devices)
+        config = StationConfig(config.source, config.station, sim, config.devices, nominal=config.nominal)
         from simulators.physics.noise import NOISE_PRESETS, earth_rate_dph
         from simulators.physics.params import preset as make_preset
         from simulators.world import World
@@ -60,8 +60,11 @@ class SimStation(Station):
                                    st.get("axis_azimuth_deg", 0.0))
         # resonator: a drawn unit's ResonatorParams (a simulated production lot) instead of the preset
         params = make_preset(sim["preset"]) if resonator is None else resonator
+        from simulators.physics.errors import ERROR_PRESETS
+
         self.world = World(params, seed=sim["seed"], sample_period_s=sim["sample_period_s"],
-                           noise=NOISE_PRESETS.get(sim["preset"]), earth_rate_dph=earth)
+                           noise=NOISE_PRESETS.get(sim["preset"]), earth_rate_dph=earth,
+                           errors=ERROR_PRESETS.get(sim["preset"]))
         self.handles: dict[str, Any] = {}
         self.addresses: dict[str, dict[str, Any]] = {}
         self.faults = FaultScheduler(self.inject)

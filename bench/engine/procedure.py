@@ -105,6 +105,9 @@ class Procedure:
     #: a pause inside a record (`ctx.record_for`): "exclude" cuts the paused span out and runs the
     #: record on by as much, "restart" records again from the resume (bench.engine.recording)
     pause_in_record: ClassVar[str] = "exclude"
+    #: parameters whose 0 means "the station's nominal value" (param name: bench.nominal key), e.g.
+    #: {"bryan_factor": "bryan_factor"}: a procedure never assumes a unit's K or f0 by default
+    nominal_params: ClassVar[dict[str, str]] = {}
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -113,6 +116,23 @@ class Procedure:
 
     def __init__(self, params: dict[str, Any] | None = None) -> None:
         self.params: dict[str, Any] = resolve_params(type(self), params)
+        #: the nominal parameters left at 0: the product's data-sheet value until a station's is taken
+        self._from_nominal = [name for name in self.nominal_params if not self.params.get(name)]
+        if self._from_nominal:
+            from bench.nominal import nominal_for
+
+            self.take_nominal(nominal_for(self.kinds[0] if self.kinds else ""))
+
+    def take_nominal(self, nominal: dict[str, float]) -> dict[str, float]:
+        """Fill each `nominal_params` parameter not given (left at 0) with a nominal value: the
+        product's at construction, the station's when the engine runs it (before the run is
+        recorded, so its record and `analyze` hold the value used); returns those taken."""
+        taken = {}
+        for name in getattr(self, "_from_nominal", ()):
+            key = self.nominal_params[name]
+            if key in nominal:
+                self.params[name] = taken[name] = self.param_specs()[name].convert(float(nominal[key]))
+        return taken
 
     def demands(self) -> list[Demand]:
         """What this run will ask of each device (rates, accelerations, amplitudes), from the

@@ -214,6 +214,7 @@ class Runner:
     def run(self, procedure: type[Procedure] | Procedure, params: dict[str, Any] | None = None) -> RunRecord:
         """Run a procedure; ParamError (before anything moves) if a parameter is bad."""
         proc = procedure if isinstance(procedure, Procedure) else procedure(params)
+        proc.take_nominal(getattr(self.station, "nominal", None) or {})  # K, f0 ... the procedure assumes
         check_station(proc, self.station)  # kind and limits: StationMismatch before anything moves
         missing = [r for r in proc.requires if r not in self.station.devices]
         if missing:

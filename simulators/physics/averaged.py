@@ -81,6 +81,7 @@ class Resonator:
         self._four_k, self._nu_offset, self._w0 = 4.0 * c.bryan_factor, c.nu_offset, c.w0_rad_s
         self._psi_per_rad = -2.0 * c.bryan_factor
         self._sigma = params.noise_sigma
+        self._thermal: tuple[float, float] | None = None  # (gamma, c_m) away from the reference temperature
 
     # --- state -------------------------------------------------------------------------------
     @property
@@ -96,6 +97,19 @@ class Resonator:
         """Change Delta(1/tau) and its axis (the slow drift of simulators.physics.noise) in the
         linear step's parameters."""
         self._zg[2], self._zg[3] = damping_terms(d_per_s, theta_tau_deg)
+
+    def set_thermal(self, gamma: float, c_m: float) -> None:
+        """The damping gamma and mean mistuning c_m (1/s) at the unit's temperature
+        (simulators.physics.errors.ErrorSources.thermal)."""
+        self._zg[0], self._zg[4] = gamma, c_m
+        self._thermal = (gamma, c_m)
+
+    def _model_zg(self, rate_rad_s: float) -> np.ndarray:
+        """The coefficients' parameter vector at a rate, with the temperature's gamma and c_m."""
+        zg = self.coeffs.zg(rate_rad_s)
+        if self._thermal is not None:
+            zg[0], zg[4] = self._thermal
+        return zg
 
     @property
     def is_linear(self) -> bool:
@@ -144,7 +158,7 @@ class Resonator:
         lam = 0.0 if ref_freq_hz is None else TWO_PI * ref_freq_hz - self._w0  # detuning_rad_s
         if self._linear:
             return self._linear_block(n_samples, dt_s, rate_rad_s, u, lam, ripple_angle_rad, measure, gains)
-        traj = self._nonlinear_block(n_samples, dt_s, self.coeffs.zg(rate_rad_s), u, lam)
+        traj = self._nonlinear_block(n_samples, dt_s, self._model_zg(rate_rad_s), u, lam)
         self._q = traj[-1].copy()
         if ripple_angle_rad is None:
             self._psi = 0.0
@@ -235,5 +249,5 @@ class Resonator:
     def steady_state(self, *, rate_rad_s: float = 0.0, force: np.ndarray, ref_freq_hz: float) -> np.ndarray:
         """Forced steady state of the linear model: 0 = A q + u/2 (used to start sweeps settled)."""
         lam = self.detuning_rad_s(ref_freq_hz)
-        a = linear_matrix(self.coeffs.zg(rate_rad_s), lam)
+        a = linear_matrix(self._model_zg(rate_rad_s), lam)
         return np.linalg.solve(a, -0.5 * np.asarray(force, dtype=float))

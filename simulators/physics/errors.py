@@ -1,0 +1,201 @@
+"""Error sources of a real gyro that the estimators do not assume (docs/error_sources.md).
+
+Each is off (0) by default, so a World without them computes what it always did; the "realistic"
+presets (ERROR_PRESETS) switch them on at sizes a real unit shows.  They act where they act in
+hardware:
+  * on the pickoffs (`measure`, applied to the demodulated states (cx, sx, cy, sy) of each block):
+    electrode misalignment, capacitive (cubic) nonlinearity, readout phase delay, then the chain's
+    gain, common-mode and differential, each with a drift and the common-mode one with temperature;
+  * on the forcers (`force`, applied to the force the devices command): gain and angle errors of
+    the X and Y drive electrodes;
+  * on the resonator (`thermal`): the natural frequency and Q at the world's temperature.
+Conventions: x(t) = cx cos wt + sx sin wt (PHYSICS.md section 1); an electrode at physical angle
+phi reads the n = 2 displacement x cos 2 phi + y sin 2 phi (X nominally at 0, Y at 45 deg).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+
+import numpy as np
+
+TWO_PI = 2.0 * math.pi
+#: the temperature a unit's f0 and Q are given at (deg C)
+REFERENCE_TEMPERATURE_C = 25.0
+
+
+@dataclass(frozen=True)
+class ErrorSources:
+    """The error sources of one simulated unit, physical units; all 0 = an ideal chain.
+
+    pickoff_gain_cm_ppm, pickoff_gain_diff_ppm: pickoff chain gains X = 1 + cm + diff,
+        Y = 1 + cm - diff (ppm at t = 0 and the reference temperature); *_drift_ppm_h their drift.
+    pickoff_gain_tc_ppm_k: the common-mode gain's temperature coefficient.
+    pickoff_angle_x_deg, pickoff_angle_y_deg: misalignment of the X and Y pickoff electrodes from
+        0 and 45 deg (physical degrees in the case frame).
+    pickoff_phase_x_deg, pickoff_phase_y_deg: phase delay of each readout chain at the carrier
+        (electrical degrees: 360 f0 x the group delay).
+    pickoff_cubic: capacitive nonlinearity e3 of each pickoff, x_read = x + e3 x^3 (per model
+        amplitude squared): at the fundamental a relative gain of (3/4) e3 a^2.
+    forcer_gain_x_ppm, forcer_gain_y_ppm: drive/control chain gain errors of the X and Y forcers.
+    forcer_angle_x_deg, forcer_angle_y_deg: misalignment of the X and Y forcer electrodes.
+    freq_tc_ppm_k: df0/dT / f0 (ppm per K); q_tc_per_k: dtau/dT / tau (relative, per K; Q = pi f0 tau
+        moves by that and by f0's TCF).
+    """
+
+    pickoff_gain_cm_ppm: float = 0.0
+    pickoff_gain_diff_ppm: float = 0.0
+    pickoff_gain_cm_drift_ppm_h: float = 0.0
+    pickoff_gain_diff_drift_ppm_h: float = 0.0
+    pickoff_gain_tc_ppm_k: float = 0.0
+    pickoff_angle_x_deg: float = 0.0
+    pickoff_angle_y_deg: float = 0.0
+    pickoff_phase_x_deg: float = 0.0
+    pickoff_phase_y_deg: float = 0.0
+    pickoff_cubic: float = 0.0
+    forcer_gain_x_ppm: float = 0.0
+    forcer_gain_y_ppm: float = 0.0
+    forcer_angle_x_deg: float = 0.0
+    forcer_angle_y_deg: float = 0.0
+    freq_tc_ppm_k: float = 0.0
+    q_tc_per_k: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"error source {f.name}={v!r} must be a finite number")
+
+    @property
+    def active(self) -> bool:
+        """Any source switched on."""
+        return any(getattr(self, f.name) for f in fields(self))
+
+    def with_(self, **changes: float) -> ErrorSources:
+        return replace(self, **changes)
+
+    # --- pickoffs ----------------------------------------------------------------------------
+    def pickoff_gains(self, t_s: float, temperature_c: float = REFERENCE_TEMPERATURE_C) -> tuple[float, float]:
+        """The X and Y pickoff chain gains at t_s and a temperature."""
+        h = t_s / 3600.0
+        cm = self.pickoff_gain_cm_ppm + self.pickoff_gain_cm_drift_ppm_h * h
+        cm += self.pickoff_gain_tc_ppm_k * (temperature_c - REFERENCE_TEMPERATURE_C)
+        diff = self.pickoff_gain_diff_ppm + self.pickoff_gain_diff_drift_ppm_h * h
+        return 1.0 + 1e-6 * (cm + diff), 1.0 + 1e-6 * (cm - diff)
+
+    def measure(self, q: np.ndarray, t_s: float, temperature_c: float = REFERENCE_TEMPERATURE_C) -> np.ndarray:
+        """The states (n, 4) as the pickoff chains read them (a new array): the electrodes'
+        projection, their cubic nonlinearity, each chain's phase delay and gain."""
+        q = np.asarray(q, dtype=float)
+        cx, sx, cy, sy = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+        ax, ay = 2.0 * math.radians(self.pickoff_angle_x_deg), 2.0 * math.radians(self.pickoff_angle_y_deg)
+        if ax or ay:  # X at ex reads x cos 2ex + y sin 2ex; Y at 45 deg + ey reads -x sin 2ey + y cos 2ey
+            cx, cy = math.cos(ax) * cx + math.sin(ax) * cy, -math.sin(ay) * cx + math.cos(ay) * cy
+            sx, sy = math.cos(ax) * sx + math.sin(ax) * sy, -math.sin(ay) * sx + math.cos(ay) * sy
+        e3 = self.pickoff_cubic
+        if e3:  # the fundamental of (x + e3 x^3): x (1 + (3/4) e3 |x|^2) on each channel
+            fx = 1.0 + 0.75 * e3 * (cx * cx + sx * sx)
+            fy = 1.0 + 0.75 * e3 * (cy * cy + sy * sy)
+            cx, sx, cy, sy = cx * fx, sx * fx, cy * fy, sy * fy
+        px, py = math.radians(self.pickoff_phase_x_deg), math.radians(self.pickoff_phase_y_deg)
+        if px:  # x(t - d) = (c cos p - s sin p) cos wt + (c sin p + s cos p) sin wt, p = w d
+            cx, sx = cx * math.cos(px) - sx * math.sin(px), cx * math.sin(px) + sx * math.cos(px)
+        if py:
+            cy, sy = cy * math.cos(py) - sy * math.sin(py), cy * math.sin(py) + sy * math.cos(py)
+        gx, gy = self.pickoff_gains(t_s, temperature_c)
+        out = np.empty_like(q)
+        out[:, 0], out[:, 1], out[:, 2], out[:, 3] = gx * cx, gx * sx, gy * cy, gy * sy
+        return out
+
+    # --- forcers -----------------------------------------------------------------------------
+    def force(self, u: np.ndarray) -> np.ndarray:
+        """The force the modes receive (4,) for a commanded one (u1, u2 on X; u3, u4 on Y): each
+        forcer's gain, and its electrode's angle (X at fx pushes along (cos 2fx, sin 2fx), Y at
+        45 deg + fy along (-sin 2fy, cos 2fy))."""
+        u = np.asarray(u, dtype=float)
+        gx, gy = 1.0 + 1e-6 * self.forcer_gain_x_ppm, 1.0 + 1e-6 * self.forcer_gain_y_ppm
+        ax, ay = 2.0 * math.radians(self.forcer_angle_x_deg), 2.0 * math.radians(self.forcer_angle_y_deg)
+        fx1, fx2, fy1, fy2 = gx * u[0], gx * u[1], gy * u[2], gy * u[3]
+        c_x, s_x, c_y, s_y = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay)
+        return np.array([c_x * fx1 - s_y * fy1, c_x * fx2 - s_y * fy2, s_x * fx1 + c_y * fy1, s_x * fx2 + c_y * fy2])
+
+    # --- resonator ---------------------------------------------------------------------------
+    def thermal(self, gamma: float, c_m: float, f0_hz: float, temperature_c: float) -> tuple[float, float]:
+        """The damping gamma and mean mistuning c_m (1/s) at a temperature, from those at the
+        reference: f0 moves by f0 TCF dT (c_m by 2 x 2 pi of that), the damping time tau by
+        (1 + q_tc dT) (so Q = pi f tau by that and by f's own change)."""
+        dt_k = temperature_c - REFERENCE_TEMPERATURE_C
+        df_hz = f0_hz * 1e-6 * self.freq_tc_ppm_k * dt_k
+        return gamma / (1.0 + self.q_tc_per_k * dt_k), c_m + 2.0 * TWO_PI * df_hz
+
+    @property
+    def thermal_active(self) -> bool:
+        return bool(self.freq_tc_ppm_k or self.q_tc_per_k)
+
+    def truth(self, t_s: float, temperature_c: float, resonator_truth: dict[str, float]) -> dict:
+        """Each source under `err_<name>`, and what they make now: the pickoff gains, the
+        temperature, the natural frequency and Q there; away from the reference temperature the
+        resonator's damping and frequency keys (tau_s, q_factor, Q, gamma, freq_offset_hz, c_m)
+        become the unit's at that temperature, their reference values kept as `<key>_ref`."""
+        gx, gy = self.pickoff_gains(t_s, temperature_c)
+        dt_k = temperature_c - REFERENCE_TEMPERATURE_C
+        r = resonator_truth
+        f0_hz = r["f0_hz"]
+        df_hz = f0_hz * 1e-6 * self.freq_tc_ppm_k * dt_k
+        tau_scale = 1.0 + self.q_tc_per_k * dt_k
+        q_scale = tau_scale * (1.0 + df_hz / f0_hz)  # Q = pi f tau: both move
+        out = {f"err_{k}": float(v) for k, v in asdict(self).items()} | {
+            "pickoff_gain_x": gx,
+            "pickoff_gain_y": gy,
+            "temperature_c": float(temperature_c),
+            "f0_at_temperature_hz": f0_hz + r["freq_offset_hz"] + df_hz,
+            "q_factor_at_temperature": r["q_factor"] * q_scale,
+        }
+        if dt_k and self.thermal_active:
+            now = {"tau_s": r["tau_s"] * tau_scale, "q_factor": r["q_factor"] * q_scale, "Q": r["Q"] * q_scale,
+                   "gamma": r["gamma"] / tau_scale, "freq_offset_hz": r["freq_offset_hz"] + df_hz,
+                   "c_m": r["c_m"] + 2.0 * TWO_PI * df_hz}
+            out |= {f"{k}_ref": r[k] for k in now} | now
+        return out
+
+
+#: the error sources of each realistic preset (docs/error_sources.md gives each size's source)
+ERROR_PRESETS: dict[str, ErrorSources] = {
+    "hrg-realistic": ErrorSources(
+        pickoff_gain_cm_ppm=-500.0,  # the issue's common-mode case; CETC fig. 3: both gains rise
+        pickoff_gain_diff_ppm=750.0,  # CETC: X/Y gain error about 0.15 %
+        pickoff_gain_cm_drift_ppm_h=20.0,
+        pickoff_gain_diff_drift_ppm_h=2.0,
+        pickoff_gain_tc_ppm_k=30.0,
+        pickoff_angle_x_deg=0.05,
+        pickoff_angle_y_deg=-0.08,
+        pickoff_phase_x_deg=2.0,  # ~1 us of group delay at 5.5 kHz
+        pickoff_phase_y_deg=2.05,
+        pickoff_cubic=1e-3,
+        forcer_gain_x_ppm=800.0,
+        forcer_gain_y_ppm=-400.0,
+        forcer_angle_x_deg=0.1,
+        forcer_angle_y_deg=-0.05,
+        freq_tc_ppm_k=55.0,  # fused silica: dE/dT / E ~ +1.1e-4 / K, f ~ sqrt(E)
+        q_tc_per_k=-3e-3,
+    ),
+    "mems-realistic": ErrorSources(
+        pickoff_gain_cm_ppm=2000.0,
+        pickoff_gain_diff_ppm=-3000.0,  # two capacitive channels matched to 0.3 %
+        pickoff_gain_cm_drift_ppm_h=50.0,
+        pickoff_gain_diff_drift_ppm_h=-10.0,
+        pickoff_gain_tc_ppm_k=100.0,
+        pickoff_angle_x_deg=0.2,
+        pickoff_angle_y_deg=-0.3,
+        pickoff_phase_x_deg=5.0,  # ~1 us of group delay at 13.6 kHz
+        pickoff_phase_y_deg=5.3,
+        pickoff_cubic=5e-3,
+        forcer_gain_x_ppm=3000.0,
+        forcer_gain_y_ppm=-2000.0,
+        forcer_angle_x_deg=0.3,
+        forcer_angle_y_deg=0.2,
+        freq_tc_ppm_k=-30.0,  # silicon: dE/dT / E ~ -60 ppm / K
+        q_tc_per_k=-2e-3,
+    ),
+}
