@@ -30,6 +30,7 @@ class CampaignOutcome:
 
     def as_json(self) -> dict[str, Any]:
         return {"campaign": self.campaign.id, "runs": len(self.campaign.runs()), "ran": len(self.ran),
+                "ran_ids": sorted(self.ran),
                 "skipped": self.skipped, "running_elsewhere": self.running_elsewhere, "counts": self.counts,
                 "summary": [s.as_dict() for s in self.summary], "files": self.files,
                 "failed": [{"run_id": r["run_id"], "outcome": r["outcome"],
