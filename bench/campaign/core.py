@@ -19,6 +19,7 @@ class CampaignOutcome:
     """What a campaign invocation did and found."""
 
     campaign: Campaign
+    runs: int  # the runs asked for (all, or the first N)
     results: list[dict[str, Any]]  # every result, in run order
     summary: list[MeasurementSummary]
     counts: dict[str, int]
@@ -29,7 +30,7 @@ class CampaignOutcome:
     dashboard: str = ""
 
     def as_json(self) -> dict[str, Any]:
-        return {"campaign": self.campaign.id, "runs": len(self.campaign.runs()), "ran": len(self.ran),
+        return {"campaign": self.campaign.id, "runs": self.runs, "ran": len(self.ran),
                 "ran_ids": sorted(self.ran),
                 "skipped": self.skipped, "running_elsewhere": self.running_elsewhere, "counts": self.counts,
                 "summary": [s.as_dict() for s in self.summary], "files": self.files,
@@ -40,12 +41,12 @@ class CampaignOutcome:
 
 def run_campaign(campaign: Campaign, *, runs_dir: str, results_url: str | None, out_dir: str | Path,
                  scheduler: str | None = None, workers: int | None = None, retry_failed: bool = False,
-                 show: bool = True, on_dashboard: Any = None) -> CampaignOutcome:
-    """Run what is left of a campaign and summarise all of it."""
+                 show: bool = True, on_dashboard: Any = None, first: int | None = None) -> CampaignOutcome:
+    """Run what is left of a campaign (or of its `first` runs) and summarise all of it (of them)."""
     from .dispatch import dashboard, dask_client, run_all
 
     ledger = Ledger(out_dir, campaign)
-    runs = [r.as_dict() for r in campaign.runs()]
+    runs = [r.as_dict() for r in campaign.runs()][:first]
     done = ledger.results()
     if retry_failed:
         done = {k: v for k, v in done.items() if v["outcome"] not in NOT_MEASURED}
@@ -63,7 +64,7 @@ def run_campaign(campaign: Campaign, *, runs_dir: str, results_url: str | None, 
             ledger.record(result)
             done[result["run_id"]] = result
         todo = [r for r in todo if r["run_id"] not in done and r["run_id"] not in running]
-    outcome = CampaignOutcome(campaign, [], [], {}, skipped=len(runs) - len(todo) - len(running),
+    outcome = CampaignOutcome(campaign, len(runs), [], [], {}, skipped=len(runs) - len(todo) - len(running),
                               running_elsewhere=running)
     if todo:
         with dask_client(scheduler, workers) as client:

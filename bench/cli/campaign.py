@@ -22,6 +22,8 @@ def add_parser(sub) -> None:
     p.add_argument("--runs-dir", default=None,
                    help="directory of the raw files, shared by every worker (default: the station's)")
     p.add_argument("--out", default=None, help="the campaign's folder (default: RUNS_DIR/campaigns/ID)")
+    p.add_argument("--first", type=int, default=None, metavar="N",
+                   help="only the study's first N runs (a later run without it makes the rest)")
     p.add_argument("--retry-failed", action="store_true", help="run again the runs that failed before")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=cmd)
@@ -45,6 +47,8 @@ def cmd(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     if args.workers is not None and args.workers < 1:
         raise CliError(f"--workers {args.workers}: at least 1")
+    if args.first is not None and args.first < 1:
+        raise CliError(f"--first {args.first}: at least 1")
     runs_dir = args.runs_dir or config.station["runs_dir"]
     _check_runs_dir(runs_dir)
     out = Path(args.out) if args.out else Path(runs_dir) / "campaigns" / campaign.id
@@ -56,13 +60,13 @@ def cmd(args: argparse.Namespace) -> int:
 
     outcome = run_campaign(campaign, runs_dir=runs_dir, results_url=results_url, out_dir=out,
                            scheduler=args.scheduler, workers=args.workers, retry_failed=args.retry_failed,
-                           show=show, on_dashboard=say)
+                           show=show, on_dashboard=say, first=args.first)
     if args.json:
         print(json.dumps(outcome.as_json()))
     else:
         from rich.console import Console
 
-        n = len(campaign.runs())
+        n = outcome.runs
         console = Console(width=None if sys.stdout.isatty() else 140)  # a pipe keeps whole numbers
         console.print(f"campaign {campaign.id}: {n} runs, {len(outcome.ran)} run now, {outcome.skipped} done before; "
                       + ", ".join(f"{k} {v}" for k, v in outcome.counts.items()))
@@ -76,5 +80,5 @@ def cmd(args: argparse.Namespace) -> int:
         _err(f"run {r['run_id']} {r['outcome']}: {r.get('error') or r.get('end_reason')}")
     if len(failed) > 5:
         _err(f"... and {len(failed) - 5} more failed runs (the report lists them)")
-    complete = len(outcome.results) == len(campaign.runs())
+    complete = len(outcome.results) == outcome.runs
     return EXIT_OK if complete and not failed else EXIT_BAD_OUTCOME
