@@ -89,6 +89,7 @@ def _coverage_figure(summary: list[MeasurementSummary]) -> str | None:
         ax.plot([s.band_low, s.band_high], [i, i], color="0.7", lw=6, solid_capstyle="butt")
         ax.plot(s.coverage, i, "o", color="C0" if s.covered else "C3")
     ax.axvline(0.95, color="k", lw=0.8, ls="--")
+    ax.invert_yaxis()  # the first measurement on top, as in the table
     ax.set_yticks(y, [s.name for s in rows])
     ax.set_xlabel("coverage of the 95 % interval (grey: binomial band)")
     fig.tight_layout()
