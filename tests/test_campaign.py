@@ -221,3 +221,14 @@ def test_killed_campaign_resumes_without_running_twice(tmp_path):
     with sqlite3.connect(tmp_path / "results.sqlite") as db:
         rows = db.execute("select run_id, outcome from runs").fetchall()
     assert sorted(rows) == sorted((i, "COMPLETE") for i in all_ids)
+
+
+def test_a_run_that_cannot_start_is_an_error_result_not_a_raise(tmp_path):
+    from bench.campaign.execute import execute_run
+
+    run = parse_campaign(_doc(params={"record_s": -5.0})).runs()[0].as_dict()
+    out = execute_run(run, str(tmp_path), str(tmp_path / "r.sqlite"))
+    assert out["outcome"] == "ERROR" and "record_s" in out["error"] and out["run_id"] == "t-00000"
+    (s,) = summarise([out, {**out, "index": 1, "outcome": "COMPLETE", "values": {"x": 1.0}, "truth": {"x": 1.5}},
+                      {**out, "index": 2, "outcome": "COMPLETE", "values": {"x": 2.0}, "truth": {"x": 1.5}}])
+    assert (s.n, s.bias, s.coverage) == (2, 0.0, None)  # the failed run is left out
