@@ -52,7 +52,7 @@ def run_campaign(campaign: Campaign, *, runs_dir: str, results_url: str | None, 
         done = {k: v for k, v in done.items() if v["outcome"] not in NOT_MEASURED}
     todo = [r for r in runs if r["run_id"] not in done]
     running: list[str] = []
-    if todo and not retry_failed:  # killed after the store took a run but before its result was kept
+    if todo:  # killed after the store took a run but before its result was kept
         from bench.results import ResultsStore
 
         store = ResultsStore(results_url, offline_ok=True)
@@ -61,6 +61,8 @@ def run_campaign(campaign: Campaign, *, runs_dir: str, results_url: str | None, 
         finally:
             store.close()
         for result in found:
+            if retry_failed and result["outcome"] in NOT_MEASURED:
+                continue
             ledger.record(result)
             done[result["run_id"]] = result
         todo = [r for r in todo if r["run_id"] not in done and r["run_id"] not in running]

@@ -20,10 +20,14 @@ def table_rows(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row a run and measurement (a failed run: one row with its error), in run order."""
     rows = []
     varied_keys = sorted({k for r in results for k in r.get("varied", {})})
+    # a varied column holds numbers, or (a grid of names: method = [...]) text
+    as_text = {k for k in varied_keys if not all(_is_number(r.get("varied", {}).get(k)) for r in results)}
     for r in sorted(results, key=lambda r: r["index"]):
+        varied = r.get("varied", {})
         base = {"run_id": r["run_id"], "index": r["index"], "procedure": r["procedure"], "seed": r["seed"],
                 "outcome": r["outcome"], "error_text": r.get("error") or "", "wall_s": r.get("wall_s"),
-                "raw_file": r.get("raw_file"), **{k: _num(r.get("varied", {}).get(k)) for k in varied_keys}}
+                "raw_file": r.get("raw_file"),
+                **{k: str(varied.get(k)) if k in as_text else _num(varied.get(k)) for k in varied_keys}}
         values = r.get("values") or {}
         if not values:
             rows.append({**base, "measurement": None, "unit": None, "value": None, "ci95_low": None,
@@ -36,6 +40,10 @@ def table_rows(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
                          "value": _num(value), "ci95_low": _num(ci[0]), "ci95_high": _num(ci[1]),
                          "truth": _num(truth), "error": _num(err), "crlb": _num((r.get("crlb") or {}).get(name))})
     return rows
+
+
+def _is_number(x: Any) -> bool:
+    return x is None or (isinstance(x, int | float) and not isinstance(x, bool))
 
 
 def _num(x: Any) -> float | None:
