@@ -227,7 +227,7 @@ class HrgFreeDecay(HrgExcitation, Procedure):
         # what the Cramer-Rao bound of this record needs (crlb_std): its length, rate, start and noise
         self._bound_inputs = {"duration_s": float(t[-1] - t[0]), "stream_hz": float((len(t) - 1) / (t[-1] - t[0])),
                               "noise_sigma": float(fit.noise_sigma), "q0": np.asarray(q[0], dtype=float),
-                              "nu": float(fit.params["nu"]), "method": fit.method}
+                              "nu": float(fit.params["nu"])}
 
     def crlb_std(self, truth: dict[str, float]) -> dict[str, float]:
         """The Cramer-Rao standard deviation of each model coefficient (maslov_*) for this run's record
@@ -236,7 +236,7 @@ class HrgFreeDecay(HrgExcitation, Procedure):
         from bench.analysis.damping_design import crlb_free_decay
 
         b = getattr(self, "_bound_inputs", None)
-        if b is None or b["method"] != "output-error":
+        if b is None or self.method != "output-error":
             return {}
         names = free_param_names(self.model)
         params = {n: (b["nu"] if n == "nu" else float(truth[n])) for n in names}
