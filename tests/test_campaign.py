@@ -44,7 +44,7 @@ start = 100
 count = 4
 
 [summary]
-measurements = ["tau_s", "split_hz", "theta_tau_deg"]
+measurements = ["tau_s", "split_hz", "theta_tau_deg", "maslov_gamma"]
 """
 
 
@@ -135,8 +135,10 @@ def test_local_cluster_campaign(local_summary):
     out, folder = local_summary
     assert out["ran"] == 8 and out["counts"] == {"COMPLETE": 8}
     rows = {s["name"]: s for s in out["summary"]}
-    assert list(rows) == ["tau_s", "split_hz", "theta_tau_deg"]
+    assert list(rows) == ["tau_s", "split_hz", "theta_tau_deg", "maslov_gamma"]
     assert rows["tau_s"]["n"] == 8 and abs(rows["tau_s"]["bias"]) < 1.0  # the drawn tau is the truth
+    # hrg-free-decay states the Cramer-Rao bound of its coefficients: 8 runs' scatter is near it
+    assert rows["tau_s"]["std_over_crlb"] is None and 0.3 < rows["maslov_gamma"]["std_over_crlb"] < 3.0
     import pyarrow.parquet as pq
 
     table = pq.read_table(folder / "runs.parquet").to_pylist()
