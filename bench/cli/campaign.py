@@ -70,7 +70,10 @@ def cmd(args: argparse.Namespace) -> int:
         console = Console(width=None if sys.stdout.isatty() else 140)  # a pipe keeps whole numbers
         console.print(f"campaign {campaign.id}: {n} runs, {len(outcome.ran)} run now, {outcome.skipped} done before; "
                       + ", ".join(f"{k} {v}" for k, v in outcome.counts.items()))
-        console.print(summary_table(outcome.summary, f"campaign {campaign.id}"))
+        if outcome.summary:
+            console.print(summary_table(outcome.summary, f"campaign {campaign.id}"))
+        else:
+            console.print("  no measurement with a truth to summarise (the Parquet file holds every value)")
         for key, path in outcome.files.items():
             console.print(f"  {key} {path}")
     for run_id in outcome.running_elsewhere:
