@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from needs import need
 
 from bench.campaign.spec import CampaignError, parse_campaign
 from bench.campaign.summary import binomial_band, summarise
@@ -108,7 +109,15 @@ def _cli(args, env=None, **kw):
                           capture_output=True, text=True, timeout=240, **kw)
 
 
+def _need_dask() -> None:
+    import importlib.util
+
+    have = all(importlib.util.find_spec(m) is not None for m in ("distributed", "pyarrow"))
+    need(have, "dask.distributed or pyarrow is not installed (pip install -e '.[campaign]')")
+
+
 def _env():
+    _need_dask()
     env = dict(os.environ, PYTHONPATH=str(ROOT), DASK_DISTRIBUTED__WORKER__DAEMON="False")
     env.pop("GYROBENCH_DEBUG", None)
     return env
