@@ -162,9 +162,9 @@ def _start(cmd, env, log):
 
 
 def test_separate_scheduler_gives_the_same_summary(local_summary, tmp_path):
+    env = _env()
     from distributed import Client
 
-    env = _env()
     sched_file = tmp_path / "scheduler.json"
     procs = []
     with open(tmp_path / "dask.log", "w") as log:
