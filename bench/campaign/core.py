@@ -45,6 +45,8 @@ def run_campaign(campaign: Campaign, *, runs_dir: str, results_url: str | None, 
     """Run what is left of a campaign (or of its `first` runs) and summarise all of it (of them)."""
     from .dispatch import dashboard, dask_client, run_all
 
+    if results_url and "://" not in results_url:  # a SQLite file: the same one from any worker's folder
+        results_url = str(Path(results_url).resolve())
     ledger = Ledger(out_dir, campaign)
     runs = [r.as_dict() for r in campaign.runs()][:first]
     done = ledger.results()
