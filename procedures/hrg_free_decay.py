@@ -226,6 +226,25 @@ class HrgFreeDecay(HrgExcitation, Procedure):
         ctx.fit("hrg-free-decay elements", t_s=t[::k], energy=el["E"][::k],
                 theta_deg=np.degrees(np.unwrap(4 * el["theta_rad"]) / 4)[::k])
         ctx.log.info("identified %s: sigma %.3g, noise %.3g per channel", fit.model, fit.sigma, fit.noise_sigma)
+        # what the Cramer-Rao bound of this record needs (crlb_std): its length, rate, start and noise
+        self._bound_inputs = {"duration_s": float(t[-1] - t[0]), "stream_hz": float((len(t) - 1) / (t[-1] - t[0])),
+                              "noise_sigma": float(fit.noise_sigma), "q0": np.asarray(q[0], dtype=float),
+                              "nu": float(fit.params["nu"])}
+
+    def crlb_std(self, truth: dict[str, float]) -> dict[str, float]:
+        """The Cramer-Rao standard deviation of each model coefficient (maslov_*) for this run's record
+        at the unit's true parameters (nu, which the table rate sets, and the noise as fitted): the
+        bound a campaign divides the scatter by (docs/campaigns.md); {} before a run identified."""
+        from bench.analysis.damping_design import crlb_free_decay
+
+        b = getattr(self, "_bound_inputs", None)
+        if b is None or self.method != "output-error":
+            return {}
+        names = free_param_names(self.model)
+        params = {n: (b["nu"] if n == "nu" else float(truth[n])) for n in names}
+        bound = crlb_free_decay(duration_s=b["duration_s"], stream_hz=b["stream_hz"], noise_sigma=b["noise_sigma"],
+                                q0=b["q0"], params=params, model=self.model)
+        return {f"maslov_{n}": float(bound.std[n]) for n in names}
 
     # --- helpers -------------------------------------------------------------------------------
     def _analyse(self, data, compute=None):

@@ -23,7 +23,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("engine", ("bench.engine", "bench.station", "bench.station_config", "bench.slots", "bench.recorder",
                 "bench.writer", "bench.results", "bench.progress", "bench.composition")),
     ("procedures", ("procedures", "bench.line")),
-    ("faces", ("bench.cli", "bench.gui", "bench.reporting", "bench.report", "bench.pytest_plugin",
+    ("faces", ("bench.cli", "bench.campaign", "bench.gui", "bench.reporting", "bench.report", "bench.pytest_plugin",
                "bench.line.cli", "bench.line.fpga_cli", "bench.line.report")),
 )
 #: the only modules outside simulators/ that may import a simulator: the composition root, which

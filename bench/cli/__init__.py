@@ -1,4 +1,4 @@
-"""The `gyrobench` command line: run, design, list, runs, show, analyze, report, fpga, sim, gui, line.
+"""The `gyrobench` command line: run, design, list, runs, show, analyze, report, campaign, fpga, sim, gui, line.
 
 This module is the entry point and the one error boundary (messages, signals, exit codes); each
 subcommand lives in its own module (run, design, listing, store, analysis, sim) with
@@ -14,7 +14,7 @@ import threading
 import time
 from typing import Any
 
-from . import analysis, design, listing, run, sim, store
+from . import analysis, campaign, design, listing, run, sim, store
 from .common import (
     BAD_OUTCOMES,
     EXIT_BAD_OUTCOME,
@@ -72,6 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
     listing.add_parser(sub)
     store.add_parser(sub)  # runs, show
     analysis.add_parser(sub)  # analyze, report
+    campaign.add_parser(sub)  # many simulated runs on Dask
     from bench.line.fpga_cli import add_fpga_subcommand
 
     add_fpga_subcommand(sub)  # fpga load|show: trims in NVM (bench/line/fpga_cli.py)

@@ -25,10 +25,19 @@ def _refuse_overrides(config: StationConfig, overrides: dict[str, Any]) -> None:
         raise StationError(f"{config.source}: a real station; {options} {verb} only to a simulated one")
 
 
-def load_station(name_or_path: str | Path, **overrides: Any) -> Station | BatchStation:
+def load_station(name_or_path: str | Path, *, unit: dict[str, float] | None = None,
+                 **overrides: Any) -> Station | BatchStation:
     """Check a station file and build its (unopened) station: real or simulated, one gyro or
-    several on one table (slots).  `overrides` (seed, speed, preset ...) apply to a simulated one."""
+    several on one table (slots).  `overrides` (seed, speed, preset ...) apply to a simulated one;
+    `unit` changes the simulated unit's true parameters from its preset's (a campaign's grids and
+    draws: {"tau_s": 320.0, ...}), as `simulated_unit` builds them."""
     config = load_config(name_or_path)
+    if unit:
+        if config.simulation is None or config.slots:
+            raise StationError(
+                f"{config.source}: the unit's true parameters apply only to a simulated one-gyro station")
+        preset_name = overrides.get("preset") or config.simulation["preset"]
+        overrides["resonator"] = simulated_unit(preset_name, **unit)
     if config.slots:
         return load_batch_station(config, **overrides)
     if config.simulation is not None:
@@ -39,13 +48,13 @@ def load_station(name_or_path: str | Path, **overrides: Any) -> Station | BatchS
     return Station(config)
 
 
-def simulated_unit(preset: str) -> Any:
-    """The resonator parameters of a simulated preset ("hrg", "mems" ...): what `gyrobench design`
-    takes its defaults from.  ValueError (simulators.physics.params.ParameterError) naming the
-    known presets when there is none by that name."""
+def simulated_unit(preset: str, **changes: float) -> Any:
+    """The resonator parameters of a simulated preset ("hrg", "mems" ...), with `changes` to some of
+    them: what `gyrobench design` takes its defaults from and what a campaign varies.  ValueError
+    (simulators.physics.params.ParameterError) naming the known presets or parameters when one is not."""
     from simulators.physics.params import preset as make_preset
 
-    return make_preset(preset)
+    return make_preset(preset, **changes)
 
 
 def load_batch_station(name_or_path: str | Path | StationConfig, **overrides: Any) -> BatchStation:
