@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.analysis.axes import AXIS_PERIOD_DEG
 from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_drift_harmonics, fit_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, step
@@ -118,7 +119,7 @@ def _drift_declarations() -> tuple[Measurement, ...]:
                                    f"phase of the {m} theta drift term, amplitude sin {m}(theta - phase), {words} "
                                    "(interval: the whole period when the amplitude's holds 0)",
                                    truth="theta_tau_deg" if (name, m) == ("before", 4) else None,
-                                   when=when, when_doc=when_doc))
+                                   when=when, when_doc=when_doc, period=360.0 / m))
         out.append(Measurement(f"drift_{name}_rest_rms_dph", "deg/h",
                                f"rms of the drift the harmonic fit leaves, {words} (noise)",
                                when=when, when_doc=when_doc))
@@ -170,7 +171,8 @@ class HrgDamping(HrgExcitation, Procedure):
 
     measurements = (
         Measurement("quadrature_rel_max", "", "largest |quadrature| / amplitude over the decay record"),
-        Measurement("theta_tau_deg", "deg", "damping axis theta_tau in [0, 90)", truth="theta_tau_deg"),
+        Measurement("theta_tau_deg", "deg", "damping axis theta_tau in [0, 90)", truth="theta_tau_deg",
+                    period=AXIS_PERIOD_DEG),
         Measurement("delta_inv_tau_per_s", "1/s", "damping anisotropy Delta(1/tau)", truth="delta_inv_tau_per_s"),
         Measurement("tau_s", "s", "mean amplitude decay time tau", truth="tau_s"),
         Measurement("q_factor", "", "quality factor pi f0 tau (f0: the reference frequency held during the decay)",

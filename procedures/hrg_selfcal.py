@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from bench.analysis import selfcal as sc
+from bench.analysis.axes import AXIS_PERIOD_DEG
 from bench.engine import Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 from drivers.fpga import protocol as fp
@@ -105,9 +106,11 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("q_factor", "", "Q = w0 / gamma, last cycle", truth="Q"),
         Measurement("delta_inv_tau_per_s", "1/s", "damping anisotropy D = Delta(1/tau), last cycle",
                     truth="delta_inv_tau_per_s"),
-        Measurement("theta_tau_deg", "deg", "damping axis, last cycle", truth="theta_tau_deg"),
+        Measurement("theta_tau_deg", "deg", "damping axis in [0, 90), last cycle", truth="theta_tau_deg",
+                    period=AXIS_PERIOD_DEG),
         Measurement("split_hz", "Hz", "frequency split, last cycle", truth="split_hz"),
-        Measurement("theta_w_deg", "deg", "stiffness axis, last cycle", truth="theta_w_deg"),
+        Measurement("theta_w_deg", "deg", "stiffness axis in [0, 90), last cycle", truth="theta_w_deg",
+                    period=AXIS_PERIOD_DEG),
         Measurement("gain_diff_start_ppm", "ppm", "X/Y gain difference g_x - g_y at clock time 0, from the straight "
                     "line through the cycles' identified values", truth=_gain_truth("start")),
         Measurement("gain_drift_ppm_h", "ppm/h", "drift of the X/Y gain difference (slope of that line)",
@@ -332,12 +335,13 @@ def _analyse(cyc: np.ndarray, rates: np.ndarray, smooth_s: float, dt: float, lev
         out.append(Result("mean_bias_10h_dph", m10, ci95=(m10 - z * sd10, m10 + z * sd10)))
     env = z * math.sqrt(float(model.increment_var_deg2(t_rec)))
     half = n // 2
+    arw, arw_ci = model.arw_deg_rth()  # one-sided [0, upper]: exactly 0 is the fit on its bound
     out += [Result("angle_error_deg", float(angle[-1]), ci95=(float(angle[-1] - env), float(angle[-1] + env))),
             Result("angle_error_max_deg", float(np.max(np.abs(angle)))),
             Result("angle_error_rms_first_deg", float(np.sqrt(np.mean(angle[:half] ** 2)))),
             Result("angle_error_rms_second_deg", float(np.sqrt(np.mean(angle[half:] ** 2)))),
             Result("angle_bounded_sd_deg", math.sqrt(model.bounded_var_deg2)),
-            Result("angle_arw_deg_rth", math.sqrt(model.arw2_deg2_s) * 60.0)]
+            Result("angle_arw_deg_rth", arw, ci95=arw_ci)]
     import allantools
 
     _taus, adev, _e, _n = allantools.oadev(filled, rate=1.0 / dt, data_type="freq", taus=np.array([smooth_s]))

@@ -29,6 +29,8 @@ from types import MappingProxyType
 import numpy as np
 from scipy import optimize, special  # stdtrit: Student t quantiles without importing scipy.stats (~1 s)
 
+from .axes import axis_deg
+
 #: Parameter vector of every fit, in this order: ln E at t0, gamma = 2/tau, b_c, b_s.
 PARAM_NAMES = ("ln_e0", "gamma_per_s", "b_c_per_s", "b_s_per_s")
 METHODS = ("log-linear", "gauss-newton", "gauss-newton-unweighted")
@@ -300,9 +302,7 @@ def _physical(params: np.ndarray, cov: np.ndarray, dof: int) -> tuple[dict, dict
     """(ln_e0, gamma, b_c, b_s) and their covariance -> theta_tau, D, tau with delta-method std."""
     gamma, b_c, b_s = (float(v) for v in params[1:])
     d = math.hypot(b_c, b_s)
-    theta_deg = math.degrees(0.25 * math.atan2(b_s, b_c)) % 90.0
-    if theta_deg >= 90.0:  # -0.0 % 90 rounding
-        theta_deg = 0.0
+    theta_deg = axis_deg(math.degrees(0.25 * math.atan2(b_s, b_c)))
     tau = 2.0 / gamma if gamma > 0 else math.inf
     g_tau = np.array([0.0, -2.0 / gamma**2 if gamma > 0 else 0.0, 0.0, 0.0])
     if d > 0:

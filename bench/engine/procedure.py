@@ -180,6 +180,12 @@ class Procedure:
                 out[spec.name] = value
         return out
 
+    @classmethod
+    def truth_periods(cls) -> dict[str, float]:
+        """The period of each declared periodic measurement (an axis angle's 90 deg), by name: a
+        truth is compared with its image nearest the value."""
+        return {spec.name: spec.period for spec in cls.measurements if spec.period is not None}
+
     # --- analysis hook ---------------------------------------------------------------------
     def analysis(self, data: Any) -> list[Result]:
         """Estimate the measurements from recorded data; override to support `analyze`."""
