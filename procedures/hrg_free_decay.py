@@ -98,8 +98,8 @@ def _method_results(t_s: np.ndarray, q: np.ndarray, *, rate_dps: float, ref_freq
     for name in ("split_hz", "delta_inv_tau_per_s", "damping_anisotropy_per_s", "freq_offset_hz"):
         out.append(Result(name, d[name], ci95=dci[name]))
     for name, key in (("theta_w_deg", "alpha_rad"), ("theta_tau_deg", "beta_rad")):
-        value, ci = axis_with_interval(math.degrees(d[key]), tuple(math.degrees(v) for v in dci[key]))
-        out.append(Result(name, value, ci95=ci))
+        value, axis_ci = axis_with_interval(math.degrees(d[key]), tuple(math.degrees(v) for v in dci[key]))
+        out.append(Result(name, value, ci95=axis_ci))
     if rate_dps:
         omega = math.radians(rate_dps)
         nu_lo, nu_hi = sorted(ci["nu"])
