@@ -4,6 +4,7 @@ one-sided intervals on a bound, lab limits through the line's judge, truths flag
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
@@ -41,3 +42,129 @@ def test_every_procedure_declares_its_axis_angles_periodic_in_90_deg():
         periods = find_procedure(name).truth_periods()
         for m in meas:
             assert periods.get(m) == 90.0, (name, m)
+
+
+# --- the CLI and the report on one short simulated hrg-free-decay run ------------------------------
+LIMITS_TOML = """
+[product]
+name = "lab-check"
+rule = "guard-band"
+
+[limits.tau_s]          # the preset's 300 s: the whole interval inside
+low = 250.0
+high = 400.0
+
+[limits.split_hz]       # the preset's 5 mHz: wholly above
+high = 0.001
+
+[limits.theta_w_deg]    # the preset's 10 deg axis: seed 3's interval straddles it
+high = 10.0
+"""
+FREE_DECAY = ["hrg-free-decay", "--set", "record_s=20", "--set", "rate_dps=20", "--seed", "3"]
+
+
+@pytest.fixture(scope="module")
+def lab_run(tmp_path_factory):
+    """The run with --limits --json --report: (exit code, JSON, raw file, report HTML)."""
+    import contextlib
+    import io
+    import json
+
+    from bench.cli import main
+
+    tmp = tmp_path_factory.mktemp("lab")
+    (tmp / "limits.toml").write_text(LIMITS_TOML)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(["run", *FREE_DECAY, "--runs-dir", str(tmp / "runs"), "--results", str(tmp / "r.sqlite"),
+                     "--limits", str(tmp / "limits.toml"), "--json", "--report"])
+    js = json.loads(out.getvalue().splitlines()[0])
+    html = Path(js["raw_file"]).with_suffix(".html").read_text(encoding="utf-8")
+    return code, js, Path(js["raw_file"]), html
+
+
+def test_run_with_lab_limits_gives_the_lines_verdicts_in_json_and_report(lab_run):
+    """ILAC G8 through the line's judge: PASS inside, FAIL wholly outside, MARGINAL (conditional) when
+    the interval straddles the limit; the run exits 1 on a FAIL; the report says the same."""
+    code, js, _raw, html = lab_run
+    verdicts = {n: m.get("verdict") for n, m in js["measurements"].items() if m.get("verdict")}
+    assert verdicts == {"tau_s": "PASS", "split_hz": "FAIL", "theta_w_deg": "MARGINAL"}
+    assert js["limits"]["outcome"] == "FAIL" and js["limits"]["product"] == "lab-check" and code == 1
+    assert js["limits"]["measurements"]["split_hz"]["rule"] == "guard-band"
+    assert "MARGINAL (conditional)" in html and ">FAIL<" in html and ">PASS<" in html
+    assert "lab-check" in html and "No limits given" not in html
+
+
+def test_cli_table_shows_verdicts_and_flags_truths(lab_run, capsys):
+    """The table printed from the same record: verdicts, the count line and the '!' marks agree."""
+    from bench.cli.record_table import print_record, truth_flags
+
+    _code, js, _raw, _html = lab_run
+    print_record(js)
+    text = capsys.readouterr().out
+    flags = truth_flags(js)
+    n_out = sum(flags.values())
+    assert f"{n_out} of {len(flags)} truths outside their 95 % intervals" in text
+    assert sum(line.endswith(" !") for line in text.splitlines()) == n_out and n_out == len(js["truth_outside"]["outside"])
+    assert "MARGINAL (conditional)" in text and "FAIL" in text and "COMPLETE" not in text.split("\n", 1)[1]
+
+
+def test_report_flags_each_truth_outside_and_counts_them(lab_run):
+    from bench.recorder import open_run
+    from bench.reporting import context
+
+    _code, js, raw, html = lab_run
+    with open_run(raw) as data:
+        ctx = context(data, figures=([], []))
+    rows = {r["name"]: r for r in ctx["measurements"]}
+    outside = sorted(n for n, r in rows.items() if r["outside"])
+    assert outside == js["truth_outside"]["outside"] and ctx["truth_outside"] == (len(outside),
+                                                                                   js["truth_outside"]["compared"])
+    assert f"{len(outside)} of {js['truth_outside']['compared']} truths outside their 95 % intervals" in html
+    assert html.count('class="outside"') == len(outside) and html.count("✗ outside") == len(outside)
+
+
+def test_without_limits_the_report_says_so_and_an_error_runs_rows_keep_their_own_status(lab_run, tmp_path):
+    """No limits: 'No limits given', rows 'measured'; the same run marked ERROR shows no row COMPLETE:
+    a fitted row says measured, a declared one never reported NOT_MEASURED."""
+    import shutil
+
+    import h5py
+
+    from bench.reporting import write_report
+
+    _code, _js, raw, _html = lab_run
+    copy = tmp_path / "error.h5"
+    shutil.copy(raw, copy)
+    with h5py.File(copy, "a") as f:
+        del f.attrs["lab_limits"]
+        f.attrs["outcome"], f.attrs["end_reason"] = "ERROR", "link lost: test"
+    page = write_report(copy)[0].read_text(encoding="utf-8")
+    table = page.split('<table class="measurements">')[1].split("</table>")[0]
+    assert "No limits given" in page and "COMPLETE" not in table and ">measured<" in table
+
+
+def test_pdf_tables_repeat_their_header_on_each_page(lab_run):
+    """The report as WeasyPrint lays it out: the measurement table (36 rows) breaks across pages and
+    every page holding one of its rows shows its header again."""
+    weasyprint = pytest.importorskip("weasyprint")
+
+    _code, _js, _raw, html = lab_run
+    texts = [_page_text(p) for p in weasyprint.HTML(string=html).render().pages]
+    with_rows = [t for t in texts if "maslov_h_s_ee" in t or "maslov_gamma " in t or "tau_s_ee" in t]
+    assert len(with_rows) >= 2, "the table does not break: nothing to check"
+    assert all("truth (simulation)" in t for t in with_rows), texts
+
+
+def _page_text(page) -> str:
+    """The text WeasyPrint laid out on one page."""
+    out = []
+
+    def walk(box):
+        text = getattr(box, "text", None)
+        if text:
+            out.append(text)
+        for child in getattr(box, "children", ()) or ():
+            walk(child)
+    walk(page._page_box)
+    return " ".join(out)
