@@ -105,7 +105,8 @@ def test_cli_table_shows_verdicts_and_flags_truths(lab_run, capsys):
     flags = truth_flags(js)
     n_out = sum(flags.values())
     assert f"{n_out} of {len(flags)} truths outside their 95 % intervals" in text
-    assert sum(line.endswith(" !") for line in text.splitlines()) == n_out and n_out == len(js["truth_outside"]["outside"])
+    marked = sum(line.endswith(" !") for line in text.splitlines())
+    assert marked == n_out == len(js["truth_outside"]["outside"])
     assert "MARGINAL (conditional)" in text and "FAIL" in text and "COMPLETE" not in text.split("\n", 1)[1]
 
 
