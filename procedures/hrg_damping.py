@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from bench.analysis.axes import AXIS_PERIOD_DEG
-from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_drift_harmonics, fit_free_decay
+from bench.analysis.damping import METHODS, MODELS, fit_angle_harmonics, fit_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
@@ -99,20 +99,25 @@ def _compensating(proc: Any) -> bool:
     return bool(proc.compensate)
 
 
+#: the harmonics of the wave angle fitted in the verification's drift (the angle model's mean + these)
+DRIFT_ORDERS = (4, 8, 12)
+
+
 def _drift_declarations() -> tuple[Measurement, ...]:
     """The verification's drift measurements (only with `compensate` on), output-referred."""
     when, when_doc = _compensating, "compensate"
     out = []
     for name, words in (("before", "compensation off"), ("after", "compensation on")):
         out.append(Measurement(f"drift_{name}_dph", "deg/h",
-                               f"4 theta drift amplitude, {words} (fit of mean + 4 theta)",
+                               f"4 theta drift amplitude, {words} (angle-record fit of mean + 4 theta)",
                                truth="drift_before_dph" if name == "before" else None, when=when, when_doc=when_doc))
-        out.append(Measurement(f"drift_{name}_mean_dph", "deg/h", f"mean drift, {words} (fit of mean + 4, 8, 12 theta)",
+        out.append(Measurement(f"drift_{name}_mean_dph", "deg/h",
+                               f"mean drift, {words} (angle-record fit of mean + 4, 8, 12 theta)",
                                truth=f"drift_{name}_mean_dph", when=when, when_doc=when_doc))
         for m in (4, 8, 12):
             truth = f"drift_{name}_{m}theta_dph" if (name, m) != ("after", 4) else None
             out.append(Measurement(f"drift_{name}_{m}theta_dph", "deg/h",
-                                   f"{m} theta drift amplitude, {words} (fit of mean + 4, 8, 12 theta)",
+                                   f"{m} theta drift amplitude, {words} (angle-record fit of mean + 4, 8, 12 theta)",
                                    truth=truth, when=when, when_doc=when_doc))
             # the damping drift's 4 theta term is sin 4(theta - theta_tau): its phase is the damping axis
             out.append(Measurement(f"drift_{name}_{m}theta_phase_deg", "deg",
@@ -121,7 +126,7 @@ def _drift_declarations() -> tuple[Measurement, ...]:
                                    truth="theta_tau_deg" if (name, m) == ("before", 4) else None,
                                    when=when, when_doc=when_doc, period=360.0 / m))
         out.append(Measurement(f"drift_{name}_rest_rms_dph", "deg/h",
-                               f"rms of the drift the harmonic fit leaves, {words} (noise)",
+                               f"rms of the drift_block_s block rates beyond the angle fit's model, {words} (noise)",
                                when=when, when_doc=when_doc))
     out.append(Measurement("drift_reduction_ratio", "", "drift_before_dph / drift_after_dph", when=when,
                            when_doc=when_doc))
@@ -166,7 +171,8 @@ class HrgDamping(HrgExcitation, Procedure):
     verify_rate_dps = Param(2.0, unit="deg/s", low=0.01, high=100.0, doc="whole-angle precession while verifying")
     verify_s = Param(90.0, unit="s", low=1.0, high=100000.0, doc="drift record per verification (off, on)")
     verify_settle_s = Param(5.0, unit="s", low=0.0, high=600.0, doc="settling before each verification record")
-    drift_block_s = Param(1.0, unit="s", low=0.01, high=100.0, doc="block over which the drift rate is measured")
+    drift_block_s = Param(1.0, unit="s", low=0.01, high=100.0,
+                          doc="block of the drift rates plotted (the drift is fitted to the angle record itself)")
     bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: refers the wave's drift to the gyro output")
 
     measurements = (
@@ -347,21 +353,28 @@ class HrgDamping(HrgExcitation, Procedure):
         k = self.bryan_factor
         to_dph = math.degrees(1.0 / k) * 3600
         results, curves, amps = [], {}, {}
+        cmd = math.radians(self.verify_rate_dps)
         for name, rows in (("before", off), ("after", on)):
+            t_s = TAP.column(rows, "t_s")
             th = orbit_elements(TAP.columns_of(rows, *_Q))["theta_rad"]
-            mids, rate = block_drift(TAP.column(rows, "t_s"), th, self.drift_block_s)
-            drift = rate - math.radians(self.verify_rate_dps)
-            fit = fit_angle_drift(mids, drift)
-            amps[name] = fit.amplitude_rad_s * to_dph
-            lo, hi = fit.amplitude_ci95
-            results.append(Result(f"drift_{name}_dph", amps[name], ci95=(lo * to_dph, hi * to_dph)))
-            full = fit_drift_harmonics(mids, drift).scaled(to_dph)
+            # the drift read from the angle record itself (harmonics of theta in the angle model,
+            # linear least squares): +-0.1 deg/h where 1 s block slopes gave +-1.5 (docs/damping_drift.md)
+            four = fit_angle_harmonics(t_s, th, cmd, orders=(4,)).drift.scaled(to_dph).harmonics[4]
+            amps[name] = four.amplitude
+            results.append(Result(f"drift_{name}_dph", four.amplitude, ci95=four.ci95))
+            angle_fit = fit_angle_harmonics(t_s, th, cmd, orders=DRIFT_ORDERS)
+            full = angle_fit.drift.scaled(to_dph)
             results.append(Result(f"drift_{name}_mean_dph", full.mean, ci95=full.mean_ci95))
             for m, h in full.harmonics.items():
                 results.append(Result(f"drift_{name}_{m}theta_dph", h.amplitude, ci95=h.ci95))
                 results.append(Result(f"drift_{name}_{m}theta_phase_deg", math.degrees(h.phase_rad),
                                       ci95=tuple(math.degrees(x) for x in h.phase_ci95)))
-            results.append(Result(f"drift_{name}_rest_rms_dph", full.rest_rms))
+            # the figure's points: block slopes (drift_block_s) of the same record; the rest is what
+            # they keep beyond the angle fit's mean + 4, 8, 12 theta model (noise, other harmonics)
+            mids, rate = block_drift(t_s, th, self.drift_block_s)
+            drift = rate - cmd
+            rest = (drift - angle_fit.drift_rad_s(mids)) * to_dph
+            results.append(Result(f"drift_{name}_rest_rms_dph", float(np.sqrt(np.mean(rest ** 2)))))
             curves[name] = (mids, drift * to_dph)
         ratio = amps["before"] / amps["after"] if amps["after"] > 0 else math.inf
         results.append(Result("drift_reduction_ratio", ratio))
