@@ -207,3 +207,35 @@ def test_the_angle_fit_reads_the_drift_with_a_far_tighter_honest_interval_than_b
         old = fit_angle_drift(mids, rate - cmd).amplitude_ci95
         ratios.append((old[1] - old[0]) / (h.ci95[1] - h.ci95[0]))
     assert covered >= 17 and min(ratios) > 10.0, (covered, ratios)
+
+
+# --- reports: cvg-allan's y labels ----------------------------------------------------------------
+class _AllanData:
+    """The two things allan_figure reads: the curve stream and the measurements."""
+
+    def __init__(self, tau, adev):
+        self._curve = {"tau_s": tau, "adev_dph": adev, "adev_low_dph": adev * 0.8, "adev_high_dph": adev * 1.25}
+
+    def __contains__(self, name):
+        return name == "cvg_allan_curve"
+
+    def table(self, _name):
+        return self._curve
+
+    def measurements(self):
+        return [{"name": "bias_instability_dph", "value": 0.15, "ci95": [0.12, 0.19]}]
+
+
+def test_allan_figure_labels_y_ticks_below_1_dph():
+    """A curve between 0.1 and 0.6 deg/h (inside one decade): labelled y ticks there, not blank."""
+    from procedures.figures.cvg_allan import allan_figure
+
+    tau = np.geomspace(1.0, 1000.0, 10)
+    adev = 0.1 + 0.5 / np.sqrt(tau)
+    fig = allan_figure(_AllanData(tau, adev))[0].figure
+    ax = fig.axes[0]
+    fig.canvas.draw()
+    lo, hi = ax.get_ylim()
+    shown = [t.get_text() for t, v in zip(ax.yaxis.get_ticklabels(), ax.get_yticks(), strict=True)
+             if lo <= v <= hi and t.get_text()]
+    assert len(shown) >= 2 and all(float(x.replace("−", "-")) < 1.0 for x in shown[:2]), shown
