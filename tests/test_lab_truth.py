@@ -239,3 +239,27 @@ def test_allan_figure_labels_y_ticks_below_1_dph():
     shown = [t.get_text() for t, v in zip(ax.yaxis.get_ticklabels(), ax.get_yticks(), strict=True)
              if lo <= v <= hi and t.get_text()]
     assert len(shown) >= 2 and all(float(x.replace("−", "-")) < 1.0 for x in shown[:2]), shown
+
+
+# --- reports: cvg-scale-factor's figure and its nonlinearity use the same points -------------------
+def test_scale_factor_figure_draws_the_points_its_nonlinearity_is_read_from():
+    """Up then down sweeps with hysteresis: the single windows reach further than their up/down
+    mean; the figure's up/down-mean curve peaks exactly at the reported nonlinearity."""
+    from types import SimpleNamespace
+
+    from bench.analysis.cvg_rate import fit_scale_factor
+    from procedures.cvg_scale_factor import rate_series
+    from procedures.figures.cvg import scale_factor_figures
+
+    rate = rate_series(100.0, 4)
+    rng = np.random.default_rng(2)
+    hysteresis = np.where(np.arange(rate.size) < rate.size // 2, 1.0, -1.0) * 2e-3
+    out = -0.277 * rate + 1e-3 * (rate / 100.0) ** 2 * 100.0 + hysteresis + rng.normal(0, 2e-4, rate.size)
+    fit = fit_scale_factor(rate, out)
+    proc = SimpleNamespace(windows_schema=SimpleNamespace(name="w"), _analyse=lambda _data: fit)
+    fig = scale_factor_figures(proc, {"w", "fpga"})[0]
+    lines = {ln.get_label(): ln for ln in fig.figure.axes[1].get_lines()}
+    means = lines["up/down mean (nonlinearity)"].get_ydata()
+    assert np.max(np.abs(means)) == pytest.approx(fit.nonlinearity_ppm, rel=1e-9)
+    assert np.max(np.abs(fit.residual_ppm)) > fit.nonlinearity_ppm  # the single windows differ
+    assert "up and down" in fig.note
