@@ -80,6 +80,10 @@ def _gain_truth(kind: str):
     return rule
 
 
+#: why a summary of the record carries no interval
+_RECORD_STAT = "a statistic of this record, not an estimate of a parameter: no interval"
+
+
 class HrgSelfcal(HrgExcitation, Procedure):
     """Whole-angle self-calibration: forced precession cycles with FM, gains, damping and stiffness
     anisotropy and Q identified cycle after cycle, the rate compensated."""
@@ -121,7 +125,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("bias_stability_selfcal_dph", "deg/h", "self-calibrated bias stability, same record; truth: the "
                     "station's noise floor over 100 s, its white drift-rate noise and bounded angle wander "
                     "(sqrt((60 N / 10)^2 + 2 (1 - e^(-100/tau_c)) (36 sigma_phi)^2))", truth=_floor_truth),
-        Measurement("improvement", "", "plain / self-calibrated bias stability"),
+        Measurement("improvement", "", "plain / self-calibrated bias stability",
+                    no_interval="a ratio of two bias stabilities read from the same record (their errors are "
+                    "correlated): no interval; each has its own"),
         Measurement("mean_bias_dph", "deg/h", "mean self-calibrated bias since the start of the compensated record",
                     truth=lambda t: t.get("earth_rate_dph", 0.0) + t.get("turn_on_bias_mean_dph", 0.0)),
         Measurement("mean_bias_10h_dph", "deg/h", "mean bias since compensation started, after 10 h",
@@ -130,15 +136,21 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("angle_error_deg", "deg", "integrated angle error at the end (interval: +-1.96 sqrt(D(T)), "
                     "D the increment variance of the angle random walk plus bounded angle fitted to the record)",
                     truth=lambda t: 0.0),
-        Measurement("angle_error_rms_first_deg", "deg", "rms of the integrated angle error over the first half"),
+        Measurement("angle_error_rms_first_deg", "deg", "rms of the integrated angle error over the first half",
+                    no_interval=_RECORD_STAT),
         Measurement("angle_error_rms_second_deg", "deg", "rms of the integrated angle error over the second half "
-                    "(about the first half's if it does not accumulate; sqrt(3) x for a random walk)"),
+                    "(about the first half's if it does not accumulate; sqrt(3) x for a random walk)",
+                    no_interval=_RECORD_STAT),
         Measurement("angle_bounded_sd_deg", "deg", "bounded angle error's std, fitted to the record's increments",
-                    truth=_truth("noise_angle_wander_deg")),
+                    truth=_truth("noise_angle_wander_deg"),
+                    no_interval="the bounded variance and the walk share the increments' curve; the fit gives no "
+                    "interval for one alone (the walk's upper bound is angle_arw_deg_rth's)"),
         Measurement("angle_arw_deg_rth", "deg/sqrt(h)", "angle random walk fitted to the record's increments",
                     truth=_truth("arw_deg_rth")),
-        Measurement("angle_error_max_deg", "deg", "largest integrated angle error over the record"),
-        Measurement("adev_100s_dph", "deg/h", "Allan deviation of the self-calibrated rate at tau = smooth_s"),
+        Measurement("angle_error_max_deg", "deg", "largest integrated angle error over the record",
+                    no_interval=_RECORD_STAT),
+        Measurement("adev_100s_dph", "deg/h", "Allan deviation of the self-calibrated rate at tau = smooth_s",
+                    no_interval=_RECORD_STAT),
     )
 
     def __init__(self, params: dict[str, Any] | None = None) -> None:

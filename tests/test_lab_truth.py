@@ -263,3 +263,28 @@ def test_scale_factor_figure_draws_the_points_its_nonlinearity_is_read_from():
     assert np.max(np.abs(means)) == pytest.approx(fit.nonlinearity_ppm, rel=1e-9)
     assert np.max(np.abs(fit.residual_ppm)) > fit.nonlinearity_ppm  # the single windows differ
     assert "up and down" in fig.note
+
+
+def test_every_hrg_selfcal_measurement_has_an_interval_or_says_why_not():
+    """From seeded synthetic cycle and rate tables through the procedure's own analysis: each
+    result carries a 95 % interval, or its declaration says why it has none."""
+    from procedures import hrg_selfcal as hs
+
+    rng = np.random.default_rng(1)
+    n_cyc = 4
+    cyc = np.full((n_cyc, len(hs.CYCLE_COLUMNS)), 1e-3)  # standard errors and the rest: small
+    col = {n: i for i, n in enumerate(hs.CYCLE_COLUMNS)}
+    for c in range(n_cyc):
+        cyc[c, col["t_start_s"]], cyc[c, col["t_end_s"]] = 3600.0 * c, 3600.0 * (c + 1)
+    for name, value in (("q_factor", 5e6), ("delta_inv_tau_per_s", 1.6e-4), ("theta_tau_deg", 20.0),
+                        ("split_hz", 5e-3), ("theta_w_deg", 10.0), ("gain_diff_ppm", 1500.0)):
+        cyc[:, col[name]] = value
+    t = np.arange(0.0, 4 * 3600.0, 1.0)
+    rates = np.column_stack([t, np.degrees(0.01 * t), 20 * np.sin(t / 300.0), 20 * np.sin(t / 300.0),
+                             rng.normal(0.0, 0.6, t.size)])
+    results = hs._analyse(cyc, rates, 100.0, 1.0, 0.95)
+    reasons = hs.HrgSelfcal.no_interval_reasons()
+    bare = [r.name for r in results if r.ci95 is None and r.name not in reasons]
+    assert bare == [], bare
+    arw = next(r for r in results if r.name == "angle_arw_deg_rth")
+    assert arw.ci95[0] == 0.0 and arw.ci95[1] >= arw.value

@@ -67,11 +67,12 @@ def _is_number(value: Any) -> bool:
 
 
 def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, Any]]:
-    from procedures import measurement_periods, measurement_truth
+    from procedures import measurement_periods, measurement_truth, no_interval_reasons
 
     truth = measurement_truth(data.attrs.get("procedure"), data.truth)  # by declaration, not by matching names
     periods = measurement_periods(data.attrs.get("procedure"))  # an axis angle's truth: its nearest image
     lab = (data.attrs.get("lab_limits") or {}).get("measurements", {})  # `gyrobench run --limits`' verdicts
+    why_not = no_interval_reasons(data.attrs.get("procedure"))  # a value without an interval says why
     incomplete = data.incomplete
     found: dict[str, dict[str, Any]] = {}
     for m in data.measurements():
@@ -91,6 +92,8 @@ def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, A
         t, period = truth.get(base), periods.get(base)
         verdict = lab.get(name) if m.get("source") == "run" else None
         outcome, lims = _row_outcome(m, verdict)
+        if interval == DASH and base in why_not and m.get("outcome") != "NOT_MEASURED":
+            interval = f"{DASH} ({why_not[base]})"
         out.append({
             "name": name, "value": value, "interval": interval, "unit": pretty_unit(m.get("unit") or "1"),
             "limits": lims, "outcome": outcome, "outcome_class": outcome.split(" ")[0],
