@@ -93,7 +93,7 @@ def print_record(js: dict[str, Any]) -> None:
     truth = measurement_truth(js.get("procedure"), js.get("truth"))  # by declaration
     flags = truth_flags(js) if truth else {}
     if flags:
-        print(f"  {truth_count_line(flags)} (marked !)")
+        print(f"  {truth_count_line(flags)}" + (" (marked !)" if any(flags.values()) else ""))
 
     def num(x: Any) -> str:  # as_json gives None for NaN/inf and for an open side of the limits
         return "-" if x is None else f"{x:.6g}"
