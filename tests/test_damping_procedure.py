@@ -21,7 +21,7 @@ PARAMS = {
     "stream_hz": 200.0,  # the FPGA streams every 5th sample during the decay
     "verify_rate_dps": 4.0,
     "verify_s": 45.0,
-    "verify_settle_s": 2.0,
+    "verify_settle_s": 5.0,  # the loops settle after whole-angle starts (docs/damping_drift.md)
 }
 
 
@@ -96,11 +96,7 @@ def test_compensation_reduces_the_angle_drift(run):
     record, _, truth = run
     m = {r.name: r for r in record.measurements}
     expected_dph = math.degrees(truth["delta_inv_tau_per_s"] / 4 / truth["bryan_factor"]) * 3600
-    # read from the angle record the interval is +-0.1 deg/h (seed scatter alike); the drift read
-    # sits above (D/4)/K in every seed by a part that grows with the precession command (3 % at
-    # 2 deg/s, 5.5 % at 4 deg/s: an angle read-out error periodic in theta looks like drift x command
-    # at one rate; docs/damping_drift.md): within 8 % here, named, not hidden in an interval
-    assert m["drift_before_dph"].value == pytest.approx(expected_dph, rel=0.08)
+    assert _within(m["drift_before_dph"], expected_dph)
     assert m["drift_after_dph"].value < m["drift_before_dph"].value / 5
     assert m["drift_reduction_ratio"].value > 5
 
@@ -146,18 +142,16 @@ def test_drift_reported_in_full_and_the_loops_add_none(run):
     record, _, truth = run
     m = {r.name: r for r in record.measurements}
     expected_dph = math.degrees(truth["delta_inv_tau_per_s"] / 4 / truth["bryan_factor"]) * 3600
-    # "consistent with zero" up to the systematic the angle-record fit now resolves (its +-0.1
-    # deg/h; the block slopes' +-1.5 hid it): a 0.1 deg/h mean and, before compensation, an 8 theta
-    # and 12 theta term under 15 % of the 4 theta one (read-out error harmonics; docs/damping_drift.md)
     for name in ("before", "after"):
+        # the mean: read from the angle record to +-0.03 deg/h, the loops' own -0.2 deg/h shows
+        # (the block slopes' +-1.5 hid it; docs/damping_drift.md): within 0.3 deg/h of zero
         mean = m[f"drift_{name}_mean_dph"]
         assert abs(mean.value) <= max(2.0 * 0.5 * (mean.ci95[1] - mean.ci95[0]), 0.3), mean
         for order in (8, 12):
             res = m[f"drift_{name}_{order}theta_dph"]
-            allowed = max(2.0 * (res.ci95[1] - res.value), 0.3, 0.15 * m[f"drift_{name}_4theta_dph"].value)
-            assert res.value <= allowed, (name, order, res)
+            assert res.value <= 2.0 * (res.ci95[1] - res.value), (name, order, res)
         assert m[f"drift_{name}_rest_rms_dph"].value > 0
-    assert m["drift_before_4theta_dph"].value == pytest.approx(expected_dph, rel=0.08)
+    assert _within(m["drift_before_4theta_dph"], expected_dph)
     assert m["drift_after_4theta_dph"].ci95[0] <= m["drift_after_4theta_expected_dph"].ci95[1]
     assert m["drift_after_4theta_dph"].value == pytest.approx(m["drift_after_dph"].value, abs=0.5)
 
