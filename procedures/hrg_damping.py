@@ -127,9 +127,11 @@ def _drift_declarations() -> tuple[Measurement, ...]:
                                    when=when, when_doc=when_doc, period=360.0 / m))
         out.append(Measurement(f"drift_{name}_rest_rms_dph", "deg/h",
                                f"rms of the drift_block_s block rates beyond the angle fit's model, {words} (noise)",
-                               when=when, when_doc=when_doc))
+                               when=when, when_doc=when_doc,
+                               no_interval="a statistic of this record, not an estimate of a parameter: no interval"))
     out.append(Measurement("drift_reduction_ratio", "", "drift_before_dph / drift_after_dph", when=when,
-                           when_doc=when_doc))
+                           when_doc=when_doc, no_interval="a ratio whose denominator's interval may hold 0: no "
+                           "interval; the two drifts have theirs"))
     out.append(Measurement("drift_after_4theta_expected_dph", "deg/h",
                            "4 theta drift the decay fit's own error leaves after compensation (rms; ci95 0 to its "
                            "95 % bound)", when=when, when_doc=when_doc))
@@ -176,7 +178,8 @@ class HrgDamping(HrgExcitation, Procedure):
     bryan_factor = Param(0.277, unit="", low=0.01, high=1.0, doc="K: refers the wave's drift to the gyro output")
 
     measurements = (
-        Measurement("quadrature_rel_max", "", "largest |quadrature| / amplitude over the decay record"),
+        Measurement("quadrature_rel_max", "", "largest |quadrature| / amplitude over the decay record",
+                    no_interval="a statistic of this record, not an estimate of a parameter: no interval"),
         Measurement("theta_tau_deg", "deg", "damping axis theta_tau in [0, 90)", truth="theta_tau_deg",
                     period=AXIS_PERIOD_DEG),
         Measurement("delta_inv_tau_per_s", "1/s", "damping anisotropy Delta(1/tau)", truth="delta_inv_tau_per_s"),

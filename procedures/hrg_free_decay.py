@@ -152,7 +152,8 @@ def _decay_declarations() -> tuple[Measurement, ...]:
         Measurement("theta_tau_deg", "deg", "damping axis in [0, 90)", truth="theta_tau_deg", period=AXIS_PERIOD_DEG),
         Measurement("bryan_factor", "", "Bryan factor K = nu / (4 Omega) from the table rate", truth="bryan_factor",
                     when=rate_on, when_doc=rate_doc),
-        Measurement("residual_sigma", "", "rms residual of the fit (model units)"),
+        Measurement("residual_sigma", "", "rms residual of the fit (model units)",
+                    no_interval="a statistic of this record, not an estimate of a parameter: no interval"),
     ]
     out = list(base)
     for m in base:
