@@ -92,10 +92,9 @@ def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, A
         t, period = truth.get(base), periods.get(base)
         verdict = lab.get(name) if m.get("source") == "run" else None
         outcome, lims = _row_outcome(m, verdict)
-        if interval == DASH and base in why_not and m.get("outcome") != "NOT_MEASURED":
-            interval = f"{DASH} ({why_not[base]})"
+        why = why_not.get(base, "") if interval == DASH and m.get("outcome") != "NOT_MEASURED" else ""
         out.append({
-            "name": name, "value": value, "interval": interval, "unit": pretty_unit(m.get("unit") or "1"),
+            "name": name, "value": value, "interval": interval, "why": why, "unit": pretty_unit(m.get("unit") or "1"),
             "limits": lims, "outcome": outcome, "outcome_class": outcome.split(" ")[0],
             "truth": truth_text(t, ci) if t is not None else DASH,
             "error": error_in_intervals(m.get("value"), t, ci, period) if t is not None else DASH,
