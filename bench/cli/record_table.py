@@ -28,8 +28,8 @@ def apply_limits(js: dict[str, Any], limits: Any, declared: set[str]) -> dict[st
     in the raw file (attribute `lab_limits`, which the report reads); declared: the procedure's
     declared measurement names (the limits that apply, as the line picks them); None without limits."""
     flags = truth_flags(js) if js.get("truth") else {}
-    if flags:
-        js["truth_outside"] = {"outside": sorted(n for n, f in flags.items() if f), "compared": len(flags)}
+    js["truth_outside"] = ({"outside": sorted(n for n, f in flags.items() if f), "compared": len(flags)}
+                           if flags else None)
     if limits is None:
         js["limits"] = None
         return None
