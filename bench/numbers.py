@@ -92,14 +92,38 @@ def limits(low: Any, high: Any) -> str:
     return f"[{plain(lo)}, {plain(hi)}]"
 
 
-def error_in_intervals(value: Any, truth: Any, ci95: Any) -> str:
-    """(value - truth) in units of the interval's half-width, e.g. '+0.37' ('—' without one)."""
+def nearest_image(truth: float, value: float, period: float | None) -> float:
+    """The truth moved by whole periods to the image nearest the value (an axis angle at 89.8 deg
+    and its truth 0.1 deg are 0.3 deg apart, not 89.7); the truth itself without a period."""
+    if period is None or not math.isfinite(truth) or not math.isfinite(value):
+        return truth
+    return truth + period * round((value - truth) / period)
+
+
+def truth_outside(value: Any, truth: Any, ci95: Any, period: float | None = None) -> bool | None:
+    """Whether the truth lies outside the value's 95 % interval (its nearest image for a periodic
+    quantity); None when there is no value, truth or interval to compare (an open end counts as
+    unbounded on that side: a one-sided interval)."""
+    v, t = _finite(value), _finite(truth)
+    if v is None or t is None or not ci95 or len(ci95) != 2:
+        return None
+    lo, hi = _finite(ci95[0]), _finite(ci95[1])
+    if lo is None and hi is None:
+        return None
+    t = nearest_image(t, v, period)
+    return (lo is not None and t < lo) or (hi is not None and t > hi)
+
+
+def error_in_intervals(value: Any, truth: Any, ci95: Any, period: float | None = None) -> str:
+    """(value - truth) in units of the interval's half-width, e.g. '+0.37' ('—' without one);
+    period: the truth's nearest image (an axis angle's 90 deg)."""
     v, t = _finite(value), _finite(truth)
     if v is None or t is None or not ci95 or len(ci95) != 2:
         return DASH
     lo, hi = _finite(ci95[0]), _finite(ci95[1])
     if lo is None or hi is None or hi <= lo:
         return DASH
+    t = nearest_image(t, v, period)
     return _minus(f"{(v - t) / (0.5 * (hi - lo)):+.2f}")
 
 

@@ -536,6 +536,13 @@ def compact(path: str | Path, filters: dict[str, Any], chunk_rows: int = COMPACT
         return False
 
 
+def annotate(path: str | Path, key: str, value: Any) -> None:
+    """Add one attribute to a finished run's raw file (JSON for a dict or list): what a face
+    decided after the run, e.g. the lab's limits and their verdicts (`gyrobench run --limits`)."""
+    with h5py.File(path, "a") as f:
+        f.attrs[key] = value if isinstance(value, (str, int, float, bool)) else _json(value)
+
+
 class MissingStream(KeyError):
     """A stream the analysis needs is not in the raw file (the run ended before writing it)."""
 

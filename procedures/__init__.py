@@ -109,3 +109,15 @@ def measurement_truth(procedure: str | None, truth: dict[str, float] | None) -> 
         return {}
     cls = procedure_named(procedure)
     return {} if cls is None else cls.truth_for(truth)
+
+
+def measurement_periods(procedure: str | None) -> dict[str, float]:
+    """The period of each periodic measurement of a registered procedure (an axis angle: 90 deg)."""
+    cls = procedure_named(procedure) if procedure else None
+    return {} if cls is None else cls.truth_periods()
+
+
+def no_interval_reasons(procedure: str | None) -> dict[str, str]:
+    """Why each measurement of a registered procedure that has no 95 % interval has none."""
+    cls = procedure_named(procedure) if procedure else None
+    return {} if cls is None else cls.no_interval_reasons()

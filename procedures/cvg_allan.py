@@ -86,7 +86,8 @@ class CvgAllan(HrgExcitation, Procedure):
                     "slope line's value at tau = 3 h",
                     truth=_truth_or_zero("rrw_dph_rth")),
         Measurement("allan_min_dph", "deg/h", "smallest Allan deviation of the curve (before any term is removed)"),
-        Measurement("allan_min_tau_s", "s", "cluster time of the smallest Allan deviation"),
+        Measurement("allan_min_tau_s", "s", "cluster time of the smallest Allan deviation",
+                    no_interval="one of the octave-spaced cluster times, read off the curve: no interval"),
         Measurement("rate_mean_dph", "deg/h", "mean rate output over the record (bias + Earth's rate + drift)"),
     )
 

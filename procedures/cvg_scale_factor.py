@@ -83,7 +83,8 @@ class CvgScaleFactor(CvgOutput, Procedure):
                     truth=lambda t: 0.0),
         Measurement("asymmetry_ppm", "ppm", "positive minus negative rates' scale factor over their mean, ppm",
                     truth=lambda t: 0.0),
-        Measurement("residual_sigma_ppm", "ppm", "scatter of one point about the line, ppm of full scale"),
+        Measurement("residual_sigma_ppm", "ppm", "scatter of one point about the line, ppm of full scale",
+                    no_interval="a statistic of this record, not an estimate of a parameter: no interval"),
     )
 
     def demands(self) -> list[Demand]:

@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from bench.analysis.damping import METHODS, MODELS, fit_angle_drift, fit_drift_harmonics, fit_free_decay
+from bench.analysis.axes import AXIS_PERIOD_DEG
+from bench.analysis.damping import METHODS, MODELS, fit_angle_harmonics, fit_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
 from bench.engine.recording import in_spans
@@ -105,32 +106,39 @@ def _compensating(proc: Any) -> bool:
     return bool(proc.compensate)
 
 
+#: the harmonics of the wave angle fitted in the verification's drift (the angle model's mean + these)
+DRIFT_ORDERS = (4, 8, 12)
+
+
 def _drift_declarations() -> tuple[Measurement, ...]:
     """The verification's drift measurements (only with `compensate` on), output-referred."""
     when, when_doc = _compensating, "compensate"
     out = []
     for name, words in (("before", "compensation off"), ("after", "compensation on")):
         out.append(Measurement(f"drift_{name}_dph", "deg/h",
-                               f"4 theta drift amplitude, {words} (fit of mean + 4 theta)",
+                               f"4 theta drift amplitude, {words} (angle-record fit of mean + 4 theta)",
                                truth="drift_before_dph" if name == "before" else None, when=when, when_doc=when_doc))
-        out.append(Measurement(f"drift_{name}_mean_dph", "deg/h", f"mean drift, {words} (fit of mean + 4, 8, 12 theta)",
+        out.append(Measurement(f"drift_{name}_mean_dph", "deg/h",
+                               f"mean drift, {words} (angle-record fit of mean + 4, 8, 12 theta)",
                                truth=f"drift_{name}_mean_dph", when=when, when_doc=when_doc))
         for m in (4, 8, 12):
             truth = f"drift_{name}_{m}theta_dph" if (name, m) != ("after", 4) else None
             out.append(Measurement(f"drift_{name}_{m}theta_dph", "deg/h",
-                                   f"{m} theta drift amplitude, {words} (fit of mean + 4, 8, 12 theta)",
+                                   f"{m} theta drift amplitude, {words} (angle-record fit of mean + 4, 8, 12 theta)",
                                    truth=truth, when=when, when_doc=when_doc))
             # the damping drift's 4 theta term is sin 4(theta - theta_tau): its phase is the damping axis
             out.append(Measurement(f"drift_{name}_{m}theta_phase_deg", "deg",
                                    f"phase of the {m} theta drift term, amplitude sin {m}(theta - phase), {words} "
                                    "(interval: the whole period when the amplitude's holds 0)",
                                    truth="theta_tau_deg" if (name, m) == ("before", 4) else None,
-                                   when=when, when_doc=when_doc))
+                                   when=when, when_doc=when_doc, period=360.0 / m))
         out.append(Measurement(f"drift_{name}_rest_rms_dph", "deg/h",
-                               f"rms of the drift the harmonic fit leaves, {words} (noise)",
-                               when=when, when_doc=when_doc))
+                               f"rms of the drift_block_s block rates beyond the angle fit's model, {words} (noise)",
+                               when=when, when_doc=when_doc,
+                               no_interval="a statistic of this record, not an estimate of a parameter: no interval"))
     out.append(Measurement("drift_reduction_ratio", "", "drift_before_dph / drift_after_dph", when=when,
-                           when_doc=when_doc))
+                           when_doc=when_doc, no_interval="a ratio whose denominator's interval may hold 0: no "
+                           "interval; the two drifts have theirs"))
     out.append(Measurement("drift_after_4theta_expected_dph", "deg/h",
                            "4 theta drift the decay fit's own error leaves after compensation (rms; ci95 0 to its "
                            "95 % bound)", when=when, when_doc=when_doc))
@@ -175,14 +183,17 @@ class HrgDamping(HrgExcitation, Procedure):
                             doc="settling before each verification record; 0: from the loops' bandwidth and the "
                                 "command (4.6 time constants of the slowest loop, plus the wave's turn of 22.5 deg "
                                 "for the split observer before the first record)")
-    drift_block_s = Param(1.0, unit="s", low=0.01, high=100.0, doc="block over which the drift rate is measured")
+    drift_block_s = Param(1.0, unit="s", low=0.01, high=100.0,
+                          doc="block of the drift rates plotted (the drift is fitted to the angle record itself)")
     bryan_factor = Param(0.0, unit="", low=0.0, high=1.0,
                          doc="K: refers the wave's drift to the gyro output (0: the station's nominal K)")
     nominal_params = {"bryan_factor": "bryan_factor"}
 
     measurements = (
-        Measurement("quadrature_rel_max", "", "largest |quadrature| / amplitude over the decay record"),
-        Measurement("theta_tau_deg", "deg", "damping axis theta_tau in [0, 90)", truth="theta_tau_deg"),
+        Measurement("quadrature_rel_max", "", "largest |quadrature| / amplitude over the decay record",
+                    no_interval="a statistic of this record, not an estimate of a parameter: no interval"),
+        Measurement("theta_tau_deg", "deg", "damping axis theta_tau in [0, 90)", truth="theta_tau_deg",
+                    period=AXIS_PERIOD_DEG),
         Measurement("delta_inv_tau_per_s", "1/s", "damping anisotropy Delta(1/tau)", truth="delta_inv_tau_per_s"),
         Measurement("tau_s", "s", "mean amplitude decay time tau", truth="tau_s"),
         Measurement("q_factor", "", "quality factor pi f0 tau (f0: the reference frequency held during the decay)",
@@ -376,21 +387,28 @@ class HrgDamping(HrgExcitation, Procedure):
         k = self.bryan_factor
         to_dph = math.degrees(1.0 / k) * 3600
         results, curves, amps = [], {}, {}
+        cmd = math.radians(self.verify_rate_dps)
         for name, rows in (("before", off), ("after", on)):
+            t_s = TAP.column(rows, "t_s")
             th = orbit_elements(TAP.columns_of(rows, *_Q))["theta_rad"]
-            mids, rate = block_drift(TAP.column(rows, "t_s"), th, self.drift_block_s)
-            drift = rate - math.radians(self.verify_rate_dps)
-            fit = fit_angle_drift(mids, drift)
-            amps[name] = fit.amplitude_rad_s * to_dph
-            lo, hi = fit.amplitude_ci95
-            results.append(Result(f"drift_{name}_dph", amps[name], ci95=(lo * to_dph, hi * to_dph)))
-            full = fit_drift_harmonics(mids, drift).scaled(to_dph)
+            # the drift read from the angle record itself (harmonics of theta in the angle model,
+            # linear least squares): +-0.1 deg/h where 1 s block slopes gave +-1.5 (docs/damping_drift.md)
+            four = fit_angle_harmonics(t_s, th, cmd, orders=(4,)).drift.scaled(to_dph).harmonics[4]
+            amps[name] = four.amplitude
+            results.append(Result(f"drift_{name}_dph", four.amplitude, ci95=four.ci95))
+            angle_fit = fit_angle_harmonics(t_s, th, cmd, orders=DRIFT_ORDERS)
+            full = angle_fit.drift.scaled(to_dph)
             results.append(Result(f"drift_{name}_mean_dph", full.mean, ci95=full.mean_ci95))
             for m, h in full.harmonics.items():
                 results.append(Result(f"drift_{name}_{m}theta_dph", h.amplitude, ci95=h.ci95))
                 results.append(Result(f"drift_{name}_{m}theta_phase_deg", math.degrees(h.phase_rad),
                                       ci95=tuple(math.degrees(x) for x in h.phase_ci95)))
-            results.append(Result(f"drift_{name}_rest_rms_dph", full.rest_rms))
+            # the figure's points: block slopes (drift_block_s) of the same record; the rest is what
+            # they keep beyond the angle fit's mean + 4, 8, 12 theta model (noise, other harmonics)
+            mids, rate = block_drift(t_s, th, self.drift_block_s)
+            drift = rate - cmd
+            rest = (drift - angle_fit.drift_rad_s(mids)) * to_dph
+            results.append(Result(f"drift_{name}_rest_rms_dph", float(np.sqrt(np.mean(rest ** 2)))))
             curves[name] = (mids, drift * to_dph)
         ratio = amps["before"] / amps["after"] if amps["after"] > 0 else math.inf
         results.append(Result("drift_reduction_ratio", ratio))

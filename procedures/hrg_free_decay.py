@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from bench.analysis.axes import AXIS_PERIOD_DEG, axis_with_interval
 from bench.analysis.maslov import derived_ci95, free_param_names, identify_free_decay
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
@@ -97,10 +98,8 @@ def _method_results(t_s: np.ndarray, q: np.ndarray, *, rate_dps: float, ref_freq
     for name in ("split_hz", "delta_inv_tau_per_s", "damping_anisotropy_per_s", "freq_offset_hz"):
         out.append(Result(name, d[name], ci95=dci[name]))
     for name, key in (("theta_w_deg", "alpha_rad"), ("theta_tau_deg", "beta_rad")):
-        value = math.degrees(d[key])
-        shift = value % 90.0 - value  # report the axis in [0, 90) like the simulator's truth
-        lo, hi = (math.degrees(v) + shift for v in dci[key])
-        out.append(Result(name, value + shift, ci95=(lo, hi)))
+        value, axis_ci = axis_with_interval(math.degrees(d[key]), tuple(math.degrees(v) for v in dci[key]))
+        out.append(Result(name, value, ci95=axis_ci))
     if rate_dps:
         omega = math.radians(rate_dps)
         nu_lo, nu_hi = sorted(ci["nu"])
@@ -148,11 +147,13 @@ def _decay_declarations() -> tuple[Measurement, ...]:
                     truth="damping_anisotropy_per_s"),
         Measurement("freq_offset_hz", "Hz", "mean frequency minus the nominal natural frequency",
                     truth="freq_offset_hz"),
-        Measurement("theta_w_deg", "deg", "stiffness (frequency) axis in [0, 90)", truth="theta_w_deg"),
-        Measurement("theta_tau_deg", "deg", "damping axis in [0, 90)", truth="theta_tau_deg"),
+        Measurement("theta_w_deg", "deg", "stiffness (frequency) axis in [0, 90)", truth="theta_w_deg",
+                    period=AXIS_PERIOD_DEG),
+        Measurement("theta_tau_deg", "deg", "damping axis in [0, 90)", truth="theta_tau_deg", period=AXIS_PERIOD_DEG),
         Measurement("bryan_factor", "", "Bryan factor K = nu / (4 Omega) from the table rate", truth="bryan_factor",
                     when=rate_on, when_doc=rate_doc),
-        Measurement("residual_sigma", "", "rms residual of the fit (model units)"),
+        Measurement("residual_sigma", "", "rms residual of the fit (model units)",
+                    no_interval="a statistic of this record, not an estimate of a parameter: no interval"),
     ]
     out = list(base)
     for m in base:

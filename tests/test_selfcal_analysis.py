@@ -131,3 +131,23 @@ def test_angle_error_fit_of_white_rate_noise_is_an_angle_random_walk():
     assert model.mean_sd_dph(36000.0) == pytest.approx(0.6 / math.sqrt(36000.0), rel=0.25)
     with pytest.raises(ValueError, match="too short"):
         s.fit_angle_error(np.zeros(20), 1.0)
+
+
+def test_an_arw_fitted_on_its_bound_carries_a_one_sided_interval():
+    """A record that a bounded angle error explains (no walk: a 0.01 deg Gauss-Markov wander with
+    300 s correlation; seed 3 fits N = 0 exactly) still bounds N from above; that bound covers a
+    true small walk in seeded records (Bonferroni over the lags: conservative)."""
+    rng = np.random.default_rng(3)
+    a = math.exp(-1.0 / 300.0)
+    kicks = rng.standard_normal(7200) * 0.01 * math.sqrt(1 - a * a)
+    wander = np.zeros(7200)
+    for k in range(1, 7200):
+        wander[k] = a * wander[k - 1] + kicks[k]
+    value, (lo, hi) = s.fit_angle_error(wander, 1.0).arw_deg_rth()
+    assert value == 0.0 and lo == 0.0 and 0.03 < hi < 0.08
+    covered = 0
+    for seed in range(20):
+        r = np.random.default_rng(seed).standard_normal(7200) * 0.6  # N = 0.01 deg/sqrt(h)
+        _, (lo, hi) = s.fit_angle_error(s.integrated_angle_deg(r, 1.0), 1.0).arw_deg_rth()
+        covered += lo <= 0.01 <= hi
+    assert covered >= 19

@@ -66,13 +66,19 @@ def _interval(value: float, sd: float, t: float) -> tuple[float, float]:
     return (value - t * sd, value + t * sd)
 
 
+def level_means(rate: np.ndarray, res: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(rate levels, mean residual at each level (the up and down sweeps' mean), points at each
+    level, each point's level index): the points the nonlinearity is read from, and the figure draws."""
+    levels, inverse, counts = np.unique(np.round(rate, 9), return_inverse=True, return_counts=True)
+    return levels, np.bincount(inverse, weights=res) / counts, counts, inverse
+
+
 def nonlinearity_ppm(rate: np.ndarray, res: np.ndarray, full_scale: float, sigma_fit: float,
                      dof_fit: int) -> tuple[float, tuple[float, float]]:
     """Largest |mean residual| over the rate levels in ppm of full scale, and a 95 % interval for
     the largest true deviation: |r_g| -/+ t sd(r_g) jointly over the G levels (Bonferroni), sd from
     the pure error within levels when a rate repeats (else the fit's residual scatter)."""
-    levels, inverse, counts = np.unique(np.round(rate, 9), return_inverse=True, return_counts=True)
-    mean_res = np.bincount(inverse, weights=res) / counts
+    levels, mean_res, counts, inverse = level_means(rate, res)
     dof_pure = int(np.sum(counts - 1))
     if dof_pure >= 2:
         sigma = math.sqrt(float(np.sum((res - mean_res[inverse]) ** 2)) / dof_pure)

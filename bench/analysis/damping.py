@@ -29,6 +29,8 @@ from types import MappingProxyType
 import numpy as np
 from scipy import optimize, special  # stdtrit: Student t quantiles without importing scipy.stats (~1 s)
 
+from .axes import axis_deg
+
 #: Parameter vector of every fit, in this order: ln E at t0, gamma = 2/tau, b_c, b_s.
 PARAM_NAMES = ("ln_e0", "gamma_per_s", "b_c_per_s", "b_s_per_s")
 METHODS = ("log-linear", "gauss-newton", "gauss-newton-unweighted")
@@ -300,9 +302,7 @@ def _physical(params: np.ndarray, cov: np.ndarray, dof: int) -> tuple[dict, dict
     """(ln_e0, gamma, b_c, b_s) and their covariance -> theta_tau, D, tau with delta-method std."""
     gamma, b_c, b_s = (float(v) for v in params[1:])
     d = math.hypot(b_c, b_s)
-    theta_deg = math.degrees(0.25 * math.atan2(b_s, b_c)) % 90.0
-    if theta_deg >= 90.0:  # -0.0 % 90 rounding
-        theta_deg = 0.0
+    theta_deg = axis_deg(math.degrees(0.25 * math.atan2(b_s, b_c)))
     tau = 2.0 / gamma if gamma > 0 else math.inf
     g_tau = np.array([0.0, -2.0 / gamma**2 if gamma > 0 else 0.0, 0.0, 0.0])
     if d > 0:
@@ -821,11 +821,23 @@ def fit_drift_harmonics(theta_rad, rate, orders: tuple[int, ...] = (4, 8, 12)) -
     dof = th.size - n_par
     s2 = float(r @ r) / dof
     cov = s2 * np.linalg.pinv(x.T @ x)
+    hs = _harmonics(p, cov, dof, orders, first=1)
+    t = float(special.stdtrit(dof, 0.975))
+    half = t * math.sqrt(max(float(cov[0, 0]), 0.0))
+    return DriftHarmonics(float(p[0]), (float(p[0]) - half, float(p[0]) + half), hs, math.sqrt(float(r @ r) / th.size),
+                          int(th.size))
+
+
+def _harmonics(p: np.ndarray, cov: np.ndarray, dof: int, orders: tuple[int, ...],
+               first: int) -> dict[int, DriftHarmonic]:
+    """Each harmonic's amplitude and phase with their 95 % intervals from a linear fit's (A_m, B_m)
+    pairs (columns first, first + 1, ... of p and cov, in the order of `orders`): the amplitude's
+    from the joint confidence ellipse, the phase's from the angle it subtends (fit_drift_harmonics)."""
     t = float(special.stdtrit(dof, 0.975))
     radius = math.sqrt(2.0 * float(special.fdtri(2, dof, 0.95)))
     hs = {}
     for i, m in enumerate(orders):
-        j = 1 + 2 * i
+        j = first + 2 * i
         ab = p[j : j + 2]
         a, b = float(ab[0]), float(ab[1])
         amp = math.hypot(a, b)
@@ -846,6 +858,63 @@ def fit_drift_harmonics(theta_rad, rate, orders: tuple[int, ...] = (4, 8, 12)) -
         p_ci = (phase - period / 2, phase + period / 2) if holds_zero or half >= period / 2 else (phase - half,
                                                                                                 phase + half)
         hs[m] = DriftHarmonic(m, amp, phase, (lo, amp + reach), p_ci)
-    half = t * math.sqrt(max(float(cov[0, 0]), 0.0))
-    return DriftHarmonics(float(p[0]), (float(p[0]) - half, float(p[0]) + half), hs, math.sqrt(float(r @ r) / th.size),
-                          int(th.size))
+    return hs
+
+
+@dataclass(frozen=True)
+class AngleHarmonicsFit:
+    """fit_angle_harmonics' result: the drift (rad/s of wave angle), the orders fitted, the rms of
+    the angle the fit leaves (rad) and the (A_m, B_m) coefficients in order of the orders."""
+
+    drift: DriftHarmonics
+    orders: tuple[int, ...]
+    angle_rest_rms_rad: float
+    coef: np.ndarray = field(repr=False)
+
+    def drift_rad_s(self, theta_rad: np.ndarray) -> np.ndarray:
+        """The fitted drift at wave angles theta (rad/s of wave angle)."""
+        th = np.asarray(theta_rad, dtype=float)
+        out = np.full_like(th, self.drift.mean)
+        for i, m in enumerate(self.orders):
+            out = out + self.coef[2 * i] * np.cos(m * th) + self.coef[2 * i + 1] * np.sin(m * th)
+        return out
+
+
+def fit_angle_harmonics(t_s, theta_rad, command_rad_s: float,
+                        orders: tuple[int, ...] = (4, 8, 12)) -> AngleHarmonicsFit:
+    """The drift read from the wave-angle record itself: theta(t) - command t = c + mean t +
+    sum_m (A_m I_cos,m(t) + B_m I_sin,m(t)), I_cos,m(t) = integral_0^t cos m theta dt (and sin):
+    a linear least-squares fit of the angle (its pickoff noise is white; block slopes differentiate
+    it and lose the precision).  The drift is mean + sum_m (A_m cos m theta + B_m sin m theta) rad/s
+    of wave angle; intervals as fit_drift_harmonics, from the angle fit's covariance (Student t on
+    the residual scatter).  drift.rest_rms: NaN here; angle_rest_rms_rad the angle left."""
+    t = np.asarray(t_s, dtype=float).reshape(-1)
+    th = np.unwrap(4.0 * np.asarray(theta_rad, dtype=float).reshape(-1)) / 4.0
+    n_par = 2 + 2 * len(orders)
+    if t.size != th.size:
+        raise ValueError(f"t_s has {t.size} samples but theta_rad has {th.size}")
+    if t.size <= n_par:
+        raise ValueError(f"fit_angle_harmonics needs more than {n_par} samples for orders {orders}, got {t.size}")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(th))):
+        raise ValueError("t_s and theta_rad must be finite")
+    tr = t - t[0]
+    cols = [np.ones_like(tr), tr]
+    for m in orders:
+        for f in (np.cos, np.sin):
+            g = f(m * th)
+            cols.append(np.concatenate([[0.0], np.cumsum(0.5 * (g[1:] + g[:-1]) * np.diff(tr))]))
+    x = np.column_stack(cols)
+    y = th - th[0] - float(command_rad_s) * tr
+    scale = np.maximum(np.max(np.abs(x), axis=0), 1e-300)  # a column of ones beside columns of seconds
+    xs = x / scale
+    ps, *_ = np.linalg.lstsq(xs, y, rcond=None)
+    p = ps / scale
+    r = y - xs @ ps
+    dof = t.size - n_par
+    s2 = float(r @ r) / dof
+    cov = s2 * np.linalg.pinv(xs.T @ xs) / np.outer(scale, scale)
+    hs = _harmonics(p, cov, dof, orders, first=2)
+    k = float(special.stdtrit(dof, 0.975))
+    half = k * math.sqrt(max(float(cov[1, 1]), 0.0))
+    drift = DriftHarmonics(float(p[1]), (float(p[1]) - half, float(p[1]) + half), hs, math.nan, int(t.size))
+    return AngleHarmonicsFit(drift, tuple(orders), math.sqrt(float(r @ r) / t.size), np.asarray(p[2:], dtype=float))

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from .axes import axis_deg
+
 #: amplitude-channel regressors (docs/selfcal.md): 1, cos 4th, sin 4th, thdot sin 4th, thdot cos 4th
 AMP_TERMS = ("gamma", "beta_c", "beta_s", "two_dg", "nuisance_c")
 #: frequency-channel regressors: 1, cos 4th, sin 4th (the FM averages out over bins of whole FM periods)
@@ -78,11 +80,11 @@ class CycleFit:
 
     @property
     def theta_tau_deg(self) -> Estimate:
-        """The damping axis: (1/4) atan2(b_s, b_c), degrees."""
+        """The damping axis: (1/4) atan2(b_s, b_c), degrees, in [0, 90) (bench.analysis.axes)."""
         bc, bs, g_bc, g_bs = self._b()
         r2 = bc * bc + bs * bs
         g = (bc * g_bs - bs * g_bc) / r2 * math.degrees(1.0) / 4.0
-        return self._est(math.degrees(math.atan2(bs, bc)) / 4.0, g, self.amp_cov)
+        return self._est(axis_deg(math.degrees(math.atan2(bs, bc)) / 4.0), g, self.amp_cov)
 
     @property
     def split_hz(self) -> Estimate:
@@ -95,11 +97,13 @@ class CycleFit:
 
     @property
     def theta_w_deg(self) -> Estimate:
+        """The stiffness axis: (1/4) atan2(h_s, h_c), degrees, in [0, 90) (bench.analysis.axes)."""
         hc, hs = self.freq_coef[1:3]
         r2 = hc * hc + hs * hs
         g = np.zeros(len(self.freq_coef))
         g[1], g[2] = -hs / r2, hc / r2
-        return self._est(math.degrees(math.atan2(hs, hc)) / 4.0, g * math.degrees(1.0) / 4.0, self.freq_cov)
+        return self._est(axis_deg(math.degrees(math.atan2(hs, hc)) / 4.0), g * math.degrees(1.0) / 4.0,
+                         self.freq_cov)
 
     def drift_rad_s(self, theta_rad: np.ndarray, cmd_rad_s: np.ndarray, *, gain_removed: bool = False) -> np.ndarray:
         """The wave's drift (rad/s of measured wave angle) these parameters predict at measured angle
@@ -241,6 +245,15 @@ class AngleErrorModel:
     bounded_var_deg2: float
     tau_c_s: float
     worst_rel_misfit: float
+    #: one-sided 95 % upper bound on arw2_deg2_s: D(L) >= N^2 L at every lag (the bounded term is
+    #: >= 0), each lag's D(L) taken at its chi-square bound, Bonferroni over the lags (NaN: not fitted)
+    arw2_upper_deg2_s: float = math.nan
+
+    def arw_deg_rth(self) -> tuple[float, tuple[float, float]]:
+        """The angle random walk N (deg/sqrt(h)) and its one-sided 95 % interval [0, upper]: the
+        bounded angle error can take up any share of D(L), so the data bound N from above only."""
+        n = math.sqrt(self.arw2_deg2_s) * 60.0
+        return n, (0.0, max(n, math.sqrt(self.arw2_upper_deg2_s) * 60.0))
 
     def increment_var_deg2(self, lag_s: np.ndarray | float) -> np.ndarray:
         lag = np.asarray(lag_s, dtype=float)
@@ -290,4 +303,15 @@ def fit_angle_error(angle_deg: np.ndarray, sample_s: float, min_lag_s: float = 1
             best = AngleErrorModel(float(coef[0]), float(coef[1]), float(tau_c), 0.0)
     assert best is not None
     misfit = float(np.max(np.abs(best.increment_var_deg2(lags) / d - 1.0)))
-    return AngleErrorModel(best.arw2_deg2_s, best.bounded_var_deg2, best.tau_c_s, misfit)
+    return AngleErrorModel(best.arw2_deg2_s, best.bounded_var_deg2, best.tau_c_s, misfit,
+                           arw2_upper_bound(d, lags, t_rec))
+
+
+def arw2_upper_bound(d_deg2: np.ndarray, lags_s: np.ndarray, t_rec_s: float, level: float = 0.95) -> float:
+    """One-sided upper bound on N^2 (deg^2/s) from the increment variances: N^2 <= D(L) / L at every
+    lag; D(L) from T/L independent increments is chi-square with that many degrees of freedom, so
+    each lag bounds N^2 by D(L) (T/L) / chi2_{alpha/n}(T/L) / L; the least bound, with the level
+    split over the n lags (Bonferroni), holds at `level` or more."""
+    alpha = (1.0 - level) / len(lags_s)
+    dof = np.maximum(1.0, np.floor(t_rec_s / lags_s))
+    return float(np.min(d_deg2 * dof / stats.chi2.ppf(alpha, dof) / lags_s))

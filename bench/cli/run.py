@@ -35,6 +35,8 @@ def add_parser(sub) -> None:
     run.add_argument("--runs-dir", default=None, help="directory of the raw HDF5 files (default: station's)")
     run.add_argument("--operator", default="")
     run.add_argument("--dut", action="append", default=[], metavar="SERIAL", help="serial of a gyro under test")
+    run.add_argument("--limits", default=None, metavar="FILE",
+                     help="the lab's limits (the line's limits format, ILAC G8 rules): a verdict per measurement")
     run.add_argument("--report", action="store_true", help="also write the run's HTML report and print its path")
     run.add_argument("--pdf", action="store_true", help="with --report: the report as a PDF too")
     run.set_defaults(func=cmd)
@@ -63,12 +65,16 @@ def cmd(args: argparse.Namespace) -> int:
     from bench.devices import StationError
     from bench.engine import ParamError, Runner, check_station
     from bench.fault_kinds import parse_fault
+    from bench.line import LineError
     from procedures import ProcedureNotFound, find_procedure
+
+    from .record_table import apply_limits, load_lab_limits, print_record
 
     try:
         proc_cls = find_procedure(args.procedure)
         params = _parse_sets(args.set)
         proc = proc_cls(params)  # parameters are checked here, before any device exists
+        lab_limits = load_lab_limits(args.limits)  # a bad limits file is said before anything moves
         overrides: dict[str, Any] = {}
         if args.seed is not None:
             overrides["seed"] = args.seed
@@ -89,7 +95,7 @@ def cmd(args: argparse.Namespace) -> int:
         check_station(proc, station)  # the kind of gyro and the station's limits, before anything opens
         if faults and not isinstance(station, SimStation):
             raise StationError(f"--fault needs a simulated station; {args.station!r} is real")
-    except (ProcedureNotFound, ParamError, StationError, ValueError) as exc:
+    except (ProcedureNotFound, ParamError, StationError, ValueError, LineError) as exc:
         _err(str(exc))
         return EXIT_USAGE
     _check_runs_dir(args.runs_dir or station.runs_dir)
@@ -132,6 +138,7 @@ def cmd(args: argparse.Namespace) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     js = rec.as_json()
+    apply_limits(js, lab_limits, {m.name for m in proc_cls.measurements})  # and the truths outside, flagged
     report = None
     if args.report and js.get("raw_file"):  # beside the raw file, same name with .html (and .pdf)
         report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if not rec.store_error else None,
@@ -139,7 +146,7 @@ def cmd(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(js))
     else:
-        _print_record(js)
+        print_record(js)
         for path in report or []:
             print(f"  report {path}")
     sys.stdout.flush()
@@ -147,29 +154,5 @@ def cmd(args: argparse.Namespace) -> int:
     if rec.store_error:  # the run's record is not in the store (it is in the spool): not a clean exit
         _err(rec.store_error)
         return EXIT_BAD_OUTCOME
-    return EXIT_BAD_OUTCOME if rec.outcome in BAD_OUTCOMES else EXIT_OK
-
-
-def _print_record(js: dict[str, Any]) -> None:
-    from procedures import measurement_truth
-
-    print(f"run {js['run_id']}  {js['procedure']}  {js['outcome']}  ({js['end_reason']})")
-    truth = measurement_truth(js.get("procedure"), js.get("truth"))  # by declaration
-    def num(x: Any) -> str:  # as_json gives None for NaN/inf and for an open side of the limits
-        return "-" if x is None else f"{x:.6g}"
-
-    rows = [("measurement", "value", "unit", "95% interval", "limits", "outcome", "truth" if truth else "")]
-    for name, m in js["measurements"].items():
-        ci = "" if m["ci95"] is None else f"[{num(m['ci95'][0])}, {num(m['ci95'][1])}]"
-        lim = "" if m["limits"] is None else "[" + ", ".join(num(x) for x in m["limits"]) + "]"
-        t = num(truth[name]) if name in truth else ""
-        rows.append((name, num(m["value"]), m["unit"], ci, lim, m["outcome"], t))
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    for r in rows:
-        print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())
-    print(
-        f"  safe state {'confirmed' if js['safe_state'] else 'NOT CONFIRMED'}; "
-        f"{js['simulated_s']:.3f} s bench time, {js['wall_s']:.2f} s wall"
-        + (f" ({js['speed_achieved']:.3g}x real time)" if js.get("speed_achieved") else "")
-        + f"; raw {js['raw_file']}"
-    )
+    lab_outcome = (js.get("limits") or {}).get("outcome")
+    return EXIT_BAD_OUTCOME if rec.outcome in BAD_OUTCOMES or lab_outcome in BAD_OUTCOMES else EXIT_OK

@@ -123,6 +123,8 @@ class Measurement:
     limits: Limits | tuple | Callable[[Any], Any] | None = None
     when: Callable[[Any], bool] | None = None
     when_doc: str = ""  # the condition in words, for `gyrobench list` and the docs' reference
+    period: float | None = None  # a periodic quantity (an axis angle: 90 deg): truth compared modulo it
+    no_interval: str = ""  # why the value comes without a 95 % interval (shown where the interval would be)
 
     def applies(self, proc: Any) -> bool:
         """Whether the run measures it (its condition, on the procedure's parameters and state)."""
@@ -163,6 +165,8 @@ class Measurement:
             "doc": self.doc,
             "truth": self.truth if isinstance(self.truth, str) or self.truth is None else "(computed)",
             "condition": self.when_doc or ("" if self.when is None else "(conditional)"),
+            **({"period": self.period} if self.period is not None else {}),
+            **({"no_interval": self.no_interval} if self.no_interval else {}),
         }
 
 

@@ -215,6 +215,17 @@ class Procedure:
                 out[spec.name] = value
         return out
 
+    @classmethod
+    def truth_periods(cls) -> dict[str, float]:
+        """The period of each declared periodic measurement (an axis angle's 90 deg), by name: a
+        truth is compared with its image nearest the value."""
+        return {spec.name: spec.period for spec in cls.measurements if spec.period is not None}
+
+    @classmethod
+    def no_interval_reasons(cls) -> dict[str, str]:
+        """Why each declared measurement that comes without an interval does, by name."""
+        return {spec.name: spec.no_interval for spec in cls.measurements if spec.no_interval}
+
     # --- analysis hook ---------------------------------------------------------------------
     def analysis(self, data: Any) -> list[Result]:
         """Estimate the measurements from recorded data; override to support `analyze`."""

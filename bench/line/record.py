@@ -72,6 +72,27 @@ def judged(name: str, procedure: str, run_id: str | None, m: dict[str, Any] | No
     return out
 
 
+def judge_measurements(procedure: str, run_id: str | None, measurements: dict[str, dict[str, Any]],
+                       limits: list[Limit], truth: dict[str, float] | None = None,
+                       aborted: str | None = None) -> list[dict[str, Any]]:
+    """A run's measurements (its `as_json()["measurements"]`) judged against the limits that apply
+    to it, one entry each (`judged`): the measured ones in the run's order (a NOT_MEASURED one only
+    when a limit names it), then each limit the run never reported.  The one path both the line's
+    steps and `gyrobench run --limits` take."""
+    by_name = {lim.name: lim for lim in limits}
+    truth = truth or {}
+    out = []
+    for name, m in measurements.items():
+        lim = by_name.get(name)
+        if lim is None and m.get("outcome") == "NOT_MEASURED":
+            continue
+        out.append(judged(name, procedure, run_id, m, lim, truth.get(name), aborted=aborted))
+    for lim in limits:
+        if lim.name not in measurements:
+            out.append(judged(lim.name, procedure, run_id, None, lim, aborted=aborted))
+    return out
+
+
 def now_iso() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat()
 

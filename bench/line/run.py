@@ -12,7 +12,16 @@ from typing import Any
 
 from . import LineError
 from .limits import ProductLimits
-from .record import SCHEMA_VERSION, judged, now_iso, record_path, sha256_of, summary, write_new_record
+from .record import (
+    SCHEMA_VERSION,
+    judge_measurements,
+    judged,
+    now_iso,
+    record_path,
+    sha256_of,
+    summary,
+    write_new_record,
+)
 from .sequence import Sequence
 from .verdict import ABORTED, ERROR, FAIL, SKIPPED, worst
 
@@ -139,22 +148,11 @@ def judge_run(cls: Any, step: Any, rec: Any, step_limits: list, t0: str, runs: l
                  "raw_file": rec.raw_file, "sha256": sha256_of(rec.raw_file), "started_at": t0,
                  "ended_at": now_iso(), "simulated_s": float(rec.simulated_s), "wall_s": float(rec.wall_s),
                  "params": _plain(rec.params), "store_error": rec.store_error})
-    by_name = {lim.name: lim for lim in step_limits}
-    step_outcomes = []
     aborted = rec.end_reason if rec.outcome == ABORTED else None  # its unreached limits: SKIPPED
-    for name, m in js["measurements"].items():
-        lim = by_name.get(name)
-        if lim is None and m.get("outcome") == "NOT_MEASURED":
-            continue
-        entry = judged(name, cls.name, rec.run_id, m, lim, truth.get(name), aborted=aborted)
-        measurements.append(entry)
-        step_outcomes.append(entry["outcome"])
-    for lim in step_limits:
-        matched.add((lim.name, lim.procedure))
-        if lim.name not in js["measurements"]:
-            entry = judged(lim.name, cls.name, rec.run_id, None, lim, aborted=aborted)
-            measurements.append(entry)
-            step_outcomes.append(entry["outcome"])
+    entries = judge_measurements(cls.name, rec.run_id, js["measurements"], step_limits, truth, aborted)
+    measurements.extend(entries)
+    step_outcomes = [e["outcome"] for e in entries]
+    matched.update((lim.name, lim.procedure) for lim in step_limits)
     if rec.outcome in (ERROR, ABORTED):
         step_outcomes.append(rec.outcome)
     return step_outcomes

@@ -9,7 +9,17 @@ from pathlib import Path
 from typing import Any
 
 from bench.figures import ReportFigure, generic_figures
-from bench.numbers import DASH, error_in_intervals, limits, plain, pretty_unit, sig, truth_text, with_interval
+from bench.numbers import (
+    DASH,
+    error_in_intervals,
+    limits,
+    plain,
+    pretty_unit,
+    sig,
+    truth_outside,
+    truth_text,
+    with_interval,
+)
 from bench.pdf import require_weasyprint, write_pdf
 
 TEMPLATES = Path(__file__).with_name("templates")
@@ -56,10 +66,13 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, str]]:
-    from procedures import measurement_truth
+def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, Any]]:
+    from procedures import measurement_periods, measurement_truth, no_interval_reasons
 
     truth = measurement_truth(data.attrs.get("procedure"), data.truth)  # by declaration, not by matching names
+    periods = measurement_periods(data.attrs.get("procedure"))  # an axis angle's truth: its nearest image
+    lab = (data.attrs.get("lab_limits") or {}).get("measurements", {})  # `gyrobench run --limits`' verdicts
+    why_not = no_interval_reasons(data.attrs.get("procedure"))  # a value without an interval says why
     incomplete = data.incomplete
     found: dict[str, dict[str, Any]] = {}
     for m in data.measurements():
@@ -75,14 +88,34 @@ def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, s
     for name, m in found.items():
         ci = m.get("ci95")
         value, interval = with_interval(m.get("value"), ci)
-        t = truth.get(m.get("base", name))
+        base = m.get("base", name)
+        t, period = truth.get(base), periods.get(base)
+        verdict = lab.get(name) if m.get("source") == "run" else None
+        outcome, lims = _row_outcome(m, verdict)
+        why = why_not.get(base, "") if interval == DASH and m.get("outcome") != "NOT_MEASURED" else ""
         out.append({
-            "name": name, "value": value, "interval": interval, "unit": pretty_unit(m.get("unit") or "1"),
-            "limits": limits(m.get("low"), m.get("high")), "outcome": m.get("outcome") or DASH,
+            "name": name, "value": value, "interval": interval, "why": why, "unit": pretty_unit(m.get("unit") or "1"),
+            "limits": lims, "outcome": outcome, "outcome_class": outcome.split(" ")[0],
             "truth": truth_text(t, ci) if t is not None else DASH,
-            "error": error_in_intervals(m.get("value"), t, ci) if t is not None else DASH,
+            "error": error_in_intervals(m.get("value"), t, ci, period) if t is not None else DASH,
+            "outside": bool(t is not None and truth_outside(m.get("value"), t, ci, period)),
+            "compared": t is not None and truth_outside(m.get("value"), t, ci, period) is not None,
         })
     return out
+
+
+def _row_outcome(m: dict[str, Any], verdict: dict[str, Any] | None) -> tuple[str, str]:
+    """(outcome, limits) of one row, its own status: the lab's verdict when a limit names it
+    (MARGINAL: ILAC G8's conditional outcome), the procedure's own limits' outcome, else
+    'measured' or NOT_MEASURED; never the run's outcome."""
+    if verdict is not None:
+        lim = verdict.get("limits") or {}
+        outcome = verdict["outcome"] + (" (conditional)" if verdict["outcome"] == "MARGINAL" else "")
+        return outcome, f"{limits(lim.get('low'), lim.get('high'))} ({verdict.get('rule')})"
+    outcome = m.get("outcome") or DASH
+    if outcome == "COMPLETE":  # no limit judged it: measured, nothing more
+        outcome = "measured"
+    return outcome, limits(m.get("low"), m.get("high"))
 
 
 def _identity(data: Any, proc: Any) -> list[tuple[str, str]]:
@@ -122,6 +155,9 @@ def context(data: Any, row: dict[str, Any] | None = None,
     rows = _measurement_rows(data, row)
     # the truth columns on a simulated station, when a measurement has a truth to compare with
     truth_shown = bool(a.get("simulated") and data.truth and any(r["truth"] != DASH for r in rows))
+    compared = [r for r in rows if r["compared"]]
+    lab = a.get("lab_limits")
+    judged_any = bool(lab) or any(r["outcome"] in ("PASS", "FAIL", "MARGINAL") for r in rows)
     return {
         "run_id": a.get("run_id", data.path.stem),
         "procedure": a.get("procedure", ""),
@@ -133,6 +169,10 @@ def context(data: Any, row: dict[str, Any] | None = None,
         "params": _param_rows(data, proc),
         "measurements": rows,
         "truth_shown": truth_shown,
+        # "7 of 16 truths outside their 95 % intervals", on a simulated station
+        "truth_outside": (sum(r["outside"] for r in compared), len(compared)) if truth_shown and compared else None,
+        "lab_limits": lab or None,
+        "no_limits": not judged_any,
         "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key, "table": f.table} for f in figs],
         "notes": notes + list(getattr(data, "notes", [])),
         "log": _log_rows(data),

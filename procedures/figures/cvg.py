@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.analysis.cvg_rate import level_means
 from bench.figures import ReportFigure, new_figure
 
 
@@ -25,14 +26,25 @@ def scale_factor_figures(proc: Any, data: Any) -> list[ReportFigure]:
     top.set_ylabel("output (deg/s)")
     top.legend(loc="best")
     half = len(fit.rate_dps) // 2
-    bottom.plot(fit.rate_dps[:half], fit.residual_ppm[:half], "^-", color="C0", markersize=4, label="rising")
-    bottom.plot(fit.rate_dps[half:], fit.residual_ppm[half:], "v-", color="C1", markersize=4, label="falling")
+    # the nonlinearity is the largest |mean of the up and down residuals at one rate|: those means
+    # are the points drawn large; the single windows (rising, falling) faint beside them
+    levels, level_ppm, _counts, _inv = level_means(fit.rate_dps, fit.residual_ppm)
+    worst = int(np.argmax(np.abs(level_ppm)))
+    bottom.plot(fit.rate_dps[:half], fit.residual_ppm[:half], "^", color="C0", markersize=3, alpha=0.45,
+                label="rising (single window)")
+    bottom.plot(fit.rate_dps[half:], fit.residual_ppm[half:], "v", color="C1", markersize=3, alpha=0.45,
+                label="falling (single window)")
+    bottom.plot(levels, level_ppm, "o-", color="k", markersize=4.5, label="up/down mean (nonlinearity)")
+    bottom.plot([levels[worst]], [level_ppm[worst]], "o", markersize=9, markerfacecolor="none", color="C3",
+                label=f"largest: {abs(level_ppm[worst]):.3g} ppm")
     bottom.axhline(0.0, color="C3", linewidth=0.8)
     bottom.set_ylabel("residual (ppm of FS)")
     bottom.set_xlabel("table rate Ω (deg/s)")
     bottom.legend(loc="best")
-    note = (f"{len(fit.rate_dps)} windows; full scale {fit.full_scale_out:.4g} deg/s; nonlinearity "
-            f"{fit.nonlinearity_ppm:.3g} ppm [{fit.nonlinearity_ppm_ci95[0]:.3g}, {fit.nonlinearity_ppm_ci95[1]:.3g}]; "
+    note = (f"{len(fit.rate_dps)} windows; full scale {fit.full_scale_out:.4g} deg/s; nonlinearity (the largest "
+            "|mean of the up and down residuals| at one rate: the black points, the largest ringed; the single "
+            f"windows faint) {fit.nonlinearity_ppm:.3g} ppm "
+            f"[{fit.nonlinearity_ppm_ci95[0]:.3g}, {fit.nonlinearity_ppm_ci95[1]:.3g}]; "
             f"asymmetry {fit.asymmetry_ppm:.3g} ppm; bias {fit.bias_dph:.3g} deg/h.")
     if fit.drift_terms is not None:
         note += " Whole-angle: the drift with a 90-degree period in the wave's angle is fitted beside the line."

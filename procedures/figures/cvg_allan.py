@@ -39,6 +39,7 @@ def allan_figure(data: Any) -> list[ReportFigure]:
         v, ci = with_interval(m["value"], m.get("ci95"))
         rows.append([sym, f"{v} {unit}", f"{ci} {unit}"])
     ax.set_ylim(max(np.min(lo[lo > 0]) / 2 if np.any(lo > 0) else np.min(adev) / 2, 1e-300), np.max(hi) * 2)
+    _label_every_decade_part(ax)
     ax.set_xlabel("τ (s)")
     ax.set_ylabel("σ(τ) (deg/h)")
     ax.grid(True, which="both", linewidth=0.3, alpha=0.5)
@@ -48,6 +49,16 @@ def allan_figure(data: Any) -> list[ReportFigure]:
                  "slopes through the read-offs: N/√τ, 0.664 B, K√(τ/3).")
     table = (["term", "value", "95 % interval"], rows) if rows else None
     return [ReportFigure("cvg-allan_adev", "Allan deviation of the rate output", fig, " ".join(notes), table)]
+
+
+def _label_every_decade_part(ax: Any) -> None:
+    """y ticks labelled at 1, 2 and 5 of every decade, as plain numbers (0.05, 0.2, 1): a curve
+    within one decade below 1 deg/h (the minimum, the bias-instability line) gets labels there."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    ax.yaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:.6g}"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
 
 
 def figures(proc: Any, data: Any) -> list[ReportFigure]:

@@ -161,8 +161,8 @@ def drift_figure(data: Any) -> list[ReportFigure]:
             continue
         rest = model["rest"]
         rest_words = f"rest rms {_fmt(rest)} {rest.get('unit', '')}" if rest else "rest rms not recorded"
-        top.plot(grid, model["model"](grid), color="C3",
-                 label="reported model: mean + 4θ + 8θ + 12θ")
+        fitted = " + ".join(["mean", *(f"{m}θ" for m in model["terms"])])
+        top.plot(grid, model["model"](grid), color="C3", label=f"fit of the angle record: {fitted}")
         top.text(0.02, 0.03, rest_words, transform=top.transAxes, fontsize=7.5, va="bottom",
                  bbox={"facecolor": "white", "edgecolor": "0.8", "alpha": 0.85, "pad": 2})
         rest_text.append(f"{name}: {rest_words}")
@@ -184,10 +184,13 @@ def drift_figure(data: Any) -> list[ReportFigure]:
                 labels.append(lab)
     fig.legend(handles, labels, loc="outside upper center", ncols=2)
     ratio = measurement(data, "drift_reduction_ratio")
-    note = ("Drift rate per block against the wave angle (folded into one 90° period), referred to the gyro output "
-            "(÷ K). The line is the model the run reported: the mean and the 4θ, 8θ and 12θ harmonics, each "
-            "amplitude · sin m(θ − phase), from the measurements drift_<record>_mean_dph, drift_<record>_<m>theta_dph "
-            "and drift_<record>_<m>theta_phase_deg; beneath, the points minus that model"
+    note = ("The drift is read from the wave-angle record itself: a linear least-squares fit of θ(t) − command·t "
+            "with the mean drift and the harmonics fitted (4θ, 8θ and 12θ, each amplitude · sin m(θ − phase)) "
+            "integrated along the recorded angle; their intervals are that fit's. The line is that model, from the "
+            "measurements drift_<record>_mean_dph, drift_<record>_<m>theta_dph and drift_<record>_<m>theta_phase_deg; "
+            "the points are the drift rate over blocks of drift_block_s of the same record against the wave angle "
+            "(folded into one 90° period), referred to the gyro output (÷ K), for comparison; beneath, the rest: "
+            "the points minus the model (noise and any harmonic not fitted)"
             + (f" ({'; '.join(rest_text)})" if rest_text else "") + ".")
     if ratio:
         note += f" drift_reduction_ratio (4θ before / 4θ after) = {with_interval(ratio['value'], None)[0]}."

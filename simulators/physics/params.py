@@ -12,6 +12,8 @@ from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
+from bench.analysis.axes import axis_deg
+
 TWO_PI = 2.0 * math.pi
 
 
@@ -136,7 +138,8 @@ class ResonatorParams:
     def truth(self) -> dict[str, float]:
         """Ground truth under the names the procedures' measurements use: the physical names of
         the HRG procedures, and the model coefficients, Q and axes (Maslov's alpha = stiffness
-        axis, beta = damping axis, both atan2/4 in (-45, 45] deg) of the identification."""
+        axis, beta = damping axis, both in [0, 90) deg as every procedure reports an axis,
+        bench.analysis.axes) of the identification."""
         th = ((self.theta_tau_deg % 90.0) + 90.0) % 90.0
         c = self.coefficients()
         model = {
@@ -151,8 +154,8 @@ class ResonatorParams:
             "kappa": c.kappa,
             "Q": c.w0_rad_s / c.gamma,
             "split_rad_s": TWO_PI * self.split_hz,
-            "alpha_deg": math.degrees(0.25 * math.atan2(c.h_s, c.h_c)),
-            "beta_deg": math.degrees(0.25 * math.atan2(c.b_s, c.b_c)),
+            "alpha_deg": axis_deg(math.degrees(0.25 * math.atan2(c.h_s, c.h_c))),
+            "beta_deg": axis_deg(math.degrees(0.25 * math.atan2(c.b_s, c.b_c))),
             "zero_rate_dps": math.degrees(c.nu_offset / (4.0 * c.bryan_factor)),
             # the damping drift (D/4) sin 4(theta - th_tau) referred to the gyro output (/K)
             "drift_predicted_dph": rad_s_to_dph(self.delta_inv_tau_per_s / 4.0 / self.bryan_factor),
