@@ -63,9 +63,11 @@ def cmd(args: argparse.Namespace) -> int:
     from bench.devices import StationError
     from bench.engine import ParamError, Runner, check_station
     from bench.fault_kinds import parse_fault
+    from bench.results.limits import check_inputs
     from procedures import ProcedureNotFound, find_procedure
 
     try:
+        check_inputs(args.operator, args.dut)  # what the results store keeps, before anything moves
         proc_cls = find_procedure(args.procedure)
         params = _parse_sets(args.set)
         proc = proc_cls(params)  # parameters are checked here, before any device exists

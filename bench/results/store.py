@@ -217,7 +217,8 @@ class ResultsStore:
         self.open_error: str | None = None
         if upgrade:
             try:
-                self._call(self._ensure_ready, "")
+                then = "then the run goes on and its record goes to the spool" if offline_ok else "then it gives up"
+                self._call(self._ensure_ready, then)
             except StoreError as exc:
                 if not offline_ok:
                     raise
