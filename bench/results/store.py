@@ -241,7 +241,12 @@ class ResultsStore:
             u = make_url(self.url)
         except Exception:  # noqa: BLE001
             return self.display_url
-        return (u.host or "local socket") if self.engine.dialect.name != "sqlite" else str(u.database)
+        if self.engine.dialect.name == "sqlite":
+            return str(u.database)
+        if u.host:
+            return u.host
+        service = u.query.get("service")
+        return f"service {service}" if service else os.environ.get("PGHOST", "local socket")
 
     def _fail(self, exc: BaseException, doing: str = "") -> StoreError:
         return StoreError(f"results store {self.display_url}{doing}: {describe_error(exc)}")
