@@ -62,6 +62,21 @@ class PgServer:
             self.resume()
         self._pg_ctl("-m", "fast", "-w", "-t", "60", "restart")
 
+    def require_password(self, user: str, password: str) -> str:
+        """A role `user` that logs in over TCP with `password` only (scram-sha-256), owning a schema
+        of its name; the URL (without the password) of that schema."""
+        from sqlalchemy import create_engine, text
+
+        hba = self.data_dir / "pg_hba.conf"
+        hba.write_text(f"host all {user} 127.0.0.1/32 scram-sha-256\n" + hba.read_text())
+        admin = create_engine(self.url, isolation_level="AUTOCOMMIT")
+        with admin.connect() as conn:
+            conn.execute(text(f"CREATE ROLE {user} LOGIN PASSWORD '{password}'"))
+            conn.execute(text(f"CREATE SCHEMA {user} AUTHORIZATION {user}"))
+        admin.dispose()
+        self._pg_ctl("reload")
+        return self.url.replace("postgres@", f"{user}@", 1) + f"?options=-csearch_path%3D{user}"
+
     def stop(self) -> None:
         """Stop the server and remove its directory (resumed first if black-holed)."""
         if self.stopped:

@@ -224,3 +224,28 @@ def test_a_database_password_never_lands_in_a_raw_file_or_a_message(url, tmp_pat
     shown = _run(["runs", "--json", "--results", with_pw], tmp_path)
     assert shown.returncode == 0 and secret not in shown.stdout + shown.stderr
     assert os.environ.get("PGPASSWORD") is None or secret not in os.environ["PGPASSWORD"]
+
+
+def test_the_password_from_pgpassword_a_password_file_or_a_service_file(server, tmp_path, monkeypatch):
+    """docs/results_store.md's ways of giving the password, against a server that requires one."""
+    from bench.results import StoreError
+
+    url = server.require_password("bench_pw", "pw-ok-1")
+    for var in ("PGPASSWORD", "PGPASSFILE", "PGSERVICEFILE", "PGSERVICE"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setenv("PGPASSFILE", str(tmp_path / "none"))
+    with pytest.raises(StoreError, match="password"):  # none given: refused, and said so
+        ResultsStore(url, notify=None)
+    monkeypatch.setenv("PGPASSWORD", "pw-ok-1")
+    ResultsStore(url, notify=None).close()
+    monkeypatch.delenv("PGPASSWORD")
+    pgpass = tmp_path / "pgpass"
+    pgpass.write_text(f"127.0.0.1:{server.port}:gyrobench_test:bench_pw:pw-ok-1\n")
+    pgpass.chmod(0o600)
+    monkeypatch.setenv("PGPASSFILE", str(pgpass))
+    ResultsStore(url, notify=None).close()
+    service = tmp_path / "pg_service.conf"
+    service.write_text(f"[gyro-line]\nhost=127.0.0.1\nport={server.port}\ndbname=gyrobench_test\nuser=bench_pw\n")
+    monkeypatch.setenv("PGSERVICEFILE", str(service))
+    store = ResultsStore("postgresql:///?service=gyro-line&options=-csearch_path%3Dbench_pw", notify=None)
+    assert store.revision() == ResultsStore.head() and store.host == "service gyro-line"
