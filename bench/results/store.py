@@ -255,8 +255,7 @@ class ResultsStore:
               retry: bool = True, tell: bool = True) -> T:
         """fn() against the store within the wait: one retry of a lost connection, StoreError
         naming the store when it did not answer or failed (what fn raised when it refused)."""
-        if self.engine.dialect.name != "postgresql":
-            return fn()  # a local file: SQLite's busy_timeout bounds the wait
+        local = self.engine.dialect.name != "postgresql"  # a local file: SQLite's busy_timeout bounds the wait
         budget = DOWN_WAIT_S if self._down else self.wait_s
         t0 = time.monotonic()
 
@@ -278,7 +277,10 @@ class ResultsStore:
                         f"{budget:.0f} s{tail}")
 
         try:
-            out = call_bounded(tries, budget, slow_after_s=SLOW_NOTICE_S if tell else None, on_slow=slow)
+            if local:
+                out = fn()
+            else:
+                out = call_bounded(tries, budget, slow_after_s=SLOW_NOTICE_S if tell else None, on_slow=slow)
         except NoAnswer as exc:
             self._down = True
             raise StoreError(f"results store {self.display_url}: {exc}") from None
