@@ -33,8 +33,15 @@ class PgServer:
     def pids(self) -> list[int]:
         """The postmaster and its children (the backends and helpers) of this server only."""
         pm = int((self.data_dir / "postmaster.pid").read_text().split()[0])
-        kids = subprocess.run(["pgrep", "-P", str(pm)], capture_output=True, text=True).stdout.split()
-        return [pm, *(int(k) for k in kids)]
+        kids = []
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                fields = stat.read_text().rsplit(")", 1)[1].split()
+            except (OSError, IndexError):
+                continue  # a process that ended meanwhile
+            if fields[1] == str(pm):  # its parent process id
+                kids.append(int(stat.parent.name))
+        return [pm, *sorted(kids)]
 
     def black_hole(self) -> None:
         """Stop every process of this server (SIGSTOP): it accepts connections and never answers."""
