@@ -184,3 +184,23 @@ def test_postgresql_without_its_driver_names_the_extra(monkeypatch, capsys):
     assert main(["runs", "--results", "postgresql://bench@db.example/results"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "gyrobench[postgres]" in err and "Traceback" not in err
+
+
+def test_a_late_start_never_hides_a_runs_end(store_url):
+    """A start row that reaches the store after the run's final record (a server that hung, then
+    answered) leaves the final record as it is."""
+    store = ResultsStore(store_url)
+    rec = _record("20260101-000000-ffffff")
+    store.save_doc(ResultsStore.record_doc(rec))
+    store.save_doc(ResultsStore.record_doc(rec, outcome=RUNNING))
+    assert store.get_run(rec.run_id)["outcome"] == "PASS"
+
+
+def test_passwords_are_masked_in_urls_and_connection_strings():
+    from bench.results.redact import redact, redact_text
+
+    assert redact_text("postgresql+psycopg://bench:p@ss:wd@db.lab:5432/r") == "postgresql+psycopg://bench:***@db.lab:5432/r"
+    assert redact_text("host=db password='a b' user=x") == "host=db password=*** user=x"
+    assert redact_text("postgresql://bench@db.lab/r?sslmode=require") == "postgresql://bench@db.lab/r?sslmode=require"
+    assert redact({"keys": {"results": "postgresql://u:pw@h/db"}, "n": 3}) == {"keys": {"results": "postgresql://u:***@h/db"},
+                                                                           "n": 3}

@@ -402,6 +402,10 @@ class ResultsStore:
         check_doc(doc)
         with self.engine.begin() as conn:
             self._lock_run(conn, doc["run"]["run_id"])
+            if doc["run"]["outcome"] == RUNNING:  # a start that reached the store late never hides the end
+                have = conn.execute(select(runs.c.outcome).where(runs.c.run_id == doc["run"]["run_id"])).scalar()
+                if have not in (None, RUNNING, INTERRUPTED):
+                    return
             if server_clock and self.engine.dialect.name == "postgresql":
                 doc["run"]["heartbeat_at"] = conn.execute(text(PG_NOW_ISO)).scalar_one()
             self._replace(conn, doc)
