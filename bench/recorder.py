@@ -43,6 +43,7 @@ import numpy as np
 from bench.engine import events as ev
 from bench.engine.context import RunAborted
 from bench.engine.recording import PAUSE_LEVEL
+from bench.results.redact import redact
 from bench.streams import StreamSchema, schema_of, unit_from_name
 
 CHUNK_ROWS = 4096
@@ -120,7 +121,7 @@ class Recorder:
             self._f.create_group("fits")
             self._log = self._text_dataset("log")
             self._meas = self._text_dataset("measurements")
-            for key, value in (attrs or {}).items():
+            for key, value in redact(attrs or {}).items():  # a store URL's password never lands in the file
                 self._f.attrs[key] = value if isinstance(value, (str, int, float, bool)) else _json(value)
             self._write_parameters(dict((attrs or {}).get("params") or {}), param_units or {})
             self._f.flush()

@@ -38,7 +38,7 @@ def _record(run_id: str, started: str, outcome: str = "PASS", duts=(), seed: int
 
 def test_migrated_schema_matches_declared_tables(store_url):
     store = ResultsStore(store_url)
-    assert store.revision() == ResultsStore.head() == "0003"
+    assert store.revision() == ResultsStore.head() == "0004"
     insp = inspect(store.engine)
     for table in metadata.sorted_tables:
         cols = {c["name"] for c in insp.get_columns(table.name)}

@@ -16,7 +16,7 @@ import pytest
 from bench.engine import Result, RunRecord
 from bench.engine.measurement import INTERRUPTED, RUNNING
 from bench.results import ResultsStore, StoreError
-from bench.results.liveness import age_s, host_name
+from bench.results.liveness import age_s, host_name, new_token
 from bench.results.spool import Spool
 
 DOWN_PG = "postgresql+psycopg://postgres@127.0.0.1:1/nowhere"  # nothing listens on port 1
@@ -40,8 +40,14 @@ def _record(run_id: str, outcome: str = "PASS") -> RunRecord:
     )
 
 
-def _running_doc(run_id: str, *, host: str, pid: int, beat_age_s: float) -> dict:
-    doc = ResultsStore.record_doc(_record(run_id), outcome=RUNNING)
+OTHER_BOOT = "0b0e0f00-0000-4000-8000-000000000000"  # another PC's (or an earlier boot's) boot id
+
+
+def _running_doc(run_id: str, *, host: str, pid: int, beat_age_s: float, here: bool | None = None) -> dict:
+    """A RUNNING document; its token of this boot when `here` (default: host is this host's name)."""
+    here = host == host_name() if here is None else here
+    token = new_token(pid) if here else f"{OTHER_BOOT}/{pid}/1234/abcdef012345"
+    doc = ResultsStore.record_doc(_record(run_id), outcome=RUNNING, token=token)
     beat = _dt.datetime.now(_dt.UTC) - _dt.timedelta(seconds=beat_age_s)
     doc["run"].update(host=host, pid=pid, heartbeat_at=beat.isoformat())
     return doc
@@ -178,3 +184,23 @@ def test_postgresql_without_its_driver_names_the_extra(monkeypatch, capsys):
     assert main(["runs", "--results", "postgresql://bench@db.example/results"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "gyrobench[postgres]" in err and "Traceback" not in err
+
+
+def test_a_late_start_never_hides_a_runs_end(store_url):
+    """A start row that reaches the store after the run's final record (a server that hung, then
+    answered) leaves the final record as it is."""
+    store = ResultsStore(store_url)
+    rec = _record("20260101-000000-ffffff")
+    store.save_doc(ResultsStore.record_doc(rec))
+    store.save_doc(ResultsStore.record_doc(rec, outcome=RUNNING))
+    assert store.get_run(rec.run_id)["outcome"] == "PASS"
+
+
+def test_passwords_are_masked_in_urls_and_connection_strings():
+    from bench.results.redact import redact, redact_text
+
+    assert redact_text("postgresql+psycopg://bench:p@ss:wd@db.lab:5432/r") == "postgresql+psycopg://bench:***@db.lab:5432/r"
+    assert redact_text("host=db password='a b' user=x") == "host=db password=*** user=x"
+    assert redact_text("postgresql://bench@db.lab/r?sslmode=require") == "postgresql://bench@db.lab/r?sslmode=require"
+    assert redact({"keys": {"results": "postgresql://u:pw@h/db"}, "n": 3}) == {"keys": {"results": "postgresql://u:***@h/db"},
+                                                                           "n": 3}

@@ -33,7 +33,10 @@ def _store(url: str | None, **kw: Any):
     except StoreError as exc:
         raise CliError(str(exc), 1) from exc
     except Exception as exc:  # noqa: BLE001 - OSError, SQLAlchemy's errors, a missing driver: one line
-        raise CliError(f"results store {url or 'runs/results.sqlite'}: cannot be opened: {_reason(exc)}", 1) from exc
+        from bench.results.redact import redact_text
+
+        where = redact_text(str(url or "runs/results.sqlite"))
+        raise CliError(f"results store {where}: cannot be opened: {redact_text(_reason(exc))}", 1) from exc
 
 
 def _reason(exc: BaseException) -> str:

@@ -66,11 +66,13 @@ def cmd(args: argparse.Namespace) -> int:
     from bench.engine import ParamError, Runner, check_station
     from bench.fault_kinds import parse_fault
     from bench.line import LineError
+    from bench.results.limits import check_inputs
     from procedures import ProcedureNotFound, find_procedure
 
     from .record_table import apply_limits, load_lab_limits, print_record
 
     try:
+        check_inputs(args.operator, args.dut)  # what the results store keeps, before anything moves
         proc_cls = find_procedure(args.procedure)
         params = _parse_sets(args.set)
         proc = proc_cls(params)  # parameters are checked here, before any device exists

@@ -33,6 +33,7 @@ def cmd_runs(args: argparse.Namespace) -> int:
     from bench.results import StoreError
 
     spool = Path(args.runs_dir) / "spool"
+    problems: list[str] = []
     try:
         store = _store(args.results, spool_dir=spool)
         if args.sync:
@@ -40,17 +41,19 @@ def cmd_runs(args: argparse.Namespace) -> int:
             for problem in problems:
                 _err(problem)
             print(f"submitted {len(submitted)} spooled run(s) from {spool}", file=sys.stderr)
-            if problems:
-                return EXIT_BAD_OUTCOME
         elif store.spool.pending():
             _err(f"{len(store.spool.pending())} run(s) wait in {spool}; `gyrobench runs --sync` submits them")
+        if store.spool.quarantined():  # refused by the store: a person decides (see each .reason)
+            _err(f"{len(store.spool.quarantined())} refused record(s) wait in {store.spool.quarantine_dir}, each "
+                 "with a .reason file beside it")
         rows = store.list_runs(limit=args.limit, procedure=args.procedure)
     except StoreError as exc:
         _err(str(exc))
         return EXIT_BAD_OUTCOME
+    code = EXIT_BAD_OUTCOME if problems else EXIT_OK  # a record refused or left in the spool: not clean
     if args.json:
         print(json.dumps(rows, default=str))
-        return EXIT_OK
+        return code
     for r in rows:
         safe = "-" if r["outcome"] == "RUNNING" else "safe" if r["safe_state"] else "UNSAFE"
         where = f"on {r['host']}, process {r['pid']}" if r["outcome"] == "RUNNING" else r["end_reason"]
@@ -58,7 +61,7 @@ def cmd_runs(args: argparse.Namespace) -> int:
             f"{r['run_id']}  {r['started_at'][:19]}  {r['station_id']:<10} {r['procedure']:<18} {r['outcome']:<11} "
             f"{safe:<6}  {where}"
         )
-    return EXIT_OK
+    return code
 
 
 def cmd_show(args: argparse.Namespace) -> int:

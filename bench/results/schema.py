@@ -48,6 +48,7 @@ runs = Table(
     Column("host", String(255)),
     Column("pid", Integer),
     Column("heartbeat_at", String(40)),
+    Column("run_token", String(128)),  # migration 0004: boot id/pid/start/random (liveness.new_token)
     Index("ix_runs_started_at", "started_at"),
     Index("ix_runs_station_id", "station_id"),
     Index("ix_runs_procedure", "procedure"),

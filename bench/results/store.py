@@ -4,10 +4,16 @@
 `postgresql+psycopg://user@host/db` on a production line) or a plain file path, and brings
 the schema to the newest migration on open (under a lock: see `locks.py`).
 
-A run's row is written when it starts (`begin_run`: outcome RUNNING, host, process id and a
-heartbeat kept fresh by a daemon thread) and replaced when it ends (`finish_run`).  A RUNNING
-row whose run is gone (`liveness.is_interrupted`) becomes INTERRUPTED when the store is listed.
-A record the store cannot take is kept in a spool (`spool.py`) and submitted by `sync`.
+A run's row is written when it starts (`begin_run`: outcome RUNNING, a run token and a heartbeat
+on the store's clock kept fresh by a daemon thread) and replaced when it ends (`finish_run`).  A
+RUNNING row whose run is gone (`liveness.is_interrupted`) becomes INTERRUPTED when the store is
+listed; a live run's next heartbeat restores it.  A record the store cannot take is kept in a
+spool (`spool.py`) and submitted by `sync`; one it refuses is quarantined with its reason.
+
+On PostgreSQL every write of a run waits a bounded time (`wait_s`): connect and statement
+timeouts, a pre-ping of pooled connections, one retry of a lost connection, and a bound of the
+caller's own (`deadline.py`) for a server that accepts and never answers; a user waiting is told
+so after `SLOW_NOTICE_S`.  Then the record goes to the spool.
 """
 
 from __future__ import annotations
@@ -15,28 +21,62 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
+import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from sqlalchemy import create_engine, delete, event, insert, select, text, update
-from sqlalchemy.engine import Engine, make_url
-from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy import create_engine, delete, event, insert, literal_column, select, text, update
+from sqlalchemy.engine import Connection, Engine, make_url
+from sqlalchemy.exc import (
+    DataError,
+    DBAPIError,
+    IntegrityError,
+    InterfaceError,
+    OperationalError,
+    SQLAlchemyError,
+    StatementError,
+)
 
 from bench.engine.measurement import INTERRUPTED, RUNNING
 
-from .liveness import HEARTBEAT_S, Heartbeat, host_name, is_interrupted, now_iso, process_alive
+from .deadline import NoAnswer, call_bounded
+from .limits import RecordRefused, check_doc
+from .liveness import (
+    HEARTBEAT_S,
+    Heartbeat,
+    host_name,
+    is_interrupted,
+    new_token,
+    now_iso,
+    process_alive,
+    token_alive_here,
+)
 from .locks import migrating_connection, sqlite_file
+from .redact import redact_text
 from .schema import measurements, run_duts, runs, truth
 from .spool import Spool
+
+T = TypeVar("T")
 
 DEFAULT_PATH = Path("runs") / "results.sqlite"
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 POSTGRES_EXTRA = "pip install 'gyrobench[postgres]'"
-PG_NOW_ISO = """SELECT to_char(clock_timestamp() AT TIME ZONE 'UTC', 'YYYY-MM-DD"T"HH24:MI:SS.US"+00:00"')"""
+PG_NOW_SQL = """to_char(clock_timestamp() AT TIME ZONE 'UTC', 'YYYY-MM-DD"T"HH24:MI:SS.US"+00:00"')"""
+PG_NOW_ISO = f"SELECT {PG_NOW_SQL}"
+# pg_advisory_xact_lock(RUN_LOCK_SPACE, hashtext(run_id)): one writer of a run's rows at a time
+RUN_LOCK_SPACE = 0x67796231
+
+CONNECT_TIMEOUT_S = 5  # a server that accepts and never answers the start-up: given up after this
+WAIT_S = 10.0  # the longest one write of a run waits for the store (both tries), then it spools
+DOWN_WAIT_S = 3.0  # once the store has not answered in this process: one short try, then the spool
+SLOW_NOTICE_S = 2.0  # a user waiting this long on the store is told why
+RETRY_PAUSE_S = 0.5  # before the one retry of a lost connection (a server restarting)
 
 
 class StoreError(Exception):
@@ -65,10 +105,37 @@ def to_url(url_or_path: str | Path | None) -> str:
 
 
 def describe_error(exc: BaseException) -> str:
-    """The first line of what the database said (no SQL, no traceback)."""
+    """The first line of what the database said (no SQL, no traceback, no password)."""
     inner = getattr(exc, "orig", None) or exc
     lines = [ln.strip() for ln in str(inner).splitlines() if ln.strip()]
-    return lines[0] if lines else type(inner).__name__
+    return redact_text(lines[0]) if lines else type(inner).__name__
+
+
+def is_refusal(exc: BaseException) -> bool:
+    """The store refuses this record (and always will): not a store that is down."""
+    if isinstance(exc, RecordRefused | DataError | IntegrityError):
+        return True
+    return isinstance(exc, StatementError) and not isinstance(exc, DBAPIError)  # a value it cannot bind
+
+
+def _is_lost_connection(exc: BaseException) -> bool:
+    """A connection that failed or was lost (worth one retry), not a refusal."""
+    if isinstance(exc, DBAPIError) and exc.connection_invalidated:
+        return True
+    return isinstance(exc, OperationalError | InterfaceError)
+
+
+def _postgres_connect_args(url: str, connect_timeout_s: float, statement_timeout_s: float) -> dict[str, Any]:
+    """psycopg's connect_timeout and the server's statement_timeout, unless the URL sets them."""
+    query = make_url(url).query
+    args: dict[str, Any] = {}
+    if "connect_timeout" not in query:
+        args["connect_timeout"] = max(2, int(math.ceil(connect_timeout_s)))  # libpq's least is 2 s
+    options = query.get("options", "")
+    options = " ".join(options) if isinstance(options, tuple) else options
+    if "statement_timeout" not in options:
+        args["options"] = f"{options} -c statement_timeout={int(statement_timeout_s * 1000)}".strip()
+    return args
 
 
 def _f(x: Any) -> float | None:
@@ -89,18 +156,24 @@ def _interrupted(row: dict[str, Any]) -> dict[str, Any]:
     beat = (row.get("heartbeat_at") or "")[:19] or "never"
     return {
         "outcome": INTERRUPTED,
-        "end_reason": f"interrupted: the run ended without a record (host {row.get('host')}, process "
+        "end_reason": f"interrupted: no sign of the run (host {row.get('host')}, process "
         f"{row.get('pid')}, last heartbeat {beat})",
         "finished_at": row.get("heartbeat_at"),
         "safe_state": False,
     }
 
 
+def _stderr(message: str) -> None:
+    print(f"gyrobench: {message}", file=sys.stderr, flush=True)
+
+
 class ResultsStore:
     """Indexes runs and their measurements; the same code for SQLite and PostgreSQL.
 
     `offline_ok=True` lets a store that cannot be reached now be opened anyway (writes then fail,
-    and `begin_run` / `finish_run` spool); otherwise opening raises StoreError."""
+    and `begin_run` / `finish_run` spool); otherwise opening raises StoreError.  `wait_s` bounds
+    each write's wait on PostgreSQL; `notify` gets the one line telling a waiting user why (stderr
+    by default)."""
 
     def __init__(
         self,
@@ -109,10 +182,24 @@ class ResultsStore:
         upgrade: bool = True,
         offline_ok: bool = False,
         spool_dir: str | Path | None = None,
+        wait_s: float = WAIT_S,
+        connect_timeout_s: float = CONNECT_TIMEOUT_S,
+        notify: Callable[[str], None] | None = _stderr,
     ) -> None:
         self.url = to_url(url)
+        self.wait_s = wait_s
+        self.notify = notify
+        self._down = False  # the store did not answer in this process (cleared by an answer)
+        self._told = False  # the waiting user was told (once while the store stays down)
+        kw: dict[str, Any] = {}
+        if self.url.startswith("postgres"):
+            kw = {
+                "pool_pre_ping": True,  # a pooled connection the server dropped (a restart) is replaced
+                "pool_timeout": wait_s,
+                "connect_args": _postgres_connect_args(self.url, connect_timeout_s, wait_s),
+            }
         try:
-            self.engine: Engine = create_engine(self.url)
+            self.engine: Engine = create_engine(self.url, **kw)
         except ImportError as exc:  # the dialect's driver is not installed
             name = getattr(exc, "name", None) or describe_error(exc)
             hint = f"; {POSTGRES_EXTRA}" if self.url.startswith("postgres") else ""
@@ -124,12 +211,14 @@ class ResultsStore:
             spool_dir = (db.parent if db is not None else DEFAULT_PATH.parent) / "spool"
         self.spool = Spool(spool_dir)
         self._beats: dict[str, Heartbeat] = {}
+        self._tokens: dict[str, str] = {}
         self.heartbeat_s = HEARTBEAT_S
         self._ready = not upgrade
         self.open_error: str | None = None
         if upgrade:
             try:
-                self._ensure_ready()
+                then = "then the run goes on and its record goes to the spool" if offline_ok else "then it gives up"
+                self._call(self._ensure_ready, then)
             except StoreError as exc:
                 if not offline_ok:
                     raise
@@ -142,11 +231,69 @@ class ResultsStore:
         """The URL without its password, for messages."""
         try:
             return make_url(self.url).render_as_string(hide_password=True)
-        except Exception:  # noqa: BLE001 - a URL SQLAlchemy cannot parse is shown as given
-            return self.url
+        except Exception:  # noqa: BLE001 - a URL SQLAlchemy cannot parse is shown as given, redacted
+            return redact_text(self.url)
+
+    @property
+    def host(self) -> str:
+        """Where the store is, for a waiting user: the server's host, or the SQLite file."""
+        try:
+            u = make_url(self.url)
+        except Exception:  # noqa: BLE001
+            return self.display_url
+        if self.engine.dialect.name == "sqlite":
+            return str(u.database)
+        if u.host:
+            return u.host
+        service = u.query.get("service")
+        return f"service {service}" if service else os.environ.get("PGHOST", "local socket")
 
     def _fail(self, exc: BaseException, doing: str = "") -> StoreError:
         return StoreError(f"results store {self.display_url}{doing}: {describe_error(exc)}")
+
+    def _call(self, fn: Callable[[], T], then: str = "then the record goes to the spool", *,
+              retry: bool = True, tell: bool = True) -> T:
+        """fn() against the store within the wait: one retry of a lost connection, StoreError
+        naming the store when it did not answer or failed (what fn raised when it refused)."""
+        local = self.engine.dialect.name != "postgresql"  # a local file: SQLite's busy_timeout bounds the wait
+        budget = DOWN_WAIT_S if self._down else self.wait_s
+        t0 = time.monotonic()
+
+        def tries() -> T:
+            try:
+                return fn()
+            except DBAPIError as exc:
+                if not retry or not _is_lost_connection(exc) or budget - (time.monotonic() - t0) < 2 * RETRY_PAUSE_S:
+                    raise
+            time.sleep(RETRY_PAUSE_S)
+            return fn()
+
+        def slow(elapsed_s: float) -> None:
+            if self.notify is None or self._told:
+                return
+            self._told = True
+            tail = f", {then}" if then else ""
+            self.notify(f"results store at {self.host}: no answer for {elapsed_s:.0f} s, waiting up to "
+                        f"{budget:.0f} s{tail}")
+
+        try:
+            if local:
+                out = fn()
+            else:
+                out = call_bounded(tries, budget, slow_after_s=SLOW_NOTICE_S if tell else None, on_slow=slow)
+        except NoAnswer as exc:
+            self._down = True
+            raise StoreError(f"results store {self.display_url}: {exc}") from None
+        except RecordRefused:
+            raise
+        except DB_ERRORS as exc:
+            if is_refusal(exc):
+                raise
+            if _is_lost_connection(exc):
+                self._down = True
+            raise self._fail(exc) from None
+        self._down = self._told = False
+        return out
 
     def _ensure_ready(self) -> None:
         """Migrate once (retried on each write while the store was unreachable)."""
@@ -155,8 +302,14 @@ class ResultsStore:
         try:
             self.upgrade()
         except DB_ERRORS as exc:
+            if _is_lost_connection(exc):
+                raise
             raise self._fail(exc) from None
         self._ready = True
+
+    def _now_sql(self) -> Any:
+        """The store's clock as a value to write: the server's on PostgreSQL."""
+        return literal_column(PG_NOW_SQL) if self.engine.dialect.name == "postgresql" else now_iso()
 
     def db_now(self) -> str:
         """Wall time for heartbeats, ISO 8601 UTC: the server's clock on PostgreSQL (stations
@@ -189,7 +342,7 @@ class ResultsStore:
 
     # --- documents: a run as the store keeps it (and the spool holds it) ------------------------
     @staticmethod
-    def record_doc(rec: Any, outcome: str | None = None) -> dict[str, Any]:
+    def record_doc(rec: Any, outcome: str | None = None, token: str | None = None) -> dict[str, Any]:
         """A run record as plain data: its `run` row, `duts`, `truth` and `measurements` rows."""
         row = {
             "run_id": rec.run_id,
@@ -213,6 +366,7 @@ class ResultsStore:
             "host": host_name(),
             "pid": os.getpid(),
             "heartbeat_at": now_iso(),
+            "run_token": token or new_token(),
         }
         return {
             "run": row,
@@ -221,41 +375,83 @@ class ResultsStore:
             "measurements": [] if outcome is not None else _result_rows(rec.measurements, "run"),
         }
 
-    def save_doc(self, doc: dict[str, Any]) -> None:
-        """Insert (or replace whole) one run document; raises what the database raises."""
+    def _lock_run(self, conn: Connection, run_id: str) -> None:
+        """Hold the run's lock for the transaction: writers of one run (syncs at once) take turns."""
+        if self.engine.dialect.name == "postgresql":
+            conn.execute(text("SELECT pg_advisory_xact_lock(:space, hashtext(:run_id))"),
+                         {"space": RUN_LOCK_SPACE, "run_id": run_id})
+
+    def _replace(self, conn: Connection, doc: dict[str, Any]) -> None:
         run_id = doc["run"]["run_id"]
+        for table in (measurements, truth, run_duts):
+            conn.execute(delete(table).where(table.c.run_id == run_id))
+        conn.execute(delete(runs).where(runs.c.run_id == run_id))
+        conn.execute(insert(runs), [doc["run"]])
+        if doc["duts"]:
+            conn.execute(
+                insert(run_duts), [{"run_id": run_id, "slot": i, "serial": s} for i, s in enumerate(doc["duts"])]
+            )
+        if doc["truth"]:
+            conn.execute(insert(truth), [{"run_id": run_id, "name": k, "value": v} for k, v in doc["truth"].items()])
+        if doc["measurements"]:
+            conn.execute(insert(measurements), [{**m, "run_id": run_id} for m in doc["measurements"]])
+
+    def save_doc(self, doc: dict[str, Any], *, server_clock: bool = False) -> None:
+        """Insert (or replace whole) one run document, under the run's lock; raises what the
+        database raises (RecordRefused before sending a text longer than its column)."""
+        check_doc(doc)
         with self.engine.begin() as conn:
-            for table in (measurements, truth, run_duts):
-                conn.execute(delete(table).where(table.c.run_id == run_id))
-            conn.execute(delete(runs).where(runs.c.run_id == run_id))
-            conn.execute(insert(runs), [doc["run"]])
-            if doc["duts"]:
-                conn.execute(
-                    insert(run_duts), [{"run_id": run_id, "slot": i, "serial": s} for i, s in enumerate(doc["duts"])]
-                )
-            if doc["truth"]:
-                conn.execute(
-                    insert(truth), [{"run_id": run_id, "name": k, "value": v} for k, v in doc["truth"].items()]
-                )
-            if doc["measurements"]:
-                conn.execute(insert(measurements), [{**m, "run_id": run_id} for m in doc["measurements"]])
+            self._lock_run(conn, doc["run"]["run_id"])
+            if doc["run"]["outcome"] == RUNNING:  # a start that reached the store late never hides the end
+                have = conn.execute(select(runs.c.outcome).where(runs.c.run_id == doc["run"]["run_id"])).scalar()
+                if have not in (None, RUNNING, INTERRUPTED):
+                    return
+            if server_clock and self.engine.dialect.name == "postgresql":
+                doc["run"]["heartbeat_at"] = conn.execute(text(PG_NOW_ISO)).scalar_one()
+            self._replace(conn, doc)
+
+    def _submit(self, doc: dict[str, Any]) -> bool:
+        """Save a spooled document unless the store already holds the run's final record (an
+        INTERRUPTED one stands back); whether it was written."""
+        row = doc["run"]
+        check_doc(doc)
+        self._ensure_ready()
+        with self.engine.begin() as conn:
+            self._lock_run(conn, row["run_id"])
+            if row["outcome"] == INTERRUPTED:
+                have = conn.execute(select(runs.c.outcome).where(runs.c.run_id == row["run_id"])).scalar()
+                if have not in (None, RUNNING, INTERRUPTED):
+                    return False
+            self._replace(conn, doc)
+        return True
 
     # --- writing -------------------------------------------------------------------------
     def save_run(self, rec: Any) -> None:
-        """Insert (or replace) a finished run with its DUTs, measurements and truth."""
+        """Insert (or replace) a finished run with its DUTs, measurements and truth (within the wait)."""
         self._stop_heartbeat(rec.run_id)
-        self._ensure_ready()
-        self.save_doc(self.record_doc(rec))
+        doc = self.record_doc(rec, token=self._tokens.get(rec.run_id))
+
+        def write() -> None:
+            self._ensure_ready()
+            self.save_doc(doc)
+
+        self._call(write)
 
     def begin_run(self, rec: Any, spool_dir: str | Path | None = None) -> list[str]:
         """Write the run's RUNNING row, keep its heartbeat fresh, and submit what the spool holds.
         Never raises: a store that cannot be written gets the row in the spool.  Notes for the log."""
         spool = Spool(spool_dir) if spool_dir is not None else self.spool
-        doc = self.record_doc(rec, outcome=RUNNING)
-        try:
+        token = self._tokens.setdefault(rec.run_id, new_token())
+        doc = self.record_doc(rec, outcome=RUNNING, token=token)
+
+        def write() -> None:
             self._ensure_ready()
-            doc["run"]["heartbeat_at"] = self.db_now()
-            self.save_doc(doc)
+            self.save_doc(doc, server_clock=True)
+
+        try:
+            self._call(write, "then the run goes on and its record goes to the spool")
+        except RecordRefused as exc:  # the final record will be refused too: finish_run quarantines it
+            return [f"results store {self.display_url} refuses the run's record: {exc}"]
         except Exception as exc:  # noqa: BLE001 - whatever the store says, the run goes on and spools
             problem = exc if isinstance(exc, StoreError) else self._fail(exc)
             try:
@@ -271,14 +467,20 @@ class ResultsStore:
         )
         return notes + problems
 
-    def heartbeat(self, run_id: str) -> None:
-        """Refresh a RUNNING row's heartbeat (wall time)."""
+    def heartbeat(self, run_id: str) -> bool:
+        """Refresh the run's heartbeat on the store's clock; a row taken for gone while the store
+        was out of reach (INTERRUPTED by another station) is RUNNING again.  Only this run's token
+        matches.  Whether a row was touched."""
+        token = self._tokens.get(run_id)
         with self.engine.begin() as conn:
-            conn.execute(
+            res = conn.execute(
                 update(runs)
-                .where((runs.c.run_id == run_id) & (runs.c.outcome == RUNNING))
-                .values(heartbeat_at=self.db_now())
+                .where((runs.c.run_id == run_id) & (runs.c.run_token == token)
+                       & runs.c.outcome.in_((RUNNING, INTERRUPTED)))
+                .values(heartbeat_at=self._now_sql(), outcome=RUNNING, end_reason="", finished_at=None,
+                        safe_state=False)
             )
+        return bool(res.rowcount)
 
     def _stop_heartbeat(self, run_id: str) -> None:
         beat = self._beats.pop(run_id, None)
@@ -286,19 +488,28 @@ class ResultsStore:
             beat.stop()
 
     def finish_run(self, rec: Any, spool_dir: str | Path | None = None) -> str | None:
-        """Save a finished run; if the store cannot take it, keep it in the spool.  None when saved,
-        else the one-line message for the user (never raises)."""
+        """Save a finished run; if the store cannot take it, keep it in the spool (a record it
+        refuses: in the spool's quarantine with the reason).  None when saved, else the one-line
+        message for the user (never raises)."""
         spool = Spool(spool_dir) if spool_dir is not None else self.spool
-        doc = self.record_doc(rec)
+        doc = self.record_doc(rec, token=self._tokens.get(rec.run_id))
         try:
             self.save_run(rec)
         except Exception as exc:  # noqa: BLE001 - the record must not be lost, whatever the store says
-            problem = exc if isinstance(exc, StoreError) else self._fail(exc)
+            refused = is_refusal(exc)
+            problem = self._fail(exc, " refuses the run's record") if refused else (
+                exc if isinstance(exc, StoreError) else self._fail(exc))
             try:
                 path = spool.put(doc)
+                if refused:
+                    path = spool.quarantine(path, str(problem))
             except OSError as exc2:
                 return f"{problem}; the spool failed too ({exc2}): the run is only in its raw file {rec.raw_file}"
+            if refused:
+                return f"{problem}; the run's record is kept in {path} with its reason"
             return f"{problem}; the run's record is kept in {path} (`gyrobench runs --sync` submits it)"
+        finally:
+            self._tokens.pop(rec.run_id, None)
         try:
             spool.remove(rec.run_id)  # the RUNNING row spooled at the start, if the store was down then
         except OSError:
@@ -308,33 +519,47 @@ class ResultsStore:
     def sync(self, spool: Spool | str | Path | None = None) -> tuple[list[str], list[str]]:
         """Submit the spooled records: (run ids submitted, one-line problems).  A RUNNING record
         whose process still runs here is left for that run; one whose process is gone goes in as
-        INTERRUPTED.  Stops at the first record the store refuses (it is down: keep the rest)."""
+        INTERRUPTED.  A record the store refuses goes to the spool's quarantine (with a `.reason`)
+        and the rest go on; at a store that is down, the rest stay.  Syncs at once submit each
+        record once (a lock per record file, and per run in the store)."""
         spool = spool if isinstance(spool, Spool) else (Spool(spool) if spool is not None else self.spool)
         submitted: list[str] = []
         problems: list[str] = []
         for path in spool.pending():
-            try:
-                doc = spool.load(path)
-                row = doc["run"]
-            except (OSError, ValueError, KeyError, TypeError) as exc:
-                problems.append(f"spooled record {path} is unreadable ({exc}); left in place")
-                continue
-            if row["outcome"] == RUNNING:
-                if row.get("host") == host_name() and process_alive(row.get("pid")):
+            with spool.claim(path) as mine:
+                if not mine:
+                    continue  # another sync submits it (or did)
+                try:
+                    doc = spool.load(path)
+                    row = doc["run"]
+                except (OSError, ValueError, KeyError, TypeError) as exc:
+                    problems.append(f"spooled record {path} is unreadable ({exc}); left in place")
                     continue
-                row.update(_interrupted(row))
-            try:
-                self._ensure_ready()
-                if row["outcome"] == INTERRUPTED and self._outcome(row["run_id"]) not in (None, RUNNING, INTERRUPTED):
-                    pass  # the store already has the run's final record
-                else:
-                    self.save_doc(doc)
-            except STORE_ERRORS as exc:
-                problem = exc if isinstance(exc, StoreError) else self._fail(exc)
-                problems.append(f"{problem}; {len(spool.pending())} record(s) stay in {spool.dir}")
-                break
-            path.unlink(missing_ok=True)
-            submitted.append(row["run_id"])
+                if row["outcome"] == RUNNING:
+                    alive = token_alive_here(row.get("run_token"))
+                    if alive is None and not row.get("run_token"):  # a record spooled before run tokens
+                        alive = row.get("host") == host_name() and process_alive(row.get("pid"))
+                    if alive:
+                        continue
+                    row.update(_interrupted(row))
+                try:
+                    self._call(lambda doc=doc: self._submit(doc), "then the records stay in the spool")
+                except Exception as exc:  # noqa: BLE001 - refused: quarantined; else the store is down
+                    if not is_refusal(exc):
+                        problem = exc if isinstance(exc, StoreError) else self._fail(exc)
+                        problems.append(f"{problem}; {len(spool.pending())} record(s) stay in {spool.dir}")
+                        break
+                    reason = str(exc) if isinstance(exc, RecordRefused) else describe_error(exc)
+                    try:
+                        dest = spool.quarantine(path, reason)
+                    except OSError as exc2:
+                        problems.append(f"spooled record {path} is refused ({reason}) and cannot be moved ({exc2})")
+                        continue
+                    problems.append(f"spooled record {row['run_id']} is refused by the store ({reason}): moved to "
+                                    f"{dest} with its .reason; the other records go on")
+                    continue
+                path.unlink(missing_ok=True)
+                submitted.append(row["run_id"])
         return submitted, problems
 
     def _outcome(self, run_id: str) -> str | None:
@@ -344,13 +569,13 @@ class ResultsStore:
     def reap(self) -> list[str]:
         """Mark RUNNING rows whose run is gone INTERRUPTED; their ids.  A row whose heartbeat moved
         since it was read is left alone (its run is alive)."""
-        cols = (runs.c.run_id, runs.c.host, runs.c.pid, runs.c.heartbeat_at)
+        cols = (runs.c.run_id, runs.c.host, runs.c.pid, runs.c.heartbeat_at, runs.c.run_token)
         with self.engine.connect() as conn:
             rows = [dict(r._mapping) for r in conn.execute(select(*cols).where(runs.c.outcome == RUNNING))]
         if not rows:
             return []
         now = _dt.datetime.fromisoformat(self.db_now())
-        gone = [r for r in rows if is_interrupted(r["host"], r["pid"], r["heartbeat_at"], now=now)]
+        gone = [r for r in rows if is_interrupted(r["run_token"], r["heartbeat_at"], now=now)]
         done = []
         for r in gone:
             same = (
@@ -368,7 +593,7 @@ class ResultsStore:
 
     def _reap_quietly(self) -> None:
         try:
-            self.reap()
+            self._call(self.reap, tell=False)
         except STORE_ERRORS:  # a read-only store still lists; its RUNNING rows stay as they are
             pass
 
