@@ -22,6 +22,7 @@ from sqlalchemy.exc import IntegrityError, OperationalError, SQLAlchemyError
 from bench.results.liveness import host_name, is_interrupted
 from bench.results.liveness import now_iso as _now
 from bench.results.locks import migrating_connection
+from bench.results.redact import redact_text
 from bench.results.store import describe_error, to_url
 
 from . import LineError
@@ -57,16 +58,18 @@ class LineDB:
         from sqlalchemy import create_engine
 
         self.url = to_url(url)
+        #: the URL as messages show it: a password in it is masked (bench.results.redact)
+        self.shown_url = redact_text(self.url)
         try:
             self.engine = create_engine(self.url)
         except ImportError as exc:
-            raise LineError(f"line database {self.url}: its driver is not installed ({exc})") from None
+            raise LineError(f"line database {self.shown_url}: its driver is not installed ({exc})") from None
         if self.engine.dialect.name == "sqlite":
             event.listen(self.engine, "connect", _sqlite_pragmas)
         try:
             self.upgrade()
         except SQLAlchemyError as exc:
-            raise LineError(f"line database {self.url}: cannot be opened: {describe_error(exc)}") from None
+            raise LineError(f"line database {self.shown_url}: cannot be opened: {describe_error(exc)}") from None
 
     def upgrade(self) -> None:
         cfg = _alembic_config()
@@ -93,13 +96,13 @@ class LineDB:
                 return self._insert(record)
             except IntegrityError:
                 if record.get("integrity"):  # a sealed record is never renumbered (its hash covers it)
-                    raise LineError(f"line database {self.url}: attempt {record['attempt']} of {record['serial']} "
-                                    f"is already there (the JSON record is kept: {record.get('record_file')})"
+                    raise LineError(f"line database {self.shown_url}: attempt {record['attempt']} of "
+                                    f"{record['serial']} is already there (the JSON record is kept: {record.get('record_file')})"
                                     ) from None
                 record["attempt"] = self.next_attempt(record["serial"])
             except OperationalError as exc:  # SQLite: the file is locked by another writer
                 if time.monotonic() > deadline:
-                    raise LineError(f"line database {self.url}: record of {record['serial']} not saved: "
+                    raise LineError(f"line database {self.shown_url}: record of {record['serial']} not saved: "
                                     f"{describe_error(exc)} (the JSON record is kept: {record.get('record_file')})"
                                     ) from None
             time.sleep(random.uniform(0.01, 0.1))
@@ -141,7 +144,7 @@ class LineDB:
                 stub["attempt"] = self.next_attempt(stub["serial"])
             except OperationalError as exc:
                 if time.monotonic() > deadline or self.engine.dialect.name != "sqlite":
-                    raise LineError(f"line database {self.url}: attempt of {stub['serial']} not begun: "
+                    raise LineError(f"line database {self.shown_url}: attempt of {stub['serial']} not begun: "
                                     f"{describe_error(exc)}") from None
             time.sleep(random.uniform(0.01, 0.1))
 
@@ -161,7 +164,7 @@ class LineDB:
                 conn.execute(update(line_attempts).where(line_attempts.c.id == attempt_id).values(**row))
                 self._insert_measurements(conn, attempt_id, record)
         except SQLAlchemyError as exc:
-            raise LineError(f"line database {self.url}: record of {record['serial']} not saved: "
+            raise LineError(f"line database {self.shown_url}: record of {record['serial']} not saved: "
                             f"{describe_error(exc)} (the JSON record is kept: {record.get('record_file')})") from None
 
     def reap(self) -> int:
