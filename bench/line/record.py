@@ -83,6 +83,11 @@ def summary(record: dict[str, Any]) -> str:
     for r in record.get("runs", []):  # a run that ended in ERROR or ABORTED: why, first
         if r.get("outcome") in (ERROR, "ABORTED"):
             words.append(f"{r.get('step') or r.get('procedure')} {r['outcome']} ({r.get('end_reason', '')})")
+    trims = record.get("trims") or {}
+    if trims.get("error"):
+        words.append(trims["error"])
+    elif trims.get("written"):
+        words.append(f"trims in NVM (unit {trims.get('unit_id')}, CRC {trims.get('crc')})")
     if not bad:
         met = sum(1 for m in record["measurements"] if m["rule"] and m["outcome"] == "PASS")
         skipped = sum(1 for m in record["measurements"] if m["rule"] and m["outcome"] == SKIPPED)

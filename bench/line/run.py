@@ -14,7 +14,7 @@ from . import LineError
 from .limits import ProductLimits
 from .record import SCHEMA_VERSION, judged, now_iso, record_path, sha256_of, summary, write_new_record
 from .sequence import Sequence
-from .verdict import ABORTED, ERROR, FAIL, SKIPPED, worst
+from .verdict import ABORTED, ERROR, FAIL, PASS, SKIPPED, worst
 
 STOP_OUTCOMES = (FAIL, ERROR, ABORTED)
 
@@ -197,8 +197,10 @@ def finish_record(ctx: LineContext, station: Any, serial: str, attempt: int, sta
         "runs": runs,
         **(extra or {}),
     }
-    record["summary"] = summary(record)
     folder = ctx.runs_dir / "line" / (ctx.lot or "no-lot")
+    if seq.write_trims:
+        _trims_step(record, station, folder)
+    record["summary"] = summary(record)
     opened = ctx.attempt_ids.pop(serial, None) or OpenAttempt(None)
     opened.stop()
     _write_sealed(ctx, record, folder)
@@ -214,6 +216,25 @@ def finish_record(ctx: LineContext, station: Any, serial: str, attempt: int, sta
     if ctx.on_record is not None:
         ctx.on_record(record)
     return record
+
+
+def _trims_step(record: dict[str, Any], station: Any, folder: Path) -> None:
+    """The sequence's gated last step (bench/line/trims.py): a PASS unit's compensation into its
+    FPGA's NVM; a write that fails makes the unit ERROR (it is not trimmed as its certificate says)."""
+    from .record import _safe
+    from .trims import write_unit_trims
+
+    link = (getattr(station, "devices", None) or {}).get("fpga")
+    if link is None and record["outcome"] == PASS:
+        record["trims"] = {"written": False, "error": f"station {station.id!r} has no FPGA to hold the trims"}
+    elif link is None:
+        why = f"unit {record['outcome']}: trims are written for PASS units only"
+        record["trims"] = {"written": False, "reason": why}
+    else:
+        path = folder / f"{_safe(record['serial'])}-a{record['attempt']}.compensation.toml"
+        record["trims"] = write_unit_trims(link, record, path)
+    if record["trims"].get("error"):
+        record["outcome"] = ERROR
 
 
 def _write_sealed(ctx: LineContext, record: dict[str, Any], folder: Path) -> None:
