@@ -89,11 +89,9 @@ def _openhtf_record(record):
     from openhtf.core import test_record as tr
     from openhtf.output.callbacks import json_factory
 
-    from bench.line.record import HTF_MEAS_OUTCOME, HTF_TEST_OUTCOME, _millis
+    from bench.line.record import HTF_MEAS_OUTCOME, HTF_TEST_OUTCOME, _cond, _millis, openhtf_metadata
 
-    meta = {"test_name": record["sequence"], "lot": record["lot"], "operator": record["operator"],
-            "attempt": record["attempt"], "software_version": record["software_version"],
-            "gyrobench_outcome": record["outcome"]}
+    meta = openhtf_metadata(record)
     rec = tr.TestRecord(dut_id=record["serial"], station_id=record["station"],
                         start_time_millis=_millis(record["started_at"]), end_time_millis=_millis(record["ended_at"]),
                         outcome=tr.Outcome[HTF_TEST_OUTCOME[record["outcome"]]], metadata=meta,
@@ -108,8 +106,8 @@ def _openhtf_record(record):
             if lim and (lim["low"] is not None or lim["high"] is not None):
                 hm_m = hm_m.in_range(lim["low"], lim["high"], marg.get("low"), marg.get("high"))
             iv = m["interval"]
-            hm_m = hm_m.doc(f"{m['outcome']} by rule {m['rule'] or 'none'}; unit {m['unit'] or '-'}; 95% interval "
-                            + ("none" if iv is None else f"[{iv[0]}, {iv[1]}]"))
+            hm_m = hm_m.doc(f"{m['outcome']}{_cond(m)} by rule {m['rule'] or 'none'}; unit {m['unit'] or '-'}; "
+                            "95% interval " + ("none" if iv is None else f"[{iv[0]}, {iv[1]}]"))
             if m["value"] is not None:
                 hm_m.measured_value.set(m["value"])
             hm_m.outcome = hm.Outcome[HTF_MEAS_OUTCOME[m["outcome"]]]
