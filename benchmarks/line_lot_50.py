@@ -5,6 +5,11 @@ SQLite): wall time, units per hour (wall), records in the database against recor
 outcome checked against its drawn truth, `line verify` of each station's lot, and the line report
 (with --pdf) over the whole database.
 
+Measured at this commit (PostgreSQL 15 from .ci/start-postgres, ci-mems, 50 units on 8 concurrent
+stations, a 2-core machine shared with other work, load average about 9-15): wall 137.8 s, 1306 units/h
+(wall), 50 records on disk and 50 attempts in the database, 0 outcomes wrong for their truth, 0 broken
+chains/signatures/raw files over the 8 lots, the report and its PDF written (a 16-unit run: 101 s).
+
 Run: URL=$(.ci/start-postgres); GYROBENCH_TEST_PG_URL=$URL .venv/bin/python benchmarks/line_lot_50.py \
          [--units 50] [--stations 8] [--sequence ci-mems] [--keep DIR]; .ci/start-postgres --stop $URL
 """
@@ -27,14 +32,19 @@ from benchmarks.line_lot import _pg_schema  # noqa: E402
 STATION_OF = {"ci-mems": "sim-mems", "eol-mems": "sim-mems", "eol-hrg": "sim-hrg", "ci-spin": "sim-hrg"}
 
 
-def _station_file(folder: Path, base: str, k: int) -> Path:
-    """A copy of a built-in simulated station with its own id (its own chain and lock)."""
+def _station_file(folder: Path, base: str, k: int) -> tuple[Path, str]:
+    """A copy of a built-in simulated station with its own id (its own chain and lock) and its own
+    Ed25519 key (records signed); the station file and the key's public half."""
+    from bench.line.integrity import generate_key, load_public_key
     from bench.station_config import find_station_file
 
-    text = find_station_file(base).read_text().replace(f'id = "{base}"', f'id = "bench-{k}"', 1)
+    (folder / "keys").mkdir(parents=True, exist_ok=True)
+    key, pub = generate_key(folder / "keys" / f"bench-{k}.key")
+    text = find_station_file(base).read_text().replace(
+        f'id = "{base}"', f'id = "bench-{k}"\nline_key = "{key}"', 1)
     path = folder / f"bench-{k}.toml"
     path.write_text(text)
-    return path
+    return path, load_public_key(pub)
 
 
 def main() -> int:
@@ -57,11 +67,13 @@ def main() -> int:
     share = [args.units // args.stations + (1 if k < args.units % args.stations else 0) for k in range(args.stations)]
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1]), "OPENBLAS_NUM_THREADS": "1"}
     procs = []
+    trusted: set[str] = set()
     t0 = time.perf_counter()
     for k, n in enumerate(share, 1):
         if n == 0:
             continue
-        st = _station_file(runs, base, k)
+        st, public = _station_file(runs, base, k)
+        trusted.add(public)
         cmd = [sys.executable, "-m", "bench.cli", "line", "simulate", "--units", str(n), "--seed", str(args.seed + k),
                "--sequence", args.sequence, "--station", str(st), "--lot", f"L50-s{k}", "--runs-dir", str(runs),
                "--db", url, "--json"]
@@ -86,7 +98,7 @@ def main() -> int:
         wrong = [w for _, _, _, js in results for w in js.get("wrong", [])]
         broken = []
         for k, _, _, _ in results:
-            v = verify_lot(db, runs, f"L50-s{k}", None)
+            v = verify_lot(db, runs, f"L50-s{k}", trusted)
             if v.breaks:
                 broken.append(f"L50-s{k}: {v.breaks[0] if v.breaks else '?'}")
         report = write_line_report(db, output=runs / "line" / "report-L50.html", pdf=True, runs_dir=runs)
