@@ -41,6 +41,9 @@ def test_a_station_past_its_calibration_refuses_line_runs(tmp_path, capsys):
     assert "refuses line runs: calibration past due: table (due 2020-01-31, " in err
     assert "reference_1 (due 2021-06-30, " in err and "frontend" not in err
     assert not (tmp_path / "runs" / "line" / "no-lot").exists()  # nothing ran
+    code = main(["line", "simulate", "--sequence", "ci-spin", "--station", st, "--units", "1",
+                 "--runs-dir", str(tmp_path / "runs")])
+    assert code == 2 and "calibration past due: table (due 2020-01-31" in capsys.readouterr().err
 
 
 def _golden(tmp_path, value: float) -> str:

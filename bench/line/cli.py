@@ -300,6 +300,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise LineError(str(exc)) from None
     args.runs_dir = args.runs_dir or cfg.station["runs_dir"]
     args.db = args.db or (cfg.station["results"] if args.runs_dir == cfg.station["runs_dir"] else None)
+    from .station_state import refusal
+
+    why = refusal(cfg.calibration, args.runs_dir, cfg.id)
+    if why:
+        raise LineError(why)
     check_limits_measured(seq, _limits_of(args, seq))
     ctx = _context(args, station_name=cfg.id, operator=args.operator or "simulator", db_url=args.db, config=cfg)
     operator = make_operator(serial=None, assume_yes=True, interactive=False)
