@@ -177,3 +177,16 @@ def test_fpga_load_by_hand_is_gated_and_an_override_is_logged(tmp_path, capsys):
     assert main(["fpga", "load", str(comp2), "--station", str(station), "--runs-dir", str(runs)]) == 2
     assert "holds the trims of another unit" in capsys.readouterr().err
     assert load(comp2).serial == "HRG-9"
+
+
+def test_a_sequence_that_writes_trims_is_refused_on_a_station_without_fpga(tmp_path, capsys):
+    from bench.cli import main
+
+    seq = tmp_path / "seq.toml"
+    seq.write_text('[sequence]\nname = "t"\nlimits = "ci-spin"\n[trims]\nwrite = true\n[[step]]\n'
+                   'procedure = "table-spin"\n')
+    station = tmp_path / "no-fpga.toml"
+    station.write_text(open("bench/stations/sim-hrg.toml").read().split("[devices.fpga]")[0])
+    code = main(["line", "run", str(seq), "--station", str(station), "--operator", "ada", "--dut", "U1", "--yes",
+                 "--runs-dir", str(tmp_path / "runs")])
+    assert code == 2 and "[trims] write = true needs an FPGA to hold the trims" in capsys.readouterr().err

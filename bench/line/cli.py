@@ -115,6 +115,9 @@ def check_steps(seq: Any, station: Any) -> None:
     before a unit is scanned; LineError names the step and why."""
     from bench.engine.demands import StationMismatch, check_station
 
+    if getattr(seq, "write_trims", False) and "fpga" not in station.config.devices:
+        raise LineError(f"{seq.source}: [trims] write = true needs an FPGA to hold the trims; station "
+                        f"{station.id!r} has {sorted(station.config.devices)}")
     for i, step in enumerate(seq.steps, 1):
         proc = step.make()
         missing = [r for r in proc.requires if r not in station.config.devices]
