@@ -190,3 +190,25 @@ def test_a_sequence_that_writes_trims_is_refused_on_a_station_without_fpga(tmp_p
     code = main(["line", "run", str(seq), "--station", str(station), "--operator", "ada", "--dut", "U1", "--yes",
                  "--runs-dir", str(tmp_path / "runs")])
     assert code == 2 and "[trims] write = true needs an FPGA to hold the trims" in capsys.readouterr().err
+
+
+def test_line_run_eol_hrg_leaves_the_trims_in_the_units_nvm(tmp_path, capsys):
+    """The issue's reproduction: `fpga show` after `line run eol-hrg` said "NVM empty ... 0 commits"."""
+    from bench.cli import main
+
+    station = tmp_path / "st.toml"
+    text = open("bench/stations/sim-hrg.toml").read().replace('id = "sim-hrg"', 'id = "nvm-hrg"')
+    station.write_text(text + f'nvm_file = "{tmp_path / "fpga.nvm"}"\n')
+    code = main(["line", "run", "eol-hrg", "--station", str(station), "--operator", "ada", "--dut", "HRG-000042",
+                 "--yes", "--lot", "L1", "--runs-dir", str(tmp_path / "runs"), "--json"])
+    (rec,) = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert code == 0 and rec["outcome"] == "PASS" and rec["trims"]["written"]
+    chosen = rec["trims"]["chosen"]
+    assert chosen["delta_inv_tau_per_s"]["procedure"] == chosen["theta_tau_deg"]["procedure"] == "hrg-free-decay"
+    assert main(["fpga", "show", "--station", str(station), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["nvm"]["valid"] and shown["nvm"]["match"] and shown["nvm"]["commits"] == 1
+    assert shown["trims"] == rec["trims"]["read_back"]
+    assert int(shown["trims"]["TRIM_UNIT_ID"]) == unit_id("HRG-000042")
+    assert shown["trims"]["TRIM_FILE_ID"] == int(rec["trims"]["file_id"], 16)
+    assert load(rec["trims"]["file"]).serial == "HRG-000042"
