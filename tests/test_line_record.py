@@ -194,3 +194,26 @@ def test_a_record_the_database_refuses_is_kept_and_imported_later(tmp_path, caps
     db = LineDB(url)
     assert [(a["serial"], a["attempt"], a["outcome"]) for a in db.attempts()] == [("SN-3", 1, "PASS")]
     db.close()
+
+
+def test_openhtf_export_keeps_marginal_its_kind_and_the_checksums():
+    """Issue 32: the export kept neither a MARGINAL's kind nor the record's checksums."""
+    import copy
+
+    from cert_record import RECORD
+
+    rec = copy.deepcopy(RECORD)
+    rec.update(lot="L1", limits_sha256="a" * 64, sequence_sha256="b" * 64,
+               integrity={"sha256": "c" * 64, "signature": "d" * 128})
+    drift = next(m for m in rec["measurements"] if m["name"] == "drift_after_dph")
+    drift["condition"] = "conditional pass"
+    htf = to_openhtf(rec)
+    assert htf["marginal"] is True and htf["outcome"] == "PASS"
+    meta = htf["metadata"]
+    assert meta["gyrobench_outcome"] == "MARGINAL" and meta["conditions"] == {"drift_after_dph": "conditional pass"}
+    assert meta["checksums"] == {"record_sha256": "c" * 64, "signature": "d" * 128, "limits_sha256": "a" * 64,
+                                 "sequence_sha256": "b" * 64,
+                                 "raw_files": {"r-damp": {"file": "runs/a.h5", "sha256": "0" * 64},
+                                               "r-fd": {"file": "runs/b.h5", "sha256": "1" * 64}}}
+    doc = htf["phases"][0]["measurements"]["drift_after_dph"]["docstring"]
+    assert doc.startswith("MARGINAL (conditional pass) by rule guard-band")
