@@ -7,6 +7,7 @@ the narrowest interval."""
 from __future__ import annotations
 
 import copy
+import hashlib
 import json
 from pathlib import Path
 from types import SimpleNamespace
@@ -36,8 +37,6 @@ def test_a_pass_unit_is_trimmed_read_back_and_its_file_hashed(tmp_path):
     try:
         out = write_unit_trims(link, PASSED, tmp_path / "u.compensation.toml")
         assert out["written"] and "error" not in out
-        import hashlib
-
         assert out["sha256"] == hashlib.sha256((tmp_path / "u.compensation.toml").read_bytes()).hexdigest()
         assert out["nvm"]["valid"] and out["nvm"]["match"] and out["nvm"]["commits"] == 1
         assert int(link.read_register("TRIM_UNIT_ID")) == unit_id("HRG-2611-0042") == int(out["unit_id"], 16)
@@ -104,6 +103,7 @@ def test_the_line_writes_the_trims_last_for_pass_and_not_for_fail(tmp_path):
         rec = _finish(_ctx(tmp_path), station, _all_pass_measurements())
         assert rec["outcome"] == "PASS" and rec["trims"]["written"], rec["trims"]
         assert rec["trims"]["file"] == rec["documents"]["compensation"]
+        assert rec["trims"]["sha256"] == hashlib.sha256(Path(rec["trims"]["file"]).read_bytes()).hexdigest()
         assert rec["trims"]["sha256"] == json.loads(Path(rec["record_file"]).read_text())["trims"]["sha256"]
         assert link.nvm_status()["commits"] == 1 and "trims in NVM" in rec["summary"]
         failed = _all_pass_measurements()

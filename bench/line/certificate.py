@@ -213,5 +213,10 @@ def write_unit_documents(record: dict[str, Any], directory: str | Path, *, pdf: 
     if pdf:
         out["certificate_pdf"] = paths[1]
     if comp is not None:
-        out["compensation"] = comp.write(directory / f"{stem}.compensation.toml")
+        path = directory / f"{stem}.compensation.toml"
+        loaded = (record.get("trims") or {}).get("file")
+        if loaded and Path(loaded) == path and path.exists():  # the file loaded into the NVM: kept as it was hashed
+            out["compensation"] = path
+        else:
+            out["compensation"] = comp.write(path)
     return out
