@@ -3,6 +3,7 @@ each value checked by bench.validation through `Key.check` against the keys its 
 
 from __future__ import annotations
 
+import datetime
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,6 +61,8 @@ class StationConfig:
     slots: dict[int, dict[str, dict[str, Any]]] = field(default_factory=dict)
     #: the file's `[nominal]` values (only those it sets; bench.nominal has the rest)
     nominal: dict[str, float] = field(default_factory=dict)
+    #: `[calibration]`: each device's (or reference's) calibration due date
+    calibration: dict[str, datetime.date] = field(default_factory=dict)
 
     @property
     def id(self) -> str:
@@ -96,11 +99,12 @@ def load_config(name_or_path: str | Path) -> StationConfig:
     except OSError as exc:
         raise StationError(f"{path}: cannot be read: {exc.strerror or exc}") from None
     for top in raw:
-        if top not in ("station", "simulation", "devices", "slots", "nominal"):
-            raise StationError(f"{path}: unknown table [{top}] (allowed: station, simulation, devices, slots, nominal)")
+        if top not in ("station", "simulation", "devices", "slots", "nominal", "calibration"):
+            raise StationError(f"{path}: unknown table [{top}] (allowed: station, simulation, devices, slots, "
+                               "nominal, calibration)")
     if "station" not in raw:
         raise StationError(f'{path}: missing table [station] with id = "..."')
-    for top in ("station", "simulation", "devices", "slots", "nominal"):
+    for top in ("station", "simulation", "devices", "slots", "nominal", "calibration"):
         if top in raw and not isinstance(raw[top], dict):
             raise StationError(f"{path}: {not_a(top, raw[top], 'a table ([' + top + '])')}")
     station = check_table(f"{path}: [station]", raw["station"], STATION_KEYS)
@@ -113,7 +117,26 @@ def load_config(name_or_path: str | Path) -> StationConfig:
     nominal = check_table(f"{path}: [nominal]", raw.get("nominal") or {}, NOMINAL_TABLE_KEYS)
     nominal = {k: v for k, v in nominal.items() if v is not None}
     return StationConfig(source=str(path), station=station, simulation=sim, devices=devices, slots=slots,
-                         nominal=nominal)
+                         nominal=nominal, calibration=_check_calibration(path, raw.get("calibration") or {}))
+
+
+def _check_calibration(path: Path, table: dict[str, Any]) -> dict[str, datetime.date]:
+    """`[calibration]`: NAME = due date (a TOML date or an ISO text `2027-03-31`), one per device or
+    reference (docs/line.md "Station calibration")."""
+    out = {}
+    for name, value in table.items():
+        if isinstance(value, datetime.datetime):
+            value = value.date()
+        elif isinstance(value, str):
+            try:
+                value = datetime.date.fromisoformat(value)
+            except ValueError:
+                value = None
+        if not isinstance(value, datetime.date):
+            raise StationError(f"{path}: [calibration] {name} = {table[name]!r} is not a date "
+                               f"(e.g. {name} = 2027-03-31)")
+        out[name] = value
+    return out
 
 
 def _check_device(path: Path, name: str, role: str, table: Any, sim: dict[str, Any] | None) -> dict[str, Any]:

@@ -146,3 +146,32 @@ def test_measurements_without_limits_are_listed_apart():
     decided, informative = html.split('<table class="informative">')
     assert "<td>drift_before_dph<br>" not in decided and "<td>drift_before_dph</td>" in informative
     assert "± 1.2" in _text(informative.split("</table>")[0])
+
+
+def test_certificate_marks_simulated_product_limits_revision_and_conditions(tmp_path):
+    """Issue 32: SIMULATED on a simulated station, product and limits revision, a MARGINAL's kind
+    and reason, the trims' state; a failed unit gets a rejection report saying why; PDF too."""
+    import copy
+
+    from bench.line.certificate import pdf_available, render_html, write_unit_documents
+
+    rec = copy.deepcopy(RECORD)
+    rec.update(simulated=True, product="hrg-5500", limits_file="/x/hrg.toml", limits_sha256="ab12" * 16,
+               trims={"written": False, "reason": "unit MARGINAL: trims are written for PASS units only"})
+    drift = next(m for m in rec["measurements"] if m["name"] == "drift_after_dph")
+    drift.update(condition="conditional pass", note="conditional pass: the value 0.45 is inside the limits")
+    html = render_html(rec)
+    assert "SIMULATED" in html and "hrg-5500" in html and "revision ab12ab12ab12" in html
+    assert "conditional pass" in html and "the value 0.45 is inside the limits" in html
+    assert "Calibration certificate" in html and "Rejection report" not in html
+    assert "NOT written: unit MARGINAL: trims are written for PASS units only" in html
+    real = render_html({**rec, "simulated": False})
+    assert "SIMULATED" not in real
+    rec["outcome"] = "FAIL"
+    tau = next(m for m in rec["measurements"] if m["name"] == "tau_s")
+    tau.update(outcome="FAIL", note="")
+    html = render_html(rec)
+    assert "<h1>Rejection report</h1>" in html and "Why the unit is rejected" in html
+    if pdf_available():
+        out = write_unit_documents(rec, tmp_path, pdf=True)
+        assert out["certificate_pdf"].read_bytes()[:5] == b"%PDF-"

@@ -29,7 +29,7 @@ from simulators.world import World
 
 def test_compensation_file_round_trips_with_uncertainties_and_provenance(tmp_path):
     comp = from_record(RECORD)
-    # hrg-damping is preferred for the drift trims; hrg-free-decay gives the split
+    # the narrower interval wins: hrg-damping's theta_tau (width 0.7) over hrg-free-decay's (width 4)
     assert comp.coefficients["theta_tau_deg"].value == 25.2 and comp.coefficients["theta_tau_deg"].run_id == "r-damp"
     c = comp.coefficients["delta_inv_tau_per_s"]
     assert c.u_low == pytest.approx(0.2e-5) and c.u_high == pytest.approx(0.3e-5)  # asymmetric: each side
@@ -40,7 +40,8 @@ def test_compensation_file_round_trips_with_uncertainties_and_provenance(tmp_pat
     doc = tomllib.loads(path.read_text())
     assert doc["coefficients"]["split_hz"] == {"value": 0.0049, "unit": "Hz", "u_low": pytest.approx(0.0002),
                                                "u_high": pytest.approx(0.0003), "register": "TRIM_SPLIT_HZ",
-                                               "run_id": "r-fd", "procedure": "hrg-free-decay"}
+                                               "run_id": "r-fd", "procedure": "hrg-free-decay",
+                                               "basis": "narrowest 95 % interval: hrg-free-decay width 0.0005"}
     back = load(path)
     assert back.coefficients == comp.coefficients and back.date == "2026-11-23T20:40:00+00:00"
     trims = back.trims()
@@ -209,7 +210,8 @@ def test_cli_load_then_show_in_a_new_session(tmp_path, capsys):
     text = open("bench/stations/sim-hrg.toml").read().replace('id = "sim-hrg"', 'id = "nvm-hrg"')
     station.write_text(text + f'nvm_file = "{tmp_path / "fpga.nvm"}"\n')
     comp = from_record(RECORD).write(tmp_path / "comp.toml")
-    assert main(["fpga", "load", str(comp), "--station", str(station), "--json"]) == 0
+    runs = ["--runs-dir", str(tmp_path / "runs"), "--override-reason", "a bench test of the NVM"]
+    assert main(["fpga", "load", str(comp), "--station", str(station), "--json", *runs]) == 0
     loaded = json.loads(capsys.readouterr().out)
     assert loaded["nvm"]["valid"] and loaded["serial"] == "HRG-2611-0042"
     assert main(["fpga", "show", "--station", str(station), "--json"]) == 0  # a new World: NVM from the file
@@ -217,7 +219,7 @@ def test_cli_load_then_show_in_a_new_session(tmp_path, capsys):
     assert shown["trims"] == loaded["trims"] and shown["nvm"]["match"]
     bad = tmp_path / "bad.toml"
     bad.write_text(comp.read_text().replace("value = 0.0049", "value = 11.0"))
-    assert main(["fpga", "load", str(bad), "--station", str(station)]) == 2
+    assert main(["fpga", "load", str(bad), "--station", str(station), *runs]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"gyrobench: error: {bad}: compensation: split_hz=11 Hz is above the limit 10 of TRIM_SPLIT_HZ"]
 

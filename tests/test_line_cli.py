@@ -1,6 +1,7 @@
 """`gyrobench line run`: a headless unit end to end, and one clear line for what is missing."""
 
 import json
+from pathlib import Path
 
 from bench.cli import main
 
@@ -12,7 +13,11 @@ def test_line_run_headless(tmp_path, capsys):
     (rec,) = json.loads(out.strip().splitlines()[-1])
     assert code == 0 and rec["outcome"] == "PASS" and rec["station"] == "sim-hrg" and rec["attempt"] == 1
     cert = tmp_path / "line" / "L1" / "SN-9-a1.certificate.html"  # every unit gets its certificate
-    assert rec["documents"] == {"certificate": str(cert)} and "SN-9" in cert.read_text()
+    assert rec["documents"]["certificate"] == str(cert) and "SN-9" in cert.read_text()
+    from bench.line.certificate import pdf_available
+
+    if pdf_available():  # and its PDF beside it (issue 32)
+        assert Path(rec["documents"]["certificate_pdf"]).read_bytes()[:5] == b"%PDF-"
     # the same unit again (a passed unit: with a reason): attempt 2 in the line database
     code = main(["line", "run", "ci-spin", "--dut", "SN-9", "--operator", "ann", "--yes", "--lot", "L1",
                  "--runs-dir", str(tmp_path), "--json", "--retest-reason", "audit sample"])

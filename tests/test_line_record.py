@@ -89,11 +89,9 @@ def _openhtf_record(record):
     from openhtf.core import test_record as tr
     from openhtf.output.callbacks import json_factory
 
-    from bench.line.record import HTF_MEAS_OUTCOME, HTF_TEST_OUTCOME, _millis
+    from bench.line.record import HTF_MEAS_OUTCOME, HTF_TEST_OUTCOME, _cond, _millis, openhtf_metadata
 
-    meta = {"test_name": record["sequence"], "lot": record["lot"], "operator": record["operator"],
-            "attempt": record["attempt"], "software_version": record["software_version"],
-            "gyrobench_outcome": record["outcome"]}
+    meta = openhtf_metadata(record)
     rec = tr.TestRecord(dut_id=record["serial"], station_id=record["station"],
                         start_time_millis=_millis(record["started_at"]), end_time_millis=_millis(record["ended_at"]),
                         outcome=tr.Outcome[HTF_TEST_OUTCOME[record["outcome"]]], metadata=meta,
@@ -108,8 +106,8 @@ def _openhtf_record(record):
             if lim and (lim["low"] is not None or lim["high"] is not None):
                 hm_m = hm_m.in_range(lim["low"], lim["high"], marg.get("low"), marg.get("high"))
             iv = m["interval"]
-            hm_m = hm_m.doc(f"{m['outcome']} by rule {m['rule'] or 'none'}; unit {m['unit'] or '-'}; 95% interval "
-                            + ("none" if iv is None else f"[{iv[0]}, {iv[1]}]"))
+            hm_m = hm_m.doc(f"{m['outcome']}{_cond(m)} by rule {m['rule'] or 'none'}; unit {m['unit'] or '-'}; "
+                            "95% interval " + ("none" if iv is None else f"[{iv[0]}, {iv[1]}]"))
             if m["value"] is not None:
                 hm_m.measured_value.set(m["value"])
             hm_m.outcome = hm.Outcome[HTF_MEAS_OUTCOME[m["outcome"]]]
@@ -196,3 +194,26 @@ def test_a_record_the_database_refuses_is_kept_and_imported_later(tmp_path, caps
     db = LineDB(url)
     assert [(a["serial"], a["attempt"], a["outcome"]) for a in db.attempts()] == [("SN-3", 1, "PASS")]
     db.close()
+
+
+def test_openhtf_export_keeps_marginal_its_kind_and_the_checksums():
+    """Issue 32: the export kept neither a MARGINAL's kind nor the record's checksums."""
+    import copy
+
+    from cert_record import RECORD
+
+    rec = copy.deepcopy(RECORD)
+    rec.update(lot="L1", limits_sha256="a" * 64, sequence_sha256="b" * 64,
+               integrity={"sha256": "c" * 64, "signature": "d" * 128})
+    drift = next(m for m in rec["measurements"] if m["name"] == "drift_after_dph")
+    drift["condition"] = "conditional pass"
+    htf = to_openhtf(rec)
+    assert htf["marginal"] is True and htf["outcome"] == "PASS"
+    meta = htf["metadata"]
+    assert meta["gyrobench_outcome"] == "MARGINAL" and meta["conditions"] == {"drift_after_dph": "conditional pass"}
+    assert meta["checksums"] == {"record_sha256": "c" * 64, "signature": "d" * 128, "limits_sha256": "a" * 64,
+                                 "sequence_sha256": "b" * 64,
+                                 "raw_files": {"r-damp": {"file": "runs/a.h5", "sha256": "0" * 64},
+                                               "r-fd": {"file": "runs/b.h5", "sha256": "1" * 64}}}
+    doc = htf["phases"][0]["measurements"]["drift_after_dph"]["docstring"]
+    assert doc.startswith("MARGINAL (conditional pass) by rule guard-band")

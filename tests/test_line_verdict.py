@@ -105,3 +105,21 @@ def test_worst_outcome():
     assert worst(["COMPLETE", "SKIPPED", FAIL]) == FAIL  # neither decides
     assert worst(["COMPLETE"]) == ERROR  # nothing checked: not a PASS
     assert worst([]) == ERROR
+
+
+def test_ilac_g8_conditional_pass_and_fail_are_told_apart_with_the_reason():
+    """Issue 32: both were MARGINAL with an empty note; now each says its kind and why."""
+    from bench.line.verdict import Limit, judge
+
+    lim = Limit("drift_after_dph", high=0.5, rule="guard-band")
+    v = judge(0.45, (0.31, 0.62), lim)
+    assert (v.outcome, v.condition) == ("MARGINAL", "conditional pass")
+    assert v.note == ("conditional pass: the value 0.45 is inside the limits but its 95 % interval [0.31, 0.62] "
+                      "crosses the high limit 0.5 (ILAC G8)")
+    v = judge(0.55, (0.41, 0.69), lim)
+    assert (v.outcome, v.condition) == ("MARGINAL", "conditional fail")
+    assert v.note.startswith("conditional fail: the value 0.55 is outside the limits")
+    assert judge(0.3, (0.2, 0.4), lim).condition == "" and judge(0.7, (0.6, 0.8), lim).condition == ""
+    band = judge(7.0, None, Limit("drift_after_dph", high=8.0, marginal_high=5.0, rule="value"))
+    assert (band.outcome, band.condition) == ("MARGINAL", "marginal band")
+    assert "beyond the marginal high 5" in band.note

@@ -39,7 +39,8 @@ class SimBatchStation(BatchStation):
             sim["seed"] = SIM_KEYS["seed"].check("", "--seed", seed)
         if speed is not None:
             sim["speed"] = SIM_KEYS["speed"].check("", "--speed", speed)
-        config = StationConfig(config.source, config.station, sim, config.devices, config.slots, config.nominal)
+        config = StationConfig(config.source, config.station, sim, config.devices, config.slots, config.nominal,
+                               calibration=config.calibration)
         n = len(config.slots)
         if resonators is not None and len(resonators) != n:
             raise StationError(f"{config.source}: {len(resonators)} resonators given for {n} slots")

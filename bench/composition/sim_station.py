@@ -48,7 +48,8 @@ class SimStation(Station):
                 raise StationError(f"{exc} (allowed: 0 = lockstep, or 0 to 1e6 x real time)") from None
         if preset is not None:
             sim["preset"] = SIM_KEYS["preset"].check("", "preset", preset)
-        config = StationConfig(config.source, config.station, sim, config.devices, nominal=config.nominal)
+        config = StationConfig(config.source, config.station, sim, config.devices, nominal=config.nominal,
+                               calibration=config.calibration)
         from simulators.physics.noise import NOISE_PRESETS, earth_rate_dph
         from simulators.physics.params import preset as make_preset
         from simulators.world import World

@@ -21,7 +21,8 @@ from .compensation import COEFFICIENTS, Compensation, CompensationError, from_re
 TEMPLATES = Path(__file__).with_name("templates")
 RULE_WORDS = {
     "guard-band": "ILAC G8: PASS when the whole 95 % interval lies inside the limits, FAIL when it lies wholly "
-               "outside, MARGINAL when it straddles a limit",
+               "outside, MARGINAL when it straddles a limit: a conditional pass when the value is inside the "
+               "limits, a conditional fail when it is outside",
     "value": "value only: PASS when the value lies inside the limits (MARGINAL inside a marginal band near "
              "them); applies to a measurement without an interval",
 }  # fmt: skip
@@ -95,6 +96,7 @@ def context(record: dict[str, Any], compensation: Compensation | None = None) ->
             "u": expanded_u(value, interval), "unit": m.get("unit", ""),
             "limits": limits(lim.get("low"), lim.get("high")), "rule": m.get("rule") or DASH,
             "outcome": m.get("outcome") or DASH, "run_id": m.get("run_id", ""),
+            "condition": m.get("condition") or "", "note": m.get("note") or "",
             "decided": m.get("outcome") in DECIDING or lim.get("low") is not None or lim.get("high") is not None,
         })  # fmt: skip
     coeffs = []
@@ -106,12 +108,31 @@ def context(record: dict[str, Any], compensation: Compensation | None = None) ->
                            "u": _u_sides(c.u_low, c.u_high), "register": c.register, "run_id": c.run_id,
                            "procedure": c.procedure})
     counts = {o: sum(1 for r in rows if r["outcome"] == o) for o in ("PASS", "MARGINAL", "FAIL", "ERROR")}
+    outcome = record.get("outcome", "")
+    rejected = outcome in ("FAIL", "ERROR", "ABORTED")
+    limits_rev = str(record.get("limits_sha256") or "")[:12]
+    trims = record.get("trims")
+    if trims is None:
+        trims_text = "not part of this sequence"
+    elif trims.get("written"):
+        trims_text = (f"written to the unit's NVM and read back equal (unit id {trims.get('unit_id')}, NVM CRC "
+                      f"{trims.get('crc')}); file SHA-256 {trims.get('sha256')}")
+    else:
+        trims_text = "NOT written: " + str(trims.get("error") or trims.get("reason") or "")
     return {
+        "title": "Rejection report" if rejected else "Calibration certificate",
+        "rejected": rejected,
+        "reasons": [r for r in rows if r["outcome"] in ("FAIL", "ERROR", "MARGINAL")],
+        "abort_reason": record.get("abort_reason") or "",
+        "simulated": bool(record.get("simulated")),
+        "trims_text": trims_text,
         "number": certificate_number(record),
         "serial": record.get("serial", ""),
         "outcome": record.get("outcome", ""),
         "identity": [
             ("Serial", record.get("serial", "")), ("Lot", record.get("lot") or DASH),
+            ("Product", record.get("product") or DASH),
+            ("Limits", f"{Path(str(record.get('limits_file') or '')).name or DASH} (revision {limits_rev or DASH})"),
             ("Sequence", record.get("sequence", "")), ("Attempt", str(record.get("attempt", ""))),
             ("Station", record.get("station", "")), ("Operator", record.get("operator") or DASH),
             ("Started", record.get("started_at") or DASH), ("Ended", record.get("ended_at") or DASH),
@@ -165,6 +186,17 @@ def write_certificate(record: dict[str, Any], path: str | Path, *, pdf: bool = F
     return out
 
 
+def pdf_available() -> bool:
+    """Whether WeasyPrint can write the certificate's PDF here."""
+    try:
+        from bench.pdf import require_weasyprint
+
+        require_weasyprint()
+    except Exception:  # noqa: BLE001 - any failure to load it means no PDF
+        return False
+    return True
+
+
 def write_unit_documents(record: dict[str, Any], directory: str | Path, *, pdf: bool = False) -> dict[str, Path]:
     """A unit's certificate (HTML, and PDF with pdf) and, when it has trim coefficients, its
     compensation file, named SERIAL-aATTEMPT.certificate.html / .compensation.toml in directory."""
@@ -181,5 +213,10 @@ def write_unit_documents(record: dict[str, Any], directory: str | Path, *, pdf: 
     if pdf:
         out["certificate_pdf"] = paths[1]
     if comp is not None:
-        out["compensation"] = comp.write(directory / f"{stem}.compensation.toml")
+        path = directory / f"{stem}.compensation.toml"
+        loaded = (record.get("trims") or {}).get("file")
+        if loaded and Path(loaded) == path and path.exists():  # the file loaded into the NVM: kept as it was hashed
+            out["compensation"] = path
+        else:
+            out["compensation"] = comp.write(path)
     return out

@@ -1,5 +1,5 @@
-"""`gyrobench line run | simulate | report | import | verify | keygen | export`: the production line's commands
-(exit codes and routing: docs/line.md)."""
+"""`gyrobench line run | simulate | golden | unlock | report | import | verify | keygen | export`: the
+production line's commands (exit codes, routing, calibration and the golden unit: docs/line.md)."""
 
 from __future__ import annotations
 
@@ -81,6 +81,16 @@ def check_inputs(args: argparse.Namespace, limits: Any, station_id: str) -> list
     return [check_serial(d, limits.serial_format) for d in getattr(args, "dut", None) or []]
 
 
+def check_station_ready(station: Any, runs_dir: str | None, *, lock_too: bool = True) -> None:
+    """A station past a calibration due date, or locked by its golden unit, refuses line runs
+    (bench/line/station_state.py); LineError says which and since when."""
+    from .station_state import refusal
+
+    why = refusal(station.config.calibration, runs_dir or station.runs_dir, station.id, lock_too=lock_too)
+    if why:
+        raise LineError(why)
+
+
 def _station_of(args: argparse.Namespace, seq_station: str) -> str:
     name = args.station or seq_station
     if not name:
@@ -105,6 +115,9 @@ def check_steps(seq: Any, station: Any) -> None:
     before a unit is scanned; LineError names the step and why."""
     from bench.engine.demands import StationMismatch, check_station
 
+    if getattr(seq, "write_trims", False) and "fpga" not in station.config.devices:
+        raise LineError(f"{seq.source}: [trims] write = true needs an FPGA to hold the trims; station "
+                        f"{station.id!r} has {sorted(station.config.devices)}")
     for i, step in enumerate(seq.steps, 1):
         proc = step.make()
         missing = [r for r in proc.requires if r not in station.config.devices]
@@ -132,6 +145,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     overrides = {} if args.seed is None else {"seed": args.seed}
     station = load_station(station_name, **overrides)  # the file checked before anything opens
     duts = check_inputs(args, limits, station.id)
+    check_station_ready(station, args.runs_dir)
     faults = [_parse_slot_fault(f) for f in args.fault or []]
     if hasattr(station, "slots"):  # several gyros on one table: one unit a slot
         return _run_batch(args, seq, station, duts, faults)
@@ -289,6 +303,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise LineError(str(exc)) from None
     args.runs_dir = args.runs_dir or cfg.station["runs_dir"]
     args.db = args.db or (cfg.station["results"] if args.runs_dir == cfg.station["runs_dir"] else None)
+    from .station_state import refusal
+
+    why = refusal(cfg.calibration, args.runs_dir, cfg.id)
+    if why:
+        raise LineError(why)
     check_limits_measured(seq, _limits_of(args, seq))
     ctx = _context(args, station_name=cfg.id, operator=args.operator or "simulator", db_url=args.db, config=cfg)
     operator = make_operator(serial=None, assume_yes=True, interactive=False)
@@ -317,6 +336,77 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             print(f"  decided by a measurement without a true value: {', '.join(untruthed)}")
         print("  every outcome is right for its drawn truth" if not wrong else f"  {len(wrong)} wrong outcome(s)")
     return EXIT_OK if not wrong else EXIT_BAD
+
+
+def cmd_golden(args: argparse.Namespace) -> int:
+    """The golden unit through a sequence at shift start: each reference's drift recorded; a drift
+    past its limit locks the station for line runs (exit 1), else exit 0."""
+    import dataclasses
+
+    from bench.composition import load_station
+
+    from .golden import drifts, load_golden, lock_reason
+    from .prompts import make_operator
+    from .run import run_unit
+    from .sequence import load_sequence
+    from .station_state import append_log, lock
+
+    golden = load_golden(args.golden)
+    seq = load_sequence(args.sequence)
+    seq = dataclasses.replace(seq, write_trims=False, max_attempts=1)  # a golden unit keeps its own trims
+    limits = _limits_of(args, seq)
+    station_name = _station_of(args, seq.station)
+    overrides = {} if args.seed is None else {"seed": args.seed}
+    station = load_station(station_name, **overrides)
+    args.lot = args.lot or "golden"
+    check_inputs(args, limits, station.id)
+    check_station_ready(station, args.runs_dir, lock_too=False)  # a locked station may run its golden unit
+    if args.runs_dir is None:
+        args.runs_dir = station.runs_dir
+    db_url = args.db or (station.results_url if args.runs_dir == station.runs_dir else None)
+    ctx = _context(args, station_name=station.id, operator=args.operator, db_url=db_url, config=station.config)
+    ctx.sequence = seq
+    operator = make_operator(serial=golden.serial, assume_yes=True, interactive=False)
+    if args.json:
+        operator.show_outcome = lambda *a: None
+    ctx.routing[golden.serial] = {"golden": golden.source, "retest_reason": "golden unit, daily check"}
+    try:
+        records = run_unit(ctx, lambda: load_station(station_name, **overrides), golden.serial, operator, max_tries=1)
+    finally:
+        ctx.store.close()
+        ctx.db.close()
+    rec = records[-1]
+    rows = drifts(rec, golden)
+    reason = lock_reason(golden.serial, rows)
+    append_log(args.runs_dir, station.id, {"event": "golden", "serial": golden.serial, "golden_file": golden.source,
+                                           "record_file": rec.get("record_file"), "outcome": rec["outcome"],
+                                           "operator": args.operator, "drifts": rows, "held": reason is None})
+    if reason:
+        lock(args.runs_dir, station.id, reason, golden_record=rec.get("record_file"))
+    if args.json:
+        print(json.dumps({"serial": golden.serial, "record": rec.get("record_file"), "drifts": rows,
+                          "locked": reason}))
+    else:
+        print(f"golden unit {golden.serial} on {station.id}: record {rec.get('record_file')}")
+        for r in rows:
+            drift = "not measured" if r["drift"] is None else f"drift {r['drift']:+.4g} {r['unit']}".rstrip()
+            print(f"  {r['name']:<24} {drift} (limit ±{r['limit']:g})  {'ok' if r['ok'] else 'PAST LIMIT'}")
+        print(f"station {station.id} LOCKED for line runs: {reason}" if reason else "drift within limits")
+    return EXIT_BAD if reason else EXIT_OK
+
+
+def cmd_unlock(args: argparse.Namespace) -> int:
+    """Unlock a station its golden unit locked, with the reason logged."""
+    from bench.station_config import load_config
+
+    from .inputs import check_operator, check_reason
+    from .station_state import unlock
+
+    cfg = load_config(args.station)
+    runs_dir = args.runs_dir or cfg.station["runs_dir"]
+    held = unlock(runs_dir, cfg.id, check_reason(args.reason), check_operator(args.operator))
+    print(f"station {cfg.id} unlocked ({args.reason}); it was locked since {held['at']}: {held['reason']}")
+    return EXIT_OK
 
 
 def _counts(records: list[dict[str, Any]]) -> dict[str, int]:
@@ -526,6 +616,27 @@ def add_line_subcommand(sub: Any) -> None:
     sim.add_argument("--json", action="store_true")
     _common(sim)
     sim.set_defaults(func=cmd_simulate)
+
+    gold = lsub.add_parser("golden", help="the golden unit at shift start: drift from its references; past a limit "
+                           "the station locks")
+    gold.add_argument("sequence", help="a shipped sequence or a TOML file")
+    gold.add_argument("--golden", required=True,
+                      help="golden file (TOML: [golden] serial, [reference.NAME] value, limit)")
+    gold.add_argument("--operator", required=True, metavar="NAME")
+    gold.add_argument("--station", default=None)
+    gold.add_argument("--limits", default=None)
+    gold.add_argument("--lot", default="")
+    gold.add_argument("--seed", type=int, default=None)
+    gold.add_argument("--json", action="store_true")
+    _common(gold)
+    gold.set_defaults(func=cmd_golden)
+
+    unl = lsub.add_parser("unlock", help="unlock a station its golden unit locked (the reason is logged)")
+    unl.add_argument("--station", required=True)
+    unl.add_argument("--reason", required=True, metavar="TEXT")
+    unl.add_argument("--operator", required=True, metavar="NAME")
+    _common(unl)
+    unl.set_defaults(func=cmd_unlock)
 
     rep = lsub.add_parser("report", help="yield, histograms with limits, Cp/Cpk, unit history, control charts")
     rep.add_argument("--lot", default=None)

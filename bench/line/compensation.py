@@ -70,6 +70,7 @@ class Coefficient:
     u_high: float | None = None
     run_id: str = ""
     procedure: str = ""
+    basis: str = ""  # why this estimate was taken (the narrowest 95 % interval, or the procedure's rank)
 
     @property
     def register(self) -> str:
@@ -103,6 +104,7 @@ class Compensation:
                 value = math.remainder(value, 90.0)  # a 4 theta pattern: 90 deg periodic
             regs[c.register] = float(value)
         regs["TRIM_EN"] = en
+        regs["TRIM_UNIT_ID"] = unit_id(self.serial)
         regs["TRIM_FILE_ID"] = self.file_id()
         return regs
 
@@ -128,12 +130,19 @@ class Compensation:
             if c.u_high is not None:
                 lines.append(f"u_high = {_num(c.u_high)}")
             lines += [f"register = {_q(c.register)}", f"run_id = {_q(c.run_id)}", f"procedure = {_q(c.procedure)}"]
+            if c.basis:
+                lines.append(f"basis = {_q(c.basis)}")
         return "\n".join(lines) + "\n"
 
     def write(self, path: str | Path) -> Path:
         path = Path(path)
         path.write_text(self.to_toml())
         return path
+
+
+def unit_id(serial: str) -> int:
+    """48 bits of the SHA-256 of a serial (what TRIM_UNIT_ID holds: NVM names the unit it trims)."""
+    return int.from_bytes(hashlib.sha256(str(serial).encode()).digest()[:6], "big")
 
 
 def _q(text: str) -> str:
@@ -184,6 +193,7 @@ def load(path: str | Path) -> Compensation:
             coeffs[name] = Coefficient(
                 name, float(c["value"]), str(c.get("unit", "")),
                 _opt(c.get("u_low")), _opt(c.get("u_high")), str(c.get("run_id", "")), str(c.get("procedure", "")),
+                str(c.get("basis", "")),
             )  # fmt: skip
         except (TypeError, ValueError):
             raise CompensationError(f"compensation file {path}: {name} value={c['value']!r} is not a number") from None
@@ -218,12 +228,18 @@ def _u(value: float, interval: Any) -> tuple[float | None, float | None]:
     return float(value) - float(interval[0]), float(interval[1]) - float(value)
 
 
+def _width(c: Coefficient) -> float:
+    """The 95 % interval's width of an estimate (inf without one)."""
+    return math.inf if c.u_low is None or c.u_high is None else c.u_low + c.u_high
+
+
 def _pick(candidates: Iterable[dict[str, Any]], serial: str, **kw: Any) -> Compensation:
-    """The preferred procedure's value of every known coefficient among measurement dicts
-    {name, procedure, run_id, value, unit, interval}."""
-    best: dict[str, tuple[int, Coefficient]] = {}
-    runs: list[str] = []
-    for m in candidates:
+    """The most precise estimate of every known coefficient among measurement dicts {name,
+    procedure, run_id, value, unit, interval}: the narrowest 95 % interval; among estimates without
+    one (or equally wide), the coefficient's preferred procedure, then the first given.  Each
+    coefficient's `basis` says which was taken and what it was chosen over."""
+    seen: dict[str, list[tuple[float, int, int, Coefficient]]] = {}
+    for i, m in enumerate(candidates):
         name = _bare(str(m.get("name", "")))
         spec = COEFFICIENTS.get(name)
         value = m.get("value")
@@ -233,9 +249,23 @@ def _pick(candidates: Iterable[dict[str, Any]], serial: str, **kw: Any) -> Compe
         rank = spec.procedures.index(proc) if proc in spec.procedures else len(spec.procedures)
         lo, hi = _u(float(value), m.get("interval"))
         coef = Coefficient(name, float(value), str(m.get("unit", spec.unit)), lo, hi, str(m.get("run_id", "")), proc)
-        if name not in best or rank < best[name][0]:
-            best[name] = (rank, coef)
-    coeffs = {n: best[n][1] for n in COEFFICIENTS if n in best}
+        seen.setdefault(name, []).append((_width(coef), rank, i, coef))
+    coeffs: dict[str, Coefficient] = {}
+    for name in COEFFICIENTS:
+        if name not in seen:
+            continue
+        ranked = sorted(seen[name], key=lambda t: t[:3])
+        width, _, _, best = ranked[0]
+        others = [f"{c.procedure or '?'} {_wtext(w)}" for w, _, _, c in ranked[1:]]
+        if math.isfinite(width):
+            basis = f"narrowest 95 % interval: {best.procedure or '?'} {_wtext(width)}"
+        else:
+            basis = f"no interval; preferred procedure {best.procedure or '?'}"
+        if others:
+            basis += " (over " + ", ".join(others) + ")"
+        coeffs[name] = Coefficient(best.name, best.value, best.unit, best.u_low, best.u_high, best.run_id,
+                                   best.procedure, basis)
+    runs: list[str] = []
     for c in coeffs.values():
         if c.run_id and c.run_id not in runs:
             runs.append(c.run_id)
@@ -243,6 +273,10 @@ def _pick(candidates: Iterable[dict[str, Any]], serial: str, **kw: Any) -> Compe
         need = ", ".join(COEFFICIENTS)
         raise CompensationError(f"unit {serial}: no calibration coefficient measured (need one of {need})")
     return Compensation(serial=serial, coefficients=coeffs, source_runs=runs, **kw)
+
+
+def _wtext(width: float) -> str:
+    return f"width {width:.3g}" if math.isfinite(width) else "no interval"
 
 
 def from_record(record: Mapping[str, Any]) -> Compensation:

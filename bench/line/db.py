@@ -97,7 +97,8 @@ class LineDB:
             except IntegrityError:
                 if record.get("integrity"):  # a sealed record is never renumbered (its hash covers it)
                     raise LineError(f"line database {self.shown_url}: attempt {record['attempt']} of "
-                                    f"{record['serial']} is already there (the JSON record is kept: {record.get('record_file')})"
+                                    f"{record['serial']} is already there (the JSON record is kept: "
+                                    f"{record.get('record_file')})"
                                     ) from None
                 record["attempt"] = self.next_attempt(record["serial"])
             except OperationalError as exc:  # SQLite: the file is locked by another writer
@@ -284,8 +285,8 @@ class LineDB:
     def measurements(self, *, lot: str | None = None) -> list[dict[str, Any]]:
         """Judged measurements with limits (their attempt's lot, station and time), oldest first."""
         m, a = line_measurements, line_attempts
-        q = (select(m.c.name, m.c.serial, m.c.value, m.c.unit, m.c.low, m.c.high, m.c.rule, m.c.outcome,
-                    m.c.ended_at, a.c.lot, a.c.station, a.c.attempt)
+        q = (select(m.c.name, m.c.procedure, m.c.serial, m.c.value, m.c.unit, m.c.low, m.c.high, m.c.rule,
+                    m.c.outcome, m.c.ended_at, a.c.lot, a.c.station, a.c.attempt, a.c.product, a.c.sequence)
              .join(a, a.c.id == m.c.attempt_id).where(m.c.rule.is_not(None))
              .order_by(m.c.ended_at, m.c.id))
         if lot is not None:

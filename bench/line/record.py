@@ -69,6 +69,8 @@ def judged(name: str, procedure: str, run_id: str | None, m: dict[str, Any] | No
                                             math.nan if interval[1] is None else interval[1])
         v = judge(math.nan if value is None else value, iv, limit)
         out.update(rule=v.rule, outcome=v.outcome, u_low=_num(v.u_low), u_high=_num(v.u_high), note=v.note)
+        if v.condition:
+            out["condition"] = v.condition
     return out
 
 
@@ -104,6 +106,11 @@ def summary(record: dict[str, Any]) -> str:
     for r in record.get("runs", []):  # a run that ended in ERROR or ABORTED: why, first
         if r.get("outcome") in (ERROR, "ABORTED"):
             words.append(f"{r.get('step') or r.get('procedure')} {r['outcome']} ({r.get('end_reason', '')})")
+    trims = record.get("trims") or {}
+    if trims.get("error"):
+        words.append(trims["error"])
+    elif trims.get("written"):
+        words.append(f"trims in NVM (unit {trims.get('unit_id')}, CRC {trims.get('crc')})")
     if not bad:
         met = sum(1 for m in record["measurements"] if m["rule"] and m["outcome"] == "PASS")
         skipped = sum(1 for m in record["measurements"] if m["rule"] and m["outcome"] == SKIPPED)
@@ -112,8 +119,9 @@ def summary(record: dict[str, Any]) -> str:
     for m in bad[:4]:
         lim = m["limits"] or {}
         value = "-" if m["value"] is None else f"{m['value']:.6g}"
-        words.append(f"{m['name']}={value} {m['unit']} {m['outcome']} (limits {lim.get('low')}..{lim.get('high')}, "
-                     f"rule {m['rule']})")
+        kind = f" {m['condition']}" if m.get("condition") else ""
+        words.append(f"{m['name']}={value} {m['unit']} {m['outcome']}{kind} (limits {lim.get('low')}.."
+                     f"{lim.get('high')}, rule {m['rule']})")
     return f"{record['outcome']}: " + "; ".join(words) + (f"; +{len(bad) - 4} more" if len(bad) > 4 else "")
 
 
@@ -173,10 +181,29 @@ def _validator_text(m: dict[str, Any]) -> list[str]:
     return [text]
 
 
+def _cond(m: dict[str, Any]) -> str:
+    return f" ({m['condition']})" if m.get("condition") else ""
+
+
 HTF_MEAS_OUTCOME = {"PASS": "PASS", MARGINAL: "PASS", "FAIL": "FAIL", ERROR: "UNSET", SKIPPED: "UNSET",
                     COMPLETE: "PASS"}
 HTF_TEST_OUTCOME = {"PASS": "PASS", MARGINAL: "PASS", "FAIL": "FAIL", ERROR: "ERROR", "ABORTED": "ABORTED"}
 NO_CODE = {"name": "", "docstring": None, "sourcecode": ""}
+
+
+def openhtf_metadata(record: dict[str, Any]) -> dict[str, Any]:
+    """The test record's metadata: identity, our outcome (MARGINAL kept, with each MARGINAL's kind),
+    and the checksums: the record's hash, the limits and sequence files', and each raw file's."""
+    integrity = record.get("integrity") or {}
+    return {"test_name": record["sequence"], "lot": record["lot"], "operator": record["operator"],
+            "attempt": record["attempt"], "software_version": record["software_version"],
+            "gyrobench_outcome": record["outcome"],
+            "conditions": {m["name"]: m["condition"] for m in record["measurements"] if m.get("condition")},
+            "checksums": {"record_sha256": integrity.get("sha256"), "signature": integrity.get("signature"),
+                          "limits_sha256": record.get("limits_sha256"),
+                          "sequence_sha256": record.get("sequence_sha256"),
+                          "raw_files": {r["run_id"]: {"file": r.get("raw_file"), "sha256": r.get("sha256")}
+                                        for r in record["runs"]}}}
 
 
 def to_openhtf(record: dict[str, Any]) -> dict[str, Any]:
@@ -190,7 +217,7 @@ def to_openhtf(record: dict[str, Any]) -> dict[str, Any]:
             if m["run_id"] != run["run_id"] or m["procedure"] != run["procedure"]:
                 continue
             iv = m["interval"]
-            doc = f"{m['outcome']} by rule {m['rule'] or 'none'}; unit {m['unit'] or '-'}; 95% interval " + (
+            doc = f"{m['outcome']}{_cond(m)} by rule {m['rule'] or 'none'}; unit {m['unit'] or '-'}; 95% interval " + (
                 "none" if iv is None else f"[{iv[0]}, {iv[1]}]")
             entry = {"name": m["name"], "outcome": HTF_MEAS_OUTCOME[m["outcome"]]}
             if _validator_text(m):
@@ -216,9 +243,7 @@ def to_openhtf(record: dict[str, Any]) -> dict[str, Any]:
         "outcome": HTF_TEST_OUTCOME[record["outcome"]],
         "outcome_details": [],
         "marginal": record["outcome"] == MARGINAL,
-        "metadata": {"test_name": record["sequence"], "lot": record["lot"], "operator": record["operator"],
-                     "attempt": record["attempt"], "software_version": record["software_version"],
-                     "gyrobench_outcome": record["outcome"], "config": None},
+        "metadata": {**openhtf_metadata(record), "config": None},
         "phases": phases,
         "subtests": [], "branches": [], "diagnosers": [], "diagnoses": [], "log_records": [],
         "station_id": record["station"],

@@ -23,7 +23,7 @@ from .record import (
     write_new_record,
 )
 from .sequence import Sequence
-from .verdict import ABORTED, ERROR, FAIL, SKIPPED, worst
+from .verdict import ABORTED, ERROR, FAIL, PASS, SKIPPED, worst
 
 STOP_OUTCOMES = (FAIL, ERROR, ABORTED)
 
@@ -46,6 +46,7 @@ class LineContext:
     signer: Any = None  # bench.line.integrity.Signer: the station's key (None: records chained, not signed)
     routing: dict[str, dict[str, Any]] = field(default_factory=dict)  # serial -> its routing (bench/line/routing.py)
     attempt_ids: dict[str, Any] = field(default_factory=dict)  # serial -> its open attempt (begin_attempt)
+    pdf: bool = True  # the certificate as PDF too (when WeasyPrint is there)
 
 
 @dataclass
@@ -195,8 +196,10 @@ def finish_record(ctx: LineContext, station: Any, serial: str, attempt: int, sta
         "runs": runs,
         **(extra or {}),
     }
-    record["summary"] = summary(record)
     folder = ctx.runs_dir / "line" / (ctx.lot or "no-lot")
+    if seq.write_trims:
+        _trims_step(record, station, folder)
+    record["summary"] = summary(record)
     opened = ctx.attempt_ids.pop(serial, None) or OpenAttempt(None)
     opened.stop()
     _write_sealed(ctx, record, folder)
@@ -214,6 +217,43 @@ def finish_record(ctx: LineContext, station: Any, serial: str, attempt: int, sta
     return record
 
 
+def _trims_step(record: dict[str, Any], station: Any, folder: Path) -> None:
+    """The sequence's gated last step (bench/line/trims.py): a PASS unit's compensation into its
+    FPGA's NVM; a write that fails makes the unit ERROR (it is not trimmed as its certificate says)."""
+    from .record import _safe
+    from .trims import write_unit_trims
+
+    link = (getattr(station, "devices", None) or {}).get("fpga")
+    if link is None and record["outcome"] == PASS:
+        record["trims"] = {"written": False, "error": f"station {station.id!r} has no FPGA to hold the trims"}
+    elif link is None:
+        why = f"unit {record['outcome']}: trims are written for PASS units only"
+        record["trims"] = {"written": False, "reason": why}
+    else:
+        path = folder / f"{_safe(record['serial'])}-a{record['attempt']}.compensation.toml"
+        record["trims"] = write_unit_trims(link, record, path)
+    if record["trims"].get("error"):
+        record["outcome"] = ERROR
+
+
+def _write_documents(record: dict[str, Any], folder: Path, *, pdf: bool) -> None:
+    """The unit's certificate (or rejection report), HTML and PDF, and its compensation file beside
+    the record; a PDF that cannot be made leaves the HTML (and says so), never the record unwritten."""
+    from .certificate import pdf_available, write_unit_documents
+
+    record.pop("documents_error", None)
+    errors = []
+    for with_pdf in ((True, False) if pdf and pdf_available() else (False,)):
+        try:
+            record["documents"] = {k: str(v) for k, v in write_unit_documents(record, folder, pdf=with_pdf).items()}
+            break
+        except Exception as exc:  # noqa: BLE001 - a document that cannot be written must not lose the record
+            record.pop("documents", None)
+            errors.append(f"{type(exc).__name__}: {exc}")
+    if errors:
+        record["documents_error"] = "; ".join(errors)
+
+
 def _write_sealed(ctx: LineContext, record: dict[str, Any], folder: Path) -> None:
     """The record's documents, its place in the station's chain and its signature, then its file
     SERIAL-aN.json created once (never over another): a name already on disk takes the next N."""
@@ -224,14 +264,7 @@ def _write_sealed(ctx: LineContext, record: dict[str, Any], folder: Path) -> Non
         while True:
             while record_path(folder, record).exists():
                 record["attempt"] += 1
-            try:  # the unit's certificate and, when it has trims, its compensation file beside the record
-                from .certificate import write_unit_documents
-
-                record.pop("documents_error", None)
-                record["documents"] = {k: str(v) for k, v in write_unit_documents(record, folder).items()}
-            except Exception as exc:  # noqa: BLE001 - a document that cannot be written must not lose the record
-                record.pop("documents", None)
-                record["documents_error"] = f"{type(exc).__name__}: {exc}"
+            _write_documents(record, folder, pdf=ctx.pdf)
             seal(record, chain, ctx.signer, ctx.db)
             try:
                 write_new_record(record, folder)

@@ -11,6 +11,10 @@ the retest policy, so a line engineer writes a new one without Python.
     max_attempts = 2               # attempts of one unit in one `line run` (1 = no retest)
     on = ["MARGINAL", "ERROR"]     # unit outcomes that start another attempt
 
+    [trims]
+    write = true                   # last step, PASS units only: the compensation into the FPGA's NVM,
+                                   # read back, its unit id checked (bench/line/trims.py)
+
     [[step]]
     procedure = "mems-sweep"       # a registered procedure (`gyrobench list`)
     [step.params]                  # parameter overrides, checked as `--set` is
@@ -38,6 +42,9 @@ SEQ_KEYS = {
 RETEST_KEYS = {
     "max_attempts": (int, 1, 1, 10, None, False),
     "on": (list, [], None, None, None, False),
+}
+TRIMS_KEYS = {
+    "write": (bool, False, None, None, None, False),
 }
 STEP_KEYS = {
     "procedure": (str, "", None, None, None, True),
@@ -75,6 +82,7 @@ class Sequence:
     steps: tuple[Step, ...]
     max_attempts: int = 1
     retest_on: tuple[str, ...] = field(default_factory=tuple)
+    write_trims: bool = False  # [trims] write: the compensation into the unit's NVM as the last step
 
     def requires(self) -> set[str]:
         from procedures import find_procedure
@@ -91,12 +99,13 @@ def load_sequence(name_or_path: str | Path) -> Sequence:
     path = find_file(name_or_path, "sequences", "sequence")
     raw = read_toml(path)
     for top in raw:
-        if top not in ("sequence", "retest", "step"):
-            raise LineError(f"{path}: unknown table [{top}] (allowed: sequence, retest, [[step]])")
+        if top not in ("sequence", "retest", "trims", "step"):
+            raise LineError(f"{path}: unknown table [{top}] (allowed: sequence, retest, trims, [[step]])")
     if "sequence" not in raw:
         raise LineError(f'{path}: missing table [sequence] with name = "..."')
     seq = table(f"{path}: [sequence]", raw["sequence"], SEQ_KEYS, name="sequence")
     retest = table(f"{path}: [retest]", raw.get("retest", {}), RETEST_KEYS, name="retest")
+    trims = table(f"{path}: [trims]", raw.get("trims", {}), TRIMS_KEYS, name="trims")
     for o in retest["on"]:
         if o not in RETEST_OUTCOMES:
             raise LineError(f"{path}: [retest] on={o!r} is not one of {', '.join(RETEST_OUTCOMES)}")
@@ -122,4 +131,4 @@ def load_sequence(name_or_path: str | Path) -> Sequence:
         del proc  # built only to check the parameters
         steps.append(Step(cls.name, t["name"] or cls.name, dict(t["params"]), stop))
     return Sequence(str(path), seq["name"], seq["description"], seq["station"], seq["limits"], tuple(steps),
-                    retest["max_attempts"], tuple(retest["on"]))
+                    retest["max_attempts"], tuple(retest["on"]), trims["write"])

@@ -1,5 +1,6 @@
 """The line's statistics, pure functions on plain rows: yield by a key, process capability (Cp, Cpk)
-of a measurement against its limits, and the final attempt of each unit."""
+of a measurement against its limits with confidence intervals, the individuals (Shewhart) chart's
+limits from the moving range, and the final attempt of each unit."""
 
 from __future__ import annotations
 
@@ -43,11 +44,17 @@ def yield_by(attempts: list[dict[str, Any]], key: Callable[[dict[str, Any]], str
     return rows
 
 
-def capability(values: Iterable[float], low: float | None, high: float | None) -> dict[str, float | None]:
+def capability(values: Iterable[float], low: float | None, high: float | None,
+               confidence: float = 0.95) -> dict[str, Any]:
     """Cp = (high - low) / 6 sigma and Cpk = min(high - mean, mean - low) / 3 sigma (sample sigma,
-    ddof 1); a one-sided limit has no Cp and its Cpk is its side's; None when undefined."""
+    ddof 1); a one-sided limit has no Cp and its Cpk is its side's; None when undefined.  With
+    their two-sided confidence intervals (`cp_ci`, `cpk_ci`):
+
+    - Cp:  [Cp sqrt(chi2_{a/2, n-1} / (n-1)), Cp sqrt(chi2_{1-a/2, n-1} / (n-1))] (exact for normal data);
+    - Cpk: Cpk -+ z_{1-a/2} sqrt(1 / (9 n) + Cpk^2 / (2 (n - 1)))  (Bissell's approximation, 1990)."""
     x = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
-    out: dict[str, float | None] = {"n": int(x.size), "mean": None, "sigma": None, "cp": None, "cpk": None}
+    out: dict[str, Any] = {"n": int(x.size), "mean": None, "sigma": None, "cp": None, "cpk": None,
+                           "cp_ci": None, "cpk_ci": None}
     if x.size < 2:
         return out
     mean, sd = float(x.mean()), float(x.std(ddof=1))
@@ -60,4 +67,43 @@ def capability(values: Iterable[float], low: float | None, high: float | None) -
              if s is not None]
     if sides:
         out["cpk"] = min(sides) / (3 * sd)
+    out["cp_ci"], out["cpk_ci"] = capability_intervals(out["cp"], out["cpk"], int(x.size), confidence)
+    return out
+
+
+def capability_intervals(cp: float | None, cpk: float | None, n: int,
+                         confidence: float = 0.95) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
+    """The confidence intervals of Cp (chi-square) and Cpk (Bissell) from n values (see `capability`)."""
+    from scipy import stats
+
+    if n < 2:
+        return None, None
+    a = 1.0 - confidence
+    cp_ci = None
+    if cp is not None:
+        dof = n - 1
+        cp_ci = (cp * math.sqrt(stats.chi2.ppf(a / 2, dof) / dof), cp * math.sqrt(stats.chi2.ppf(1 - a / 2, dof) / dof))
+    cpk_ci = None
+    if cpk is not None:
+        half = float(stats.norm.ppf(1 - a / 2)) * math.sqrt(1 / (9 * n) + cpk**2 / (2 * (n - 1)))
+        cpk_ci = (cpk - half, cpk + half)
+    return cp_ci, cpk_ci
+
+
+D2_MR = 1.128  # d2 for a moving range of 2: sigma_within = mean moving range / d2
+
+
+def individuals_chart(values: Iterable[float]) -> dict[str, Any]:
+    """The individuals (X) chart of values in time order: centre line the mean, the within spread
+    sigma = mean |x_i - x_(i-1)| / 1.128 (moving range of 2), Shewhart limits mean -+ 3 sigma_within
+    (= mean -+ 2.66 MR-bar); the points past a limit (0-based indices)."""
+    x = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    out: dict[str, Any] = {"n": int(x.size), "center": None, "mr_bar": None, "sigma_within": None, "ucl": None,
+                           "lcl": None, "outside": []}
+    if x.size < 2:
+        return out
+    mr_bar = float(np.mean(np.abs(np.diff(x))))
+    center, sw = float(x.mean()), mr_bar / D2_MR
+    out.update(center=center, mr_bar=mr_bar, sigma_within=sw, ucl=center + 3 * sw, lcl=center - 3 * sw)
+    out["outside"] = [int(i) for i in np.flatnonzero((x > out["ucl"]) | (x < out["lcl"]))] if sw > 0 else []
     return out

@@ -45,6 +45,25 @@ class Verdict:
     u_low: float | None = None  # value - interval low (U below the value)
     u_high: float | None = None  # interval high - value
     note: str = ""
+    condition: str = ""  # a MARGINAL's kind: "conditional pass" or "conditional fail" (ILAC G8), "marginal band"
+
+
+def conditional(value: float, interval: tuple[float, float], low: float | None, high: float | None) -> tuple[str, str]:
+    """ILAC G8's two kinds of MARGINAL, told apart by where the value lies, and the reason: a
+    conditional pass (the value inside the limits, its 95 % interval across one) or a conditional
+    fail (the value outside, its interval reaching back inside)."""
+    lo, hi = sorted(float(x) for x in interval)
+    crossed = [f"{name} limit {lim:g}" for name, lim in (("low", low), ("high", high))
+               if lim is not None and lo < lim < hi]
+    where = " and ".join(crossed) or "a limit"
+    iv = f"[{lo:.6g}, {hi:.6g}]"
+    if _finite(value) and (low is None or value >= low) and (high is None or value <= high):
+        return "conditional pass", f"conditional pass: the value {value:.6g} is inside the limits but its 95 % " \
+                                   f"interval {iv} crosses the {where} (ILAC G8)"
+    if _finite(value):
+        return "conditional fail", f"conditional fail: the value {value:.6g} is outside the limits and its 95 % " \
+                                   f"interval {iv} reaches back across the {where} (ILAC G8)"
+    return "conditional", f"the 95 % interval {iv} crosses the {where}; no finite value to place (ILAC G8)"
 
 
 def _finite(x: float | None) -> bool:
@@ -94,10 +113,21 @@ def judge(value: float | None, interval: tuple[float, float] | None, limit: Limi
         if not (_finite(lo) or _finite(hi)):  # no end known: nothing to decide on but the value
             return Verdict(value_rule(v, limit.low, limit.high), VALUE, None, None,
                            "the interval has no finite end; decided on the value")
-        return Verdict(guard_band((lo, hi), limit.low, limit.high), GUARD_BAND, u_lo, u_hi)
+        outcome = guard_band((lo, hi), limit.low, limit.high)
+        if outcome != MARGINAL:
+            return Verdict(outcome, GUARD_BAND, u_lo, u_hi)
+        lo_, hi_ = (-math.inf if not _finite(lo) else lo), (math.inf if not _finite(hi) else hi)
+        kind, why = conditional(v, (lo_, hi_), limit.low, limit.high)
+        return Verdict(outcome, GUARD_BAND, u_lo, u_hi, why, kind)
     note = "no 95% interval; decided on the value" if limit.rule == GUARD_BAND else ""
-    return Verdict(value_rule(v, limit.low, limit.high, limit.marginal_low, limit.marginal_high), VALUE,
-                   u_lo, u_hi, note)
+    outcome = value_rule(v, limit.low, limit.high, limit.marginal_low, limit.marginal_high)
+    if outcome == MARGINAL:
+        marg = (("low", limit.marginal_low), ("high", limit.marginal_high))
+        band = [f"beyond the marginal {n} {m:g}" for n, m in marg
+                if m is not None and ((n == "low" and v < m) or (n == "high" and v > m))]
+        why = f"marginal: the value {v:.6g} is inside the limits but {' and '.join(band)} (value rule)"
+        return Verdict(outcome, VALUE, u_lo, u_hi, "; ".join(x for x in (note, why) if x), "marginal band")
+    return Verdict(outcome, VALUE, u_lo, u_hi, note)
 
 
 def worst(outcomes) -> str:

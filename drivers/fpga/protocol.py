@@ -175,6 +175,8 @@ TRIM_REGISTERS: tuple[Register, ...] = (
     Register("TRIM_GAIN_X", 0x49, "f", "rw", 0.5, 2.0, "", 1.0, "pickoff x gain trim (multiplies cx, sx)"),
     Register("TRIM_GAIN_Y", 0x4A, "f", "rw", 0.5, 2.0, "", 1.0, "pickoff y gain trim (multiplies cy, sy)"),
     Register("TRIM_BRYAN_FACTOR", 0x4B, "f", "rw", 0.0, 1.0, "", 0.0, "scale factor trim: Bryan factor K (0 none)"),
+    Register("TRIM_UNIT_ID", 0x4E, "u", "rw", 0, float(2**48 - 1),
+             doc="the unit's serial as 48 bits of its SHA-256 (0: none), so NVM names the unit it trims"),
     Register("TRIM_FILE_ID", 0x4F, "u", "rw", 0, float(2**48 - 1), doc="compensation file id (SHA-256, 6 bytes)"),
 )
 TRIM_BLOCK = tuple(r.name for r in TRIM_REGISTERS if r.access == "rw")  # what NVM holds, in address order
