@@ -123,6 +123,15 @@ class Recorder:
                 self._f.attrs[key] = value if isinstance(value, (str, int, float, bool)) else _json(value)
             self._write_parameters(dict((attrs or {}).get("params") or {}), param_units or {})
             self._f.flush()
+        except (ValueError, TypeError) as exc:  # a value HDF5 cannot hold (a NUL in an id): no stub left
+            self._drop_reserve()
+            if self._f is not None:
+                with contextlib.suppress(Exception):
+                    self._f.close()
+                with contextlib.suppress(OSError):
+                    self.path.unlink()
+            raise RawDataError(f"raw data: cannot create {self.path}: a run attribute cannot be stored ({exc})") \
+                from exc
         except (OSError, RuntimeError) as exc:
             self._drop_reserve()
             if self._f is not None:
@@ -701,5 +710,32 @@ def stored_legends(f: h5py.File, stream: str, attrs: Any) -> dict[str, dict[int,
     return out
 
 
+class NotARunFile(ValueError):
+    """An HDF5 file that is not a gyrobench raw file (another program's), or whose run attributes
+    cannot be read (params that are not JSON)."""
+
+
+#: what every raw file holds from its first flush (Recorder.__init__)
+RUN_ATTRS, RUN_GROUPS = ("run_id", "procedure"), ("streams",)
+
+
+def check_run_file(data: RunData) -> RunData:
+    """data if it is a gyrobench raw file, else NotARunFile saying what it lacks."""
+    missing = [f"attribute {a!r}" for a in RUN_ATTRS if a not in data.attrs]
+    missing += [f"group {g!r}" for g in RUN_GROUPS if g not in data.f]
+    if missing:
+        raise NotARunFile(f"{data.path}: not a gyrobench raw file (no {', '.join(missing)})")
+    for key in ("params", "station", "truth"):
+        if key in data.attrs and not isinstance(data.attrs[key], dict):
+            raise NotARunFile(f"{data.path}: attribute {key!r} is not a JSON object: {str(data.attrs[key])[:60]!r}")
+    return data
+
+
 def open_run(path: str | Path) -> RunData:
-    return RunData(path)
+    """A raw file opened for reading; NotARunFile if it is HDF5 but not a gyrobench run."""
+    data = RunData(path)
+    try:
+        return check_run_file(data)
+    except NotARunFile:
+        data.close()
+        raise

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.devices import DRIVERS, INSTRUMENT, ROLES, Key, StationError, check_table
-from bench.validation import missing_key, not_a, not_one_of
+from bench.validation import ValidationError, check_label, missing_key, not_a, not_one_of
 
 BUILTIN_DIR = Path(__file__).resolve().parent / "stations"
 
@@ -92,6 +92,10 @@ def load_config(name_or_path: str | Path) -> StationConfig:
         if top in raw and not isinstance(raw[top], dict):
             raise StationError(f"{path}: {not_a(top, raw[top], 'a table ([' + top + '])')}")
     station = check_table(f"{path}: [station]", raw["station"], STATION_KEYS)
+    try:  # the id names runs, records and files: printable, not too long (bench.validation)
+        check_label("id", station["id"])
+    except ValidationError as exc:
+        raise StationError(f"{path}: [station] {exc}") from None
     sim = check_table(f"{path}: [simulation]", raw["simulation"], SIM_KEYS) if "simulation" in raw else None
     devices = {role: _check_device(path, f"[devices.{role}]", role, table, sim)
                for role, table in (raw.get("devices") or {}).items()}

@@ -47,6 +47,15 @@ def _parse_sets(items: list[str]) -> dict[str, str]:
     return dict(parse_assignment(item) for item in items)
 
 
+def _check_people(args: argparse.Namespace) -> None:
+    """--operator and each --dut checked for length and control characters (bench.validation)."""
+    from bench.validation import check_label
+
+    check_label("--operator", args.operator, allow_empty=True)
+    for serial in args.dut:
+        check_label("--dut", serial)
+
+
 def _warn_unfired_faults(station: Any, faults: list[tuple[str, float]]) -> None:
     """A --fault whose time the run never reached did not test anything: say so."""
     sched = getattr(station, "faults", None)
@@ -66,6 +75,7 @@ def cmd(args: argparse.Namespace) -> int:
     from procedures import ProcedureNotFound, find_procedure
 
     try:
+        _check_people(args)  # before the procedure file is even imported
         proc_cls = find_procedure(args.procedure)
         params = _parse_sets(args.set)
         proc = proc_cls(params)  # parameters are checked here, before any device exists

@@ -56,21 +56,26 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, str]]:
+def _measurement_rows(data: Any, row: dict[str, Any] | None) -> tuple[list[dict[str, str]], list[dict[str, str]]]:
+    """(the run's own measurements, the re-analyses `gyrobench analyze` stored) as table rows:
+    two tables, so a re-fit never reads as part of what the run measured."""
     from procedures import measurement_truth
 
     truth = measurement_truth(data.attrs.get("procedure"), data.truth)  # by declaration, not by matching names
-    incomplete = data.incomplete
-    found: dict[str, dict[str, Any]] = {}
+    own: dict[str, dict[str, Any]] = {}
     for m in data.measurements():
         key = m["name"] if m.get("dut") is None else f"{m['dut']}:{m['name']}"
-        found[key] = {**m, "name": key, "source": "run"}
-    if row is not None:
-        for m in row.get("measurements", []):
-            if m.get("source") == "analyze":
-                name = m["name"] + (" (re-analysis, incomplete run)" if incomplete else " (re-analysis)")
-                ci = [m.get("ci95_low"), m.get("ci95_high")]
-                found[name] = {**m, "name": name, "ci95": ci if None not in ci else None, "base": m["name"]}
+        own[key] = {**m, "name": key}
+    again: dict[str, dict[str, Any]] = {}
+    for m in (row or {}).get("measurements", []):
+        if m.get("source") == "analyze":
+            key = m["name"] if m.get("dut") is None else f"{m['dut']}:{m['name']}"
+            ci = [m.get("ci95_low"), m.get("ci95_high")]
+            again[key] = {**m, "name": key, "ci95": ci if None not in ci else None, "base": m["name"]}
+    return _table_rows(own, truth), _table_rows(again, truth)
+
+
+def _table_rows(found: dict[str, dict[str, Any]], truth: dict[str, float]) -> list[dict[str, str]]:
     out = []
     for name, m in found.items():
         ci = m.get("ci95")
@@ -119,9 +124,9 @@ def context(data: Any, row: dict[str, Any] | None = None,
     proc = procedure_of(data)
     figs, notes = figures if figures is not None else figures_for(data, proc)
     a = data.attrs
-    rows = _measurement_rows(data, row)
+    rows, reanalysis = _measurement_rows(data, row)
     # the truth columns on a simulated station, when a measurement has a truth to compare with
-    truth_shown = bool(a.get("simulated") and data.truth and any(r["truth"] != DASH for r in rows))
+    truth_shown = bool(a.get("simulated") and data.truth and any(r["truth"] != DASH for r in rows + reanalysis))
     return {
         "run_id": a.get("run_id", data.path.stem),
         "procedure": a.get("procedure", ""),
@@ -132,6 +137,7 @@ def context(data: Any, row: dict[str, Any] | None = None,
         "identity": _identity(data, proc),
         "params": _param_rows(data, proc),
         "measurements": rows,
+        "reanalysis": reanalysis,
         "truth_shown": truth_shown,
         "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key, "table": f.table} for f in figs],
         "notes": notes + list(getattr(data, "notes", [])),
