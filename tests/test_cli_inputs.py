@@ -137,3 +137,18 @@ def test_show_spells_out_escapes_stored_before_labels_were_checked(recorded, tmp
     assert main(["show", str(raw)]) == 0
     out = capsys.readouterr().out
     assert "\x1b" not in out and "operator: A\\nB\\x1b[31mRED" in out
+
+
+@pytest.mark.parametrize("body, words", [
+    ("import sys\nsys.exit(0)\n", "it called sys.exit(0) while being imported"),
+    ("import time\ntime.sleep(20)\n", "its import did not finish within 0.5 s"),
+    ("raise RuntimeError('boom')\n", "loading it failed: RuntimeError: boom"),
+])
+def test_a_procedure_file_that_exits_hangs_or_raises_at_import_is_an_error(tmp_path, capsys, monkeypatch, body,
+                                                                             words):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("GYROBENCH_IMPORT_TIMEOUT_S", "0.5")
+    (tmp_path / "proc.py").write_text(body)
+    assert main(["run", "proc.py"]) == 2
+    assert words in _one_line(capsys.readouterr().err)
+    assert not (tmp_path / "runs").exists()
