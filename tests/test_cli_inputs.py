@@ -152,3 +152,19 @@ def test_a_procedure_file_that_exits_hangs_or_raises_at_import_is_an_error(tmp_p
     assert main(["run", "proc.py"]) == 2
     assert words in _one_line(capsys.readouterr().err)
     assert not (tmp_path / "runs").exists()
+
+
+def test_line_run_window_without_a_display_is_one_line_before_anything_opens(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for name in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM"):
+        monkeypatch.delenv(name, raising=False)
+    code = main(["line", "run", "ci-spin", "--station", "sim-hrg-4", "--operator", "ann", "--dut", "A1",
+                 "--dut", "A2", "--window", "--yes"])
+    line = _one_line(capsys.readouterr().err)
+    assert code == 2 and "line run --window: no display (DISPLAY / WAYLAND_DISPLAY unset)" in line
+    assert "libxcb" not in line and not (tmp_path / "runs").exists()
+    from bench.gui.app import window_unavailable
+
+    assert window_unavailable("x", {"QT_QPA_PLATFORM": "offscreen"}) is None
+    assert window_unavailable("x", {"DISPLAY": ":0"}) is None
+    assert "QT_QPA_PLATFORM=xcb" in window_unavailable("x", {"QT_QPA_PLATFORM": "xcb"})
