@@ -18,6 +18,7 @@ from .common import (
     _speed,
     _store,
     _write_report,
+    exit_for_signal,
 )
 
 
@@ -109,8 +110,10 @@ def cmd(args: argparse.Namespace) -> int:
         station, runs_dir=args.runs_dir or station.runs_dir, store=store, operator=args.operator, duts=args.dut
     )
     previous = {}
+    signalled: list[int] = []  # the signal that aborted the run: its exit code once the run is safe
 
     def on_signal(signum, _frame):
+        signalled.append(signum)
         runner.abort(signal.Signals(signum).name)
 
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -151,6 +154,9 @@ def cmd(args: argparse.Namespace) -> int:
     _warn_unfired_faults(station, faults)
     if rec.store_error:  # the run's record is not in the store (it is in the spool): not a clean exit
         _err(rec.store_error)
+    if signalled and rec.outcome == "ABORTED":  # after the safe state: 130 (SIGINT) / 143 (SIGTERM)
+        return exit_for_signal(signalled[0])
+    if rec.store_error:
         return EXIT_BAD_OUTCOME
     return EXIT_BAD_OUTCOME if rec.outcome in BAD_OUTCOMES else EXIT_OK
 
