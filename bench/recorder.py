@@ -417,6 +417,14 @@ class Recorder:
         kind, _, detail = _why(exc).partition(" (")
         detail = f" ({detail}" if detail else ""
         self.failure = f"raw data: {kind} at t = {t} s{detail}; {kept} is kept in {self.path}"
+        if not self.path.exists():  # the file (or its folder) was removed under the run: nothing is kept
+            gone = self.path if self.path.parent.is_dir() else f"{self.path} (its folder {self.path.parent} too)"
+            self.failure = (f"raw data: {kind} at t = {t} s{detail}; the raw file {gone} was deleted during the run: "
+                            "all of its recorded data is lost")
+            self._drop_reserve()
+            with contextlib.suppress(Exception):
+                self._f.close()
+            raise RawDataError(self.failure) from exc
         self._drop_reserve()  # room for the file's last metadata
         try:
             if not isinstance(exc, _NoRoom):  # HDF5 saw a write fail: its state is not to be trusted

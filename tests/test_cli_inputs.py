@@ -168,3 +168,31 @@ def test_line_run_window_without_a_display_is_one_line_before_anything_opens(tmp
     assert window_unavailable("x", {"QT_QPA_PLATFORM": "offscreen"}) is None
     assert window_unavailable("x", {"DISPLAY": ":0"}) is None
     assert "QT_QPA_PLATFORM=xcb" in window_unavailable("x", {"QT_QPA_PLATFORM": "xcb"})
+
+
+def test_a_raw_file_deleted_mid_run_is_reported_as_lost(tmp_path):
+    import bench.engine.events as ev
+
+    folder = tmp_path / "runs"
+    rec = Recorder(folder / "r.h5", {"params": {"x": 1}, "run_id": "r", "procedure": "x"})
+    t = np.arange(100) * 1e-3
+    with pytest.raises(RawDataError) as err:
+        for k in range(1000):  # a minute of data at most: the next flush meets the removed folder
+            rec.on_event(ev.SampleBlock(run_id="r", t_sim_s=float(t[-1] + k * 0.1), stream="fpga", columns=("t_s", "v"),
+                                        data=np.column_stack([t + k * 0.1, t])))
+            if k == 20:
+                shutil.rmtree(folder)
+        rec.flush()
+    text = str(err.value)
+    assert "was deleted during the run: all of its recorded data is lost" in text and "is kept in" not in text
+    assert f"its folder {folder} too" in text
+    rec.close()
+
+
+def test_a_store_file_deleted_while_open_is_named_not_called_read_only(tmp_path):
+    from bench.results import ResultsStore
+
+    store = ResultsStore(tmp_path / "results.sqlite")
+    (tmp_path / "results.sqlite").unlink()
+    text = str(store._fail(RuntimeError("attempt to write a readonly database")))
+    assert f"its file {tmp_path / 'results.sqlite'} was deleted while open" in text and "readonly" not in text

@@ -146,6 +146,10 @@ class ResultsStore:
             return self.url
 
     def _fail(self, exc: BaseException, doing: str = "") -> StoreError:
+        db = sqlite_file(self.engine)
+        if db is not None and not db.exists():  # SQLite says "readonly database" when its file was deleted
+            return StoreError(f"results store {self.display_url}{doing}: its file {db} was deleted while open "
+                              "(the runs it held are lost with it)")
         return StoreError(f"results store {self.display_url}{doing}: {describe_error(exc)}")
 
     def _ensure_ready(self) -> None:
