@@ -424,6 +424,7 @@ class Recorder:
             self._drop_reserve()
             with contextlib.suppress(Exception):
                 self._f.close()
+            self._f = None  # nothing left to close
             raise RawDataError(self.failure) from exc
         self._drop_reserve()  # room for the file's last metadata
         try:
