@@ -45,11 +45,10 @@ from bench.engine.context import RunAborted
 from bench.streams import StreamSchema, schema_of, unit_from_name
 
 CHUNK_ROWS = 4096
+#: the file is flushed after each second of bench time (and each wall second): a killed process or a
+#: full disk loses at most the last second of data, in lockstep as in real time (a lockstep run makes a
+#: bench second in a few wall ms; benchmarks/flush_cadence.py measured no cost in wall time)
 FLUSH_EVERY_S = 1.0
-#: the least wall time between two flushes that a second of bench-clock data asks for (unless a
-#: chunk's worth of rows came since): a lockstep run makes a simulated second in a few wall ms, and
-#: a flush each time cost a tenth of a long record's wall time
-MIN_FLUSH_WALL_S = 0.25
 #: filters of the streams in the closed file: readable by the stock HDF5 tools (h5dump); chosen by
 #: benchmarks/raw_compression.py.  None keeps the file as written.
 STREAM_FILTERS: dict[str, Any] | None = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
@@ -159,7 +158,6 @@ class Recorder:
         self._last_t: float | None = None
         self._last_flush_sim: float | None = None
         self._last_flush_wall = time.monotonic()
-        self._rows_since_flush = 0
 
     # --- the space reserve ---------------------------------------------------------------
     def _take_reserve(self) -> None:
@@ -232,7 +230,6 @@ class Recorder:
     def _write_event(self, event: ev.Event) -> None:
         if isinstance(event, ev.SampleBlock):
             self.append(event.stream, event.columns, event.data)
-            self._rows_since_flush += len(event.data)
         elif isinstance(event, ev.StreamDeclared):
             self._schemas[event.schema.name] = event.schema
         elif isinstance(event, ev.Measurement):
@@ -355,14 +352,10 @@ class Recorder:
         if self._last_flush_sim is None:
             self._last_flush_sim = t_sim_s
         wall_s = now - self._last_flush_wall
-        if (
-            t_sim_s - self._last_flush_sim >= FLUSH_EVERY_S
-            and (wall_s >= MIN_FLUSH_WALL_S or self._rows_since_flush >= CHUNK_ROWS)
-        ) or wall_s >= FLUSH_EVERY_S:
+        if t_sim_s - self._last_flush_sim >= FLUSH_EVERY_S or wall_s >= FLUSH_EVERY_S:
             self._flush()
             self._last_flush_sim = t_sim_s
             self._last_flush_wall = now
-            self._rows_since_flush = 0
 
     def _check_space(self) -> None:
         """Disk full is declared while RESERVE_BYTES are still free, before a write fails: a write
@@ -725,15 +718,14 @@ class NotARunFile(ValueError):
 
 
 #: what every raw file holds from its first flush (Recorder.__init__)
-RUN_ATTRS, RUN_GROUPS = ("run_id", "procedure"), ("streams",)
+RUN_PARTS = ("streams", "fits", "log", "measurements")
 
 
 def check_run_file(data: RunData) -> RunData:
     """data if it is a gyrobench raw file, else NotARunFile saying what it lacks."""
-    missing = [f"attribute {a!r}" for a in RUN_ATTRS if a not in data.attrs]
-    missing += [f"group {g!r}" for g in RUN_GROUPS if g not in data.f]
+    missing = [part for part in RUN_PARTS if part not in data.f]
     if missing:
-        raise NotARunFile(f"{data.path}: not a gyrobench raw file (no {', '.join(missing)})")
+        raise NotARunFile(f"{data.path}: not a gyrobench raw file (it has no {', '.join(missing)})")
     for key in ("params", "station", "truth"):
         if key in data.attrs and not isinstance(data.attrs[key], dict):
             raise NotARunFile(f"{data.path}: attribute {key!r} is not a JSON object: {str(data.attrs[key])[:60]!r}")

@@ -98,7 +98,8 @@ def _bad_params(recorded: Path, path: Path) -> Path:
 def test_hdf5_files_that_are_not_runs_are_named_in_one_line(recorded, tmp_path, capsys, command):
     foreign, bad = _foreign(tmp_path / "other.h5"), _bad_params(recorded, tmp_path / "bad.h5")
     assert main([command, str(foreign)]) == 2
-    assert "other.h5: not a gyrobench raw file (no attribute 'run_id'" in _one_line(capsys.readouterr().err)
+    said = _one_line(capsys.readouterr().err)
+    assert "other.h5: not a gyrobench raw file (it has no streams, fits, log, measurements)" in said
     assert main([command, str(bad)]) == 2
     assert "bad.h5: attribute 'params' is not a JSON object: '{not json'" in _one_line(capsys.readouterr().err)
     with pytest.raises(NotARunFile):
@@ -196,3 +197,22 @@ def test_a_store_file_deleted_while_open_is_named_not_called_read_only(tmp_path)
     (tmp_path / "results.sqlite").unlink()
     text = str(store._fail(RuntimeError("attempt to write a readonly database")))
     assert f"its file {tmp_path / 'results.sqlite'} was deleted while open" in text and "readonly" not in text
+
+
+def test_lockstep_data_is_flushed_every_bench_second(tmp_path, monkeypatch):
+    """Blocks published as fast as a lockstep run makes them: a flush follows each bench second (a
+    full disk or a kill loses at most a second and a block), not only each quarter wall second
+    (which let a fast run leave 40 bench s unflushed, benchmarks/flush_cadence.py)."""
+    import bench.engine.events as ev
+
+    rec = Recorder(tmp_path / "r.h5", {"params": {}, "run_id": "r", "procedure": "x"})
+    flushed: list[float] = []
+    real = Recorder._flush
+    monkeypatch.setattr(Recorder, "_flush", lambda self: (real(self), flushed.append(self._last_t)))
+    block_s, t = 0.1, np.arange(100) * 1e-3
+    for k in range(300):  # 30 bench s in a few wall ms
+        rec.on_event(ev.SampleBlock(run_id="r", t_sim_s=(k + 1) * block_s, stream="fpga", columns=("t_s", "v"),
+                                    data=np.column_stack([t + k * block_s, t])))
+    rec.close()
+    gaps = np.diff([0.0, *flushed[:-1]])  # the last is close's own flush
+    assert len(flushed) >= 29 and gaps.max() <= 1.0 + block_s + 1e-9, gaps

@@ -38,6 +38,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         return opened
     data, store, run_id = opened
     with data:
+        if not (args.procedure or data.attrs.get("procedure")):
+            _err(f"{data.path}: the file does not name its procedure: give --procedure NAME")
+            return EXIT_USAGE
         try:
             cls = find_procedure(args.procedure or data.attrs["procedure"])
         except ProcedureNotFound as exc:
