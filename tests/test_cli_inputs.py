@@ -216,3 +216,42 @@ def test_lockstep_data_is_flushed_every_bench_second(tmp_path, monkeypatch):
     rec.close()
     gaps = np.diff([0.0, *flushed[:-1]])  # the last is close's own flush
     assert len(flushed) >= 29 and gaps.max() <= 1.0 + block_s + 1e-9, gaps
+
+
+BAD_STATION = """[station]
+id = "a\\u0000b"
+colour = "red"
+[simulation]
+preset = "hrg"
+seed = -1
+[devices.table]
+driver = "modbus-table"
+max_rate_dps = "fast"
+[devices.frontend]
+driver = "nope"
+"""
+
+
+def test_check_station_reports_every_problem_and_opens_nothing(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text(BAD_STATION)
+    assert main(["check-station", str(path)]) == 2
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1] == f"{path}: 5 problem(s)"
+    for words in ("[station] colour: unknown key", "[station] id='a\\x00b' holds a control character (NUL)",
+                  "[simulation] seed=-1 is below the limit 0", "[devices.table] max_rate_dps='fast' is not a number",
+                  "[devices.frontend] driver='nope' is not one of"):
+        assert sum(words in line for line in out[:-1]) == 1, (words, out)
+    assert main(["check-station", "sim-hrg-4", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["problems"] == []
+    assert main(["check-station", "sim-hrg"]) == 0
+    assert "ok: station 'sim-hrg' (simulated), devices fpga, frontend, table" in capsys.readouterr().out
+    assert main(["check-station", str(tmp_path / "none.toml")]) == 2
+    assert "no such station file" in capsys.readouterr().out
+
+
+def test_every_builtin_station_checks_clean():
+    from bench.station_config import builtin_stations, station_problems
+
+    assert {name: station_problems(path) for name, path in builtin_stations().items()} == \
+        {name: [] for name in builtin_stations()}

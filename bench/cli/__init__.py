@@ -32,7 +32,7 @@ if sys.argv[0] == "-m" or sys.argv[0].endswith("gyrobench"):
     for _sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(_sig, _interrupted_early)
 
-from . import analysis, design, listing, run, sim, store  # noqa: E402 - after the handlers above
+from . import analysis, check, design, listing, run, sim, store  # noqa: E402 - after the handlers above
 from .common import (  # noqa: E402
     BAD_OUTCOMES,
     EXIT_BAD_OUTCOME,
@@ -73,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_parser(sub)
     design.add_parser(sub)
     listing.add_parser(sub)
+    check.add_parser(sub)  # check-station
     store.add_parser(sub)  # runs, show
     analysis.add_parser(sub)  # analyze, report
     from bench.line.fpga_cli import add_fpga_subcommand
