@@ -25,3 +25,16 @@ def test_the_license_is_an_spdx_string_with_a_setuptools_that_takes_it():
     setuptools = [r for r in py["build-system"]["requires"] if r.startswith("setuptools")]
     assert setuptools == ["setuptools>=77"]
     assert not any(c.startswith("License ::") for c in py["project"].get("classifiers", []))
+
+
+def test_line_report_figures_of_a_measurement_without_limits_or_spread_warn_nothing():
+    import warnings
+
+    from bench.line.report import _figures
+
+    measure = {"name": "q", "unit": "", "low": None, "high": None, "mean": 1.0, "sigma": 0.0,
+               "final": [{"value": 1.0}], "rows": [{"value": 1.0}]}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # matplotlib's "No artists with labels found to put in legend"
+        hist, chart = _figures(measure)
+    assert "<svg" in hist and "<svg" in chart

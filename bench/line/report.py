@@ -47,6 +47,13 @@ def summarize(db: Any, lot: str | None = None) -> dict[str, Any]:
     }
 
 
+def _legend(ax: Any) -> None:
+    """A legend when something is labelled (a measurement without limits or spread has nothing:
+    matplotlib would warn "No artists with labels found")."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7, loc="best")
+
+
 def _figures(measure: dict[str, Any]) -> tuple[str, str]:
     """(histogram, control chart) of one measurement as inline SVG."""
     from bench.figures import ReportFigure, new_figure
@@ -62,7 +69,7 @@ def _figures(measure: dict[str, Any]) -> tuple[str, str]:
             ax.axvline(lim, color="#c00", ls="--", lw=1.2, label=f"{lab} limit {lim:g}")
     ax.set_xlabel(measure["name"] + unit)
     ax.set_ylabel("units")
-    ax.legend(fontsize=7, loc="best")
+    _legend(ax)
     hist = ReportFigure(f"hist-{measure['name']}", measure["name"], fig).svg()
     fig2, axes2 = new_figure(1, 1, height_in=2.4, width_in=6.0)
     ax = axes2[0, 0]
@@ -78,7 +85,7 @@ def _figures(measure: dict[str, Any]) -> tuple[str, str]:
             ax.axhline(lim, color="#c00", ls="--", lw=1.2)
     ax.set_xlabel("attempt, in time order")
     ax.set_ylabel(measure["name"] + unit)
-    ax.legend(fontsize=7, loc="best")
+    _legend(ax)
     chart = ReportFigure(f"chart-{measure['name']}", measure["name"], fig2).svg()
     return hist, chart
 
