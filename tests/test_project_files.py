@@ -38,3 +38,26 @@ def test_line_report_figures_of_a_measurement_without_limits_or_spread_warn_noth
         warnings.simplefilter("error")  # matplotlib's "No artists with labels found to put in legend"
         hist, chart = _figures(measure)
     assert "<svg" in hist and "<svg" in chart
+
+
+QT_SIZE_HINTS = """
+from bench.gui.app import _app
+app = _app()
+from PySide6.QtCore import qWarning
+from PySide6.QtWidgets import QMainWindow
+w = QMainWindow(); w.show(); app.processEvents()
+w.setMinimumSize(300, 200); app.processEvents(); w.close()  # the offscreen plugin's propagateSizeHints()
+qWarning("a message that is kept")
+"""
+
+
+def test_headless_windows_print_no_propagate_size_hints_lines(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
+    r = subprocess.run([sys.executable, "-c", QT_SIZE_HINTS], cwd=tmp_path, env={**env, "PYTHONPATH": str(ROOT)},
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "propagateSizeHints" not in r.stderr and "a message that is kept" in r.stderr

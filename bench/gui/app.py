@@ -53,10 +53,32 @@ def choose_qt_platform(environ: dict[str, str] | None = None) -> str | None:
     return "offscreen"
 
 
+#: what Qt's platform plugins say that tells the user nothing: the offscreen plugin (headless
+#: screenshots, CI) reports each size hint it cannot pass to a window manager it does not have
+QUIET_QT_MESSAGES = frozenset({"This plugin does not support propagateSizeHints()"})
+_QT_HANDLER: list = []  # the installed handler, kept alive
+
+
+def quiet_qt_messages() -> None:
+    """Route Qt's messages through a handler that drops QUIET_QT_MESSAGES and prints the rest to
+    stderr as Qt would (once a process)."""
+    if _QT_HANDLER:
+        return
+    from PySide6.QtCore import qInstallMessageHandler
+
+    def handler(_mode, _context, message: str) -> None:
+        if message not in QUIET_QT_MESSAGES:
+            sys.stderr.write(message + "\n")
+
+    _QT_HANDLER.append(handler)
+    qInstallMessageHandler(handler)
+
+
 def _app():
     from PySide6.QtWidgets import QApplication
 
     choose_qt_platform()
+    quiet_qt_messages()
 
     app = QApplication.instance()
     return app if app is not None else QApplication(["gyrobench"])
