@@ -90,6 +90,8 @@ def _judge(case: Case, rc: int, out: str, err: str, workdir: Path) -> None:
     p = case.problems
     if "Traceback" in err:
         p.append("traceback on stderr: " + err[err.index("Traceback"):][:300].replace("\n", " | "))
+    if "internal error" in err:
+        p.append("internal error: " + err[err.index("internal error"):][:200])
     lines = [ln for ln in out.splitlines() if ln.startswith("{")]
     if case.early and not lines:
         # stopped before the run began: nothing moved, nothing to record; a clean exit is all

@@ -224,6 +224,8 @@ def run_case(case: Case, root: Path) -> tuple[bool, str]:
         why.append("exit 0")
     if "Traceback" in err:
         why.append("traceback")
+    if "internal error" in err:
+        why.append("internal error")
     if len(lines) != 1:
         why.append(f"{len(lines)} message lines")
     missing = [p for p in case.expect if p not in err]
