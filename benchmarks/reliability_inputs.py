@@ -137,7 +137,8 @@ def station_cases() -> list[Case]:
         ("seed-fraction", sim("seed = 0", "seed = 1.5"), ["seed=1.5 is not an integer"]),
         ("seed-huge", sim("seed = 0", "seed = 18446744073709551615"), ["seed=18446744073709551615", "above"]),
         ("speed-negative-in-file", sim("seed = 0", "seed = 0\nspeed = -1.0"), ["speed=-1 is below the limit 0"]),
-        ("preset-unknown", sim('preset = "hrg"', 'preset = "fog"'), ["preset='fog' is not one of hrg, hrg-wa, mems"]),
+        ("preset-unknown", sim('preset = "hrg"', 'preset = "fog"'),
+         ["preset='fog' is not one of hrg, hrg-wa, hrg-selfcal, mems"]),
         ("sample-period-above", sim("seed = 0", "seed = 0\nsample_period_s = 1.0"),
          ["sample_period_s=1 s is above the limit 0.1 s"]),
         ("results-not-text", sim('id = "audit"', 'id = "audit"\nresults = 5'), ["results=5 is not text"]),
@@ -185,7 +186,7 @@ def option_cases(tmp: Path) -> list[Case]:
         ("fault-time-negative", ["--fault", "link-drop@-1"], None, ["time=-1 s is below the limit 0 s"]),
         ("fault-time-nan", ["--fault", "link-drop@nan"], None, ["time=nan is not a finite number"]),
         ("fault-on-real", ["--fault", "link-drop@1"], REAL, ["--fault needs a simulated station"]),
-        ("seed-on-real", ["--seed", "1"], REAL, ["a real station; --seed apply only to a simulated one"]),
+        ("seed-on-real", ["--seed", "1"], REAL, ["a real station; --seed applies only to a simulated one"]),
         ("fault-no-such-device", ["--fault", "frontend-hang@1"], sim('[devices.frontend]\ndriver = "scpi-frontend"\n'
                                                                       "max_amplitude_v = 5.0\n", ""),
          ["--fault frontend-hang", "no frontend"]),

@@ -255,3 +255,14 @@ def test_every_builtin_station_checks_clean():
 
     assert {name: station_problems(path) for name, path in builtin_stations().items()} == \
         {name: [] for name in builtin_stations()}
+
+
+def test_a_fault_for_a_device_the_station_lacks_is_one_line(tmp_path, capsys, monkeypatch):
+    """StationError raised once the station is open (schedule_fault) is a known error, not "internal"."""
+    monkeypatch.chdir(tmp_path)
+    station = tmp_path / "no_frontend.toml"
+    station.write_text('[station]\nid = "audit"\n[simulation]\npreset = "hrg"\n'
+                       '[devices.table]\ndriver = "modbus-table"\n[devices.fpga]\ndriver = "fpga-link"\n')
+    assert main(["run", "table-spin", "--set", "hold_s=0.2", "--station", str(station),
+                 "--fault", "frontend-hang@1"]) == 2
+    assert "--fault frontend-hang: station 'audit' has no frontend to fault" in _one_line(capsys.readouterr().err)

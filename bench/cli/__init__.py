@@ -129,7 +129,7 @@ def _known_error(exc: BaseException) -> str | None:
     """The one-line message of an error the user can act on, or None for an unexpected one."""
     from bench.validation import ValidationError
 
-    station_error = getattr(sys.modules.get("bench.station"), "StationError", ())
+    station_error = getattr(sys.modules.get("bench.devices"), "StationError", ())  # where it lives
     param_error = getattr(sys.modules.get("bench.engine.params"), "ParamError", ())
     not_found = getattr(sys.modules.get("procedures"), "ProcedureNotFound", ())
     if isinstance(exc, (ValidationError, *[c for c in (station_error, param_error, not_found) if c])):
