@@ -25,7 +25,8 @@ from .common import (
 def add_parser(sub) -> None:
     """Register `run` and its options."""
     run = sub.add_parser("run", help="run a procedure (a registered name or a .py file) on a station")
-    run.add_argument("procedure")
+    run.add_argument("procedure", help="a registered name, or a .py file (imported within 30 s, "
+                                        "$GYROBENCH_IMPORT_TIMEOUT_S)")
     run.add_argument("--station", default="sim-hrg", help="built-in station name or a station TOML file")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="a procedure parameter")
     run.add_argument("--seed", type=int, default=None, help="simulation seed (simulated stations)")
