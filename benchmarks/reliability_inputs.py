@@ -199,9 +199,14 @@ def option_cases(tmp: Path) -> list[Case]:
         ("procedure-import-error", [], None, ["No module named 'gyrobench_no_such_module'"], "./bad_import.py"),
         ("runs-dir-is-a-file", ["--runs-dir", str(tmp / "afile")], None, ["is a file, not a directory"]),
         ("runs-dir-unwritable", ["--runs-dir", "/proc/gyrobench-audit"], None, ["raw data cannot be written"]),
-        ("results-readonly", ["--results", ro_store], None, ["results store", "readonly database"]),
+        ("results-readonly", ["--results", ro_store], None, ["results store", "readonly database", "spool"]),
     ]
     return [Case(n, a, s, e, *p) for n, a, s, e, *p in c]
+
+
+#: cases whose run goes ahead by design: a store that cannot be written takes the record later, through
+#: the spool (docs/results_store.md); the exit is still non-zero and the one line names the spool
+RUNS_ANYWAY = {"results-readonly"}
 
 
 def run_case(case: Case, root: Path) -> tuple[bool, str]:
@@ -232,7 +237,7 @@ def run_case(case: Case, root: Path) -> tuple[bool, str]:
     missing = [p for p in case.expect if p not in err]
     if missing:
         why.append(f"message lacks {missing}")
-    if moved:
+    if moved and case.name not in RUNS_ANYWAY:
         why.append("a run started")
     return not why, f"{case.name}: {'; '.join(why) or 'clean'} | {err[-300:]!r}"
 
