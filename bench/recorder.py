@@ -47,11 +47,10 @@ from bench.results.redact import redact
 from bench.streams import StreamSchema, schema_of, unit_from_name
 
 CHUNK_ROWS = 4096
+#: the file is flushed after each second of bench time (and each wall second): a killed process or a
+#: full disk loses at most the last second of data, in lockstep as in real time (a lockstep run makes a
+#: bench second in a few wall ms; benchmarks/flush_cadence.py measured no cost in wall time)
 FLUSH_EVERY_S = 1.0
-#: the least wall time between two flushes that a second of bench-clock data asks for (unless a
-#: chunk's worth of rows came since): a lockstep run makes a simulated second in a few wall ms, and
-#: a flush each time cost a tenth of a long record's wall time
-MIN_FLUSH_WALL_S = 0.25
 #: filters of the streams in the closed file: readable by the stock HDF5 tools (h5dump); chosen by
 #: benchmarks/raw_compression.py.  None keeps the file as written.
 STREAM_FILTERS: dict[str, Any] | None = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
@@ -125,6 +124,15 @@ class Recorder:
                 self._f.attrs[key] = value if isinstance(value, (str, int, float, bool)) else _json(value)
             self._write_parameters(dict((attrs or {}).get("params") or {}), param_units or {})
             self._f.flush()
+        except (ValueError, TypeError) as exc:  # a value HDF5 cannot hold (a NUL in an id): no stub left
+            self._drop_reserve()
+            if self._f is not None:
+                with contextlib.suppress(Exception):
+                    self._f.close()
+                with contextlib.suppress(OSError):
+                    self.path.unlink()
+            raise RawDataError(f"raw data: cannot create {self.path}: a run attribute cannot be stored ({exc})") \
+                from exc
         except (OSError, RuntimeError) as exc:
             self._drop_reserve()
             if self._f is not None:
@@ -152,7 +160,6 @@ class Recorder:
         self._last_t: float | None = None
         self._last_flush_sim: float | None = None
         self._last_flush_wall = time.monotonic()
-        self._rows_since_flush = 0
 
     # --- the space reserve ---------------------------------------------------------------
     def _take_reserve(self) -> None:
@@ -225,7 +232,6 @@ class Recorder:
     def _write_event(self, event: ev.Event) -> None:
         if isinstance(event, ev.SampleBlock):
             self.append(event.stream, event.columns, event.data)
-            self._rows_since_flush += len(event.data)
         elif isinstance(event, ev.StreamDeclared):
             self._schemas[event.schema.name] = event.schema
         elif isinstance(event, ev.Measurement):
@@ -348,14 +354,10 @@ class Recorder:
         if self._last_flush_sim is None:
             self._last_flush_sim = t_sim_s
         wall_s = now - self._last_flush_wall
-        if (
-            t_sim_s - self._last_flush_sim >= FLUSH_EVERY_S
-            and (wall_s >= MIN_FLUSH_WALL_S or self._rows_since_flush >= CHUNK_ROWS)
-        ) or wall_s >= FLUSH_EVERY_S:
+        if t_sim_s - self._last_flush_sim >= FLUSH_EVERY_S or wall_s >= FLUSH_EVERY_S:
             self._flush()
             self._last_flush_sim = t_sim_s
             self._last_flush_wall = now
-            self._rows_since_flush = 0
 
     def _check_space(self) -> None:
         """Disk full is declared while RESERVE_BYTES are still free, before a write fails: a write
@@ -410,6 +412,15 @@ class Recorder:
         kind, _, detail = _why(exc).partition(" (")
         detail = f" ({detail}" if detail else ""
         self.failure = f"raw data: {kind} at t = {t} s{detail}; {kept} is kept in {self.path}"
+        if not self.path.exists():  # the file (or its folder) was removed under the run: nothing is kept
+            gone = self.path if self.path.parent.is_dir() else f"{self.path} (its folder {self.path.parent} too)"
+            self.failure = (f"raw data: {kind} at t = {t} s{detail}; the raw file {gone} was deleted during the run: "
+                            "all of its recorded data is lost")
+            self._drop_reserve()
+            with contextlib.suppress(Exception):
+                self._f.close()
+            self._f = None  # nothing left to close
+            raise RawDataError(self.failure) from exc
         self._drop_reserve()  # room for the file's last metadata
         try:
             if not isinstance(exc, _NoRoom):  # HDF5 saw a write fail: its state is not to be trusted
@@ -727,5 +738,31 @@ def stored_legends(f: h5py.File, stream: str, attrs: Any) -> dict[str, dict[int,
     return out
 
 
+class NotARunFile(ValueError):
+    """An HDF5 file that is not a gyrobench raw file (another program's), or whose run attributes
+    cannot be read (params that are not JSON)."""
+
+
+#: what every raw file holds from its first flush (Recorder.__init__)
+RUN_PARTS = ("streams", "fits", "log", "measurements")
+
+
+def check_run_file(data: RunData) -> RunData:
+    """data if it is a gyrobench raw file, else NotARunFile saying what it lacks."""
+    missing = [part for part in RUN_PARTS if part not in data.f]
+    if missing:
+        raise NotARunFile(f"{data.path}: not a gyrobench raw file (it has no {', '.join(missing)})")
+    for key in ("params", "station", "truth"):
+        if key in data.attrs and not isinstance(data.attrs[key], dict):
+            raise NotARunFile(f"{data.path}: attribute {key!r} is not a JSON object: {str(data.attrs[key])[:60]!r}")
+    return data
+
+
 def open_run(path: str | Path) -> RunData:
-    return RunData(path)
+    """A raw file opened for reading; NotARunFile if it is HDF5 but not a gyrobench run."""
+    data = RunData(path)
+    try:
+        return check_run_file(data)
+    except NotARunFile:
+        data.close()
+        raise

@@ -11,7 +11,7 @@ from typing import Any
 
 from bench.devices import DRIVERS, INSTRUMENT, ROLES, Key, StationError, check_table
 from bench.nominal import NOMINAL_KEYS
-from bench.validation import missing_key, not_a, not_one_of
+from bench.validation import ValidationError, check_label, missing_key, not_a, not_one_of, unknown_name
 
 BUILTIN_DIR = Path(__file__).resolve().parent / "stations"
 
@@ -85,11 +85,10 @@ def find_station_file(name_or_path: str | Path) -> Path:
     raise StationError(f"{text}: no such station file or built-in station (built-in: {', '.join(builtin)})")
 
 
-def load_config(name_or_path: str | Path) -> StationConfig:
-    """Read and check a station file; StationError names the file, key, value and range."""
-    path = find_station_file(name_or_path)
+def _read(path: Path) -> dict[str, Any]:
+    """A station file's TOML as a dict; StationError if it is not UTF-8 TOML or cannot be read."""
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise StationError(f"{path}: not valid TOML: {exc}") from None
     except UnicodeDecodeError as exc:
@@ -98,6 +97,12 @@ def load_config(name_or_path: str | Path) -> StationConfig:
         ) from None
     except OSError as exc:
         raise StationError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+
+
+def load_config(name_or_path: str | Path) -> StationConfig:
+    """Read and check a station file; StationError names the file, key, value and range."""
+    path = find_station_file(name_or_path)
+    raw = _read(path)
     for top in raw:
         if top not in ("station", "simulation", "devices", "slots", "nominal", "calibration"):
             raise StationError(f"{path}: unknown table [{top}] (allowed: station, simulation, devices, slots, "
@@ -108,6 +113,10 @@ def load_config(name_or_path: str | Path) -> StationConfig:
         if top in raw and not isinstance(raw[top], dict):
             raise StationError(f"{path}: {not_a(top, raw[top], 'a table ([' + top + '])')}")
     station = check_table(f"{path}: [station]", raw["station"], STATION_KEYS)
+    try:  # the id names runs, records and files: printable, not too long (bench.validation)
+        check_label("id", station["id"])
+    except ValidationError as exc:
+        raise StationError(f"{path}: [station] {exc}") from None
     sim = check_table(f"{path}: [simulation]", raw["simulation"], SIM_KEYS) if "simulation" in raw else None
     devices = {role: _check_device(path, f"[devices.{role}]", role, table, sim)
                for role, table in (raw.get("devices") or {}).items()}
@@ -216,3 +225,85 @@ def _check_slots(path: Path, raw: Any, shared: dict[str, dict[str, Any]],
             raise StationError(f"{path}: [slots.{n}] has {roles}, [slots.1] has {roles_of_1}: "
                                "every slot the same roles")
     return slots
+
+
+def station_problems(name_or_path: str | Path) -> list[str]:
+    """Every problem of a station file, one line each, in load_config's words ([] when it loads):
+    each key of each table checked on its own, so a file with three mistakes shows three lines.
+    Nothing is opened or started (`gyrobench check-station`)."""
+    try:
+        path = find_station_file(name_or_path)
+        raw = _read(path)
+    except StationError as exc:
+        return [str(exc)]
+    problems: list[str] = []
+    for top, value in raw.items():
+        if top not in ("station", "simulation", "devices", "slots", "nominal", "calibration"):
+            problems.append(f"{path}: unknown table [{top}] (allowed: station, simulation, devices, slots, "
+                            "nominal, calibration)")
+        elif not isinstance(value, dict):
+            problems.append(f"{path}: {not_a(top, value, 'a table ([' + top + '])')}")
+    tables = {k: v for k, v in raw.items() if isinstance(v, dict)}
+    if "station" not in raw:
+        problems.append(f'{path}: missing table [station] with id = "..."')
+    elif "station" in tables:
+        problems += _table_problems(f"{path}: [station]", tables["station"], STATION_KEYS)
+        if isinstance(tables["station"].get("id"), str):
+            try:
+                check_label("id", tables["station"]["id"])
+            except ValidationError as exc:
+                problems.append(f"{path}: [station] {exc}")
+    sim = None
+    if "simulation" in tables:
+        sim_problems = _table_problems(f"{path}: [simulation]", tables["simulation"], SIM_KEYS)
+        problems += sim_problems
+        sim = check_table(f"{path}: [simulation]", tables["simulation"], SIM_KEYS) if not sim_problems else {}
+    devices: dict[str, dict[str, Any]] = {}
+    for role, table in (tables.get("devices") or {}).items():
+        try:
+            devices[role] = _check_device(path, f"[devices.{role}]", role, table, sim)
+        except StationError as exc:
+            problems += _device_problems(path, f"[devices.{role}]", role, table) or [str(exc)]
+    if raw.get("devices", {}) == {}:  # absent or empty (one that is not a table is said above)
+        problems.append(f"{path}: no [devices.*] table (roles: {', '.join(ROLES)})")
+    if tables.get("slots"):
+        try:
+            _check_slots(path, tables["slots"], devices, sim)
+        except StationError as exc:
+            problems.append(str(exc))
+    if tables.get("nominal"):
+        problems += _table_problems(f"{path}: [nominal]", tables["nominal"], NOMINAL_TABLE_KEYS)
+    if tables.get("calibration"):
+        try:
+            _check_calibration(path, tables["calibration"])
+        except StationError as exc:
+            problems.append(str(exc))
+    if not problems:
+        try:
+            load_config(path)
+        except StationError as exc:  # a rule across tables the checks above do not repeat
+            problems.append(str(exc))
+    return list(dict.fromkeys(problems))
+
+
+def _table_problems(where: str, table: dict[str, Any], keys: dict[str, Key]) -> list[str]:
+    """Each unknown, missing or bad key of one table, in check_table's words."""
+    out = [f"{where} {unknown_name(name, 'unknown key', keys)}" for name in table if name not in keys]
+    for name, key in keys.items():
+        if name in table:
+            try:
+                key.check(where, name, table[name])
+            except StationError as exc:
+                out.append(str(exc))
+        elif key.required:
+            out.append(f"{where} {missing_key(name, key.range_text())}")
+    return out
+
+
+def _device_problems(path: Path, name: str, role: str, table: Any) -> list[str]:
+    """Each bad key of a device table whose driver is known ([] otherwise: its one error stands)."""
+    driver = table.get("driver") if isinstance(table, dict) else None
+    spec = DRIVERS.get(driver) if isinstance(driver, str) else None
+    if spec is None or spec.role != (role if role in ROLES else INSTRUMENT):
+        return []
+    return _table_problems(f"{path}: {name}", table, spec.keys)

@@ -179,3 +179,33 @@ def parse_assignment(item: str, option: str = "--set") -> tuple[str, str]:
     if not sep or not name.strip():
         raise ValidationError(f"{option} {item!r}: expected NAME=VALUE, e.g. {option} rate_dps=200")
     return name.strip(), value
+
+
+#: the longest DUT serial, operator name or station id: a column every store takes as text
+MAX_LABEL_CHARS = 64
+
+
+def check_label(name: str, value: Any, *, max_chars: int = MAX_LABEL_CHARS, allow_empty: bool = False) -> str:
+    """A name a person types that ends up in records and on screens (a DUT serial, an operator, a
+    station id): text of at most max_chars printable characters, no NUL or control character, so
+    no store rejects it later and no terminal runs it as an escape."""
+    if not isinstance(value, str):
+        raise ValidationError(not_a(name, value, str))
+    if not value.strip():
+        if allow_empty and not value:
+            return value
+        raise ValidationError(f"{name}={value!r} is empty")
+    if len(value) > max_chars:
+        raise ValidationError(f"{name}={value[:20]!r}... has {len(value)} characters, above the limit {max_chars}")
+    bad = next((ch for ch in value if not ch.isprintable()), None)
+    if bad is not None:
+        what = "NUL" if bad == "\0" else f"U+{ord(bad):04X}"
+        raise ValidationError(f"{name}={value!r} holds a control character ({what}); only printable text is allowed")
+    return value
+
+
+def printable(text: Any) -> str:
+    """A stored value as a screen shows it: control characters (escapes, newlines) spelled out as
+    in repr, so a record written before labels were checked cannot move a terminal's cursor."""
+    s = str(text)
+    return s if s.isprintable() else "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in s)

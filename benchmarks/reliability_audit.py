@@ -4,6 +4,10 @@ no record lost).  Each script can also be run on its own; see its docstring for 
 
     sudo .venv/bin/python benchmarks/reliability_audit.py          # about 15 minutes on 2 cores
 
+Issue 39 added the class "bad inputs to every command" (reliability_commands.py: runs, show,
+analyze, report, check-station, line run --window, run's labels and procedure files, signals at
+import and on sim): 23 cases, 23 clean on 2026-11-28 (60 s on 2 shared cores).
+
 The disk cases need root (tmpfs mounts); the PostgreSQL writers need $GYROBENCH_TEST_PG_URL (for
 example from .ci/start-postgres), else only SQLite is tried.
 """
@@ -21,6 +25,7 @@ HERE = Path(__file__).resolve().parent
 SCRIPTS = (
     "reliability_faults.py",
     "reliability_inputs.py",
+    "reliability_commands.py",
     "reliability_replies.py",
     "reliability_disks.py",
     "reliability_writers.py",
@@ -31,6 +36,7 @@ CLASSES = (
     "signals",
     "signals before the run began",
     "bad station files and parameters",
+    "bad inputs to every command",
     "malformed device replies",
     "full or read-only disks",
     "concurrent writers",

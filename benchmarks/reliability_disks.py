@@ -72,6 +72,8 @@ def judge(done: subprocess.CompletedProcess, raw_dir: Path, *, expect_fail: bool
     problems = []
     if "Traceback" in done.stderr or "Segmentation" in done.stderr:
         problems.append("traceback/crash on stderr")
+    if "internal error" in done.stderr:
+        problems.append("internal error")
     if done.returncode < 0 or done.returncode > 2:
         problems.append(f"exit {done.returncode}")
     try:

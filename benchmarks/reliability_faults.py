@@ -90,6 +90,8 @@ def _judge(case: Case, rc: int, out: str, err: str, workdir: Path) -> None:
     p = case.problems
     if "Traceback" in err:
         p.append("traceback on stderr: " + err[err.index("Traceback"):][:300].replace("\n", " | "))
+    if "internal error" in err:
+        p.append("internal error: " + err[err.index("internal error"):][:200])
     lines = [ln for ln in out.splitlines() if ln.startswith("{")]
     if case.early and not lines:
         # stopped before the run began: nothing moved, nothing to record; a clean exit is all
@@ -118,8 +120,10 @@ def _judge(case: Case, rc: int, out: str, err: str, workdir: Path) -> None:
             p.append(f"outcome {js['outcome']} after a signal")
     if case.signal is None and js["outcome"] in ("PASS", "COMPLETE", "FAIL", "MARGINAL"):
         p.append(f"the fault went unnoticed: outcome {js['outcome']}")
-    if rc not in (0, 1):
-        p.append(f"exit code {rc}")
+    signalled = case.signal is not None and js["outcome"] == "ABORTED"
+    expected = {128 + case.signal} if signalled else {0, 1}  # 130 / 143 after a signal, as a shell says
+    if rc not in expected:
+        p.append(f"exit code {rc} (expected {sorted(expected)})")
     try:
         ResultsStore(str(workdir / "results.sqlite"), upgrade=False).get_run(js["run_id"])
     except Exception as exc:  # noqa: BLE001 - reported

@@ -14,6 +14,7 @@ import importlib.util
 import pkgutil
 import sys
 from pathlib import Path
+from typing import Any
 
 
 class ProcedureNotFound(LookupError):
@@ -68,8 +69,51 @@ def procedure_named(name: str) -> type | None:
     return all_procedures().get(name)
 
 
-def load_file(path: str | Path) -> type:
-    """The procedure defined in a Python file (the only one, or the last one defined)."""
+#: how long a procedure file may take to import (wall seconds); $GYROBENCH_IMPORT_TIMEOUT_S overrides
+IMPORT_TIMEOUT_S = 30.0
+
+
+def import_timeout_s() -> float:
+    """The import bound: $GYROBENCH_IMPORT_TIMEOUT_S if set (a positive number), else IMPORT_TIMEOUT_S."""
+    import os
+
+    text = os.environ.get("GYROBENCH_IMPORT_TIMEOUT_S", "")
+    try:
+        value = float(text) if text else IMPORT_TIMEOUT_S
+    except ValueError:
+        raise ProcedureNotFound(f"GYROBENCH_IMPORT_TIMEOUT_S={text!r} is not a number of seconds") from None
+    if not 0 < value < 1e6:
+        raise ProcedureNotFound(f"GYROBENCH_IMPORT_TIMEOUT_S={text!r} is not between 0 and 1e6 s")
+    return value
+
+
+def _exec_bounded(spec: Any, module: Any, timeout_s: float) -> None:
+    """Run a procedure file's module code on a daemon thread, at most timeout_s: a file that hangs
+    (a blocking read, an endless loop) or calls sys.exit() at import is an error, not the
+    end of the command. The error it raised, if any, is raised here."""
+    import threading
+
+    failure: list[BaseException] = []
+
+    def body() -> None:
+        try:
+            spec.loader.exec_module(module)
+        except BaseException as exc:  # noqa: BLE001 - SystemExit too: handed to the caller
+            failure.append(exc)
+
+    worker = threading.Thread(target=body, name=f"import {module.__name__}", daemon=True)
+    worker.start()
+    worker.join(timeout_s)
+    if worker.is_alive():
+        raise TimeoutError(f"its import did not finish within {timeout_s:g} s (set GYROBENCH_IMPORT_TIMEOUT_S "
+                           "for a slower one)")
+    if failure:
+        raise failure[0]
+
+
+def load_file(path: str | Path, timeout_s: float | None = None) -> type:
+    """The procedure defined in a Python file (the only one, or the last one defined); importing it
+    may take at most timeout_s (default `import_timeout_s()`)."""
     path = Path(path).resolve()
     if not path.is_file():
         raise ProcedureNotFound(f"{path}: no such file")
@@ -78,7 +122,14 @@ def load_file(path: str | Path) -> type:
     module = importlib.util.module_from_spec(spec)
     sys.modules[mod_name] = module
     try:
-        spec.loader.exec_module(module)
+        _exec_bounded(spec, module, import_timeout_s() if timeout_s is None else timeout_s)
+    except TimeoutError as exc:
+        sys.modules.pop(mod_name, None)
+        raise ProcedureNotFound(f"{path}: {exc}") from None
+    except SystemExit as exc:
+        sys.modules.pop(mod_name, None)
+        raise ProcedureNotFound(f"{path}: it called sys.exit({exc.code!r}) while being imported; a procedure "
+                                "file only defines procedures") from None
     except SyntaxError as exc:
         sys.modules.pop(mod_name, None)
         raise ProcedureNotFound(f"{path}, line {exc.lineno}: {exc.msg} (not a valid Python file)") from None

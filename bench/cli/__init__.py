@@ -14,8 +14,26 @@ import threading
 import time
 from typing import Any
 
-from . import analysis, campaign, design, listing, run, sim, store
-from .common import (
+
+def _interrupted_early(signum: int, _frame: Any) -> None:
+    """SIGINT/SIGTERM while the CLI is still importing (before main()'s error boundary): one line and
+    the conventional exit code, no traceback; nothing has been opened yet, so nothing to make safe."""
+    import os
+
+    name = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+    os.write(2, f"gyrobench: interrupted ({name}) before anything started\n".encode())
+    os._exit(128 + signum)
+
+
+# installed before the subcommands' modules are imported (a Ctrl-C during those imports gave
+# importlib's traceback, a SIGTERM a silent -15); only in the CLI's own process, not an importer:
+# `gyrobench`, or `python -m bench.cli` (whose package is imported while sys.argv[0] is still "-m")
+if sys.argv[0] == "-m" or sys.argv[0].endswith("gyrobench"):
+    for _sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(_sig, _interrupted_early)
+
+from . import analysis, campaign, check, design, listing, run, sim, store  # noqa: E402 - after the handlers above
+from .common import (  # noqa: E402
     BAD_OUTCOMES,
     EXIT_BAD_OUTCOME,
     EXIT_BROKEN_PIPE,
@@ -26,21 +44,13 @@ from .common import (
     CliError,
     _err,
     _reason,
+    exit_for_signal,
 )
 
 __all__ = [
     "BAD_OUTCOMES", "EXIT_BAD_OUTCOME", "EXIT_BROKEN_PIPE", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK",
     "EXIT_USAGE", "CliError", "build_parser", "main",
 ]
-
-
-def _interrupted_early(signum: int, _frame: Any) -> None:
-    """SIGINT/SIGTERM while the CLI is still importing (before main()'s error boundary): one line and
-    the conventional exit code, no traceback; nothing has been opened yet, so nothing to make safe."""
-    import os
-
-    os.write(2, f"gyrobench: interrupted ({signal.Signals(signum).name}) before anything started\n".encode())
-    os._exit(128 + signum)
 
 
 _SIGNALLED: list[str] = []  # the signal that interrupted main(), if any
@@ -55,13 +65,6 @@ def _interrupt(signum: int, _frame: Any) -> None:
     raise KeyboardInterrupt(_SIGNALLED[-1])
 
 
-# the CLI's own process, not an importer: `gyrobench`, or `python -m bench.cli` (whose package is
-# imported while sys.argv[0] is still "-m")
-if sys.argv[0] == "-m" or sys.argv[0].endswith("gyrobench"):
-    for _sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(_sig, _interrupted_early)
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The parser of every subcommand, in the order `gyrobench --help` lists them."""
     parser = argparse.ArgumentParser(prog="gyrobench", description="Calibrate Coriolis vibratory gyroscopes.")
@@ -70,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_parser(sub)
     design.add_parser(sub)
     listing.add_parser(sub)
+    check.add_parser(sub)  # check-station
     store.add_parser(sub)  # runs, show
     analysis.add_parser(sub)  # analyze, report
     campaign.add_parser(sub)  # many simulated runs on Dask
@@ -106,23 +110,27 @@ def main(argv: list[str] | None = None) -> int:
         _silence_stdout()
         return EXIT_BROKEN_PIPE
     except KeyboardInterrupt as exc:
-        _err("interrupted (SIGTERM)" if str(exc) == "SIGTERM" else "interrupted (Ctrl-C)")
-        return EXIT_INTERRUPTED
+        return _interrupted("SIGTERM" if str(exc) == "SIGTERM" else "SIGINT")
     except CliError as exc:
         _err(str(exc))
         return exc.code
     except Exception as exc:  # noqa: BLE001 - the boundary: classify, never print a bare traceback
         if _SIGNALLED:  # the interrupt surfaced as another error (inside an import, a library)
-            _err("interrupted (SIGTERM)" if _SIGNALLED[-1] == "SIGTERM" else "interrupted (Ctrl-C)")
-            return EXIT_INTERRUPTED
+            return _interrupted(_SIGNALLED[-1])
         return _report_exception(exc, debug)
+
+
+def _interrupted(name: str) -> int:
+    """One line for an interrupted command and the shell's code for it: 130 for SIGINT, 143 for SIGTERM."""
+    _err("interrupted (SIGTERM)" if name == "SIGTERM" else "interrupted (Ctrl-C)")
+    return exit_for_signal(signal.Signals[name])
 
 
 def _known_error(exc: BaseException) -> str | None:
     """The one-line message of an error the user can act on, or None for an unexpected one."""
     from bench.validation import ValidationError
 
-    station_error = getattr(sys.modules.get("bench.station"), "StationError", ())
+    station_error = getattr(sys.modules.get("bench.devices"), "StationError", ())  # where it lives
     param_error = getattr(sys.modules.get("bench.engine.params"), "ParamError", ())
     not_found = getattr(sys.modules.get("procedures"), "ProcedureNotFound", ())
     if isinstance(exc, (ValidationError, *[c for c in (station_error, param_error, not_found) if c])):

@@ -11,11 +11,14 @@ from .common import EXIT_BAD_OUTCOME, EXIT_OK, EXIT_USAGE, _err, _store, _write_
 
 def add_parser(sub) -> None:
     """Register `analyze` and `report`."""
-    analyze = sub.add_parser("analyze", help="re-fit a recorded run with its procedure's analysis hook")
+    analyze = sub.add_parser(
+        "analyze", help="re-fit a recorded run with its procedure's analysis hook; the results are stored as "
+        "the run's re-analysis rows (kept apart from its own; a second analyze replaces them)")
     analyze.add_argument("run", help='run id, unique prefix, "last", or a raw .h5 file')
     analyze.add_argument("--results", default=None)
     analyze.add_argument("--json", action="store_true")
     analyze.add_argument("--procedure", default=None, help="analyse with another procedure (name or file)")
+    analyze.add_argument("--no-store", action="store_true", help="print the re-fit only; store nothing")
     analyze.add_argument("--figures", default=None, metavar="DIR", help="also write the report's figures (SVG)")
     analyze.set_defaults(func=cmd_analyze)
 
@@ -35,6 +38,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         return opened
     data, store, run_id = opened
     with data:
+        if not (args.procedure or data.attrs.get("procedure")):
+            _err(f"{data.path}: the file does not name its procedure: give --procedure NAME")
+            return EXIT_USAGE
         try:
             cls = find_procedure(args.procedure or data.attrs["procedure"])
         except ProcedureNotFound as exc:
@@ -56,12 +62,14 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         figures = _write_figures(data, proc, args.figures) if args.figures else []
         notes = list(data.notes)
         truth = data.truth or {}
-    if store is not None:
+    stored = None
+    if store is not None and not args.no_store:
         store.save_analysis(run_id, results)
+        stored = store.display_url
     out = {r.name if r.dut is None else f"{r.dut}:{r.name}": r.as_json() for r in results}
     if args.json:
         print(json.dumps({"run_id": run_id, "measurements": out, "truth": truth or None, "incomplete": incomplete,
-                          "notes": notes, "figures": [str(p) for p in figures]}))
+                          "notes": notes, "figures": [str(p) for p in figures], "stored_in": stored}))
     else:
         print(f"re-analysis of run {run_id} ({cls.name})")
         if incomplete:
@@ -74,6 +82,11 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             print(f"  {name} = {m['value']} {m['unit']}  ci95 {m['ci95']}  {m['outcome']}{t}")
         for path in figures:
             print(f"  figure {path}")
+        if stored:
+            print(f"  stored in {stored} as this run's re-analysis ({len(results)} row(s), replacing any earlier "
+                  "one; the run's own results are kept apart; --no-store stores nothing)")
+        else:
+            print("  not stored" + (" (a raw file, no store)" if store is None else " (--no-store)"))
     return EXIT_OK
 
 
@@ -109,10 +122,15 @@ def _open_recorded(run: str, results: str | None):
 def _open_for_command(args: argparse.Namespace) -> tuple[Any, Any, str] | int:
     """`_open_recorded` for analyze and report: (data, store, run id), or the exit code after one
     message (an unknown run or missing file: usage; a file that is not HDF5 or is damaged)."""
+    from bench.recorder import NotARunFile
+
     try:
         return _open_recorded(args.run, args.results)
     except KeyError as exc:
         _err(str(exc.args[0]))
+        return EXIT_USAGE
+    except NotARunFile as exc:  # HDF5 from another program, or attributes we cannot read
+        _err(str(exc))
         return EXIT_USAGE
     except OSError as exc:  # not an HDF5 file, or damaged
         _err(f"cannot read the raw file of {args.run!r}: {exc}")

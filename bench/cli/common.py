@@ -7,7 +7,7 @@ import sys
 from typing import Any
 
 EXIT_OK, EXIT_BAD_OUTCOME, EXIT_USAGE = 0, 1, 2
-EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 70, 130, 141
+EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_TERMINATED, EXIT_BROKEN_PIPE = 70, 130, 143, 141
 BAD_OUTCOMES = ("ERROR", "ABORTED", "FAIL")
 
 
@@ -17,6 +17,12 @@ class CliError(Exception):
     def __init__(self, message: str, code: int = EXIT_USAGE) -> None:
         super().__init__(message)
         self.code = code
+
+
+def exit_for_signal(signum: int) -> int:
+    """The exit code of a command a signal ended (after its safe state): 128 + the signal's number,
+    as a shell reports it (SIGINT 130, SIGTERM 143), so a script tells it from a failed run (1)."""
+    return 128 + int(signum)
 
 
 def _err(msg: str) -> None:

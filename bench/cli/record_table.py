@@ -112,7 +112,7 @@ def print_record(js: dict[str, Any]) -> None:
         f"  safe state {'confirmed' if js['safe_state'] else 'NOT CONFIRMED'}; "
         f"{js['simulated_s']:.3f} s bench time, {js['wall_s']:.2f} s wall"
         + (f" ({js['speed_achieved']:.3g}x real time)" if js.get("speed_achieved") else "")
-        + f"; raw {js['raw_file']}"
+        + f"; raw {js['raw_file']}" + _gone(js["raw_file"])
     )
 
 
@@ -128,3 +128,10 @@ def _limits_and_outcome(m: dict[str, Any], entry: dict[str, Any] | None, num) ->
     if outcome == "COMPLETE":  # no limit judged it: it was measured, nothing more
         outcome = "measured"
     return lim, outcome
+
+
+def _gone(path: str | None) -> str:
+    """' (deleted during the run)' when the raw file a record names is no longer there."""
+    from pathlib import Path
+
+    return " (deleted during the run)" if path and not Path(path).exists() else ""

@@ -18,13 +18,15 @@ from .common import (
     _speed,
     _store,
     _write_report,
+    exit_for_signal,
 )
 
 
 def add_parser(sub) -> None:
     """Register `run` and its options."""
     run = sub.add_parser("run", help="run a procedure (a registered name or a .py file) on a station")
-    run.add_argument("procedure")
+    run.add_argument("procedure", help="a registered name, or a .py file (imported within 30 s, "
+                                        "$GYROBENCH_IMPORT_TIMEOUT_S)")
     run.add_argument("--station", default="sim-hrg", help="built-in station name or a station TOML file")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="a procedure parameter")
     run.add_argument("--seed", type=int, default=None, help="simulation seed (simulated stations)")
@@ -47,6 +49,15 @@ def _parse_sets(items: list[str]) -> dict[str, str]:
     from bench.validation import parse_assignment
 
     return dict(parse_assignment(item) for item in items)
+
+
+def _check_people(args: argparse.Namespace) -> None:
+    """--operator and each --dut checked for length and control characters (bench.validation)."""
+    from bench.validation import check_label
+
+    check_label("--operator", args.operator, allow_empty=True)
+    for serial in args.dut:
+        check_label("--dut", serial)
 
 
 def _warn_unfired_faults(station: Any, faults: list[tuple[str, float]]) -> None:
@@ -73,6 +84,7 @@ def cmd(args: argparse.Namespace) -> int:
 
     try:
         check_inputs(args.operator, args.dut)  # what the results store keeps, before anything moves
+        _check_people(args)  # before the procedure file is even imported
         proc_cls = find_procedure(args.procedure)
         params = _parse_sets(args.set)
         proc = proc_cls(params)  # parameters are checked here, before any device exists
@@ -107,8 +119,10 @@ def cmd(args: argparse.Namespace) -> int:
         station, runs_dir=args.runs_dir or station.runs_dir, store=store, operator=args.operator, duts=args.dut
     )
     previous = {}
+    signalled: list[int] = []  # the signal that aborted the run: its exit code once the run is safe
 
     def on_signal(signum, _frame):
+        signalled.append(signum)
         runner.abort(signal.Signals(signum).name)
 
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -155,6 +169,9 @@ def cmd(args: argparse.Namespace) -> int:
     _warn_unfired_faults(station, faults)
     if rec.store_error:  # the run's record is not in the store (it is in the spool): not a clean exit
         _err(rec.store_error)
+    if signalled and rec.outcome == "ABORTED":  # after the safe state: 130 (SIGINT) / 143 (SIGTERM)
+        return exit_for_signal(signalled[0])
+    if rec.store_error:
         return EXIT_BAD_OUTCOME
     lab_outcome = (js.get("limits") or {}).get("outcome")
     return EXIT_BAD_OUTCOME if rec.outcome in BAD_OUTCOMES or lab_outcome in BAD_OUTCOMES else EXIT_OK

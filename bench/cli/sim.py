@@ -8,7 +8,7 @@ import math
 import signal
 import time
 
-from .common import EXIT_OK, EXIT_USAGE, _err
+from .common import EXIT_OK, EXIT_USAGE, _err, exit_for_signal
 
 
 def add_parser(sub) -> None:
@@ -31,10 +31,10 @@ def cmd(args: argparse.Namespace) -> int:
     except StationError as exc:
         _err(str(exc))
         return EXIT_USAGE
-    stop = {"flag": False}
+    stop: dict = {"flag": False, "signum": None}
 
     def on_signal(signum, _frame):
-        stop["flag"] = True
+        stop["flag"], stop["signum"] = True, signum
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
@@ -53,4 +53,5 @@ def cmd(args: argparse.Namespace) -> int:
             time.sleep(0.05)
     finally:
         station.close()
-    return EXIT_OK
+    # stopped by a signal (Ctrl-C, the service manager): 130 / 143, as a shell reports it
+    return EXIT_OK if stop["signum"] is None else exit_for_signal(stop["signum"])

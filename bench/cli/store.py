@@ -8,6 +8,8 @@ import sys
 
 from .common import EXIT_BAD_OUTCOME, EXIT_OK, EXIT_USAGE, _err, _store
 
+MAX_LIMIT = 1_000_000  # runs listed at most
+
 
 def add_parser(sub) -> None:
     """Register `runs` and `show`."""
@@ -31,7 +33,9 @@ def cmd_runs(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from bench.results import StoreError
+    from bench.validation import convert
 
+    limit = convert("--limit", args.limit, int, low=1, high=MAX_LIMIT)  # SQLite takes 64-bit ints only
     spool = Path(args.runs_dir) / "spool"
     problems: list[str] = []
     try:
@@ -46,7 +50,7 @@ def cmd_runs(args: argparse.Namespace) -> int:
         if store.spool.quarantined():  # refused by the store: a person decides (see each .reason)
             _err(f"{len(store.spool.quarantined())} refused record(s) wait in {store.spool.quarantine_dir}, each "
                  "with a .reason file beside it")
-        rows = store.list_runs(limit=args.limit, procedure=args.procedure)
+        rows = store.list_runs(limit=limit, procedure=args.procedure)
     except StoreError as exc:
         _err(str(exc))
         return EXIT_BAD_OUTCOME
@@ -54,6 +58,9 @@ def cmd_runs(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(rows, default=str))
         return code
+    if not rows:
+        what = f"no {args.procedure} runs" if args.procedure else "no runs yet"
+        print(f"{what} in {store.display_url}", file=sys.stderr)
     for r in rows:
         safe = "-" if r["outcome"] == "RUNNING" else "safe" if r["safe_state"] else "UNSAFE"
         where = f"on {r['host']}, process {r['pid']}" if r["outcome"] == "RUNNING" else r["end_reason"]
@@ -64,13 +71,44 @@ def cmd_runs(args: argparse.Namespace) -> int:
     return code
 
 
+SHOW_KEYS = ("run_id", "procedure", "station_id", "outcome", "end_reason", "safe_state", "started_at",
+             "simulated_s", "wall_s", "software_version", "operator", "seed", "raw_file")
+
+
+def _run_from_file(path: str) -> dict:
+    """A raw .h5 file's record in the shape `ResultsStore.get_run` gives (measurements with their
+    intervals, all the run's own), for `show FILE`."""
+    from bench.recorder import open_run
+
+    with open_run(path) as data:
+        a = data.attrs
+        row = {k: a.get(k) for k in SHOW_KEYS}
+        row["raw_file"] = str(data.path)
+        row["params"], row["truth"] = data.params, data.truth or {}
+        row["duts"] = [str(d) for d in a.get("duts") or []]
+        row["measurements"] = []
+        for m in data.measurements():
+            ci = m.get("ci95") or [None, None]
+            row["measurements"].append({**m, "ci95_low": ci[0], "ci95_high": ci[1], "source": "run"})
+    return row
+
+
 def cmd_show(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from bench.recorder import NotARunFile
     from bench.results import StoreError
 
     try:
-        run = _store(args.results).get_run(args.run)
+        if args.run.endswith(".h5") and Path(args.run).is_file():  # a raw file: no store needed
+            run = _run_from_file(args.run)
+        else:
+            run = _store(args.results).get_run(args.run)
     except KeyError as exc:
         _err(str(exc.args[0]))
+        return EXIT_USAGE
+    except NotARunFile as exc:
+        _err(str(exc))
         return EXIT_USAGE
     except StoreError as exc:
         _err(str(exc))
@@ -78,33 +116,38 @@ def cmd_show(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(run, default=str))
         return EXIT_OK
-    for key in (
-        "run_id",
-        "procedure",
-        "station_id",
-        "outcome",
-        "end_reason",
-        "safe_state",
-        "started_at",
-        "simulated_s",
-        "wall_s",
-        "software_version",
-        "operator",
-        "seed",
-        "raw_file",
-    ):
-        print(f"{key:>17}: {run[key]}")
-    if run.get("host"):  # where it ran, and its last sign of life (RUNNING / INTERRUPTED)
-        print(f"{'host':>17}: {run['host']} (process {run['pid']}, heartbeat {run['heartbeat_at']})")
-    print(f"{'params':>17}: {run['params']}")
-    if run["duts"]:
-        print(f"{'duts':>17}: {', '.join(run['duts'])}")
+    _print_run(run)
+    return EXIT_OK
+
+
+def _num(x) -> str:
+    return "-" if x is None else f"{x:.6g}" if isinstance(x, float) else str(x)
+
+
+def _print_run(run: dict) -> None:
+    """One run as text; every stored value through `printable` (a serial recorded before labels
+    were checked may hold an escape)."""
+    from bench.validation import printable
     from procedures import measurement_truth
 
+    for key in SHOW_KEYS:
+        print(f"{key:>17}: {printable(run.get(key))}")
+    if run.get("host"):  # where it ran, and its last sign of life (RUNNING / INTERRUPTED)
+        print(f"{'host':>17}: {printable(run['host'])} (process {run['pid']}, heartbeat {run['heartbeat_at']})")
+    print(f"{'params':>17}: {printable(run['params'])}")
+    if run["duts"]:
+        print(f"{'duts':>17}: {', '.join(printable(d) for d in run['duts'])}")
     truth = measurement_truth(run["procedure"], run["truth"])  # by declaration
-    for m in run["measurements"]:
-        lim = "" if m["low"] is None and m["high"] is None else f" [{m['low']}, {m['high']}]"
-        t = f"  truth {truth[m['name']]:.6g}" if m["name"] in truth else ""
-        dut = f"{m['dut']}:" if m["dut"] else ""
-        print(f"  {m['source']:<7} {dut}{m['name']} = {m['value']} {m['unit']}{lim} {m['outcome']}{t}")
-    return EXIT_OK
+    for source, title in (("run", "measurements (the run's own)"),
+                          ("analyze", "re-analysis (gyrobench analyze; the run's own results are above)")):
+        rows = [m for m in run["measurements"] if (m.get("source") or "run") == source]
+        if not rows:
+            continue
+        print(f"{title}:")
+        for m in rows:
+            lim = "" if m["low"] is None and m["high"] is None else f"  limits [{_num(m['low'])}, {_num(m['high'])}]"
+            ci = ("" if m.get("ci95_low") is None or m.get("ci95_high") is None
+                  else f"  95% [{_num(m['ci95_low'])}, {_num(m['ci95_high'])}]")
+            t = f"  truth {truth[m['name']]:.6g}" if m["name"] in truth else ""
+            dut = f"{printable(m['dut'])}:" if m["dut"] else ""
+            print(f"  {dut}{m['name']} = {_num(m['value'])} {m['unit']}{ci}{lim}  {m['outcome']}{t}")

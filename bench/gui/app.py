@@ -30,6 +30,19 @@ def has_display(environ: dict[str, str] | None = None) -> bool:
     return bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
 
 
+def window_unavailable(command: str, environ: dict[str, str] | None = None) -> str | None:
+    """Why `command` cannot show its window (no display, and no Qt platform that needs none), in
+    one line; None when it can. Checked before anything starts: Qt without a display aborts the
+    process (exit 134) with a misleading message about libxcb."""
+    env = os.environ if environ is None else environ
+    platform = env.get("QT_QPA_PLATFORM", "")
+    if has_display(env) or (platform and not platform.startswith(("xcb", "wayland"))):
+        return None
+    return (f"{command}: no display (DISPLAY / WAYLAND_DISPLAY unset): the window cannot be shown"
+            + (f" on QT_QPA_PLATFORM={platform}" if platform else "")
+            + "; run without the window, or set QT_QPA_PLATFORM=offscreen")
+
+
 def choose_qt_platform(environ: dict[str, str] | None = None) -> str | None:
     """With no display and no QT_QPA_PLATFORM, pick Qt's offscreen platform (set in the
     environment, before the QApplication exists): Qt would otherwise abort the process."""
@@ -40,10 +53,32 @@ def choose_qt_platform(environ: dict[str, str] | None = None) -> str | None:
     return "offscreen"
 
 
+#: what Qt's platform plugins say that tells the user nothing: the offscreen plugin (headless
+#: screenshots, CI) reports each size hint it cannot pass to a window manager it does not have
+QUIET_QT_MESSAGES = frozenset({"This plugin does not support propagateSizeHints()"})
+_QT_HANDLER: list = []  # the installed handler, kept alive
+
+
+def quiet_qt_messages() -> None:
+    """Route Qt's messages through a handler that drops QUIET_QT_MESSAGES and prints the rest to
+    stderr as Qt would (once a process)."""
+    if _QT_HANDLER:
+        return
+    from PySide6.QtCore import qInstallMessageHandler
+
+    def handler(_mode, _context, message: str) -> None:
+        if message not in QUIET_QT_MESSAGES:
+            sys.stderr.write(message + "\n")
+
+    _QT_HANDLER.append(handler)
+    qInstallMessageHandler(handler)
+
+
 def _app():
     from PySide6.QtWidgets import QApplication
 
     choose_qt_platform()
+    quiet_qt_messages()
 
     app = QApplication.instance()
     return app if app is not None else QApplication(["gyrobench"])

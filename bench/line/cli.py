@@ -139,6 +139,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     if not args.operator.strip():
         raise LineError("--operator NAME is required on a line (the record names who tested the unit)")
+    if args.window:  # before anything opens: Qt without a display aborts the process
+        from bench.gui.app import window_unavailable
+
+        why = window_unavailable("line run --window")
+        if why:
+            raise LineError(why)
     seq = load_sequence(args.sequence)
     limits = _limits_of(args, seq)
     station_name = _station_of(args, seq.station)

@@ -97,8 +97,15 @@ def _golden_figure(rows: list[dict[str, Any]]) -> str:
         ax.axhline(k, color="#c00", ls="--", lw=1.2, label="limit (locks the station)" if k > 0 else None)
     ax.set_xlabel("golden check, in time order")
     ax.set_ylabel("drift / its limit")
-    ax.legend(fontsize=7, loc="best")
+    _legend(ax)
     return ReportFigure("golden-drift", "golden unit drift", fig).svg()
+
+
+def _legend(ax: Any) -> None:
+    """A legend when something is labelled (a measurement without limits or spread has nothing:
+    matplotlib would warn "No artists with labels found")."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7, loc="best")
 
 
 def _figures(measure: dict[str, Any]) -> tuple[str, str]:
@@ -116,7 +123,7 @@ def _figures(measure: dict[str, Any]) -> tuple[str, str]:
             ax.axvline(lim, color="#c00", ls="--", lw=1.2, label=f"{lab} limit {lim:g}")
     ax.set_xlabel(measure["name"] + unit)
     ax.set_ylabel("units")
-    ax.legend(fontsize=7, loc="best")
+    _legend(ax)
     tag = f"{measure['procedure']}-{measure['name']}-{measure['sequence']}"
     hist = ReportFigure(f"hist-{tag}", measure["name"], fig).svg()
     fig2, axes2 = new_figure(1, 1, height_in=2.4, width_in=6.0)
@@ -138,7 +145,7 @@ def _figures(measure: dict[str, Any]) -> tuple[str, str]:
             ax.axhline(lim, color="#c00", ls="--", lw=1.2)
     ax.set_xlabel("unit, in the time order tested")
     ax.set_ylabel(measure["name"] + unit)
-    ax.legend(fontsize=7, loc="best")
+    _legend(ax)
     chart = ReportFigure(f"chart-{tag}", measure["name"], fig2).svg()
     return hist, chart
 

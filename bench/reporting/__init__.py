@@ -66,24 +66,35 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _measurement_rows(data: Any, row: dict[str, Any] | None) -> list[dict[str, Any]]:
+def _measurement_rows(data: Any, row: dict[str, Any] | None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """(the run's own measurements, the re-analyses `gyrobench analyze` stored) as table rows:
+    two tables, so a re-fit never reads as part of what the run measured."""
     from procedures import measurement_periods, measurement_truth, no_interval_reasons
 
-    truth = measurement_truth(data.attrs.get("procedure"), data.truth)  # by declaration, not by matching names
-    periods = measurement_periods(data.attrs.get("procedure"))  # an axis angle's truth: its nearest image
-    lab = (data.attrs.get("lab_limits") or {}).get("measurements", {})  # `gyrobench run --limits`' verdicts
-    why_not = no_interval_reasons(data.attrs.get("procedure"))  # a value without an interval says why
-    incomplete = data.incomplete
-    found: dict[str, dict[str, Any]] = {}
+    name = data.attrs.get("procedure")
+    known = {
+        "truth": measurement_truth(name, data.truth),  # by declaration, not by matching names
+        "periods": measurement_periods(name),  # an axis angle's truth: its nearest image
+        "lab": (data.attrs.get("lab_limits") or {}).get("measurements", {}),  # `gyrobench run --limits`' verdicts
+        "why_not": no_interval_reasons(name),  # a value without an interval says why
+    }
+    own: dict[str, dict[str, Any]] = {}
     for m in data.measurements():
         key = m["name"] if m.get("dut") is None else f"{m['dut']}:{m['name']}"
-        found[key] = {**m, "name": key, "source": "run"}
-    if row is not None:
-        for m in row.get("measurements", []):
-            if m.get("source") == "analyze":
-                name = m["name"] + (" (re-analysis, incomplete run)" if incomplete else " (re-analysis)")
-                ci = [m.get("ci95_low"), m.get("ci95_high")]
-                found[name] = {**m, "name": name, "ci95": ci if None not in ci else None, "base": m["name"]}
+        own[key] = {**m, "name": key, "source": "run"}
+    again: dict[str, dict[str, Any]] = {}
+    for m in (row or {}).get("measurements", []):
+        if m.get("source") == "analyze":
+            key = m["name"] if m.get("dut") is None else f"{m['dut']}:{m['name']}"
+            ci = [m.get("ci95_low"), m.get("ci95_high")]
+            again[key] = {**m, "name": key, "ci95": ci if None not in ci else None, "base": m["name"]}
+    return _table_rows(own, known), _table_rows(again, known)
+
+
+def _table_rows(found: dict[str, dict[str, Any]], known: dict[str, Any]) -> list[dict[str, Any]]:
+    """Table rows of measurements: value and interval by the digit rule, the row's own outcome, the
+    truth and whether it lies outside the interval (an axis angle modulo its period)."""
+    truth, periods, lab, why_not = known["truth"], known["periods"], known["lab"], known["why_not"]
     out = []
     for name, m in found.items():
         ci = m.get("ci95")
@@ -152,9 +163,9 @@ def context(data: Any, row: dict[str, Any] | None = None,
     proc = procedure_of(data)
     figs, notes = figures if figures is not None else figures_for(data, proc)
     a = data.attrs
-    rows = _measurement_rows(data, row)
+    rows, reanalysis = _measurement_rows(data, row)
     # the truth columns on a simulated station, when a measurement has a truth to compare with
-    truth_shown = bool(a.get("simulated") and data.truth and any(r["truth"] != DASH for r in rows))
+    truth_shown = bool(a.get("simulated") and data.truth and any(r["truth"] != DASH for r in rows + reanalysis))
     compared = [r for r in rows if r["compared"]]
     lab = a.get("lab_limits")
     judged_any = bool(lab) or any(r["outcome"] in ("PASS", "FAIL", "MARGINAL") for r in rows)
@@ -168,6 +179,7 @@ def context(data: Any, row: dict[str, Any] | None = None,
         "identity": _identity(data, proc),
         "params": _param_rows(data, proc),
         "measurements": rows,
+        "reanalysis": reanalysis,
         "truth_shown": truth_shown,
         # "7 of 16 truths outside their 95 % intervals", on a simulated station
         "truth_outside": (sum(r["outside"] for r in compared), len(compared)) if truth_shown and compared else None,

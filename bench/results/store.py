@@ -249,6 +249,10 @@ class ResultsStore:
         return f"service {service}" if service else os.environ.get("PGHOST", "local socket")
 
     def _fail(self, exc: BaseException, doing: str = "") -> StoreError:
+        db = sqlite_file(self.engine)
+        if db is not None and not db.exists():  # SQLite says "readonly database" when its file was deleted
+            return StoreError(f"results store {self.display_url}{doing}: its file {db} was deleted while open "
+                              "(the runs it held are lost with it)")
         return StoreError(f"results store {self.display_url}{doing}: {describe_error(exc)}")
 
     def _call(self, fn: Callable[[], T], then: str = "then the record goes to the spool", *,
