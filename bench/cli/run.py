@@ -83,8 +83,8 @@ def cmd(args: argparse.Namespace) -> int:
     from .record_table import apply_limits, load_lab_limits, print_record
 
     try:
-        check_inputs(args.operator, args.dut)  # what the results store keeps, before anything moves
-        _check_people(args)  # before the procedure file is even imported
+        _check_people(args)  # a serial's or operator's length and characters, before the procedure file is imported
+        check_inputs(args.operator, args.dut)  # and what the results store keeps (the looser bound)
         proc_cls = find_procedure(args.procedure)
         params = _parse_sets(args.set)
         proc = proc_cls(params)  # parameters are checked here, before any device exists
