@@ -81,6 +81,7 @@ class MainWindow(QMainWindow):
         self.last_finished: ev.RunFinished | None = None
         self.t_sim_s = 0.0
         self.screenshot_t_s: float | None = None
+        self.run_unit: tuple[list[str], str] = ([], "")  # the serials and operator of the run going on
 
         self.station = StationPanel(backend.station_name, backend.simulated)
         self.station.speed_changed.connect(self._on_speed)
@@ -92,6 +93,10 @@ class MainWindow(QMainWindow):
             why = "; ".join(f"{n} ({w})" for n, w in hidden.items())
             self.procedure.setToolTip(f"not offered on this station: {why}")
         self.form = ParameterForm()
+        from .unit_fields import UnitFields
+
+        self.unit = UnitFields()  # DUT serial and operator: every run is stored with them
+        self.unit.scanned.connect(lambda _s: self.start_button.setFocus())
         self.start_button = QPushButton("Start")
         self.pause_button = QPushButton("Pause")
         self.abort_button = QPushButton("Abort")
@@ -125,6 +130,7 @@ class MainWindow(QMainWindow):
         left_lay.addWidget(box)
         proc_box = QGroupBox("Procedure")
         proc_lay = QVBoxLayout(proc_box)
+        proc_lay.addWidget(self.unit)
         proc_lay.addWidget(self.procedure)
         form_scroll = QScrollArea()
         form_scroll.setWidget(self.form)
@@ -197,6 +203,7 @@ class MainWindow(QMainWindow):
         self.start_button.setEnabled(self.form.is_valid() and not self.run_active)
         self.form.setEnabled(not self.run_active)
         self.procedure.setEnabled(not self.run_active)
+        self.unit.set_running(self.run_active)
         self.pause_button.setEnabled(self.run_active)
         self.pause_button.setText("Resume" if self.paused else "Pause")
         self.abort_button.setEnabled(self.run_active)
@@ -222,6 +229,11 @@ class MainWindow(QMainWindow):
         if not self.form.validate() or self.run_active:
             return
         try:
+            duts, operator = self.unit.checked()
+            if hasattr(self.backend, "set_unit"):
+                self.backend.set_unit(duts, operator)
+            self.unit.remember()
+            self.run_unit = (duts, operator)
             self.backend.start(self.procedure.currentText(), self.form.values())
         except (ValueError, RuntimeError) as exc:
             self.log.add(self.t_sim_s, "ERROR", str(exc))
@@ -335,7 +347,9 @@ class MainWindow(QMainWindow):
         self.steps.set_steps(e.steps)
         self.run_active = True
         self.last_finished = None
-        self.log.add(e.t_sim_s, "INFO", f"run {e.run_id} started: {e.procedure} {e.params}")
+        duts, operator = self.run_unit
+        who = f" (DUT {', '.join(duts) or 'none'}, operator {operator or 'none'})"
+        self.log.add(e.t_sim_s, "INFO", f"run {e.run_id} started: {e.procedure} {e.params}{who}")
         self._update_buttons()
 
     def _on_run_finished(self, e: ev.RunFinished) -> None:
