@@ -18,6 +18,7 @@ def add_gui_subcommand(sub) -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="a procedure parameter (repeatable)")
     p.add_argument("--open", dest="open_run", default=None, metavar="RUN.h5", help="replay a recorded run")
+    p.add_argument("--start", action="store_true", help="start the --run procedure as soon as the window is up")
     p.add_argument("--operator", action="store_true", help="the line operator's window (big verdict, serial scan)")
     p.set_defaults(func=cmd_gui)
     return p
@@ -34,5 +35,11 @@ def cmd_gui(args: argparse.Namespace) -> int:
         from .operator_view import run_operator
 
         return run_operator(args.station, run=args.run, params=params, seed=args.seed, screenshot=args.screenshot)
-    return run_gui(args.station, run=args.run, screenshot=args.screenshot, at_s=args.at_s, seed=args.seed,
-                   speed=speed, open_run=args.open_run, params=params)
+    try:
+        return run_gui(args.station, run=args.run, screenshot=args.screenshot, at_s=args.at_s, seed=args.seed,
+                       speed=speed, open_run=args.open_run, params=params, start=args.start)
+    except KeyboardInterrupt as exc:  # a signal outside the event loop: the run's safe state is done
+        import sys
+
+        print(f"gyrobench gui: interrupted ({exc or 'SIGINT'})", file=sys.stderr)
+        return 143 if str(exc) == "SIGTERM" else 130

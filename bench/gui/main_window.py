@@ -438,10 +438,16 @@ class MainWindow(QMainWindow):
             QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
         return answer == QMessageBox.StandardButton.Yes
 
+    def quit_for_signal(self, name: str) -> None:
+        """Ctrl+C or SIGTERM: abort a run to the safe state (no question), then close."""
+        self.log.add(self.t_sim_s, "WARNING", f"{name}: aborting to the safe state and closing")
+        self.quitting = True
+        self.close()
+
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
         if self.run_active or self.backend.running():
             if self.run_active:  # after RunFinished the thread only says its last words: no question
-                if not self.ask_close_during_run():
+                if not getattr(self, "quitting", False) and not self.ask_close_during_run():
                     event.ignore()
                     return
                 self.abort()
