@@ -242,7 +242,7 @@ class ReplayWindow(QMainWindow):
                 blocks.setdefault((e.stream, tuple(e.columns)), []).append(np.asarray(e.data))
             elif isinstance(e, ev.RunStarted):
                 self.plots.clear()
-                self.plots.set_origin(None)  # time since the first recorded sample
+                self.plots.set_origin(e.t_sim_s)  # time since the run started (bench.gui.replay.run_start_s)
             elif isinstance(e, ev.StreamDeclared):
                 self.plots.declare(e.schema)
             elif isinstance(e, ev.FitUpdate):
