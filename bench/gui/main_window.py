@@ -341,9 +341,12 @@ class MainWindow(QMainWindow):
         self.steps_done = 0
         self.step_fraction = 0.0
         self.results.clear()
+        from procedures import measurement_periods
+
         from .run_truth import truth_for_run
 
-        self.results.set_truth(truth_for_run(self.backend, e.procedure, e.run_id))  # the truth column (simulated)
+        self.results.set_truth(truth_for_run(self.backend, e.procedure, e.run_id),  # the truth column (simulated)
+                               measurement_periods(e.procedure))
         self.steps.set_steps(e.steps)
         self.run_active = True
         self.last_finished = None

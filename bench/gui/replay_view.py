@@ -229,7 +229,9 @@ class ReplayWindow(QMainWindow):
         self.station.expandToDepth(0)
         self.station.resizeColumnToContents(0)
         self.params.resizeRowsToContents()
-        self.results.set_truth(_recorded_truths(a))
+        from procedures import measurement_periods
+
+        self.results.set_truth(_recorded_truths(a), measurement_periods(str(a.get("procedure", "")) or None))
         self._apply(rec.events)
         self.results.set_report(str(rec.path))
         self.statusBar().showMessage(f"replay of {rec.path}")
