@@ -4,7 +4,7 @@ runs (QSettings), and fit for a keyboard-wedge scanner (it types the serial and 
 from __future__ import annotations
 
 from PySide6.QtCore import QSettings, Signal
-from PySide6.QtWidgets import QFormLayout, QLabel, QLineEdit, QWidget
+from PySide6.QtWidgets import QFormLayout, QLabel, QLineEdit, QSizePolicy, QWidget
 
 from bench.line.inputs import check_operator, check_serial
 from bench.validation import ValidationError
@@ -34,6 +34,8 @@ class UnitFields(QWidget):
         self.error = QLabel("")
         self.error.setWordWrap(True)
         self.error.setStyleSheet("color: #c00000;")
+        self.error.setVisible(False)  # a row only when there is something wrong
+        self.error.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         lay = QFormLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
         lay.addRow("DUT serial", self.dut)
@@ -43,18 +45,23 @@ class UnitFields(QWidget):
         self.dut.setText(str(s.value("dut", "") or ""))
         self.operator.setText(str(s.value("operator", "") or ""))
         self.dut.returnPressed.connect(self._on_enter)
-        self.dut.textEdited.connect(lambda _t: self.error.setText(""))
-        self.operator.textEdited.connect(lambda _t: self.error.setText(""))
+        self.dut.textEdited.connect(lambda _t: self.say(""))
+        self.operator.textEdited.connect(lambda _t: self.say(""))
 
     def _on_enter(self) -> None:
         try:
             duts = self.duts()
         except ValidationError as exc:
-            self.error.setText(str(exc))
+            self.say(str(exc))
             return
         self.dut.setText(", ".join(duts))
         self.remember()
         self.scanned.emit(", ".join(duts))
+
+    def say(self, text: str) -> None:
+        """What is wrong with the fields (hidden when nothing is)."""
+        self.error.setText(text)
+        self.error.setVisible(bool(text))
 
     def duts(self) -> list[str]:
         """The serials typed or scanned, normalised; ValidationError names a bad one."""
@@ -70,9 +77,9 @@ class UnitFields(QWidget):
         try:
             out = self.duts(), self.operator_name()
         except ValidationError as exc:
-            self.error.setText(str(exc))
+            self.say(str(exc))
             raise
-        self.error.setText("")
+        self.say("")
         return out
 
     def remember(self) -> None:
