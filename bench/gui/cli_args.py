@@ -19,7 +19,11 @@ def add_gui_subcommand(sub) -> argparse.ArgumentParser:
                    help="a procedure parameter (repeatable)")
     p.add_argument("--open", dest="open_run", default=None, metavar="RUN.h5", help="replay a recorded run")
     p.add_argument("--start", action="store_true", help="start the --run procedure as soon as the window is up")
-    p.add_argument("--operator", action="store_true", help="the line operator's window (big verdict, serial scan)")
+    p.add_argument("--operator", action="store_true",
+                   help="the operator station: log in, pick a line sequence, scan serials (with --run PROC: one "
+                        "procedure a unit, no line records)")
+    p.add_argument("--sequence", default=None, help="with --operator: the line sequence to offer first")
+    p.add_argument("--runs-dir", dest="runs_dir", default=None, help="with --operator: where records go")
     p.set_defaults(func=cmd_gui)
     return p
 
@@ -31,6 +35,11 @@ def cmd_gui(args: argparse.Namespace) -> int:
     from bench.validation import parse_assignment
 
     params = dict(parse_assignment(item) for item in args.set)  # the same reading as `gyrobench run --set`
+    if args.operator and args.run is None:
+        from .operator_station import run_station
+
+        return run_station(args.station, sequence=args.sequence, runs_dir=args.runs_dir, seed=args.seed,
+                           screenshot=args.screenshot)
     if args.operator:
         from .operator_view import run_operator
 
