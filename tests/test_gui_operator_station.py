@@ -86,3 +86,28 @@ def test_login_from_the_operators_table(station, tmp_path):
     assert win.log_in() and "Grace H" in win.who.text()
     with pytest.raises(ValueError, match="not in the line database's operators table"):
         win.session.log_in("Mallory")
+
+
+def test_a_retest_after_fail_needs_a_rework_code(station, qtbot):
+    """The line's routing, from the window: a FAIL unit is not retested without a rework code."""
+    win = station
+    win.operator.setEditText("Ada L")
+    assert win.log_in()
+    from bench.line.record import now_iso
+
+    ctx = win.session.ctx
+    ctx.db.save({"schema_version": 1, "serial": "LN-0003", "attempt": 1, "lot": "", "station": "sim-hrg",
+                 "operator": "Ada L", "sequence": "ci-spin", "product": "ci-spin", "started_at": now_iso(),
+                 "ended_at": now_iso(), "outcome": "FAIL", "measurements": [], "runs": []})
+    qtbot.keyClicks(win.serial_field, "LN-0003")
+    qtbot.keyClick(win.serial_field, Qt.Key.Key_Return)
+    qtbot.waitUntil(lambda: bool(win.units_done), timeout=WAIT_MS)
+    assert win.verdict.text() == "NOT RUN" and "needs --rework CODE" in win.reason.text()
+    win.retest.setText("RW-12")
+    qtbot.keyClicks(win.serial_field, "LN-0003")
+    qtbot.keyClick(win.serial_field, Qt.Key.Key_Return)
+    for _ in range(2):
+        qtbot.waitUntil(win.waiting, timeout=WAIT_MS)
+        qtbot.mouseClick(win.yes_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: len(win.units_done) == 2, timeout=WAIT_MS)
+    assert win.records[-1]["routing"]["rework"] == "RW-12" and win.verdict.text() == "PASS"

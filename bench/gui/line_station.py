@@ -120,8 +120,10 @@ class LineSession:
 
         return check_serial(text, self.limits.serial_format)
 
-    def run_serial(self, serial: str, operator: Any) -> list[dict[str, Any]]:
-        """One unit through the sequence (worker thread): routing, the fixture prompt, its attempts."""
+    def run_serial(self, serial: str, operator: Any, *, rework: str | None = None,
+                   retest_reason: str | None = None) -> list[dict[str, Any]]:
+        """One unit through the sequence (worker thread): routing (a retest after FAIL needs a rework
+        code, after PASS a reason), the fixture prompt, its attempts."""
         from bench.composition import load_station
         from bench.line.routing import history, route
         from bench.line.run import run_unit
@@ -130,7 +132,12 @@ class LineSession:
             raise LineError("log in first")
         ctx = self.ctx
         ctx.aborted.clear()
-        ctx.routing[serial], tries = route(history(ctx.db, ctx.runs_dir, serial), serial, self.seq)
+        from bench.line.inputs import check_reason, check_rework
+
+        rework = check_rework(rework) if rework else None
+        retest_reason = check_reason(retest_reason) if retest_reason else None
+        ctx.routing[serial], tries = route(history(ctx.db, ctx.runs_dir, serial), serial, self.seq, rework=rework,
+                                           retest_reason=retest_reason)
         if not operator.confirm(f"unit {serial} is in the fixture of station {self.station_id!r}?"):
             raise LineError(f"unit {serial}: the fixture was not confirmed; nothing was run")
         return run_unit(ctx, lambda: load_station(self.station_name, **self.overrides), serial, operator,

@@ -123,6 +123,11 @@ class OperatorStation(QWidget):
         self.serial_field.setObjectName("serial")
         self.serial_field.setFont(font(22))
         self.serial_field.setPlaceholderText("scan or type the serial, then Enter")
+        self.retest = QLineEdit()
+        self.retest.setObjectName("retest")
+        self.retest.setPlaceholderText("a retest only: after a FAIL the rework code (RW-12), after a PASS why")
+        self.retest_kind = QComboBox()
+        self.retest_kind.addItems(["rework code", "retest reason"])
         self.yes_button = QPushButton("Yes")
         self.no_button = QPushButton("No")
         for b in (self.yes_button, self.no_button):
@@ -150,6 +155,10 @@ class OperatorStation(QWidget):
         lay.addSpacing(10)
         lay.addWidget(self.prompt)
         lay.addWidget(self.serial_field)
+        retest_row = QHBoxLayout()
+        retest_row.addWidget(self.retest_kind)
+        retest_row.addWidget(self.retest, 1)
+        lay.addLayout(retest_row)
         lay.addLayout(answers)
         lay.addWidget(self.message)
         lay.addWidget(self.files)
@@ -236,10 +245,14 @@ class OperatorStation(QWidget):
         self.files.setText("")
         self.prompt.setText(f"{serial}: testing - do not touch the fixture")
         session, operator = self.session, StationOperator(self, serial)
+        why = self.retest.text().strip()
+        is_rework = self.retest_kind.currentText() == "rework code"
+        rework, reason = (why or None, None) if is_rework else (None, why or None)
+        self.retest.clear()
 
         def work() -> None:
             try:
-                result: Any = session.run_serial(serial, operator)
+                result: Any = session.run_serial(serial, operator, rework=rework, retest_reason=reason)
             except BaseException as exc:  # noqa: BLE001 - said on the screen, never a traceback
                 result = exc
             self.relay.finished.emit((serial, result))
