@@ -18,11 +18,12 @@ WAIT_MS = 60_000
 
 @pytest.fixture
 def settings_dir(tmp_path):
-    """QSettings in a temporary folder: the user's own settings are never touched."""
+    """QSettings in this test's own folder (conftest keeps the session's apart from the user's)."""
     path = tmp_path / "settings"
     for fmt in (QSettings.Format.NativeFormat, QSettings.Format.IniFormat):
         QSettings.setPath(fmt, QSettings.Scope.UserScope, str(path))
-    return path
+    yield path
+    QSettings("gyrobench", "window").clear()
 
 
 def test_scanner_input_is_normalised_and_remembered(qtbot, settings_dir):
