@@ -111,3 +111,15 @@ def test_a_retest_after_fail_needs_a_rework_code(station, qtbot):
         qtbot.mouseClick(win.yes_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: len(win.units_done) == 2, timeout=WAIT_MS)
     assert win.records[-1]["routing"]["rework"] == "RW-12" and win.verdict.text() == "PASS"
+
+
+def test_operator_station_screenshot_from_the_command_line(tmp_path, monkeypatch, qapp, capsys):
+    """`gyrobench gui --operator --screenshot FILE`: a demonstration unit through ci-spin, headless."""
+    monkeypatch.chdir(tmp_path)
+    from bench.cli import main
+
+    png = tmp_path / "op.png"
+    assert main(["gui", "--operator", "--runs-dir", str(tmp_path / "runs"), "--screenshot", str(png)]) == 0
+    assert "unit ('DEMO-0001', 'PASS')" in capsys.readouterr().out
+    assert png.stat().st_size > 5_000
+    assert list((tmp_path / "runs" / "line" / "no-lot").glob("DEMO-0001-a1*.json"))
