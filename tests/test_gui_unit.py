@@ -76,3 +76,24 @@ def test_window_run_is_stored_with_its_dut_and_operator(qtbot, tmp_path, monkeyp
         assert QSettings("gyrobench", "window").value("dut") == "SN-7"
     finally:
         backend.close()
+
+
+def test_the_engines_safe_state_report_shows_at_once(qtbot, tmp_path, monkeypatch, settings_dir):
+    """The engine logs its safe-state report before it closes the run's files and says RunFinished:
+    the window shows the confirmation from that report, not from RunFinished."""
+    from bench.engine import events as ev
+
+    monkeypatch.chdir(tmp_path)
+    backend = EngineBackend("sim-hrg", seed=0)
+    win = MainWindow(backend)
+    qtbot.addWidget(win)
+    try:
+        win.run_active, win.aborting = True, True  # as after Abort, before the engine has finished
+        win.on_events([ev.Log("r1", 12.0, level="INFO", message="safe state confirmed: {'table': 'rest'}")])
+        assert win.safe_label.text() == "safe state confirmed"
+        assert win.status_line.text().startswith("aborted: safe state confirmed")
+        win.on_events([ev.Log("r1", 12.0, level="ERROR", message="safe state NOT confirmed: {} errors {'t': 'x'}")])
+        assert win.safe_label.text() == "SAFE STATE NOT CONFIRMED"
+    finally:
+        win.run_active = False
+        backend.close()

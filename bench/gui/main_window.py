@@ -308,6 +308,8 @@ class MainWindow(QMainWindow):
                 self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut, ci95=e.ci95)
             elif isinstance(e, ev.Log):
                 self.log.add(e.t_sim_s, e.level, e.message)
+                if self.run_active and e.message.startswith(("safe state confirmed", "safe state NOT confirmed")):
+                    self._on_safe_state_report(e.message.startswith("safe state confirmed"))
             elif isinstance(e, ev.StationStatus):
                 self.station.update_devices(e.devices)
             elif isinstance(e, ev.RunStarted):
@@ -319,6 +321,15 @@ class MainWindow(QMainWindow):
         self.station.set_time(self.t_sim_s)
         if self.run_active:
             self._show_run_info()
+
+    def _on_safe_state_report(self, confirmed: bool) -> None:
+        """The engine's safe-state report, shown at once (the run's files close after it, then
+        RunFinished): the operator never waits on a confirmation the engine already gave."""
+        self.safe_label.setText("safe state confirmed" if confirmed else "SAFE STATE NOT CONFIRMED")
+        self.safe_label.setStyleSheet(STATUS_STYLES["neutral"] if confirmed else STATUS_STYLES["red"])
+        if self.aborting:
+            self.set_status_line("aborted: safe state confirmed; closing the run's files..." if confirmed
+                                 else "aborted: SAFE STATE NOT CONFIRMED", "amber" if confirmed else "red")
 
     def _add_blocks(self, pending: dict[tuple[str, tuple[str, ...]], list[np.ndarray]]) -> None:
         for (stream, columns), arrays in pending.items():
