@@ -234,6 +234,8 @@ class Recorder:
             self.append(event.stream, event.columns, event.data)
         elif isinstance(event, ev.StreamDeclared):
             self._schemas[event.schema.name] = event.schema
+        elif isinstance(event, ev.RunStarted):  # the replay's time origin: the run's start, in bench time
+            self._f.attrs["t_start_s"] = float(event.t_sim_s)
         elif isinstance(event, ev.Measurement):
             keys = ("name", "value", "unit", "ci95", "low", "high", "marginal_low", "marginal_high", "outcome", "dut")
             row = {k: getattr(event, k) for k in keys}

@@ -115,7 +115,10 @@ def main(history_shot: str, replay_shot: str, out_dir: str) -> int:
         # refuses (as where no browser can start; a real one would open windows on the test's X server)
         from PySide6.QtGui import QDesktopServices
 
+        from bench.gui import open_report
+
         handed: list[str] = []
+        open_report.opener_argv = lambda _path: None  # Qt's own call, stubbed: no xdg-open on the test's display
         QDesktopServices.openUrl = staticmethod(lambda url: handed.append(url.toLocalFile()) and False)
         click(hist.report_button)
         seen["report_handed"] = handed

@@ -202,6 +202,7 @@ def test_open_report_without_a_browser_shows_the_path_and_copies_it(tmp_path, qt
     page = tmp_path / "report.html"
     page.write_text("<html></html>")
     monkeypatch.setattr(open_report, "launcher_missing", lambda: None)
+    monkeypatch.setattr(open_report, "opener_argv", lambda _p: None)  # Qt's own call (not Linux)
     monkeypatch.setattr(QDesktopServices, "openUrl", staticmethod(lambda _url: False))
     dialog = open_report.open_in_browser(page)
     qtbot.addWidget(dialog)

@@ -132,3 +132,30 @@ def test_safe_state_on_an_idle_station_is_done_and_said(window, qtbot):
     qtbot.mouseClick(win.safe_state_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: "safe state button: safe state confirmed" in win.log.toPlainText(), timeout=WAIT_MS)
     assert abs(station.world.case_rate_dps) < 0.1
+
+
+def test_refused_value_is_logged_and_recorded_and_the_dock_says_when_safe(window, qtbot):
+    """A value refused at its field is in the log and in `manual_actions` (accepted 0); after
+    SAFE STATE the dock shows the engine's confirmation, not "aborting..." for ever."""
+    win = window
+    panel = _open_and_start(qtbot, win)
+    panel.rate_edit.setText("1500")
+    qtbot.mouseClick(panel.rate_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: "manual: table_rate '1500' refused" in win.log.toPlainText(), timeout=WAIT_MS)
+    assert "above the station's limit 1000 deg/s" in win.log.toPlainText()
+    assert panel.session.state.rate_cmd_dps == 0.0  # nothing was sent
+    qtbot.mouseClick(panel.safe_button, Qt.MouseButton.LeftButton)
+    assert "aborting to the safe state" in panel.message.text()
+    qtbot.waitUntil(lambda: win.last_finished is not None, timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: "safe state confirmed" in panel.message.text(), timeout=WAIT_MS)
+    assert "aborting" not in panel.message.text()
+    assert win.backend.join(60)
+    from bench.engine.manual import ACTION_CODES
+    from bench.recorder import open_run
+
+    with open_run(win.last_finished.raw_file) as data:
+        cols = data.columns("manual_actions")
+        rows = data.array("manual_actions")
+    is_rate = rows[:, cols.index("action")] == ACTION_CODES["table_rate"]
+    refused = rows[is_rate & (rows[:, cols.index("accepted")] == 0)]
+    assert len(refused) == 1 and refused[0, cols.index("rate_cmd_dps")] == 0.0

@@ -30,17 +30,36 @@ def test_columns_not_measured_and_height(qtbot):
     t.add("D", math.nan, "1/s", None, 1e-3, "NOT_MEASURED")
     t.add("theta_tau_deg", 20.2, "deg", None, None, "COMPLETE", ci95=(20.1, 20.3), truth=20.0)
     assert t.HEADERS == ("measurement", "value", "95% interval", "unit", "limits", "outcome", "truth")
-    assert _row(t, 0) == {"measurement": "tau_s", "value": "299.9", "95% interval": "[299.5, 300.3]", "unit": "s",
-                          "limits": "250 to 350", "outcome": "PASS", "truth": "300 (in the interval)"}
+    assert _row(t, 0) == {"measurement": "tau_s", "value": "299.90", "95% interval": "[299.50, 300.30]", "unit": "s",
+                          "limits": "[250, 350]", "outcome": "PASS", "truth": "300.00 (in the interval)"}
     row = _row(t, 1)
-    assert row["value"] == "not measured" and row["outcome"] == "NOT MEASURED" and row["limits"] == "<= 0.001"
+    assert row["value"] == "not measured" and row["outcome"] == "NOT MEASURED" and row["limits"] == "≤ 0.001"
     assert "nan" not in " ".join(row.values()).lower()
-    assert _row(t, 2)["truth"] == "20 (OUTSIDE the interval)"
+    assert _row(t, 2)["truth"] == "20.000 (OUTSIDE the interval)"
     assert t.table.height() > h0
     rows = sum(t.table.rowHeight(r) for r in range(3))
     assert t.table.height() >= rows + t.table.horizontalHeader().height()
     assert t.table.height() <= rows + t.table.horizontalHeader().height() + 40  # no empty rows' worth below
     assert t.table.verticalScrollBar().maximum() == 0  # every row shown
+
+
+def test_values_follow_the_reports_digit_rule(qtbot):
+    """The issue's rows: no '5.18363e+06 [5.18362e+06, 5.18363e+06]' or '300 [300, 300]'."""
+    from bench.numbers import with_interval
+
+    t = ResultsTable()
+    qtbot.addWidget(t)
+    t.add("Q", 5183627.4, "1", None, None, "COMPLETE", ci95=(5183620.1, 5183634.9))
+    t.add("tau_s", 300.00123, "s", None, None, "COMPLETE", ci95=(299.99987, 300.00259))
+    t.add("arw_deg_rth", 0.0123456, "deg/rt(h)", None, None, "COMPLETE")  # no interval: 4 significant digits
+    t.add("theta_tau_deg", 89.9, "deg", None, None, "COMPLETE", ci95=(89.7, 90.1), truth=0.05)
+    t.periods = {"theta_tau_deg": 90.0}
+    assert (_row(t, 0)["value"], _row(t, 0)["95% interval"]) == with_interval(5183627.4, (5183620.1, 5183634.9))
+    assert _row(t, 0)["value"] == "5.1836274e6"  # the report writes it so too
+    assert (_row(t, 1)["value"], _row(t, 1)["95% interval"]) == ("300.0012", "[299.9999, 300.0026]")
+    assert (_row(t, 2)["value"], _row(t, 2)["95% interval"]) == ("0.01235", "")
+    t.add("theta_tau_deg", 89.9, "deg", None, None, "COMPLETE", ci95=(89.7, 90.1), truth=0.05)
+    assert _row(t, 4)["truth"] == "0.05 (in the interval)"  # 0.05 deg is 90.05 deg on the axis
 
 
 def test_truth_column_after_a_run_on_the_simulated_station(qtbot, tmp_path, monkeypatch):
@@ -64,8 +83,13 @@ def test_truth_column_after_a_run_on_the_simulated_station(qtbot, tmp_path, monk
 
         truth = measurement_truth("hrg-free-decay", backend.station.truth())
         with_truth = [r for r in rows if r["truth"]]
-        assert with_truth and all(float(r["truth"].split()[0]) == pytest.approx(truth[r["measurement"]], rel=1e-5)
-                                  for r in with_truth)
+        assert with_truth
+        for r in with_truth:  # the simulator's value, at the measured value's precision (the report's rule)
+            text = r["truth"].split()[0].replace("\u2212", "-")
+            mant = text.partition("e")[0]
+            decimals = len(mant.partition(".")[2])
+            scale = 10.0 ** int(text.partition("e")[2] or 0)
+            assert float(text) == pytest.approx(truth[r["measurement"]], abs=0.51 * 10.0 ** -decimals * scale), r
         assert any(r["95% interval"] for r in rows)
     finally:
         backend.close()

@@ -72,8 +72,12 @@ def test_a_rate_beyond_the_table_limit_is_refused_naming_the_limit(sim_station, 
         acts = np.asarray(f["streams/manual_actions"]) if "streams/manual_actions" in f else None
         assert acts is not None, list(f)
         codes = acts[:, ACTIONS_STREAM.index("action")].astype(int).tolist()
-        assert codes == [ACTION_CODES[k] for k in ("start", "table_rate", "table_stop")]
-        assert acts[1, ACTIONS_STREAM.index("rate_cmd_dps")] == 100.0
+        # the three refused values are there too (accepted 0), before the rate that was done
+        kinds = ("start", "table_rate", "agc_setpoint", "table_rate", "table_rate", "table_stop")
+        assert codes == [ACTION_CODES[k] for k in kinds]
+        assert acts[:, ACTIONS_STREAM.index("accepted")].astype(int).tolist() == [1, 0, 0, 0, 1, 1]
+        assert acts[1, ACTIONS_STREAM.index("rate_cmd_dps")] == 0.0  # refused: nothing commanded
+        assert acts[4, ACTIONS_STREAM.index("rate_cmd_dps")] == 100.0
         assert "fpga" in f["streams"]  # the stream the session started
 
 

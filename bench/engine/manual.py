@@ -72,6 +72,7 @@ class Action:
     kind: str
     value: float | None = None
     error: str | None = None
+    refused: str | None = None  # refused before the engine (a value beyond its limit): only logged and recorded
     done: threading.Event = field(default_factory=threading.Event)
 
     def wait(self, timeout_s: float = 10.0) -> bool:
@@ -148,8 +149,15 @@ class ManualSession:
         return None
 
     def submit(self, kind: str, value: Any = None) -> Action:
-        """Check the action (raises if refused), then queue it for the engine's thread."""
-        checked = self.check(kind, value)
+        """Check the action (raises if refused), then queue it for the engine's thread.  A refused
+        value during a session still reaches the engine's thread, to be logged and recorded in
+        `manual_actions` as refused (nothing is sent to a device)."""
+        try:
+            checked = self.check(kind, value)
+        except ValidationError as exc:
+            if kind in ACTION_CODES and self.state.active and not self._end.is_set():
+                self._queue.put(Action(kind, None, error=str(exc), refused=f"{kind} {str(value).strip()!r}"))
+            raise
         if not self.state.active or self._end.is_set():
             raise ValidationError(f"{kind}: no manual control session is active")
         action = Action(kind, checked)
@@ -202,6 +210,12 @@ class ManualSession:
             self.state.drive_read = bool(int(fpga.read_register("STATUS")) & ST_DRIVE_ON)
 
     def _apply(self, ctx: Any, action: Action) -> None:
+        if action.refused is not None:  # refused at its field: said in the log and the record, nothing sent
+            self.state.last = f"refused: {action.error}"
+            ctx.log.warning(f"manual: {action.refused} refused: {action.error}")
+            self._record(ctx, action.kind, False)
+            action.done.set()
+            return
         text = action.kind if action.value is None else f"{action.kind} {action.value:g}"
         try:
             getattr(self, f"_do_{action.kind}")(ctx, action.value)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import sys
 import threading
 import time
@@ -145,17 +146,113 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
     return path
 
 
+class QuitOnSignal:
+    """Ctrl+C and SIGTERM on the window's process: the run (if any) is aborted to the safe state,
+    the window closes and the process exits with 128 + the signal's number, with no traceback.
+
+    Python runs a signal handler only when the interpreter has control: a timer wakes it from Qt's
+    event loop every `poll_ms`; outside the loop (starting, a headless screenshot) the signal
+    becomes a KeyboardInterrupt that `cmd_gui` turns into the same clean exit."""
+
+    def __init__(self, poll_ms: int = 200) -> None:
+        self.signum: int | None = None
+        self.in_loop = False
+        self.window = None
+        self._timer = None
+        self._old: dict[int, object] = {}
+        self.poll_ms = poll_ms
+
+    def install(self) -> QuitOnSignal:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._old[sig] = signal.signal(sig, self.handler)
+        return self
+
+    def uninstall(self) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old.clear()
+        if self._timer is not None:
+            self._timer.stop()
+
+    def handler(self, signum: int, _frame=None) -> None:
+        self.signum = signum
+        if not self.in_loop:
+            raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    def watch(self, window) -> None:
+        """From here on a signal closes `window` (its closeEvent waits for the safe state)."""
+        from PySide6.QtCore import QTimer
+
+        self.window = window
+        self.in_loop = True
+        self._timer = QTimer()
+        self._timer.timeout.connect(self.check)
+        self._timer.start(self.poll_ms)
+
+    def check(self) -> None:
+        """GUI thread: act on a signal that arrived (once)."""
+        if self.signum is None or self.window is None:
+            return
+        window, self.window = self.window, None
+        name = signal.Signals(self.signum).name
+        quit_for_signal = getattr(window, "quit_for_signal", None)
+        if quit_for_signal is not None:
+            quit_for_signal(name)
+        else:
+            window.close()
+        from PySide6.QtWidgets import QApplication
+
+        QApplication.quit()
+
+    @property
+    def exit_code(self) -> int:
+        return 0 if self.signum is None else 128 + int(self.signum)
+
+
+def run_replay(open_run: str, *, screenshot: str | None = None) -> int:
+    """`gui --open RUN.h5`: the recorded run in its own window, no station opened."""
+    app = _app()
+    from .replay_view import ReplayWindow
+
+    guard = QuitOnSignal().install()
+    win = ReplayWindow(open_run)
+    try:
+        win.show()
+        if screenshot is not None:
+            app.processEvents()
+            win.plots.refresh(force=True)
+            if not win.grab().save(str(screenshot), "PNG"):
+                raise OSError(f"could not write the screenshot {screenshot}")
+            return 0
+        guard.watch(win)
+        code = int(app.exec())
+        return guard.exit_code or code
+    finally:
+        guard.uninstall()
+        win.close()
+        win.deleteLater()
+        app.processEvents()
+
+
 def run_gui(station: str | None = None, *, run: str | None = None, screenshot: str | None = None,
             at_s: float | None = None, seed: int = 0, speed: float | None = None,
-            open_run: str | None = None, params: dict[str, str] | None = None) -> int:
-    """Open the window (blocking until it closes), or with `screenshot`, run headless and exit."""
+            open_run: str | None = None, params: dict[str, str] | None = None, start: bool = False) -> int:
+    """Open the window (blocking until it closes), or with `screenshot`, run headless and exit.
+    `open_run` alone opens that recorded run's replay only; `start` starts `run` at once."""
     if screenshot is None and not os.environ.get("QT_QPA_PLATFORM") and not has_display():
         raise SystemExit("gyrobench gui: no display (DISPLAY / WAYLAND_DISPLAY unset): the window cannot be "
                          "shown; use --screenshot FILE to run headless, or set QT_QPA_PLATFORM")
+    if open_run is not None and run is None:
+        return run_replay(open_run, screenshot=screenshot)
     app = _app()
     from .main_window import MainWindow
 
-    backend = make_backend(station, seed=seed)
+    guard = QuitOnSignal().install()
+    try:
+        backend = make_backend(station, seed=seed)
+    except BaseException:
+        guard.uninstall()
+        raise
     window = MainWindow(backend)
     code = 0
     try:
@@ -186,8 +283,20 @@ def run_gui(station: str | None = None, *, run: str | None = None, screenshot: s
                     if k in window.form.fields:
                         window.form.set_value(k, v)
             window.show()
+            guard.watch(window)
+            if start and run is not None:
+                window.start()
+                if window.run_active:
+                    print(f"gyrobench gui: {run} started", flush=True)  # a script waits for this line
             code = int(app.exec())
+            if guard.signum is not None:
+                fin = window.last_finished
+                safe = "" if fin is None else "confirmed" if fin.safe_state else "NOT confirmed"
+                print(f"gyrobench gui: stopped by {signal.Signals(guard.signum).name}"
+                      + (f"; run {fin.run_id} {fin.outcome}, safe state {safe}" if fin else ""), flush=True)
+                code = guard.exit_code
     finally:
+        guard.uninstall()
         backend.close()
         window.close()
         window.deleteLater()

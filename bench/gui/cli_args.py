@@ -18,7 +18,12 @@ def add_gui_subcommand(sub) -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="a procedure parameter (repeatable)")
     p.add_argument("--open", dest="open_run", default=None, metavar="RUN.h5", help="replay a recorded run")
-    p.add_argument("--operator", action="store_true", help="the line operator's window (big verdict, serial scan)")
+    p.add_argument("--start", action="store_true", help="start the --run procedure as soon as the window is up")
+    p.add_argument("--operator", action="store_true",
+                   help="the operator station: log in, pick a line sequence, scan serials (with --run PROC: one "
+                        "procedure a unit, no line records)")
+    p.add_argument("--sequence", default=None, help="with --operator: the line sequence to offer first")
+    p.add_argument("--runs-dir", dest="runs_dir", default=None, help="with --operator: where records go")
     p.set_defaults(func=cmd_gui)
     return p
 
@@ -30,9 +35,20 @@ def cmd_gui(args: argparse.Namespace) -> int:
     from bench.validation import parse_assignment
 
     params = dict(parse_assignment(item) for item in args.set)  # the same reading as `gyrobench run --set`
+    if args.operator and args.run is None:
+        from .operator_station import run_station
+
+        return run_station(args.station, sequence=args.sequence, runs_dir=args.runs_dir, seed=args.seed,
+                           screenshot=args.screenshot)
     if args.operator:
         from .operator_view import run_operator
 
         return run_operator(args.station, run=args.run, params=params, seed=args.seed, screenshot=args.screenshot)
-    return run_gui(args.station, run=args.run, screenshot=args.screenshot, at_s=args.at_s, seed=args.seed,
-                   speed=speed, open_run=args.open_run, params=params)
+    try:
+        return run_gui(args.station, run=args.run, screenshot=args.screenshot, at_s=args.at_s, seed=args.seed,
+                       speed=speed, open_run=args.open_run, params=params, start=args.start)
+    except KeyboardInterrupt as exc:  # a signal outside the event loop: the run's safe state is done
+        import sys
+
+        print(f"gyrobench gui: interrupted ({exc or 'SIGINT'})", file=sys.stderr)
+        return 143 if str(exc) == "SIGTERM" else 130

@@ -93,6 +93,13 @@ class EngineBackend(ManualBackendMixin):
                 out[name] = why
         return out
 
+    def set_unit(self, duts: list[str], operator: str) -> None:
+        """The serials under test and the operator the next run is stored with (history, reports)."""
+        if self.running():
+            raise RuntimeError(self.busy_text() or "a run is already going on")
+        self.runner.duts = list(duts)
+        self.runner.operator = operator
+
     def start(self, procedure: str, values: dict[str, Any]) -> None:
         from bench.engine import check_station
         from procedures import find_procedure

@@ -81,6 +81,7 @@ class MainWindow(QMainWindow):
         self.last_finished: ev.RunFinished | None = None
         self.t_sim_s = 0.0
         self.screenshot_t_s: float | None = None
+        self.run_unit: tuple[list[str], str] = ([], "")  # the serials and operator of the run going on
 
         self.station = StationPanel(backend.station_name, backend.simulated)
         self.station.speed_changed.connect(self._on_speed)
@@ -92,6 +93,10 @@ class MainWindow(QMainWindow):
             why = "; ".join(f"{n} ({w})" for n, w in hidden.items())
             self.procedure.setToolTip(f"not offered on this station: {why}")
         self.form = ParameterForm()
+        from .unit_fields import UnitFields
+
+        self.unit = UnitFields()  # DUT serial and operator: every run is stored with them
+        self.unit.scanned.connect(lambda _s: self.start_button.setFocus())
         self.start_button = QPushButton("Start")
         self.pause_button = QPushButton("Pause")
         self.abort_button = QPushButton("Abort")
@@ -125,6 +130,7 @@ class MainWindow(QMainWindow):
         left_lay.addWidget(box)
         proc_box = QGroupBox("Procedure")
         proc_lay = QVBoxLayout(proc_box)
+        proc_lay.addWidget(self.unit)
         proc_lay.addWidget(self.procedure)
         form_scroll = QScrollArea()
         form_scroll.setWidget(self.form)
@@ -147,10 +153,19 @@ class MainWindow(QMainWindow):
         left_lay.addWidget(step_box, 1)
         left.setMinimumWidth(320)
         left.setMaximumWidth(420)
+        # the column scrolls when the window is too short for it: its boxes never overlap
+        left_scroll = QScrollArea()
+        left_scroll.setObjectName("left_column")
+        left_scroll.setWidget(left)
+        left_scroll.setWidgetResizable(True)
+        left_scroll.setFrameShape(QScrollArea.Shape.NoFrame)
+        left_scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        left_scroll.setMinimumWidth(340)
+        left_scroll.setMaximumWidth(440)
 
         right, self.tabs = plots_over_tabs(self.plots, self.results, self.log)
         central = QSplitter(Qt.Orientation.Horizontal)
-        central.addWidget(left)
+        central.addWidget(left_scroll)
         central.addWidget(right)
         central.setStretchFactor(1, 1)
         self.setCentralWidget(central)
@@ -197,6 +212,7 @@ class MainWindow(QMainWindow):
         self.start_button.setEnabled(self.form.is_valid() and not self.run_active)
         self.form.setEnabled(not self.run_active)
         self.procedure.setEnabled(not self.run_active)
+        self.unit.set_running(self.run_active)
         self.pause_button.setEnabled(self.run_active)
         self.pause_button.setText("Resume" if self.paused else "Pause")
         self.abort_button.setEnabled(self.run_active)
@@ -222,6 +238,11 @@ class MainWindow(QMainWindow):
         if not self.form.validate() or self.run_active:
             return
         try:
+            duts, operator = self.unit.checked()
+            if hasattr(self.backend, "set_unit"):
+                self.backend.set_unit(duts, operator)
+            self.unit.remember()
+            self.run_unit = (duts, operator)
             self.backend.start(self.procedure.currentText(), self.form.values())
         except (ValueError, RuntimeError) as exc:
             self.log.add(self.t_sim_s, "ERROR", str(exc))
@@ -287,6 +308,8 @@ class MainWindow(QMainWindow):
                 self.results.add(e.name, e.value, e.unit, e.low, e.high, e.outcome, e.dut, ci95=e.ci95)
             elif isinstance(e, ev.Log):
                 self.log.add(e.t_sim_s, e.level, e.message)
+                if self.run_active and e.message.startswith(("safe state confirmed", "safe state NOT confirmed")):
+                    self._on_safe_state_report(e.message.startswith("safe state confirmed"))
             elif isinstance(e, ev.StationStatus):
                 self.station.update_devices(e.devices)
             elif isinstance(e, ev.RunStarted):
@@ -298,6 +321,15 @@ class MainWindow(QMainWindow):
         self.station.set_time(self.t_sim_s)
         if self.run_active:
             self._show_run_info()
+
+    def _on_safe_state_report(self, confirmed: bool) -> None:
+        """The engine's safe-state report, shown at once (the run's files close after it, then
+        RunFinished): the operator never waits on a confirmation the engine already gave."""
+        self.safe_label.setText("safe state confirmed" if confirmed else "SAFE STATE NOT CONFIRMED")
+        self.safe_label.setStyleSheet(STATUS_STYLES["neutral"] if confirmed else STATUS_STYLES["red"])
+        if self.aborting:
+            self.set_status_line("aborted: safe state confirmed; closing the run's files..." if confirmed
+                                 else "aborted: SAFE STATE NOT CONFIRMED", "amber" if confirmed else "red")
 
     def _add_blocks(self, pending: dict[tuple[str, tuple[str, ...]], list[np.ndarray]]) -> None:
         for (stream, columns), arrays in pending.items():
@@ -329,13 +361,18 @@ class MainWindow(QMainWindow):
         self.steps_done = 0
         self.step_fraction = 0.0
         self.results.clear()
+        from procedures import measurement_periods
+
         from .run_truth import truth_for_run
 
-        self.results.set_truth(truth_for_run(self.backend, e.procedure, e.run_id))  # the truth column (simulated)
+        self.results.set_truth(truth_for_run(self.backend, e.procedure, e.run_id),  # the truth column (simulated)
+                               measurement_periods(e.procedure))
         self.steps.set_steps(e.steps)
         self.run_active = True
         self.last_finished = None
-        self.log.add(e.t_sim_s, "INFO", f"run {e.run_id} started: {e.procedure} {e.params}")
+        duts, operator = self.run_unit
+        who = f" (DUT {', '.join(duts) or 'none'}, operator {operator or 'none'})"
+        self.log.add(e.t_sim_s, "INFO", f"run {e.run_id} started: {e.procedure} {e.params}{who}")
         self._update_buttons()
 
     def _on_run_finished(self, e: ev.RunFinished) -> None:
@@ -424,10 +461,16 @@ class MainWindow(QMainWindow):
             QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
         return answer == QMessageBox.StandardButton.Yes
 
+    def quit_for_signal(self, name: str) -> None:
+        """Ctrl+C or SIGTERM: abort a run to the safe state (no question), then close."""
+        self.log.add(self.t_sim_s, "WARNING", f"{name}: aborting to the safe state and closing")
+        self.quitting = True
+        self.close()
+
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
         if self.run_active or self.backend.running():
             if self.run_active:  # after RunFinished the thread only says its last words: no question
-                if not self.ask_close_during_run():
+                if not getattr(self, "quitting", False) and not self.ask_close_during_run():
                     event.ignore()
                     return
                 self.abort()

@@ -52,9 +52,12 @@ class ManualBackendMixin:
     def safe_state_now(self, reason: str = "safe state asked from the window") -> str:
         """Bring the station to its safe state now: a run or a session is aborted (the runner's
         safe state follows); an idle station is made safe in a worker thread.  Returns what was done."""
+        self._safe_result = None
         if self.running():
+            self._safe_run = True
             self.runner.abort(reason)
             return "aborting to the safe state..."
+        self._safe_run = False
 
         def work() -> None:
             clock = self.station.clock
@@ -67,10 +70,22 @@ class ManualBackendMixin:
                 ok, detail = False, f"{type(exc).__name__}: {exc}"
             self.bus.publish(ev.Log("", clock.now(), level="INFO" if ok else "ERROR",
                                     message=f"{reason}: safe state {'confirmed' if ok else 'NOT confirmed'}: {detail}"))
+            self._safe_result = (ok, f"safe state {'confirmed' if ok else 'NOT confirmed'}")
             self.publish_status()
 
         threading.Thread(target=work, name="safe-state", daemon=True).start()
         return "bringing the idle station to its safe state..."
+
+    def safe_state_done(self) -> tuple[bool, str] | None:
+        """After safe_state_now: (confirmed, what to show) once the engine is done, None before."""
+        if getattr(self, "_safe_run", False):
+            if self.running():
+                return None
+            rec = self.runner.record
+            ok = bool(rec is not None and rec.safe_state)
+            return ok, (f"run {rec.run_id} {rec.outcome}: " if rec is not None else "") + \
+                f"safe state {'confirmed' if ok else 'NOT confirmed'}"
+        return getattr(self, "_safe_result", None)
 
     # provided by EngineBackend
     station: Any

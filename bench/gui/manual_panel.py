@@ -173,6 +173,7 @@ class ManualPanel(QWidget):
         text = self.backend.safe_state_now("safe state button")
         self.message.setStyleSheet("color: #9a6200;")
         self.message.setText(text)
+        self._safe_asked = True
 
     def _check_field(self, kind: str, edit: QLineEdit, error: QLabel) -> bool:
         try:
@@ -188,6 +189,11 @@ class ManualPanel(QWidget):
     def _submit(self, kind: str, edit: QLineEdit | None, error: QLabel) -> None:
         """Check, then queue the action; a refusal (here or by the driver) is shown at `error`."""
         if edit is not None and not self._check_field(kind, edit, error):
+            if self.active():  # refused here: the session still logs and records the refusal
+                try:
+                    self.session.submit(kind, edit.text())
+                except ValueError:
+                    pass
             return
         error.setStyleSheet(ERROR_STYLE)
         if self.session is None:
@@ -205,6 +211,7 @@ class ManualPanel(QWidget):
     def refresh(self) -> None:
         """Show the session's state (read by the engine's thread) and the refusals of done actions
         (nothing to do while the dock is hidden: the window's redraws keep the CPU)."""
+        self._show_safe_state_done()
         if not self.isVisible():
             return
         for action, error in list(self._pending):
@@ -231,6 +238,19 @@ class ManualPanel(QWidget):
             shown = {k: "-" for k in self.readings}
         for key, text in shown.items():
             self.readings[key].setText(text)
+
+    def _show_safe_state_done(self) -> None:
+        """Replace "aborting to the safe state..." by what the engine confirmed, once it has."""
+        if not getattr(self, "_safe_asked", False):
+            return
+        done = getattr(self.backend, "safe_state_done", None)
+        result = done() if done is not None else None
+        if result is None:
+            return
+        self._safe_asked = False
+        ok, text = result
+        self.message.setStyleSheet("" if ok else ERROR_STYLE)
+        self.message.setText(text)
 
     def table_rate_shown(self) -> float:
         """The table rate the panel shows (NaN when none)."""

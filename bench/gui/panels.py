@@ -25,6 +25,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from bench import numbers
 from bench.engine.measurement import NOT_MEASURED
 
 from .backend import SPEEDS
@@ -196,6 +197,7 @@ class ResultsTable(QWidget):
         self.table.setVerticalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAsNeeded)
         lay.addWidget(self.table, 1)  # the room goes to the rows first, up to their height
         self.truths: dict[str, float] = {}
+        self.periods: dict[str, float] = {}
         self._split_before: list[int] | None = None  # the plots/results split before the rows grew it
         row = QHBoxLayout()
         self.outcome = QLabel("")
@@ -217,11 +219,14 @@ class ResultsTable(QWidget):
         self.report_path = None
         self.report_button.setEnabled(False)
         self.truths = {}
+        self.periods = {}
         self._fit_rows()
 
-    def set_truth(self, truths: dict[str, float]) -> None:
-        """The simulator's true value of each measurement, by name (empty on a real bench)."""
+    def set_truth(self, truths: dict[str, float], periods: dict[str, float] | None = None) -> None:
+        """The simulator's true value of each measurement, by name (empty on a real bench), and the
+        period of each periodic one (an axis angle), compared at its nearest image as in the report."""
         self.truths = dict(truths)
+        self.periods = dict(periods or {})
 
     def add(self, name: str, value: float, unit: str, low: float | None, high: float | None, outcome: str,
             dut: str | None = None, ci95: tuple[float, float] | None = None, truth: float | None = None) -> None:
@@ -230,9 +235,10 @@ class ResultsTable(QWidget):
         label = name if dut is None else f"{name} [{dut}]"
         truth = self.truths.get(name) if truth is None else truth
         measured = outcome != NOT_MEASURED and value is not None and math.isfinite(value)
-        cells = (label, f"{value:.6g}" if measured else "not measured", _interval(ci95) if measured else "", unit,
-                 _limits(low, high), outcome.replace("_", " ") if outcome == NOT_MEASURED else outcome,
-                 _truth(truth, ci95 if measured else None))
+        value_text, interval_text = _value_and_interval(value, ci95) if measured else ("not measured", "")
+        cells = (label, value_text, interval_text, numbers.pretty_unit(unit), _limits(low, high),
+                 outcome.replace("_", " ") if outcome == NOT_MEASURED else outcome,
+                 _truth(truth, ci95 if measured else None, value if measured else None, self.periods.get(name)))
         colour = QColor(OUTCOME_COLOURS.get(outcome, "#ffffff"))
         for c, text in enumerate(cells):
             item = QTableWidgetItem(text)
@@ -302,28 +308,31 @@ class ResultsTable(QWidget):
         self.report_button.setEnabled(path is not None)
 
 
-def _interval(ci95: tuple[float, float] | None) -> str:
-    return "" if ci95 is None else f"[{ci95[0]:.6g}, {ci95[1]:.6g}]"
+def _value_and_interval(value: float, ci95: tuple[float, float] | None) -> tuple[str, str]:
+    """The report's digit rule (bench.numbers.with_interval): two significant digits of the
+    interval's half-width; four significant digits and no interval text without one."""
+    text, interval = numbers.with_interval(value, ci95)
+    return text, "" if interval == numbers.DASH else interval
 
 
 def _limits(low: float | None, high: float | None) -> str:
-    if low is not None and high is not None:
-        return f"{low:.6g} to {high:.6g}"
-    if low is not None:
-        return f">= {low:.6g}"
-    if high is not None:
-        return f"<= {high:.6g}"
-    return ""
+    """Limits as the report writes them ('[lo, hi]', '≥ lo', '≤ hi'), '' without any."""
+    text = numbers.limits(low, high)
+    return "" if text == numbers.DASH else text
 
 
-def _truth(truth: float | None, ci95: tuple[float, float] | None) -> str:
-    """The simulated truth, marked when the 95 % interval holds it (or misses it)."""
+def _truth(truth: float | None, ci95: tuple[float, float] | None, value: float | None = None,
+           period: float | None = None) -> str:
+    """The simulated truth at the value's precision, marked when the 95 % interval holds it (or
+    misses it; an axis angle's nearest image, as the report compares)."""
     if truth is None:
         return ""
-    if ci95 is None:
-        return f"{truth:.6g}"
-    inside = ci95[0] <= truth <= ci95[1]
-    return f"{truth:.6g} ({'in' if inside else 'OUTSIDE'} the interval)"
+    text = numbers.truth_text(truth, ci95)
+    shown = value if value is not None else truth
+    outside = None if ci95 is None else numbers.truth_outside(shown, truth, ci95, period)
+    if outside is None:
+        return text
+    return f"{text} ({'OUTSIDE' if outside else 'in'} the interval)"
 
 
 def plots_over_tabs(plots: QWidget, results: QWidget, log: QWidget) -> tuple[QSplitter, QTabWidget]:

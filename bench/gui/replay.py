@@ -122,8 +122,9 @@ def replay_events(path: str | Path) -> list[ev.Event]:
         rows = {k: [_json_row(r) for r in f[k][()]] for k in ("measurements", "log") if k in f}
     if not streams:
         raise ValueError(f"{path} has no stream with a 'columns' attribute")
-    t_end = 0.0
-    out: list[ev.Event] = [ev.RunStarted(run_id, 0.0, procedure=_text(attrs.get("procedure", "replay")),
+    t_start = run_start_s(attrs, streams, rows.get("log", []))
+    t_end = t_start
+    out: list[ev.Event] = [ev.RunStarted(run_id, t_start, procedure=_text(attrs.get("procedure", "replay")),
                                          params=params, station=_text(attrs.get("station", "")),
                                          simulated=bool(attrs.get("simulated", False)), steps=("replay",))]
     for stream, cols, data, schema in streams:
@@ -157,6 +158,16 @@ def replay_events(path: str | Path) -> list[ev.Event]:
                               end_reason=f"replay of {path.name}", safe_state=bool(attrs.get("safe_state", False)),
                               raw_file=str(path)))
     return out
+
+
+def run_start_s(attrs: dict[str, Any], streams: list, log_rows: list[dict[str, Any]]) -> float:
+    """The run's start in bench time: the file's `t_start_s`, else the earliest time it recorded
+    (any stream's first t_s, the first log row), never one stream chosen by its name."""
+    if "t_start_s" in attrs:
+        return float(attrs["t_start_s"])
+    times = [float(data[0, cols.index("t_s")]) for _s, cols, data, _schema in streams if "t_s" in cols and len(data)]
+    times += [float(r["t_sim_s"]) for r in log_rows[:1] if "t_sim_s" in r]
+    return min(times) if times else 0.0
 
 
 def _interval(value: Any) -> tuple[float, float] | None:

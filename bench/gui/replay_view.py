@@ -229,7 +229,9 @@ class ReplayWindow(QMainWindow):
         self.station.expandToDepth(0)
         self.station.resizeColumnToContents(0)
         self.params.resizeRowsToContents()
-        self.results.set_truth(_recorded_truths(a))
+        from procedures import measurement_periods
+
+        self.results.set_truth(_recorded_truths(a), measurement_periods(str(a.get("procedure", "")) or None))
         self._apply(rec.events)
         self.results.set_report(str(rec.path))
         self.statusBar().showMessage(f"replay of {rec.path}")
@@ -242,7 +244,7 @@ class ReplayWindow(QMainWindow):
                 blocks.setdefault((e.stream, tuple(e.columns)), []).append(np.asarray(e.data))
             elif isinstance(e, ev.RunStarted):
                 self.plots.clear()
-                self.plots.set_origin(None)  # time since the first recorded sample
+                self.plots.set_origin(e.t_sim_s)  # time since the run started (bench.gui.replay.run_start_s)
             elif isinstance(e, ev.StreamDeclared):
                 self.plots.declare(e.schema)
             elif isinstance(e, ev.FitUpdate):

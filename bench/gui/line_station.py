@@ -1,0 +1,150 @@
+"""The operator station's line session: one logged-in operator, one sequence and its product limits,
+one station; each scanned serial runs through `bench.line` as `gyrobench line run` does (routing,
+attempts, a unit record, a certificate, a line database row), with the window's prompts."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from bench.line import LineError
+
+#: columns an operators table may name its people by, in order of preference
+NAME_COLUMNS = ("name", "operator", "badge", "login")
+
+
+def sequences() -> list[str]:
+    """The built-in line sequences by name (bench/line/sequences/*.toml)."""
+    from bench.line import sequence
+
+    folder = Path(sequence.__file__).parent / "sequences"
+    return sorted(p.stem for p in folder.glob("*.toml"))
+
+
+def known_operators(db: Any) -> list[str] | None:
+    """The operators the line database lists (its `operators` table), or None when it has none."""
+    from sqlalchemy import MetaData, Table, inspect, select
+
+    engine = getattr(db, "engine", None)
+    if engine is None or not inspect(engine).has_table("operators"):
+        return None
+    table = Table("operators", MetaData(), autoload_with=engine)
+    col = next((table.c[n] for n in NAME_COLUMNS if n in table.c), None)
+    if col is None:
+        return None
+    query = select(col)
+    if "active" in table.c:
+        query = query.where(table.c.active.is_(True) | (table.c.active == 1))
+    with engine.connect() as conn:
+        return sorted(str(r[0]) for r in conn.execute(query) if r[0])
+
+
+def free_text_allowed(station: Any) -> bool:
+    """Whether an operator may log in by a typed name (no operators table): the station file's
+    `[station] free_text_operator`; a simulated station allows it unless it says false."""
+    cfg = getattr(station, "config", None)
+    said = (getattr(cfg, "station", None) or {}).get("free_text_operator")
+    if said is not None:
+        return bool(said)
+    return getattr(cfg, "simulation", None) is not None
+
+
+class LineSession:
+    """A station, a sequence and its limits, the line database; `log_in` then `run_serial` per unit."""
+
+    def __init__(self, station: str, sequence: str, *, runs_dir: str | Path | None = None, db: str | None = None,
+                 seed: int | None = None, limits: str | None = None) -> None:
+        from bench.composition import load_station
+        from bench.line.cli import _limits_of, check_limits_measured, check_steps
+        from bench.line.db import LineDB
+        from bench.line.sequence import load_sequence
+
+        self.overrides = {} if seed is None else {"seed": seed}
+        self.seq = load_sequence(sequence)
+        self.args = argparse.Namespace(sequence=sequence, limits=limits, runs_dir=None, lot="", rework=None,
+                                       retest_reason=None, operator="", dut=[], db=db)
+        self.limits = _limits_of(self.args, self.seq)
+        self.station_name = station or self.seq.station
+        if not self.station_name:
+            raise LineError(f"sequence {self.seq.name!r} names no station: choose one")
+        probe = load_station(self.station_name, **self.overrides)  # the file checked, nothing opened
+        if hasattr(probe, "slots"):
+            raise LineError(f"station {probe.id!r} has slots: its window is `gyrobench line run --window`")
+        check_steps(self.seq, probe)
+        check_limits_measured(self.seq, self.limits)
+        self.station_id = probe.id
+        self.free_text = free_text_allowed(probe)
+        self.args.runs_dir = str(runs_dir or probe.runs_dir)
+        self.db_url = db or (probe.results_url if runs_dir is None else None)
+        Path(self.args.runs_dir).mkdir(parents=True, exist_ok=True)
+        self.db = LineDB(self.db_url or str(Path(self.args.runs_dir) / "results.sqlite"))
+        self.operator = ""
+        self.ctx: Any = None
+
+    def operators(self) -> list[str] | None:
+        return known_operators(self.db)
+
+    def log_in(self, name: str) -> str:
+        """The operator, from the database's operators table; a typed name only where the station
+        allows it (LineError otherwise)."""
+        from bench.line.inputs import check_operator
+
+        name = check_operator(name)
+        listed = self.operators()
+        if listed is not None:
+            if name not in listed:
+                raise LineError(f"operator {name!r} is not in the line database's operators table")
+        elif not self.free_text:
+            raise LineError(f"station {self.station_id!r} takes operators from the line database, which lists none "
+                            "(set [station] free_text_operator = true to allow typed names)")
+        from bench.line.cli import _context
+
+        if self.ctx is not None:
+            self.close()
+        self.args.operator = name
+        probe_cfg = None
+        try:
+            from bench.composition import load_station
+
+            probe_cfg = load_station(self.station_name, **self.overrides).config
+        except Exception:  # noqa: BLE001 - the signer is optional; the station was checked above
+            probe_cfg = None
+        self.ctx = _context(self.args, station_name=self.station_id, operator=name, db_url=self.db_url,
+                            config=probe_cfg)
+        self.operator = name
+        return name
+
+    def check_serial(self, text: str) -> str:
+        from bench.line.inputs import check_serial
+
+        return check_serial(text, self.limits.serial_format)
+
+    def run_serial(self, serial: str, operator: Any, *, rework: str | None = None,
+                   retest_reason: str | None = None) -> list[dict[str, Any]]:
+        """One unit through the sequence (worker thread): routing (a retest after FAIL needs a rework
+        code, after PASS a reason), the fixture prompt, its attempts."""
+        from bench.composition import load_station
+        from bench.line.routing import history, route
+        from bench.line.run import run_unit
+
+        if self.ctx is None:
+            raise LineError("log in first")
+        ctx = self.ctx
+        ctx.aborted.clear()
+        from bench.line.inputs import check_reason, check_rework
+
+        rework = check_rework(rework) if rework else None
+        retest_reason = check_reason(retest_reason) if retest_reason else None
+        ctx.routing[serial], tries = route(history(ctx.db, ctx.runs_dir, serial), serial, self.seq, rework=rework,
+                                           retest_reason=retest_reason)
+        if not operator.confirm(f"unit {serial} is in the fixture of station {self.station_id!r}?"):
+            raise LineError(f"unit {serial}: the fixture was not confirmed; nothing was run")
+        return run_unit(ctx, lambda: load_station(self.station_name, **self.overrides), serial, operator,
+                        max_tries=tries)
+
+    def close(self) -> None:
+        if self.ctx is not None:
+            self.ctx.store.close()
+            self.ctx.db.close()
+            self.ctx = None
