@@ -28,6 +28,7 @@ SPEC = register_driver(
         role="chamber",
         part="chamber-to-ambient",
         keys={
+            "driver": Key(str, required=True),
             "host": Key(str, "127.0.0.1", doc="Modbus TCP host"),
             "port": Key(int, 502, 1, 65535, doc="Modbus TCP port"),
             "serial_port": Key(str, "", doc="RTU on a serial port instead of TCP"),
