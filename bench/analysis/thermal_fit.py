@@ -52,9 +52,9 @@ def _wls(x: np.ndarray, y: np.ndarray, w: np.ndarray, order: int) -> tuple[np.nd
 
 
 def fit_temperature_polynomial(
-    temperature_c, y, sigma, *, max_order: int = 3, t_ref_c: float = 25.0
+    temperature_c, y, sigma, *, max_order: int = 3, t_ref_c: float = 25.0, min_order: int = 0
 ) -> ThermalFit:
-    """Fit y against temperature: orders 0..max_order (each leaving one degree of freedom or more),
+    """Fit y against temperature: orders min_order..max_order (each leaving one degree of freedom or more),
     BIC = chi2 + (order + 1) ln n on the points' standard errors `sigma`, the lowest BIC taken.
     Intervals: the weights' covariance, widened by the Birge ratio when the scatter exceeds the
     points' errors (then Student's t on the degrees of freedom, else the normal quantile)."""
@@ -69,7 +69,9 @@ def fit_temperature_polynomial(
     x = t - t_ref_c
     w = 1.0 / s**2
     top = min(int(max_order), n - 2)
-    fits = {k: _wls(x, yv, w, k) for k in range(top + 1)}
+    if min_order > top:
+        raise ValueError(f"order {min_order} needs {min_order + 2} points or more; {n} given")
+    fits = {k: _wls(x, yv, w, k) for k in range(int(min_order), top + 1)}
     bic = {k: chi2 + (k + 1) * math.log(n) for k, (_, _, chi2) in fits.items()}
     order = min(bic, key=bic.get)
     coeffs, cov, chi2 = fits[order]
