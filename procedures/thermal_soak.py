@@ -43,7 +43,8 @@ def _pair(interval) -> tuple[float, float]:
 
 
 def _f0_tc_truth(truth: dict[str, float]) -> float:
-    return truth["err_freq_tc_ppm_k"]
+    """The World's frequency temperature coefficient (0 for a unit without error sources)."""
+    return truth.get("err_freq_tc_ppm_k", 0.0)
 
 
 def _f0_at_25c_truth(truth: dict[str, float]) -> float:
@@ -60,10 +61,10 @@ class ThermalSoak(CvgOutput, Procedure):
     requires = ("fpga", "chamber")
     kinds = ("hrg",)
 
-    t_low_c = Param(-40.0, unit="degC", low=-100.0, high=200.0, doc="lowest set point")
-    t_high_c = Param(85.0, unit="degC", low=-100.0, high=200.0, doc="highest set point")
-    points = Param(6, low=2, high=50, doc="set points from t_low_c to t_high_c, equally spaced")
-    ramp_c_per_min = Param(3.0, unit="degC/min", low=0.1, high=50.0, doc="the chamber's set-point ramp limit")
+    t_low_degc = Param(-40.0, unit="degC", low=-100.0, high=200.0, doc="lowest set point")
+    t_high_degc = Param(85.0, unit="degC", low=-100.0, high=200.0, doc="highest set point")
+    points = Param(6, low=2, high=50, doc="set points from t_low_degc to t_high_degc, equally spaced")
+    ramp_degc_per_min = Param(3.0, unit="degC/min", low=0.1, high=50.0, doc="the chamber's set-point ramp limit")
     settle_window_s = Param(120.0, unit="s", low=5.0, high=3600.0,
                             doc="window whose mean frequency is compared with the one before")
     settle_ppm_per_min = Param(0.05, unit="ppm/min", low=1e-4, high=100.0,
@@ -102,7 +103,7 @@ class ThermalSoak(CvgOutput, Procedure):
         return []
 
     def setpoints_c(self) -> np.ndarray:
-        return np.linspace(self.t_low_c, self.t_high_c, int(self.points))
+        return np.linspace(self.t_low_degc, self.t_high_degc, int(self.points))
 
     # --- the frequency the stream carries, kept for the settle judgement -----------------------
     def _collect(self, block: np.ndarray) -> None:
@@ -127,8 +128,8 @@ class ThermalSoak(CvgOutput, Procedure):
 
     @step("Excite and hold the amplitude")
     def excite(self, ctx):
-        if self.t_high_c <= self.t_low_c:
-            raise ValueError(f"t_high_c={self.t_high_c:g} must be above t_low_c={self.t_low_c:g}")
+        if self.t_high_degc <= self.t_low_degc:
+            raise ValueError(f"t_high_degc={self.t_high_degc:g} must be above t_low_degc={self.t_low_degc:g}")
         self._lock = threading.Lock()
         self._f_sum, self._f_n = 0.0, 0
         ctx.subscribe(ctx.devices.fpga, self._keep_latest)
@@ -138,7 +139,7 @@ class ThermalSoak(CvgOutput, Procedure):
         self._hold_amplitude(ctx)
         chamber = ctx.devices.chamber
         chamber.stop_profile()
-        chamber.set_ramp_rate(self.ramp_c_per_min)
+        chamber.set_ramp_rate(self.ramp_degc_per_min)
         ctx.defer(lambda: chamber.set_setpoint(REF_TEMPERATURE_C) if chamber.connected else None,
                   "chamber set point back to 25 degC")
 

@@ -18,7 +18,7 @@ STATION = Path(__file__).resolve().parents[1] / "bench" / "stations" / "sim-hrg-
 
 @pytest.fixture
 def sim_station(tmp_path):
-    text = STATION.read_text().replace("ramp_c_per_min = 3.0", "ramp_c_per_min = 30.0")
+    text = STATION.read_text().replace("ramp_degc_per_min = 3.0", "ramp_degc_per_min = 30.0")
     text = text.replace("case_tau_s = 1200.0", "case_tau_s = 60.0")
     path = tmp_path / "sim-hrg-thermal-quick.toml"
     path.write_text(text)
@@ -30,7 +30,7 @@ def sim_station(tmp_path):
 
 
 def test_soak_finds_the_frequency_temperature_coefficient(run_procedure, sim_station):
-    params = {"t_low_c": 15.0, "t_high_c": 35.0, "points": 3, "ramp_c_per_min": 30.0, "settle_window_s": 30.0,
+    params = {"t_low_degc": 15.0, "t_high_degc": 35.0, "points": 3, "ramp_degc_per_min": 30.0, "settle_window_s": 30.0,
               "settle_ppm_per_min": 0.2, "record_s": 60.0, "max_order": 2}
     record = run_procedure(ThermalSoak, params)
     assert record.outcome == "COMPLETE", (record.end_reason, record.traceback)
