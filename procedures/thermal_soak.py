@@ -63,7 +63,8 @@ class ThermalSoak(CvgOutput, Procedure):
 
     t_low_degc = Param(-40.0, unit="degC", low=-100.0, high=200.0, doc="lowest set point")
     t_high_degc = Param(85.0, unit="degC", low=-100.0, high=200.0, doc="highest set point")
-    points = Param(6, low=2, high=50, doc="set points from t_low_degc to t_high_degc, equally spaced")
+    points = Param(6, low=3, high=50, doc="set points from t_low_degc to t_high_degc, equally spaced (3 or more: "
+                                         "a line with a degree of freedom left for its interval)")
     ramp_degc_per_min = Param(3.0, unit="degC/min", low=0.1, high=50.0, doc="the chamber's set-point ramp limit")
     settle_window_s = Param(120.0, unit="s", low=5.0, high=3600.0,
                             doc="window whose mean frequency is compared with the one before")

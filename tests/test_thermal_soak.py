@@ -5,30 +5,13 @@ ambient."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
-from bench.composition.sim_station import SimStation
 from bench.recorder import open_run
 from procedures.thermal_soak import ThermalSoak
 
-STATION = Path(__file__).resolve().parents[1] / "bench" / "stations" / "sim-hrg-thermal.toml"
 
-
-@pytest.fixture
-def sim_station(tmp_path):
-    text = STATION.read_text().replace("ramp_degc_per_min = 3.0", "ramp_degc_per_min = 30.0")
-    text = text.replace("case_tau_s = 1200.0", "case_tau_s = 60.0")
-    path = tmp_path / "sim-hrg-thermal-quick.toml"
-    path.write_text(text)
-    station = SimStation(path, seed=0).open()
-    try:
-        yield station
-    finally:
-        station.close()
-
-
+@pytest.mark.parametrize("sim_station", ["sim-hrg-thermal-quick"], indirect=True)
 def test_soak_finds_the_frequency_temperature_coefficient(run_procedure, sim_station):
     params = {"t_low_degc": 15.0, "t_high_degc": 35.0, "points": 3, "ramp_degc_per_min": 30.0, "settle_window_s": 30.0,
               "settle_ppm_per_min": 0.2, "record_s": 60.0, "max_order": 2}

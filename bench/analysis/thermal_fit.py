@@ -68,9 +68,11 @@ def fit_temperature_polynomial(
         raise ValueError("every sigma must be finite and > 0")
     x = t - t_ref_c
     w = 1.0 / s**2
-    top = min(int(max_order), n - 2)
+    distinct = len(np.unique(np.round(t, 9)))
+    top = min(int(max_order), n - 2, distinct - 1)  # an order needs that many + 1 distinct temperatures
     if min_order > top:
-        raise ValueError(f"order {min_order} needs {min_order + 2} points or more; {n} given")
+        raise ValueError(f"order {min_order} needs {min_order + 2} points at {min_order + 1} temperatures or more; "
+                         f"{n} points at {distinct} temperatures given")
     fits = {k: _wls(x, yv, w, k) for k in range(int(min_order), top + 1)}
     bic = {k: chi2 + (k + 1) * math.log(n) for k, (_, _, chi2) in fits.items()}
     order = min(bic, key=bic.get)
