@@ -239,3 +239,9 @@ class ThermalSoak(CvgOutput, Procedure):
         win = data.table(WINDOWS.name)
         out.append(Result("settle_mean_s", float(np.mean(win["settle_s"]))))
         return out
+
+    def figures(self, data) -> list:
+        """Frequency and bias against the case temperature with their fits and residuals."""
+        from procedures.figures.thermal_soak import fit_figures
+
+        return fit_figures(self, data)

@@ -31,3 +31,8 @@ def test_soak_finds_the_frequency_temperature_coefficient(run_procedure, sim_sta
     assert list(win["setpoint_c"]) == [15.0, 25.0, 35.0]
     assert max(abs(win["part_c"] - win["setpoint_c"])) < 0.1  # settled: the case at the set point
     assert sim_station.devices["chamber"].setpoint_c() == 25.0  # back to ambient at the end
+    # the raw file gives the same numbers, and the fit figure
+    again = {r.name: r.value for r in ThermalSoak(record.params).analysis(data)}
+    assert again["f0_tc_ppm_k"] == pytest.approx(tc.value, rel=1e-9)
+    figs = ThermalSoak(record.params).figures(data)
+    assert [f.key for f in figs] == ["thermal-soak_fits"] and len(figs[0].figure.axes) == 4
