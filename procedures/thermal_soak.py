@@ -23,7 +23,7 @@ from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
 
-from .cvg_output import MODES, CvgOutput
+from .cvg_output import MODES, CvgOutput, static_bias_truth
 
 WINDOWS = declare(StreamSchema("thermal_soak_windows", "thermal-soak", (
     Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
@@ -89,7 +89,8 @@ class ThermalSoak(CvgOutput, Procedure):
         Measurement("f0_at_25c_hz", "Hz", "resonator frequency at 25 degC from the fit",
                     truth=_f0_at_25c_truth),
         Measurement("bias_tc_dph_k", "deg/h/K", "bias's temperature slope at 25 degC from the fit"),
-        Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC from the fit"),
+        Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC from the fit (the wave's angle held in "
+                    "force-to-rebalance; in whole-angle it precesses through the soak)", truth=static_bias_truth),
         Measurement("bias_fit_order", "", "polynomial order of the bias fit (lowest BIC)",
                     no_interval="an order chosen by a criterion"),
         Measurement("f0_fit_order", "", "polynomial order of the frequency fit (lowest BIC)",
