@@ -243,6 +243,6 @@ class ThermalSoak(CvgOutput, Procedure):
 
     def figures(self, data) -> list:
         """Frequency and bias against the case temperature with their fits and residuals."""
-        from procedures.figures.thermal_soak import fit_figures
+        from procedures.figures.thermal_soak import fit_figures, temperature_figure
 
-        return fit_figures(self, data)
+        return temperature_figure(self, data) + fit_figures(self, data)

@@ -35,4 +35,9 @@ def test_soak_finds_the_frequency_temperature_coefficient(run_procedure, sim_sta
     again = {r.name: r.value for r in ThermalSoak(record.params).analysis(data)}
     assert again["f0_tc_ppm_k"] == pytest.approx(tc.value, rel=1e-9)
     figs = ThermalSoak(record.params).figures(data)
-    assert [f.key for f in figs] == ["thermal-soak_fits"] and len(figs[0].figure.axes) == 4
+    assert [f.key for f in figs] == ["thermal-soak_temperatures", "thermal-soak_fits"]
+    assert len(figs[1].figure.axes) == 4
+    # the chamber's stream (its link checks): the case lags the air and ends at the last set point
+    ch = data.table("chamber")
+    assert len(ch["t_s"]) > 100 and abs(ch["part_degc"][-1] - 35.0) < 0.1
+    assert min(ch["air_degc"]) == pytest.approx(15.0) and max(ch["air_degc"]) == pytest.approx(35.0)

@@ -4,7 +4,17 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from bench.devices import DriverSpec, Key, register_driver
+from bench.streams import Column, StreamSchema, declare
+
+#: the chamber's stream: its temperatures at every link check (the station's health rows)
+CHAMBER_STREAM = declare(StreamSchema("chamber", "chamber", (
+    Column("t_s", "s", quantity="time t"),
+    Column("air_degc", "degC", quantity="chamber air temperature"),
+    Column("part_degc", "degC", quantity="case (part thermocouple) temperature"),
+)))
 
 
 def _build(cfg: dict[str, Any], clock: Any) -> Any:
@@ -18,8 +28,9 @@ def _build(cfg: dict[str, Any], clock: Any) -> Any:
     return chamber
 
 
-def _health(device: Any, since: Any = None) -> None:
-    device.air_c()  # a sign of life: raises LinkLostError when the controller is gone
+def _health(device: Any, since: Any = None) -> np.ndarray:
+    """A sign of life (LinkLostError when the controller is gone) and the chamber stream's row."""
+    return np.array([[device.air_c(), device.part_c()]])
 
 
 SPEC = register_driver(
@@ -43,6 +54,7 @@ SPEC = register_driver(
         build=_build,
         serve="simulators.chamber.watlow_f4_server:serve_station",
         health=_health,
+        health_columns=CHAMBER_STREAM.names[1:],
         doc="temperature chamber, Watlow F4 controller on Modbus TCP or RTU",
     )
 )

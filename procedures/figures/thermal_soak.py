@@ -10,6 +10,27 @@ import numpy as np
 from bench.figures import ReportFigure, new_figure
 
 
+def temperature_figure(proc: Any, data: Any) -> list[ReportFigure]:
+    """The chamber air and the case through the run, the settled records marked."""
+    if "chamber" not in data:
+        return []
+    ch = data.table("chamber")
+    fig, ax = new_figure(1, 1, height_in=3.0)
+    a = ax[0, 0]
+    a.plot(ch["t_s"] / 3600.0, ch["air_degc"], "-", color="C0", lw=1.0, label="chamber air")
+    a.plot(ch["t_s"] / 3600.0, ch["part_degc"], "-", color="C3", lw=1.0, label="case (part thermocouple)")
+    if proc.windows_schema.name in data:
+        win = data.table(proc.windows_schema.name)
+        for i, (t0, t1) in enumerate(zip(win["t_start_s"], win["t_end_s"], strict=True)):
+            a.axvspan(t0 / 3600.0, t1 / 3600.0, color="0.8", label="settled records" if i == 0 else None)
+    a.set_xlabel("bench time (h)")
+    a.set_ylabel("temperature (degC)")
+    a.legend(loc="best")
+    return [ReportFigure("thermal-soak_temperatures", "Chamber and case temperatures", fig,
+                         "Air ramps at the controller's limit; the case follows it; each record starts once "
+                         "the resonator frequency has stopped drifting.")]
+
+
 def fit_figures(proc: Any, data: Any) -> list[ReportFigure]:
     """Frequency and bias against temperature with their fits (top) and residuals (bottom)."""
     if proc.windows_schema.name not in data or "fpga" not in data:
