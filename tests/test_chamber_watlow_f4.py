@@ -109,3 +109,16 @@ def test_a_refused_write_is_a_device_error(served):
             chamber._write(fp.HR_PV_PART, 0)
     finally:
         chamber.close()
+
+
+def test_the_driver_over_rtu_frames():
+    world = World(preset("hrg"), seed=1)
+    server = serve_watlow_f4(world, framer="rtu", device_id=3)
+    chamber = WatlowF4Chamber.rtu(server.url, device_id=3)
+    try:
+        chamber.connect()
+        chamber.set_setpoint(-40.0)
+        assert chamber.setpoint_c() == -40.0 and chamber.air_c() == 25.0
+    finally:
+        chamber.close()
+        server.stop()
