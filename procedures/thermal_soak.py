@@ -13,6 +13,7 @@ the order by BIC, 95 % intervals)."""
 
 from __future__ import annotations
 
+import math
 import threading
 
 import numpy as np
@@ -76,6 +77,9 @@ class ThermalSoak(CvgOutput, Procedure):
     record_s = Param(300.0, unit="s", low=1.0, high=1e5, doc="static record once settled")
     batches = Param(10, low=2, high=1000, doc="batches of each record for its intervals")
     max_order = Param(3, low=0, high=6, doc="highest polynomial order the fits try")
+    resolution_degc = Param(0.1, unit="degC", low=0.0, high=5.0,
+                            doc="the part thermocouple's display step: its error (step / sqrt 12) enters the fits "
+                                "as an effective variance (bench.analysis.thermal_fit)")
     stream_hz = Param(10.0, unit="Hz", low=0.01, high=1e6, doc="FPGA stream rate during the run (boxcar-decimated)")
     scale_factor = Param(0.0, low=-1e6, high=1e6,
                          doc="output per input rate (from cvg-scale-factor); 0: the mode's nominal one")
@@ -210,7 +214,8 @@ class ThermalSoak(CvgOutput, Procedure):
         p = self.points_table(data)
         if len(p["part_c"]) < 2:
             raise RuntimeError(f"{len(p['part_c'])} settled record(s): a fit needs 2 or more set points")
-        kw = dict(max_order=int(self.max_order), t_ref_c=REF_TEMPERATURE_C)
+        kw = dict(max_order=int(self.max_order), t_ref_c=REF_TEMPERATURE_C,
+                  sigma_t_c=self.resolution_degc / math.sqrt(12.0))
         bias = fit_temperature_polynomial(p["part_c"], p["bias_dph"], p["bias_se_dph"], **kw)
         f0 = fit_temperature_polynomial(p["part_c"], p["f0_hz"], p["f0_se_hz"], **kw)
         return p, bias, f0
@@ -218,7 +223,8 @@ class ThermalSoak(CvgOutput, Procedure):
     def _linear(self, data, key: str) -> ThermalFit:
         p = self.points_table(data)
         y, se = (p["f0_hz"], p["f0_se_hz"]) if key == "f0" else (p["bias_dph"], p["bias_se_dph"])
-        return fit_temperature_polynomial(p["part_c"], y, se, max_order=1, min_order=1, t_ref_c=REF_TEMPERATURE_C)
+        return fit_temperature_polynomial(p["part_c"], y, se, max_order=1, min_order=1, t_ref_c=REF_TEMPERATURE_C,
+                                          sigma_t_c=self.resolution_degc / math.sqrt(12.0))
 
     def analysis(self, data) -> list[Result]:
         """The fits' results from a recorded run's `thermal_soak_windows` and `fpga` streams."""

@@ -43,3 +43,20 @@ def test_batch_mean_standard_error():
     assert m == pytest.approx(3.0, abs=4 * 0.02) and se == pytest.approx(0.02, rel=0.5)
     with pytest.raises(ValueError):
         batch_mean(v[:5], 10)
+
+
+def test_a_steep_line_read_by_a_coarse_thermometer_stays_a_line():
+    """f0 at 0.3 Hz/K, the temperature read to 0.1 degC, the frequency's own error 0.1 mHz: without
+    the thermometer's error the steps look like curvature; with it, mostly order 1 and the true slope."""
+    rng = np.random.default_rng(3)
+    naive_lines, lines, slope_hits = 0, 0, 0
+    for _ in range(100):
+        t_true = np.linspace(-40.0, 85.0, 10) + rng.uniform(-0.3, 0.3, 10)
+        t_read = np.round(t_true, 1)
+        f = 5500.0 + 0.3 * (t_true - 25.0) + rng.normal(0.0, 1e-4, 10)
+        sigma = np.full(10, 1e-4)
+        naive_lines += fit_temperature_polynomial(t_read, f, sigma, max_order=3).order == 1
+        fit = fit_temperature_polynomial(t_read, f, sigma, max_order=3, sigma_t_c=0.1 / np.sqrt(12.0))
+        lines += fit.order == 1
+        slope_hits += bool(fit.ci95[1][0] <= 0.3 <= fit.ci95[1][1])
+    assert naive_lines < 50 and lines > 70 and slope_hits > 90, (naive_lines, lines, slope_hits)

@@ -52,12 +52,17 @@ def _wls(x: np.ndarray, y: np.ndarray, w: np.ndarray, order: int) -> tuple[np.nd
 
 
 def fit_temperature_polynomial(
-    temperature_c, y, sigma, *, max_order: int = 3, t_ref_c: float = 25.0, min_order: int = 0
+    temperature_c, y, sigma, *, max_order: int = 3, t_ref_c: float = 25.0, min_order: int = 0,
+    sigma_t_c: float = 0.0,
 ) -> ThermalFit:
     """Fit y against temperature: orders min_order..max_order (each leaving one degree of freedom or more),
     BIC = chi2 + (order + 1) ln n on the points' standard errors `sigma`, the lowest BIC taken.
     Intervals: the weights' covariance, widened by the Birge ratio when the scatter exceeds the
-    points' errors (then Student's t on the degrees of freedom, else the normal quantile)."""
+    points' errors (then Student's t on the degrees of freedom, else the normal quantile).
+    sigma_t_c: the temperature readings' own standard error (a 0.1 degC display: 0.1 / sqrt(12)),
+    carried into y as the effective variance sigma^2 + (dy/dT sigma_t)^2, dy/dT from each order's
+    own fit (iterated twice), so a steep quantity does not take a higher order to chase the
+    thermometer's steps (the BIC then compares chi2 on each order's own effective weights)."""
     t = np.asarray(temperature_c, dtype=float)
     yv = np.asarray(y, dtype=float)
     s = np.asarray(sigma, dtype=float)
@@ -73,7 +78,13 @@ def fit_temperature_polynomial(
     if min_order > top:
         raise ValueError(f"order {min_order} needs {min_order + 2} points at {min_order + 1} temperatures or more; "
                          f"{n} points at {distinct} temperatures given")
-    fits = {k: _wls(x, yv, w, k) for k in range(int(min_order), top + 1)}
+    fits = {}
+    for k in range(int(min_order), top + 1):
+        fit = _wls(x, yv, w, k)
+        for _ in range(2 if sigma_t_c > 0 else 0):
+            slope = np.polynomial.polynomial.polyval(x, np.polynomial.polynomial.polyder(fit[0])) if k else 0.0
+            fit = _wls(x, yv, 1.0 / (s**2 + (slope * sigma_t_c) ** 2), k)
+        fits[k] = fit
     bic = {k: chi2 + (k + 1) * math.log(n) for k, (_, _, chi2) in fits.items()}
     order = min(bic, key=bic.get)
     coeffs, cov, chi2 = fits[order]
