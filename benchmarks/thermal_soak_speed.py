@@ -39,9 +39,9 @@ def main() -> None:
     print(f"outcome {rec.outcome}; {sim_h:.2f} simulated h in {wall / 60:.2f} wall min "
           f"({sim_h / (wall / 60):.2f} sim h / wall min)")
     for m in rec.measurements:
-        ci = "" if m.ci95 is None else f" [{m.ci95[0]:.6g}, {m.ci95[1]:.6g}]"
+        ci = "" if m.ci95 is None else f" [{m.ci95[0]:.9g}, {m.ci95[1]:.9g}]"
         tv = truth.get(m.name)
-        print(f"  {m.name} = {m.value:.6g}{ci} {m.unit}" + ("" if tv is None else f"  (truth {tv:.6g})"))
+        print(f"  {m.name} = {m.value:.9g}{ci} {m.unit}" + ("" if tv is None else f"  (truth {tv:.9g})"))
 
 
 if __name__ == "__main__":
