@@ -21,10 +21,11 @@ from bench.validation import KIND_WORDS, ValidationError, convert, missing_key, 
 #: the parts of a station's safe state, in the order they are done; each device's spec says which
 #: part it plays.  A part holds a list of devices, so with several gyros on one table every slot's
 #: drive is cut before the one shared table is brought to rest, and then every slot's outputs go off
-SAFE_PARTS: tuple[str, ...] = ("drive-cut", "table-to-rest", "outputs-off")
-#: the roles a station file may name (`[devices.<role>]`); the several-gyros issue adds slots of
+SAFE_PARTS: tuple[str, ...] = ("drive-cut", "table-to-rest", "chamber-to-ambient", "outputs-off")
+#: the roles a station file may name (`[devices.<role>]`; `chamber`: a temperature chamber,
+#: docs/chamber.md); the several-gyros issue adds slots of
 #: `frontend`/`fpga` (N front ends and N links per station) beside the one shared `table`
-ROLES = ("table", "frontend", "fpga")
+ROLES = ("table", "frontend", "fpga", "chamber")
 #: the role of a driver placed under any other name (`[devices.dmm]`, `[devices.supply]`): an
 #: instrument the station sets up, logs and makes safe, and procedures reach as `ctx.devices.<name>`
 INSTRUMENT = "instrument"

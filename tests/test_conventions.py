@@ -31,6 +31,8 @@ from procedures import all_procedures
 
 #: name suffix -> the unit a value so named carries (longest suffix first)
 SUFFIX_UNITS = {
+    "_degc_per_min": "degC/min",
+    "_ppm_per_min": "ppm/min",
     "_per_s": "1/s",
     "_dps2": "deg/s^2",
     "_dps": "deg/s",
@@ -39,6 +41,7 @@ SUFFIX_UNITS = {
     "_hz": "Hz",
     "_v": "V",
     "_s": "s",
+    "_degc": "degC",
 }
 BUILTIN_PROCEDURES = {"table-spin", "hrg-damping", "hrg-free-decay", "mems-sweep"}
 BUILTIN_STATIONS = {"sim-hrg", "sim-mems"}

@@ -34,7 +34,7 @@ SIMULATOR_USERS = ("bench.composition", "bench.line.simulate", "bench.pytest_plu
 #: command spellings), never a driver
 PROTOCOL_MODULES = ("drivers.fpga.protocol", "drivers.rate_table.modbus_protocol",
                     "drivers.rate_table.ascii_protocol", "drivers.rate_table.acutronic_protocol",
-                    "drivers.frontend.commands", "drivers.errors")
+                    "drivers.chamber.watlow_f4_protocol", "drivers.frontend.commands", "drivers.errors")
 
 
 @dataclass(frozen=True)

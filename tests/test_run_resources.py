@@ -30,6 +30,9 @@ SHORT = {
     "hrg-selfcal": ("sim-hrg-selfcal", {"cycles": 2, "precession_dps": 2.0, "settle_s": 1.0, "bin_s": 1.0,
                                         "smooth_s": 10.0}),
     "cvg-bias": ("sim-hrg-ftr", {"record_s": 2.0, "turn_ons": 2, "quench_s": 1.0, "settle_s": 0.5, "batches": 2}),
+    "thermal-soak": ("sim-hrg-thermal-quick", {"t_low_degc": 24.0, "t_high_degc": 26.0, "points": 3,
+                                               "settle_window_s": 10.0, "settle_ppm_per_min": 1.0,
+                                               "settle_windows": 1, "record_s": 2.0, "batches": 2}),
 }
 
 

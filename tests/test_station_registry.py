@@ -100,6 +100,7 @@ def test_safe_state_parts_in_the_engines_order_each_a_list_of_devices():
     assert by_part(parts) == [
         ("drive-cut", ["fpga.a", "fpga.b"]),
         ("table-to-rest", ["table"]),
+        ("chamber-to-ambient", []),
         ("outputs-off", ["frontend.a", "frontend.b"]),
     ]
     with pytest.raises(ValueError):
@@ -111,6 +112,7 @@ def test_simulated_station_orders_by_part_and_keeps_no_attribute_on_drivers():
         assert station.safe_state_plan() == [
             ("drive-cut", ["fpga"]),
             ("table-to-rest", ["table"]),
+            ("chamber-to-ambient", []),
             ("outputs-off", ["frontend"]),
         ]
         link = station.devices["fpga"]

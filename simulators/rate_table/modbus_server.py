@@ -194,13 +194,15 @@ class ModbusTableServer(TableFaultControls):
     serial line (docs/rate_table_modbus.md)."""
 
     def __init__(
-        self, world, mechanics: TableMechanics, *, host: str, port: int, framer: str, device_id: int, use_pty=False
+        self, world, mechanics: TableMechanics, *, host: str, port: int, framer: str, device_id: int, use_pty=False,
+        registers: Any = None,
     ):
         if framer not in ("tcp", "rtu"):
             raise ValueError(f"framer={framer!r}: expected 'tcp' or 'rtu'")
         self.world, self.mechanics, self.framer, self.device_id = world, mechanics, framer, device_id
         self.link_faults = _LinkFaults()
-        self._registers = _TableRegisters(world, mechanics)
+        # another controller on the same framing (simulators/chamber) brings its own register map
+        self._registers = registers if registers is not None else _TableRegisters(world, mechanics)
         self._units = {device_id, 255} if framer == "tcp" else {device_id}
         self._conns: set[socket.socket] = set()
         self._conns_lock = threading.Lock()

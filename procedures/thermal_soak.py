@@ -1,0 +1,254 @@
+"""thermal-soak: the unit's bias and resonator frequency at set points over a temperature range,
+each recorded once the unit has settled, with polynomial fits against temperature
+(docs/chamber.md, "The soak method").
+
+Steps: excite and hold the amplitude; then for each set point (low to high, `points` of them):
+the chamber's set point, windows of `settle_window_s` until the resonator frequency's drift
+between consecutive windows stays below `settle_ppm_per_min` for `settle_windows` windows (the
+unit's own thermometer, judged from its readings, not a fixed time), then a static record of
+`record_s` with the chamber's part (case) temperature read at its start and end.  The analysis
+takes each record's bias (bench.analysis.cvg_rate.static_bias) and mean frequency (batch means)
+and fits each against the case temperature (bench.analysis.thermal_fit: weighted least squares,
+the order by BIC, 95 % intervals)."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+
+from bench.analysis.cvg_rate import static_bias
+from bench.analysis.thermal_fit import ThermalFit, batch_mean, fit_temperature_polynomial
+from bench.engine import Demand, Measurement, Param, Procedure, Result, step
+from bench.streams import Column, StreamSchema, declare
+from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
+
+from .cvg_output import MODES, CvgOutput, static_bias_truth
+
+WINDOWS = declare(StreamSchema("thermal_soak_windows", "thermal-soak", (
+    Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
+    Column("air_c", "degC", doc="chamber air at the record's start and end (mean)"),
+    Column("part_c", "degC", doc="the part thermocouple on the unit's case (mean of start and end)"),
+    Column("settle_s", "s", doc="time from the set point to the record's start"),
+    Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
+    Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
+    Column("scale_factor", "1"),
+)))
+
+REF_TEMPERATURE_C = 25.0
+
+
+def _pair(interval) -> tuple[float, float]:
+    return float(interval[0]), float(interval[1])
+
+
+def _f0_tc_truth(truth: dict[str, float]) -> float:
+    """The World's frequency temperature coefficient (0 for a unit without error sources)."""
+    return truth.get("err_freq_tc_ppm_k", 0.0)
+
+
+def _f0_at_25c_truth(truth: dict[str, float]) -> float:
+    """The natural frequency at the reference temperature (the World's truth keeps the reference
+    values under `<key>_ref` when the unit is elsewhere, simulators/physics/errors.py)."""
+    return truth["f0_hz"] + truth.get("freq_offset_hz_ref", truth["freq_offset_hz"])
+
+
+class ThermalSoak(CvgOutput, Procedure):
+    """Bias and resonator frequency against temperature from set points with settled soaks."""
+
+    name = "thermal-soak"
+    windows_schema = WINDOWS
+    requires = ("fpga", "chamber")
+    kinds = ("hrg",)
+
+    t_low_degc = Param(-40.0, unit="degC", low=-100.0, high=200.0, doc="lowest set point")
+    t_high_degc = Param(85.0, unit="degC", low=-100.0, high=200.0, doc="highest set point")
+    points = Param(6, low=3, high=50, doc="set points from t_low_degc to t_high_degc, equally spaced (3 or more: "
+                                         "a line with a degree of freedom left for its interval)")
+    ramp_degc_per_min = Param(3.0, unit="degC/min", low=0.1, high=50.0, doc="the chamber's set-point ramp limit")
+    settle_window_s = Param(120.0, unit="s", low=5.0, high=3600.0,
+                            doc="window whose mean frequency is compared with the one before")
+    settle_ppm_per_min = Param(0.05, unit="ppm/min", low=1e-4, high=100.0,
+                               doc="settled when the frequency drifts less than this (0.05 ppm/min: ~1 mK/min "
+                                   "at fused silica's 55 ppm/K)")
+    settle_windows = Param(2, low=1, high=100, doc="consecutive windows below the drift threshold")
+    settle_timeout_s = Param(6 * 3600.0, unit="s", low=60.0, high=1e6, doc="longest wait at one set point")
+    record_s = Param(300.0, unit="s", low=1.0, high=1e5, doc="static record once settled")
+    batches = Param(10, low=2, high=1000, doc="batches of each record for its intervals")
+    max_order = Param(3, low=0, high=6, doc="highest polynomial order the fits try")
+    resolution_degc = Param(0.1, unit="degC", low=0.0, high=5.0,
+                            doc="the part thermocouple's display step: its error (step / sqrt 12) enters the fits "
+                                "as an effective variance (bench.analysis.thermal_fit)")
+    stream_hz = Param(10.0, unit="Hz", low=0.01, high=1e6, doc="FPGA stream rate during the run (boxcar-decimated)")
+    scale_factor = Param(0.0, low=-1e6, high=1e6,
+                         doc="output per input rate (from cvg-scale-factor); 0: the mode's nominal one")
+    bryan_factor = Param(0.0, low=0.0, high=1.0,
+                         doc="nominal K: whole-angle's nominal scale factor is -K (0: the station's nominal K)")
+    nominal_params = {"bryan_factor": "bryan_factor"}
+
+    measurements = (
+        Measurement("f0_tc_ppm_k", "ppm/K", "resonator frequency's temperature coefficient at 25 degC "
+                    "(fit slope over the fitted frequency there)", truth=_f0_tc_truth),
+        Measurement("f0_at_25c_hz", "Hz", "resonator frequency at 25 degC from the fit",
+                    truth=_f0_at_25c_truth),
+        Measurement("bias_tc_dph_k", "deg/h/K", "bias's temperature slope at 25 degC from the fit"),
+        Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC from the fit (the wave's angle held in "
+                    "force-to-rebalance; in whole-angle it precesses through the soak)", truth=static_bias_truth),
+        Measurement("bias_fit_order", "", "polynomial order of the bias fit (lowest BIC)",
+                    no_interval="an order chosen by a criterion"),
+        Measurement("f0_fit_order", "", "polynomial order of the frequency fit (lowest BIC)",
+                    no_interval="an order chosen by a criterion"),
+        Measurement("bias_fit_rms_dph", "deg/h", "rms residual of the bias fit",
+                    no_interval="a residual"),
+        Measurement("settle_mean_s", "s", "mean time from a set point to its settled record",
+                    no_interval="a time the run took"),
+    )
+
+    def demands(self) -> list[Demand]:
+        return []
+
+    def setpoints_c(self) -> np.ndarray:
+        return np.linspace(self.t_low_degc, self.t_high_degc, int(self.points))
+
+    # --- the frequency the stream carries, kept for the settle judgement -----------------------
+    def _collect(self, block: np.ndarray) -> None:
+        """Stream subscriber: accumulate freq_ctrl for the current settle window."""
+        f = FPGA.columns_of(block, "freq_ctrl")
+        with self._lock:
+            self._f_sum += float(np.sum(f))
+            self._f_n += len(f)
+
+    def _window_freq(self, ctx, seconds: float) -> float:
+        """Mean freq_ctrl (Hz, relative to REF_FREQ_HZ) over the next `seconds` of bench time."""
+        fpga = ctx.devices.fpga
+        fpga.sync()
+        with self._lock:
+            self._f_sum, self._f_n = 0.0, 0
+        ctx.sleep(seconds)
+        fpga.sync()
+        with self._lock:
+            if self._f_n == 0:
+                raise RuntimeError(f"no stream sample in a {seconds:g} s settle window")
+            return self._f_sum / self._f_n
+
+    @step("Excite and hold the amplitude")
+    def excite(self, ctx):
+        if self.t_high_degc <= self.t_low_degc:
+            raise ValueError(f"t_high_degc={self.t_high_degc:g} must be above t_low_degc={self.t_low_degc:g}")
+        self._lock = threading.Lock()
+        self._f_sum, self._f_n = 0.0, 0
+        ctx.subscribe(ctx.devices.fpga, self._keep_latest)
+        ctx.subscribe(ctx.devices.fpga, self._collect)
+        self._start_output(ctx)
+        self._start_loops(ctx)
+        self._hold_amplitude(ctx)
+        chamber = ctx.devices.chamber
+        chamber.stop_profile()
+        chamber.set_ramp_rate(self.ramp_degc_per_min)
+        ctx.defer(lambda: chamber.set_setpoint(REF_TEMPERATURE_C) if chamber.connected else None,
+                  "chamber set point back to 25 degC")
+
+    @step("Set points, settle and record")
+    def soak(self, ctx):
+        chamber = ctx.devices.chamber
+        fpga = ctx.devices.fpga
+        ref_hz = float(fpga.read_register("REF_FREQ_HZ"))
+        code = MODES.index(self._mode)
+        sf = self._scale_factor()
+        sps = self.setpoints_c()
+        for i, sp in enumerate(sps):
+            chamber.set_setpoint(float(sp))
+            t_set = ctx.clock.now()
+            prev, quiet = None, 0
+            while quiet < self.settle_windows:
+                if ctx.clock.now() - t_set > self.settle_timeout_s:
+                    raise TimeoutError(f"set point {sp:g} degC: the frequency still drifts after "
+                                       f"{self.settle_timeout_s:g} s (threshold {self.settle_ppm_per_min:g} ppm/min)")
+                f = self._window_freq(ctx, self.settle_window_s)
+                if prev is not None:
+                    drift = (f - prev) / (ref_hz + f) * 1e6 / (self.settle_window_s / 60.0)
+                    quiet = quiet + 1 if abs(drift) < self.settle_ppm_per_min else 0
+                prev = f
+            settle_s = ctx.clock.now() - t_set
+            s0 = chamber.status()
+            t0, t1 = self._record_window(ctx, self.record_s, f"set point {sp:g} degC record")
+            s1 = chamber.status()
+            row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf]
+            ctx.record(WINDOWS, WINDOWS.names, np.array([row]))
+            ctx.log.info(f"set point {sp:g} degC: settled after {settle_s:.0f} s, case {row[4]:.1f} degC")
+            ctx.progress((i + 1) / len(sps), f"set point {i + 1} / {len(sps)}")
+
+    @step("Fits against temperature")
+    def estimate(self, ctx):
+        for res in self.analysis(ctx.data()):
+            ctx.report(res)
+
+    # --- analysis --------------------------------------------------------------------------
+    def _scale_factor(self) -> float:
+        if self.scale_factor:
+            return float(self.scale_factor)
+        return 1.0 if self._mode == "force-to-rebalance" else -float(self.bryan_factor)
+
+    def points_table(self, data) -> dict[str, np.ndarray]:
+        """Each record's case temperature, bias (deg/h) and frequency (Hz) with standard errors."""
+        win = data.table(WINDOWS.name)
+        fpga = data.table("fpga")
+        t = fpga["t_s"]
+        earth_dph = self.earth_rate_on_axis_dph(data)
+        rows = []
+        for t0, t1, part, ref, mode, sf in zip(win["t_start_s"], win["t_end_s"], win["part_c"], win["ref_freq_hz"],
+                                               win["mode"], win["scale_factor"], strict=True):
+            sel = (t > t0) & (t <= t1)
+            name = MODES[int(mode)]
+            y = fpga["rate_out_dps"][sel] if name == "force-to-rebalance" else fpga["angle_out_deg"][sel]
+            b = static_bias(t[sel], y, mode=name, scale_factor=float(sf), earth_rate_dph=earth_dph,
+                            n_batches=self.batches)
+            f, f_se = batch_mean(fpga["freq_ctrl"][sel], self.batches)
+            rows.append((part, b.bias_dph, b.sigma_dph, ref + f, f_se))
+        a = np.array(rows, dtype=float).reshape(-1, 5)
+        return {"part_c": a[:, 0], "bias_dph": a[:, 1], "bias_se_dph": a[:, 2], "f0_hz": a[:, 3], "f0_se_hz": a[:, 4]}
+
+    def fits(self, data) -> tuple[dict[str, np.ndarray], ThermalFit, ThermalFit]:
+        """The points, the bias fit and the frequency fit."""
+        p = self.points_table(data)
+        if len(p["part_c"]) < 2:
+            raise RuntimeError(f"{len(p['part_c'])} settled record(s): a fit needs 2 or more set points")
+        kw = dict(max_order=int(self.max_order), t_ref_c=REF_TEMPERATURE_C,
+                  sigma_t_c=self.resolution_degc / math.sqrt(12.0))
+        bias = fit_temperature_polynomial(p["part_c"], p["bias_dph"], p["bias_se_dph"], **kw)
+        f0 = fit_temperature_polynomial(p["part_c"], p["f0_hz"], p["f0_se_hz"], **kw)
+        return p, bias, f0
+
+    def _linear(self, data, key: str) -> ThermalFit:
+        p = self.points_table(data)
+        y, se = (p["f0_hz"], p["f0_se_hz"]) if key == "f0" else (p["bias_dph"], p["bias_se_dph"])
+        return fit_temperature_polynomial(p["part_c"], y, se, max_order=1, min_order=1, t_ref_c=REF_TEMPERATURE_C,
+                                          sigma_t_c=self.resolution_degc / math.sqrt(12.0))
+
+    def analysis(self, data) -> list[Result]:
+        """The fits' results from a recorded run's `thermal_soak_windows` and `fpga` streams."""
+        _, bias, f0 = self.fits(data)
+        f25 = float(f0.coeffs[0])
+        out = [
+            Result("f0_at_25c_hz", f25, ci95=_pair(f0.ci95[0])),
+            Result("bias_at_25c_dph", float(bias.coeffs[0]), ci95=_pair(bias.ci95[0])),
+            Result("bias_fit_order", float(bias.order)),
+            Result("f0_fit_order", float(f0.order)),
+            Result("bias_fit_rms_dph", float(np.sqrt(np.mean(bias.residuals**2)))),
+        ]
+        # a slope where the BIC kept none: the straight line's, with its interval (holding 0)
+        f0_s, bias_s = (fit if fit.order >= 1 else self._linear(data, key) for fit, key in ((f0, "f0"), (bias, "bias")))
+        lo, hi = f0_s.ci95[1]
+        out.append(Result("f0_tc_ppm_k", float(f0_s.coeffs[1] / f25 * 1e6),
+                          ci95=(float(lo / f25 * 1e6), float(hi / f25 * 1e6))))
+        out.append(Result("bias_tc_dph_k", float(bias_s.coeffs[1]), ci95=_pair(bias_s.ci95[1])))
+        win = data.table(WINDOWS.name)
+        out.append(Result("settle_mean_s", float(np.mean(win["settle_s"]))))
+        return out
+
+    def figures(self, data) -> list:
+        """Frequency and bias against the case temperature with their fits and residuals."""
+        from procedures.figures.thermal_soak import fit_figures, temperature_figure
+
+        return temperature_figure(self, data) + fit_figures(self, data)

@@ -1,0 +1,1 @@
+"""Simulated temperature chambers (docs/chamber.md)."""

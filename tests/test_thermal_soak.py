@@ -1,0 +1,43 @@
+"""thermal-soak on the thermal HRG station (a quick chamber and a light case so the test is short):
+3 set points, each settled from the resonator frequency's own drift; the frequency fit's
+temperature coefficient against the simulator's truth, the bias fit, and the chamber back at
+ambient."""
+
+from __future__ import annotations
+
+import pytest
+
+from bench.recorder import open_run
+from procedures.thermal_soak import ThermalSoak
+
+
+@pytest.mark.parametrize("sim_station", ["sim-hrg-thermal-quick"], indirect=True)
+def test_soak_finds_the_frequency_temperature_coefficient(run_procedure, sim_station):
+    params = {"t_low_degc": 15.0, "t_high_degc": 35.0, "points": 3, "ramp_degc_per_min": 30.0, "settle_window_s": 30.0,
+              "settle_ppm_per_min": 0.2, "record_s": 60.0, "max_order": 2}
+    record = run_procedure(ThermalSoak, params)
+    assert record.outcome == "COMPLETE", (record.end_reason, record.traceback)
+    got = {m.name: m for m in record.measurements}
+    truth = sim_station.truth()
+    tc = got["f0_tc_ppm_k"]
+    print({k: (m.value, m.ci95) for k, m in got.items()})
+    assert tc.ci95[0] <= truth["err_freq_tc_ppm_k"] <= tc.ci95[1], (tc.value, tc.ci95)
+    assert tc.value == pytest.approx(truth["err_freq_tc_ppm_k"], rel=0.02)
+    assert got["f0_fit_order"].value == 1.0
+    f25, f25_true = got["f0_at_25c_hz"], ThermalSoak.truth_for(truth)["f0_at_25c_hz"]
+    assert f25.ci95[0] - 0.01 <= f25_true <= f25.ci95[1] + 0.01, (f25.value, f25.ci95, f25_true)
+    data = open_run(record.raw_file)
+    win = data.table("thermal_soak_windows")
+    assert list(win["setpoint_c"]) == [15.0, 25.0, 35.0]
+    assert max(abs(win["part_c"] - win["setpoint_c"])) < 0.1  # settled: the case at the set point
+    assert sim_station.devices["chamber"].setpoint_c() == 25.0  # back to ambient at the end
+    # the raw file gives the same numbers, and the fit figure
+    again = {r.name: r.value for r in ThermalSoak(record.params).analysis(data)}
+    assert again["f0_tc_ppm_k"] == pytest.approx(tc.value, rel=1e-9)
+    figs = ThermalSoak(record.params).figures(data)
+    assert [f.key for f in figs] == ["thermal-soak_temperatures", "thermal-soak_fits"]
+    assert len(figs[1].figure.axes) == 4
+    # the chamber's stream (its link checks): the case lags the air and ends at the last set point
+    ch = data.table("chamber")
+    assert len(ch["t_s"]) > 100 and abs(ch["part_degc"][-1] - 35.0) < 0.1
+    assert min(ch["air_degc"]) == pytest.approx(15.0) and max(ch["air_degc"]) == pytest.approx(35.0)
