@@ -12,7 +12,8 @@ types a run uses.  Its random generators are its own: no run's draws change.
 On a cache that does not hold this source's kernels yet (bench.kernel_cache keys it on their
 sources), a line on stderr says so at once and one more names each kernel as numba starts it, so a
 first run is never a minute of nothing on screen; `make install` fills the cache ahead
-(`python -m simulators.warm`, which also compiles the damping fit's model)."""
+(`python -m simulators.warm`).  The damping fit's model kernel is compiled here too, so the run's
+analysis process finds it cached."""
 
 from __future__ import annotations
 
@@ -44,6 +45,7 @@ def warm_kernels(*, verbose: bool | None = None) -> None:
                   f"cached in {kernel_cache.cache_dir()}) ...", file=sys.stderr, flush=True)
         with _named_compiles(verbose if verbose is not None else cold):
             _warm_devices()
+            warm_analysis()  # the run's analysis process then loads it from the same cache
         if cold:
             kernel_cache.mark_filled()
         _done = True
@@ -132,6 +134,4 @@ def _drive(world: Any) -> list[bytes]:
 
 
 if __name__ == "__main__":  # `make install`: fill the kernel cache so a first `make run` finds it
-    with _named_compiles(True):
-        warm_analysis()
     warm_kernels(verbose=True)
