@@ -2,18 +2,23 @@
 #   make run    - a calibration on the simulated bench
 #   make test   - the test suite
 #   make docs   - the documentation site into site/ (warnings are errors)
+#   make warm   - compile the simulators' kernels into the cache (install does it too)
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test lint bench clean install docs
+.PHONY: run test lint bench clean install docs warm
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m simulators.warm  # compile the kernels now, so a first run finds them cached
 	touch $(STAMP)
+
+warm: $(STAMP)
+	$(BIN)/python -m simulators.warm
 
 install: $(STAMP)
 
@@ -34,4 +39,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/sim_speed.py
 
 clean:
-	rm -rf $(VENV) runs .pytest_cache site
+	rm -rf $(VENV) runs .pytest_cache site .kernel_cache

@@ -571,6 +571,7 @@ class RunData:
 
     def __init__(self, source: str | Path | h5py.File) -> None:
         self._own = not isinstance(source, h5py.File)
+        self._arrays: dict[str, np.ndarray] = {}  # array(): each stream read once (read-only files)
         # no file lock: a run still being written can be read (the GUI, a report mid-run)
         self.f = h5py.File(source, "r", locking=False) if self._own else source
         self.path = Path(self.f.filename)
@@ -683,7 +684,14 @@ class RunData:
         return stored_legends(self.f, stream, self._stream(stream).attrs)
 
     def array(self, stream: str) -> np.ndarray:
-        return self._stream(stream)[...]
+        """The stream's rows (a copy the caller may change).  A file this object opened read-only
+        is read and decompressed once per stream: a report's figures read the FPGA stream twice."""
+        if not self._own:  # a file someone else holds (it may still be written)
+            return self._stream(stream)[...]
+        cached = self._arrays.get(stream)
+        if cached is None:
+            cached = self._arrays[stream] = self._stream(stream)[...]
+        return cached.copy()
 
     def table(self, stream: str) -> dict[str, np.ndarray]:
         """Columns of a stream by name: `data.table("fpga")["cx"]`."""

@@ -7,34 +7,96 @@ the link checks' replies then miss their wall-clock timeouts and a first run aft
 end with a lost link.  So a simulated station calls `warm_kernels()` before it serves: a throwaway
 world with every simulated device, driven through the per-block and the fused paths for a few
 simulated seconds, and a few stream frames parsed, which calls every kernel with the argument
-types a run uses.  Its random generators are its own: no run's draws change."""
+types a run uses.  Its random generators are its own: no run's draws change.
+
+On a cache that does not hold this source's kernels yet (bench.kernel_cache keys it on their
+sources), a line on stderr says so at once and one more names each kernel as numba starts it, so a
+first run is never a minute of nothing on screen; `make install` fills the cache ahead
+(`python -m simulators.warm`).  The damping fit's model kernel is compiled here too, so the run's
+analysis process finds it cached."""
 
 from __future__ import annotations
 
+import sys
 import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 _lock = threading.Lock()
 _done = False
+#: the modules whose kernels are named as they compile
+_KERNEL_MODULES = ("simulators.", "drivers.fpga.protocol", "bench.analysis.free_decay_rk")
 
 
-def warm_kernels() -> None:
-    """Once per process: call every compiled kernel of the simulated devices and the stream parser."""
+def warm_kernels(*, verbose: bool | None = None) -> None:
+    """Once per process: call every compiled kernel of the simulated devices and the stream parser.
+    verbose: lines on stderr while compiling (default: only when the cache is not filled yet)."""
     global _done
     with _lock:
         if _done:
             return
-        from drivers.fpga import protocol as p
+        from bench import kernel_cache
 
-        from .physics.noise import NOISE_PRESETS
-        from .physics.params import preset
-        from .world import World
-
-        for world in (World(preset("hrg-wa"), seed=0, noise=NOISE_PRESETS["hrg-wa"], earth_rate_dph=10.0),
-                      World(preset("hrg"), seed=0)):  # with and without the noise model's inputs
-            frames = _drive(world)
-        p.FrameParser().feed(b"".join(frames[-4:]))
+        cold = not kernel_cache.is_filled()
+        if verbose if verbose is not None else cold:
+            print(f"gyrobench: compiling the simulated devices' kernels (once per change of their source; "
+                  f"cached in {kernel_cache.cache_dir()}) ...", file=sys.stderr, flush=True)
+        with _named_compiles(verbose if verbose is not None else cold):
+            _warm_devices()
+            warm_analysis()  # the run's analysis process then loads it from the same cache
+        if cold:
+            kernel_cache.mark_filled()
         _done = True
+
+
+def _warm_devices() -> None:
+    from drivers.fpga import protocol as p
+
+    from .physics.noise import NOISE_PRESETS
+    from .physics.params import preset
+    from .world import World
+
+    for world in (World(preset("hrg-wa"), seed=0, noise=NOISE_PRESETS["hrg-wa"], earth_rate_dph=10.0),
+                  World(preset("hrg"), seed=0)):  # with and without the noise model's inputs
+        frames = _drive(world)
+    p.FrameParser().feed(b"".join(frames[-4:]))
+
+
+@contextmanager
+def _named_compiles(on: bool) -> Iterator[None]:
+    """While on: a line on stderr as each of our kernels starts compiling (not the ones it inlines)."""
+    if not on:
+        yield
+        return
+    from numba.core import event
+
+    t0, depth = time.perf_counter(), [0]
+
+    class _Named(event.Listener):
+        def on_start(self, ev: event.Event) -> None:
+            depth[0] += 1
+            fn = ev.data["dispatcher"].py_func
+            if depth[0] == 1 and fn.__module__.startswith(_KERNEL_MODULES):
+                print(f"  {time.perf_counter() - t0:5.1f} s  compiling {fn.__module__}.{fn.__qualname__}",
+                      file=sys.stderr, flush=True)
+
+        def on_end(self, ev: event.Event) -> None:
+            depth[0] -= 1
+
+    with event.install_listener("numba:compile", _Named()):
+        yield
+    print(f"  {time.perf_counter() - t0:5.1f} s  kernels ready", file=sys.stderr, flush=True)
+
+
+def warm_analysis() -> None:
+    """Compile (or load) the damping fit's model kernel with the argument types the fit uses."""
+    import numpy as np
+
+    from bench.analysis.free_decay_rk import rk4_sensitivities
+
+    rk4_sensitivities(np.zeros((4, 4)), np.zeros((8, 4, 4)), 0.0, 0.0, False, np.ones(4), 3, 0.01, 1, True)
 
 
 def _drive(world: Any) -> list[bytes]:
@@ -69,3 +131,7 @@ def _drive(world: Any) -> list[bytes]:
         fw.write(p.register("STREAM_DECIMATION"), 1)
     world.advance(0.4)
     return frames
+
+
+if __name__ == "__main__":  # `make install`: fill the kernel cache so a first `make run` finds it
+    warm_kernels(verbose=True)

@@ -25,11 +25,26 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
-from scipy import optimize, special  # stdtrit: Student t quantiles without importing scipy.stats (~1 s)
 
 from .axes import axis_deg
+
+
+def _optimize() -> Any:
+    """scipy.optimize on first use: a report that only reads a damping run's results does not pay
+    its import (~0.4 s of CPU; benchmarks/report_speed.py)."""
+    from scipy import optimize
+
+    return optimize
+
+
+def _special() -> Any:
+    """scipy.special on first use (stdtrit: Student t quantiles without importing scipy.stats, ~1 s)."""
+    from scipy import special
+
+    return special
 
 #: Parameter vector of every fit, in this order: ln E at t0, gamma = 2/tau, b_c, b_s.
 PARAM_NAMES = ("ln_e0", "gamma_per_s", "b_c_per_s", "b_s_per_s")
@@ -240,10 +255,10 @@ def _belt_table(level: float) -> tuple[np.ndarray, np.ndarray]:
     s = np.empty_like(r)
     for i, ri in enumerate(r):
         def cover(x: float, ri: float = ri) -> float:
-            low = special.chndtr((ri - x) ** 2, 2, ri * ri) if x < ri else 0.0
-            return float(special.chndtr((ri + x) ** 2, 2, ri * ri) - low) - level
+            low = _special().chndtr((ri - x) ** 2, 2, ri * ri) if x < ri else 0.0
+            return float(_special().chndtr((ri + x) ** 2, 2, ri * ri) - low) - level
 
-        s[i] = optimize.brentq(cover, 0.0, 20.0, xtol=1e-10)
+        s[i] = _optimize().brentq(cover, 0.0, 20.0, xtol=1e-10)
     return r, s
 
 
@@ -280,7 +295,7 @@ def delta_interval(b: np.ndarray, cov_b: np.ndarray, level: float = 0.95) -> tup
     if d > _GAUSS_SIGMAS * sig_max:  # far from zero: the Gaussian (delta-method) interval
         g = b / d
         sd = math.sqrt(max(float(g @ cov_b @ g), 0.0))
-        k = float(special.ndtri(0.5 * (1.0 + level)))
+        k = float(_special().ndtri(0.5 * (1.0 + level)))
         return d - k * sd, d + k * sd
     w = np.linalg.inv(cov_b)
 
@@ -293,8 +308,8 @@ def delta_interval(b: np.ndarray, cov_b: np.ndarray, level: float = 0.95) -> tup
 
     # the accepted set is an interval around |b_hat| (excess < 0 there): its ends by Brent's method
     tol = 1e-6 * sig
-    low = 0.0 if f(0.0) <= 0.0 else optimize.brentq(f, 0.0, d, xtol=tol)
-    high = optimize.brentq(f, d, d + 10.0 * sig_max, xtol=tol)
+    low = 0.0 if f(0.0) <= 0.0 else _optimize().brentq(f, 0.0, d, xtol=tol)
+    high = _optimize().brentq(f, d, d + 10.0 * sig_max, xtol=tol)
     return float(low), float(high)
 
 
@@ -318,7 +333,7 @@ def _physical(params: np.ndarray, cov: np.ndarray, dof: int) -> tuple[dict, dict
         else math.sqrt(max(0.5 * (cov[2, 2] + cov[3, 3]), 0.0)),
         "tau_s": math.sqrt(max(float(g_tau @ cov @ g_tau), 0.0)),
     }
-    k = float(special.stdtrit(max(dof, 1), 0.975))
+    k = float(_special().stdtrit(max(dof, 1), 0.975))
     value = {"theta_tau_deg": theta_deg, "delta_inv_tau_per_s": d, "tau_s": tau}
     ci = {
         "theta_tau_deg": (theta_deg - k * std["theta_tau_deg"], theta_deg + k * std["theta_tau_deg"]),
@@ -750,7 +765,7 @@ def fit_angle_drift(theta_rad, rate_rad_s) -> AngleDriftFit:
         sd = math.sqrt(max(float(g @ cov @ g), 0.0))
     else:
         sd = math.sqrt(max(0.5 * (cov[1, 1] + cov[2, 2]), 0.0))
-    k = float(special.stdtrit(dof, 0.975))
+    k = float(_special().stdtrit(dof, 0.975))
     return AngleDriftFit(
         amplitude_rad_s=amp,
         phase_rad=phase,
@@ -822,7 +837,7 @@ def fit_drift_harmonics(theta_rad, rate, orders: tuple[int, ...] = (4, 8, 12)) -
     s2 = float(r @ r) / dof
     cov = s2 * np.linalg.pinv(x.T @ x)
     hs = _harmonics(p, cov, dof, orders, first=1)
-    t = float(special.stdtrit(dof, 0.975))
+    t = float(_special().stdtrit(dof, 0.975))
     half = t * math.sqrt(max(float(cov[0, 0]), 0.0))
     return DriftHarmonics(float(p[0]), (float(p[0]) - half, float(p[0]) + half), hs, math.sqrt(float(r @ r) / th.size),
                           int(th.size))
@@ -833,8 +848,8 @@ def _harmonics(p: np.ndarray, cov: np.ndarray, dof: int, orders: tuple[int, ...]
     """Each harmonic's amplitude and phase with their 95 % intervals from a linear fit's (A_m, B_m)
     pairs (columns first, first + 1, ... of p and cov, in the order of `orders`): the amplitude's
     from the joint confidence ellipse, the phase's from the angle it subtends (fit_drift_harmonics)."""
-    t = float(special.stdtrit(dof, 0.975))
-    radius = math.sqrt(2.0 * float(special.fdtri(2, dof, 0.95)))
+    t = float(_special().stdtrit(dof, 0.975))
+    radius = math.sqrt(2.0 * float(_special().fdtri(2, dof, 0.95)))
     hs = {}
     for i, m in enumerate(orders):
         j = first + 2 * i
@@ -914,7 +929,7 @@ def fit_angle_harmonics(t_s, theta_rad, command_rad_s: float,
     s2 = float(r @ r) / dof
     cov = s2 * np.linalg.pinv(xs.T @ xs) / np.outer(scale, scale)
     hs = _harmonics(p, cov, dof, orders, first=2)
-    k = float(special.stdtrit(dof, 0.975))
+    k = float(_special().stdtrit(dof, 0.975))
     half = k * math.sqrt(max(float(cov[1, 1]), 0.0))
     drift = DriftHarmonics(float(p[1]), (float(p[1]) - half, float(p[1]) + half), hs, math.nan, int(t.size))
     return AngleHarmonicsFit(drift, tuple(orders), math.sqrt(float(r @ r) / t.size), np.asarray(p[2:], dtype=float))

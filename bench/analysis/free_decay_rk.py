@@ -12,7 +12,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from bench.kernel_cache import njit  # NUMBA_CACHE_DIR keyed on the kernels' sources
 
 RK_RATE_STEP = 0.01  # rad per RK4 substep at the model's fastest rate: local error ~ 1e-12
 

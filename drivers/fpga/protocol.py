@@ -24,8 +24,8 @@ from binascii import crc_hqx
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
+from bench.kernel_cache import njit  # NUMBA_CACHE_DIR keyed on the kernels' sources
 from bench.streams import Column, StreamSchema, declare
 
 SYNC = b"\xa5\x5a"

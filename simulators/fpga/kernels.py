@@ -28,8 +28,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from bench.kernel_cache import njit  # NUMBA_CACHE_DIR keyed on the kernels' sources
 from drivers.fpga.protocol import put_stream_frame
 
 # loop parameters (registers), packed by FpgaFirmware when a register is written

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from bench.kernel_cache import njit  # NUMBA_CACHE_DIR keyed on the kernels' sources
 
 
 @njit(cache=True)

@@ -203,7 +203,7 @@ class Resonator:
         if gains is not None and sigma != 0.0:  # the gains applied in the kernel's noise loop
             linear_block(zg, lam, dt, self._q, u, ripple, psi_per_rad, out, noise, sigma, gains[0], gains[1])
             return out, noise
-        linear_block(zg, lam, dt, self._q, u, ripple, psi_per_rad, out, noise, sigma)
+        linear_block(zg, lam, dt, self._q, u, ripple, psi_per_rad, out, noise, sigma, 1.0, 1.0)  # one signature
         if not measure:
             return out, None
         q_meas = noise if sigma != 0.0 else out.copy()

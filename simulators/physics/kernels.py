@@ -10,7 +10,8 @@ after an install pays the compile.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from bench.kernel_cache import njit  # NUMBA_CACHE_DIR keyed on the kernels' sources
 
 _TAYLOR_MAX_NORM = 0.125  # scale A h below this: the series then converges in ~14 terms
 _TAYLOR_TOL = 1e-18
@@ -58,11 +59,22 @@ def exact_step_matrices(a: np.ndarray, dt: float, phi: np.ndarray, gam: np.ndarr
         norm *= 0.5
         h *= 0.5
         s += 1
-    ah = a * h
-    term = np.eye(4)
+    # element by element (the same products and sums as the array expressions `a * h`,
+    # `np.eye(4) * h`, `g += tmp`, `p[:, :] = tmp`): numba compiles loops in a fraction of the time
+    # it takes for array expressions and their shape checks (benchmarks/first_run.py)
+    ah = np.empty((4, 4))
+    term = np.zeros((4, 4))
     nxt = np.empty((4, 4))
-    p = np.eye(4)
-    g = np.eye(4) * h
+    p = np.zeros((4, 4))
+    g = np.zeros((4, 4))
+    for i in range(4):
+        for j in range(4):
+            ah[i, j] = a[i, j] * h
+        term[i, i] = 1.0
+        p[i, i] = 1.0
+    for i in range(4):
+        for j in range(4):
+            g[i, j] = p[i, j] * h
     for k in range(1, 40):
         _matmul4(term, ah, nxt)
         big = 0.0
@@ -78,11 +90,17 @@ def exact_step_matrices(a: np.ndarray, dt: float, phi: np.ndarray, gam: np.ndarr
     tmp = np.empty((4, 4))
     for _ in range(s):
         _matmul4(p, g, tmp)
-        g += tmp
+        for i in range(4):
+            for j in range(4):
+                g[i, j] += tmp[i, j]
         _matmul4(p, p, tmp)
-        p[:, :] = tmp
-    phi[:, :] = p
-    gam[:, :] = 0.5 * g
+        for i in range(4):
+            for j in range(4):
+                p[i, j] = tmp[i, j]
+    for i in range(4):
+        for j in range(4):
+            phi[i, j] = p[i, j]
+            gam[i, j] = 0.5 * g[i, j]
 
 
 @njit(cache=True)

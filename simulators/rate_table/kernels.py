@@ -7,7 +7,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from bench.kernel_cache import njit  # NUMBA_CACHE_DIR keyed on the kernels' sources
 
 _DEG = math.pi / 180.0
 
