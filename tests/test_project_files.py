@@ -33,7 +33,8 @@ def test_line_report_figures_of_a_measurement_without_limits_or_spread_warn_noth
     from bench.line.report import _figures
 
     measure = {"name": "q", "unit": "", "low": None, "high": None, "mean": 1.0, "sigma": 0.0,
-               "final": [{"value": 1.0}], "rows": [{"value": 1.0}]}
+               "procedure": "p", "sequence": "s", "final": [{"value": 1.0}], "rows": [{"value": 1.0}],
+               "chart": {"center": 1.0, "sigma_within": 0.0, "ucl": 1.0, "lcl": 1.0, "outside": []}}
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # matplotlib's "No artists with labels found to put in legend"
         hist, chart = _figures(measure)

@@ -19,7 +19,7 @@ from alembic.config import Config
 from sqlalchemy import event, func, insert, select, update
 from sqlalchemy.exc import IntegrityError, OperationalError, SQLAlchemyError
 
-from bench.results.liveness import host_name, is_interrupted
+from bench.results.liveness import STALE_S, age_s, host_name, process_alive
 from bench.results.liveness import now_iso as _now
 from bench.results.locks import migrating_connection
 from bench.results.redact import redact_text
@@ -176,7 +176,7 @@ class LineDB:
             rows = conn.execute(select(c.id, c.host, c.pid, c.heartbeat_at, c.record).where(c.outcome == RUNNING)).all()
             n = 0
             for r in rows:
-                if not is_interrupted(r.host, r.pid, r.heartbeat_at):
+                if not _attempt_gone(r.host, r.pid, r.heartbeat_at):
                     continue
                 stub = dict(r.record or {})
                 stub.update(outcome=INTERRUPTED, end_reason=f"interrupted: the attempt ended without a record "
@@ -299,3 +299,11 @@ class LineDB:
         with self.engine.connect() as conn:
             return (conn.execute(select(func.count()).select_from(line_attempts)).scalar_one(),
                     conn.execute(select(func.count()).select_from(line_measurements)).scalar_one())
+
+
+def _attempt_gone(host: str | None, pid: int | None, heartbeat_at: str | None) -> bool:
+    """A RUNNING attempt is over: its heartbeat is stale, or it ran on this host and its process is
+    gone (an attempt row names its host and process; a fresh heartbeat from elsewhere is a live unit)."""
+    if age_s(heartbeat_at) > STALE_S:
+        return True
+    return host == host_name() and not process_alive(pid)
