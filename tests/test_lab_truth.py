@@ -126,6 +126,16 @@ def test_report_flags_each_truth_outside_and_counts_them(lab_run):
     assert html.count('class="outside"') == len(outside) and html.count("✗ outside") == len(outside)
 
 
+def test_a_short_decay_fits_the_tables_ripple_so_its_damping_terms_hold_their_truth(lab_run):
+    """20 s at 20 deg/s is 400 deg of table turn: the once- and twice-per-turn angle ripple is fitted
+    (it used to be only from 720 deg on, and D then read ~2.7 % high, outside its interval in 20 of
+    20 seeds; docs/free_decay_identification.md).  The damping terms' truths now lie inside."""
+    _code, js, _raw, _html = lab_run
+    outside = set(js["truth_outside"]["outside"])
+    assert not outside & {"delta_inv_tau_per_s", "damping_anisotropy_per_s", "maslov_b_s", "maslov_b_c"}
+    assert len(outside) <= 4, outside  # of 32 compared: chance, not a model error
+
+
 def test_without_limits_the_report_says_so_and_an_error_runs_rows_keep_their_own_status(lab_run, tmp_path):
     """No limits: 'No limits given', rows 'measured'; the same run marked ERROR shows no row COMPLETE:
     a fitted row says measured, a declared one never reported NOT_MEASURED."""
