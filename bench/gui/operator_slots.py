@@ -63,6 +63,7 @@ class SlotPanel(QFrame):
         self.bar = QProgressBar()
         self.bar.setRange(0, 1000)
         self.bar.setTextVisible(False)
+        self.bar.setValue(0)
         self.clear_button = QPushButton("Clear")
         self.retest_button = QPushButton("Retest")
         buttons = QHBoxLayout()

@@ -139,6 +139,7 @@ class OperatorStation(QWidget):
         self.bar = QProgressBar()
         self.bar.setRange(0, 1000)
         self.bar.setTextVisible(False)
+        self.bar.setValue(0)
         self.slots_widget = QWidget()
         self.slots_row = QHBoxLayout(self.slots_widget)
         self.slots_row.setContentsMargins(0, 0, 0, 0)
