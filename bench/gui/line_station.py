@@ -57,7 +57,7 @@ class LineSession:
     """A station, a sequence and its limits, the line database; `log_in` then `run_serial` per unit."""
 
     def __init__(self, station: str, sequence: str, *, runs_dir: str | Path | None = None, db: str | None = None,
-                 seed: int | None = None, limits: str | None = None) -> None:
+                 seed: int | None = None, limits: str | None = None, lot: str = "") -> None:
         from bench.composition import load_station
         from bench.line.checks import check_limits_measured, check_steps
         from bench.line.cli import _limits_of
@@ -69,6 +69,9 @@ class LineSession:
         self.args = argparse.Namespace(sequence=sequence, limits=limits, runs_dir=None, lot="", rework=None,
                                        retest_reason=None, operator="", dut=[], db=db)
         self.limits = _limits_of(self.args, self.seq)
+        from bench.line.inputs import check_lot
+
+        self.args.lot = check_lot(lot or "", self.limits.lot_format) or ""
         self.station_name = station or self.seq.station
         if not self.station_name:
             raise LineError(f"sequence {self.seq.name!r} names no station: choose one")

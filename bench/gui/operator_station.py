@@ -72,8 +72,10 @@ class OperatorStation(QWidget):
     unit_done = Signal(str, str)  # serial, final outcome
 
     def __init__(self, station: str | None, *, sequence: str | None = None, runs_dir: str | None = None,
-                 db: str | None = None, seed: int | None = None, parent: QWidget | None = None) -> None:
+                 db: str | None = None, seed: int | None = None, lot: str = "",
+                 parent: QWidget | None = None) -> None:
         super().__init__(parent)
+        self.lot = lot
         self.station_arg, self.runs_dir, self.db_arg, self.seed = station, runs_dir, db, seed
         self.session: LineSession | None = None
         self.records: list[dict[str, Any]] = []
@@ -228,7 +230,7 @@ class OperatorStation(QWidget):
         self.serial_field.setEnabled(False)
         try:
             self.session = LineSession(self.station_arg, self.sequence.currentText(), runs_dir=self.runs_dir,
-                                       db=self.db_arg, seed=self.seed)
+                                       db=self.db_arg, seed=self.seed, lot=self.lot)
         except (ValidationError, ValueError, OSError) as exc:
             self.message.setText(str(exc))
             self.login_button.setEnabled(False)
