@@ -176,3 +176,20 @@ def test_a_locked_station_with_slots_refuses_the_batch(qtbot, tmp_path, monkeypa
     unlock(runs, "sim-mems-4", "front end replaced", "Ada L")  # unlocked: the calibration line says so
     assert win.refused() is False and "golden unit: not locked" in win.calib.text()
     win.close()
+
+
+def test_operators_table_with_a_boolean_active_column_on_postgresql(pg_url):
+    """PostgreSQL refused `boolean = integer` when the login listed the active operators."""
+    from sqlalchemy import text
+
+    from bench.gui.line_station import known_operators
+    from bench.line.db import LineDB
+
+    db = LineDB(pg_url)
+    try:
+        with db.engine.begin() as conn:
+            conn.execute(text("CREATE TABLE operators (name VARCHAR(64), active BOOLEAN)"))
+            conn.execute(text("INSERT INTO operators VALUES ('Grace H', TRUE), ('Gone G', FALSE), ('Ada L', NULL)"))
+        assert known_operators(db) == ["Grace H"]
+    finally:
+        db.close()

@@ -36,11 +36,18 @@ def known_operators(db: Any) -> list[str] | None:
     col = next((table.c[n] for n in NAME_COLUMNS if n in table.c), None)
     if col is None:
         return None
-    query = select(col)
-    if "active" in table.c:
-        query = query.where(table.c.active.is_(True) | (table.c.active == 1))
-    with engine.connect() as conn:
-        return sorted(str(r[0]) for r in conn.execute(query) if r[0])
+    active = table.c.active if "active" in table.c else None
+    query = select(col) if active is None else select(col, active)
+    with engine.connect() as conn:  # `active` read, not compared in SQL: BOOLEAN, INTEGER or text alike
+        rows = list(conn.execute(query))
+    return sorted(str(r[0]) for r in rows if r[0] and (active is None or _truthy(r[1])))
+
+
+def _truthy(value: Any) -> bool:
+    """An operators table's `active` as written by any database: True, 1, 't', 'yes' ..."""
+    if isinstance(value, str):
+        return value.strip().lower() in ("1", "t", "true", "y", "yes")
+    return bool(value)
 
 
 def free_text_allowed(station: Any) -> bool:
