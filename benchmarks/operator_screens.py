@@ -27,15 +27,14 @@ def main() -> int:
     from bench.gui.operator_station import OperatorStation
 
     app = QApplication.instance() or QApplication([])
-    calls = {"n": 0}
+    armed = {"on": False}
     real = composition.load_station
 
     def with_fault(name, **kw):  # the first batch: slot 3's FPGA link drops mid-sweep
         st = real(name, **kw)
-        if hasattr(st, "slots"):
-            calls["n"] += 1
-            if calls["n"] == 1:
-                st.schedule_fault("link-drop", 2.0, 3)
+        if armed["on"]:
+            armed["on"] = False
+            st.schedule_fault("link-drop", 2.0, 3)
         return st
 
     composition.load_station = with_fault
@@ -69,6 +68,7 @@ def main() -> int:
         win.serial_field.setText(text)
         win.serial_field.returnPressed.emit()
     shot(win, "slots_filled")
+    armed["on"] = True
     win.start_batch()
     wait(win, lambda: bool(win.batches_done), grab_running="running")
     shot(win, "verdicts")

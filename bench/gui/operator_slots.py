@@ -48,7 +48,7 @@ class SlotPanel(QFrame):
         self.serial_label.setFont(font(16, True))
         self.serial_label.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.verdict = QLabel()
-        self.verdict.setFont(font(30, True))
+        self.verdict.setFont(font(26, True))
         self.verdict.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.verdict.setMinimumHeight(80)
         self.reason = QLabel("")
@@ -83,7 +83,7 @@ class SlotPanel(QFrame):
     def empty(self) -> None:
         """No unit in the slot (it is not run; its batch records it as not fitted)."""
         self.serial, self.tested = None, False
-        self.serial_label.setText("empty")
+        self.serial_label.setText("-")
         self.set_verdict("EMPTY", "")
         self.reset_progress()
         self.retest_button.setEnabled(False)

@@ -85,6 +85,7 @@ class OperatorStation(QWidget):
         self.unit_progress = UnitProgress(1)
         self._thread: threading.Thread | None = None
         self._answer: tuple[dict, threading.Event] | None = None
+        self._running_prompt = ""
         self.setWindowTitle("gyrobench - operator station")
         self.resize(1000, 720)
         self.relay = _Relay()
@@ -323,9 +324,10 @@ class OperatorStation(QWidget):
         if self.slots:
             self._place(self.serial_field.text())
             return
-        if self.refused():
+        if self.refused():  # the one message, under the verdict
             self._set_verdict("REFUSED")
             self.reason.setText(self.message.text())
+            self.message.setText("")
             return
         try:
             serial = self.session.check_serial(self.serial_field.text())
@@ -342,7 +344,8 @@ class OperatorStation(QWidget):
         self.unit_label.setText(serial)
         self.reason.setText("")
         self.files.setText("")
-        self.prompt.setText(f"{serial}: testing - do not touch the fixture")
+        self._running_prompt = f"{serial}: testing - do not touch the fixture"
+        self.prompt.setText(self._running_prompt)
         session, operator = self.session, StationOperator(self, serial)
         why = self.retest.text().strip()
         is_rework = self.retest_kind.currentText() == "rework code"
@@ -376,7 +379,7 @@ class OperatorStation(QWidget):
         (box, done), self._answer = self._answer, None
         self.yes_button.setEnabled(False)
         self.no_button.setEnabled(False)
-        self.prompt.setText(f"{self.unit_label.text()}: testing - do not touch the fixture")
+        self.prompt.setText(self._running_prompt)
         box["value"] = value
         done.set()
 
@@ -495,7 +498,8 @@ class OperatorStation(QWidget):
         for w in (self.serial_field, self.start_button, self.login_button, self.sequence):
             w.setEnabled(False)
         placed = ", ".join(f"{s} (slot {n})" for n, s in serials.items())
-        self.prompt.setText(("retest of " if only else "") + f"{placed}: testing - do not touch the fixtures")
+        self._running_prompt = ("retest of " if only else "") + f"{placed}: testing - do not touch the fixtures"
+        self.prompt.setText(self._running_prompt)
         session, operator = self.session, StationOperator(self, "")
 
         def on_batch(batch: Any) -> None:  # worker thread, before each step's batch runs
