@@ -61,6 +61,12 @@ def test_progress_follows_the_engine_events():
     assert p.fraction == pytest.approx(1.0) and p.text == "step 2/2 hrg-damping"
     p.apply(ev.RunFinished("r2", 4.0))
     assert p.finished and p.fraction == 1.0
+    cut = UnitProgress(1)  # a run that ends in ERROR keeps the fraction it reached
+    cut.apply(ev.RunStarted("r3", 0.0, procedure="mems-sweep", steps=("a", "b")))
+    cut.apply(ev.StepStarted("r3", 0.0, name="a", index=0, total=2))
+    cut.apply(ev.Progress("r3", 1.0, fraction=0.5))
+    cut.apply(ev.RunFinished("r3", 1.0, outcome="ERROR"))
+    assert cut.fraction == pytest.approx(0.25)
 
 
 def test_slots_one_empty_verdicts_and_a_retest_of_one_slot(qtbot, tmp_path, monkeypatch):

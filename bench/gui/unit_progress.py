@@ -13,6 +13,8 @@ from bench.engine import events as ev
 
 #: the events the progress needs (sample blocks and measurements are not queued)
 KINDS = (ev.RunStarted, ev.StepStarted, ev.Progress, ev.RunFinished)
+#: run outcomes that end a run before its last step
+STOPPED = ("ERROR", "ABORTED")
 
 
 class UnitProgress:
@@ -62,7 +64,8 @@ class UnitProgress:
         elif isinstance(event, ev.Progress):
             self.sub_fraction = min(1.0, max(0.0, float(event.fraction)))
         elif isinstance(event, ev.RunFinished):
-            self.sub_index, self.sub_fraction = self.sub_total, 0.0
+            if event.outcome not in STOPPED:  # a run cut short keeps the fraction it reached
+                self.sub_index, self.sub_fraction = self.sub_total, 0.0
             self.finished = self.run_k >= self.n_steps - 1
 
     @property
