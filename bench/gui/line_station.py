@@ -1,6 +1,9 @@
 """The operator station's line session: one logged-in operator, one sequence and its product limits,
 one station; each scanned serial runs through `bench.line` as `gyrobench line run` does (routing,
-attempts, a unit record, a certificate, a line database row), with the window's prompts."""
+attempts, a unit record, a certificate, a line database row), with the window's prompts.  On a
+station with slots one serial a slot (an empty slot is not run, recorded as not fitted) runs as one
+batch, as `gyrobench line run` on that station does; one slot may be retested alone.  A station
+past a calibration due date or locked by its golden unit refuses to run (bench/line/station_state.py)."""
 
 from __future__ import annotations
 
@@ -33,11 +36,18 @@ def known_operators(db: Any) -> list[str] | None:
     col = next((table.c[n] for n in NAME_COLUMNS if n in table.c), None)
     if col is None:
         return None
-    query = select(col)
-    if "active" in table.c:
-        query = query.where(table.c.active.is_(True) | (table.c.active == 1))
-    with engine.connect() as conn:
-        return sorted(str(r[0]) for r in conn.execute(query) if r[0])
+    active = table.c.active if "active" in table.c else None
+    query = select(col) if active is None else select(col, active)
+    with engine.connect() as conn:  # `active` read, not compared in SQL: BOOLEAN, INTEGER or text alike
+        rows = list(conn.execute(query))
+    return sorted(str(r[0]) for r in rows if r[0] and (active is None or _truthy(r[1])))
+
+
+def _truthy(value: Any) -> bool:
+    """An operators table's `active` as written by any database: True, 1, 't', 'yes' ..."""
+    if isinstance(value, str):
+        return value.strip().lower() in ("1", "t", "true", "y", "yes")
+    return bool(value)
 
 
 def free_text_allowed(station: Any) -> bool:
@@ -54,9 +64,10 @@ class LineSession:
     """A station, a sequence and its limits, the line database; `log_in` then `run_serial` per unit."""
 
     def __init__(self, station: str, sequence: str, *, runs_dir: str | Path | None = None, db: str | None = None,
-                 seed: int | None = None, limits: str | None = None) -> None:
+                 seed: int | None = None, limits: str | None = None, lot: str = "") -> None:
         from bench.composition import load_station
-        from bench.line.cli import _limits_of, check_limits_measured, check_steps
+        from bench.line.checks import check_limits_measured, check_steps
+        from bench.line.cli import _limits_of
         from bench.line.db import LineDB
         from bench.line.sequence import load_sequence
 
@@ -65,15 +76,23 @@ class LineSession:
         self.args = argparse.Namespace(sequence=sequence, limits=limits, runs_dir=None, lot="", rework=None,
                                        retest_reason=None, operator="", dut=[], db=db)
         self.limits = _limits_of(self.args, self.seq)
+        from bench.line.inputs import check_lot
+
+        self.args.lot = check_lot(lot or "", self.limits.lot_format) or ""
         self.station_name = station or self.seq.station
         if not self.station_name:
             raise LineError(f"sequence {self.seq.name!r} names no station: choose one")
         probe = load_station(self.station_name, **self.overrides)  # the file checked, nothing opened
-        if hasattr(probe, "slots"):
-            raise LineError(f"station {probe.id!r} has slots: its window is `gyrobench line run --window`")
-        check_steps(self.seq, probe)
-        check_limits_measured(self.seq, self.limits)
+        self.n_slots = int(probe.n_slots) if hasattr(probe, "slots") else 0
+        if self.n_slots:
+            from bench.line.batch_run import check_batch_sequence
+
+            check_batch_sequence(self.seq, self.limits, probe)
+        else:
+            check_steps(self.seq, probe)
+            check_limits_measured(self.seq, self.limits)
         self.station_id = probe.id
+        self.calibration = dict(probe.config.calibration)
         self.free_text = free_text_allowed(probe)
         self.args.runs_dir = str(runs_dir or probe.runs_dir)
         self.db_url = db or (probe.results_url if runs_dir is None else None)
@@ -84,6 +103,28 @@ class LineSession:
 
     def operators(self) -> list[str] | None:
         return known_operators(self.db)
+
+    def refusal(self) -> str | None:
+        """Why the station refuses to run now (a calibration past due, a golden-unit lock), or None."""
+        from bench.line.station_state import refusal
+
+        return refusal(self.calibration, self.args.runs_dir, self.station_id)
+
+    def calibration_status(self) -> str:
+        """The station's calibration due dates and its golden-unit lock, one line for the login."""
+        from bench.line.station_state import current_lock
+
+        dates = ", ".join(f"{name} due {due.isoformat()}" for name, due in sorted(self.calibration.items(),
+                                                                                  key=lambda kv: kv[1]))
+        held = current_lock(self.args.runs_dir, self.station_id)
+        lock = f"LOCKED since {held['at']}: {held['reason']}" if held else "not locked"
+        return f"calibration: {dates or 'no due dates in the station file'}; golden unit: {lock}"
+
+    def check_ready(self) -> None:
+        """LineError (one message) when the station may not run: calibration past due or locked."""
+        why = self.refusal()
+        if why:
+            raise LineError(why)
 
     def log_in(self, name: str) -> str:
         """The operator, from the database's operators table; a typed name only where the station
@@ -130,6 +171,9 @@ class LineSession:
 
         if self.ctx is None:
             raise LineError("log in first")
+        if self.n_slots:
+            raise LineError(f"station {self.station_id!r} has slots: run_slots places one serial a slot")
+        self.check_ready()
         ctx = self.ctx
         ctx.aborted.clear()
         from bench.line.inputs import check_reason, check_rework
@@ -142,6 +186,29 @@ class LineSession:
             raise LineError(f"unit {serial}: the fixture was not confirmed; nothing was run")
         return run_unit(ctx, lambda: load_station(self.station_name, **self.overrides), serial, operator,
                         max_tries=tries)
+
+    def run_slots(self, serials: dict[int, str], operator: Any, *, rework: str | None = None,
+                  retest_reason: str | None = None, not_fitted: list[int] | None = None,
+                  alone: bool = False) -> list[dict[str, Any]]:
+        """The placed units (serial by slot, empty slots left out) as one batch (worker thread),
+        through the code path of `gyrobench line run` on a station with slots; one slot alone is a
+        retest of that unit, routed by the line's rules (a rework code after FAIL, a reason after PASS)."""
+        from bench.composition import load_station
+        from bench.line.batch_run import run_batch_units
+        from bench.line.inputs import check_reason, check_rework
+
+        if self.ctx is None:
+            raise LineError("log in first")
+        if not self.n_slots:
+            raise LineError(f"station {self.station_id!r} holds one unit: run_serial")
+        self.check_ready()
+        ctx = self.ctx
+        ctx.aborted.clear()
+        rework = check_rework(rework) if rework else None
+        retest_reason = check_reason(retest_reason) if retest_reason else None
+        station = load_station(self.station_name, **self.overrides)
+        return run_batch_units(ctx, station, dict(sorted(serials.items())), operator, rework=rework,
+                               retest_reason=retest_reason, not_fitted=not_fitted, alone=alone)
 
     def close(self) -> None:
         if self.ctx is not None:

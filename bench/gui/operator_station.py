@@ -1,20 +1,26 @@
 """The operator station (`gyrobench gui --operator`): log in, pick a sequence, scan a serial; the unit
 runs through the line (bench.line: routing, attempts, unit record, certificate, line database row)
 in a worker thread; PASS / FAIL / MARGINAL shows large with its reason, then the next serial.  The
-line's prompts (fixture, table spin) appear here as Yes / No buttons."""
+line's prompts (fixture, table spin) appear here as Yes / No buttons; the running step and its
+progress show live (bench/gui/unit_progress.py).  On a station with slots each scan fills the next
+empty slot (Enter on an empty field leaves it empty), Start runs them as one batch, each slot shows
+its verdict, and Retest runs one slot alone (bench/gui/operator_slots.py).  The station's
+calibration dates and golden-unit lock show at login; a station out of calibration or locked
+refuses to run with one message."""
 
 from __future__ import annotations
 
 import threading
 from typing import Any
 
-from PySide6.QtCore import QObject, Qt, Signal
+from PySide6.QtCore import QObject, Qt, QTimer, Signal
 from PySide6.QtGui import QFont
 from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
     QLabel,
     QLineEdit,
+    QProgressBar,
     QPushButton,
     QSizePolicy,
     QVBoxLayout,
@@ -24,9 +30,12 @@ from PySide6.QtWidgets import (
 from bench.validation import ValidationError
 
 from .line_station import LineSession, sequences
+from .operator_slots import SlotPanel
 from .operator_view import COLOURS
+from .unit_progress import UnitProgress
 
-COLOURS = {**COLOURS, "LOG IN": ("#d8d8d8", "#333"), "CONDITIONAL": COLOURS["MARGINAL"]}
+COLOURS = {**COLOURS, "LOG IN": ("#d8d8d8", "#333"), "CONDITIONAL": COLOURS["MARGINAL"],
+           "NOT RUN": ("#c62020", "white"), "REFUSED": ("#6a1b9a", "white")}
 
 
 class _Relay(QObject):
@@ -63,14 +72,20 @@ class OperatorStation(QWidget):
     unit_done = Signal(str, str)  # serial, final outcome
 
     def __init__(self, station: str | None, *, sequence: str | None = None, runs_dir: str | None = None,
-                 db: str | None = None, seed: int | None = None, parent: QWidget | None = None) -> None:
+                 db: str | None = None, seed: int | None = None, lot: str = "",
+                 parent: QWidget | None = None) -> None:
         super().__init__(parent)
+        self.lot = lot
         self.station_arg, self.runs_dir, self.db_arg, self.seed = station, runs_dir, db, seed
         self.session: LineSession | None = None
         self.records: list[dict[str, Any]] = []
         self.units_done: list[tuple[str, str]] = []
+        self.batches_done: list[dict[int, str]] = []  # each batch's (or retest's) outcome by slot
+        self.slots: dict[int, SlotPanel] = {}
+        self.unit_progress = UnitProgress(1)
         self._thread: threading.Thread | None = None
         self._answer: tuple[dict, threading.Event] | None = None
+        self._running_prompt = ""
         self.setWindowTitle("gyrobench - operator station")
         self.resize(1000, 720)
         self.relay = _Relay()
@@ -100,6 +115,10 @@ class OperatorStation(QWidget):
         for w in (QLabel("Operator"), self.operator, QLabel("Sequence"), self.sequence, self.login_button):
             top.addWidget(w)
         top.addWidget(self.who, 1)
+        self.calib = QLabel("")
+        self.calib.setObjectName("calibration")
+        self.calib.setWordWrap(True)
+        self.calib.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
 
         self.verdict = QLabel("LOG IN")
         self.verdict.setObjectName("verdict")
@@ -116,6 +135,21 @@ class OperatorStation(QWidget):
         self.reason.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.reason.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         self.reason.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.step_label = QLabel("")
+        self.step_label.setObjectName("step")
+        self.step_label.setFont(font(13))
+        self.step_label.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.bar = QProgressBar()
+        self.bar.setRange(0, 1000)
+        self.bar.setTextVisible(False)
+        self.bar.setValue(0)
+        self.slots_widget = QWidget()
+        self.slots_row = QHBoxLayout(self.slots_widget)
+        self.slots_row.setContentsMargins(0, 0, 0, 0)
+        self.start_button = QPushButton("Start")
+        self.start_button.setObjectName("start")
+        self.start_button.setMinimumHeight(44)
+        self.start_button.setFont(font(16, True))
         self.prompt = QLabel("")
         self.prompt.setFont(font(18, True))
         self.prompt.setWordWrap(True)
@@ -149,12 +183,19 @@ class OperatorStation(QWidget):
 
         lay = QVBoxLayout(self)
         lay.addLayout(top)
+        lay.addWidget(self.calib)
         lay.addWidget(self.verdict)
         lay.addWidget(self.unit_label)
         lay.addWidget(self.reason)
+        lay.addWidget(self.slots_widget, 3)
+        lay.addWidget(self.step_label)
+        lay.addWidget(self.bar)
         lay.addSpacing(10)
         lay.addWidget(self.prompt)
-        lay.addWidget(self.serial_field)
+        scan_row = QHBoxLayout()
+        scan_row.addWidget(self.serial_field, 1)
+        scan_row.addWidget(self.start_button)
+        lay.addLayout(scan_row)
         retest_row = QHBoxLayout()
         retest_row.addWidget(self.retest_kind)
         retest_row.addWidget(self.retest, 1)
@@ -169,6 +210,10 @@ class OperatorStation(QWidget):
         self.serial_field.returnPressed.connect(self._serial_entered)
         self.yes_button.clicked.connect(lambda: self._answered(True))
         self.no_button.clicked.connect(lambda: self._answered(False))
+        self.start_button.clicked.connect(lambda: self.start_batch())
+        self.timer = QTimer(self)
+        self.timer.timeout.connect(self._show_progress)
+        self.timer.start(100)
         self._set_verdict("LOG IN")
         self.serial_field.setEnabled(False)
         self._open_session()
@@ -186,20 +231,62 @@ class OperatorStation(QWidget):
         self.serial_field.setEnabled(False)
         try:
             self.session = LineSession(self.station_arg, self.sequence.currentText(), runs_dir=self.runs_dir,
-                                       db=self.db_arg, seed=self.seed)
+                                       db=self.db_arg, seed=self.seed, lot=self.lot)
         except (ValidationError, ValueError, OSError) as exc:
             self.message.setText(str(exc))
             self.login_button.setEnabled(False)
             return
+        self._build_slots()
+        self._show_calibration()
         listed = self.session.operators()
         self.operator.setEditable(listed is None and self.session.free_text)
         if listed:
             self.operator.addItems(listed)
         self.login_button.setEnabled(bool(listed) or self.session.free_text)
-        self.message.setText("" if self.login_button.isEnabled() else
+        self.message.setText(self.session.refusal() or "" if self.login_button.isEnabled() else
                              f"station {self.session.station_id!r}: the line database lists no operators and "
                              "the station takes no typed names")
         self.prompt.setText("Log in: " + ("choose your name" if listed else "type your name"))
+
+    def _build_slots(self) -> None:
+        """A panel a slot (a station with slots), else the one unit's verdict."""
+        for panel in self.slots.values():
+            panel.setParent(None)
+            panel.deleteLater()
+        self.slots.clear()
+        n_steps = len(self.session.seq.steps) if self.session else 1
+        self.unit_progress = UnitProgress(n_steps)
+        for n in range(1, (self.session.n_slots if self.session else 0) + 1):
+            panel = SlotPanel(n, n_steps)
+            panel.clear_button.clicked.connect(lambda _c=False, n=n: self.clear_slot(n))
+            panel.retest_button.clicked.connect(lambda _c=False, n=n: self.retest_slot(n))
+            self.slots_row.addWidget(panel)
+            self.slots[n] = panel
+        many = bool(self.slots)
+        self.slots_widget.setVisible(many)
+        self.start_button.setVisible(many)
+        self.start_button.setEnabled(False)
+        for w in (self.verdict, self.unit_label, self.reason, self.step_label, self.bar):
+            w.setVisible(not many)
+        self.serial_field.setPlaceholderText(
+            "scan a serial (Enter alone leaves the slot empty)" if many
+            else "scan or type the serial, then Enter")
+
+    def _show_calibration(self) -> None:
+        """The station's calibration dates and golden-unit lock; red when it refuses to run."""
+        if self.session is None:
+            return
+        refused = self.session.refusal()
+        self.calib.setText(f"station {self.session.station_id}: {self.session.calibration_status()}")
+        self.calib.setStyleSheet("color: #c62020; font-weight: bold;" if refused else "color: #2e5e2e;")
+
+    def refused(self) -> bool:
+        """Whether the station refuses to run now (shown as one message); re-read at each unit."""
+        why = self.session.refusal() if self.session is not None else None
+        self._show_calibration()
+        if why:
+            self.message.setText(why)
+        return bool(why)
 
     def log_in(self) -> bool:
         if self.session is None or self.busy():
@@ -209,7 +296,8 @@ class OperatorStation(QWidget):
         except (ValidationError, ValueError) as exc:
             self.message.setText(str(exc))
             return False
-        self.message.setText("")
+        self.message.setText(self.session.refusal() or "")
+        self._show_calibration()
         self.who.setText(f"<b>{name}</b> on {self.session.station_id}, sequence {self.session.seq.name}")
         self._set_verdict("READY")
         self._ask_serial()
@@ -220,13 +308,26 @@ class OperatorStation(QWidget):
         return self._thread is not None and self._thread.is_alive()
 
     def _ask_serial(self) -> None:
-        self.prompt.setText("Next unit: scan its serial" if self.units_done else "Scan the unit's serial")
+        if self.slots:
+            free = self._next_free()
+            self.start_button.setEnabled(any(p.serial for p in self.slots.values()) and not self.busy())
+            self.prompt.setText(f"Scan the unit for slot {free}, or Start" if free else "Every slot is set: Start")
+        else:
+            self.prompt.setText("Next unit: scan its serial" if self.units_done else "Scan the unit's serial")
         self.serial_field.setEnabled(True)
         self.serial_field.clear()
         self.serial_field.setFocus()
 
     def _serial_entered(self) -> None:
         if self.session is None or self.session.ctx is None or self.busy():
+            return
+        if self.slots:
+            self._place(self.serial_field.text())
+            return
+        if self.refused():  # the one message, under the verdict
+            self._set_verdict("REFUSED")
+            self.reason.setText(self.message.text())
+            self.message.setText("")
             return
         try:
             serial = self.session.check_serial(self.serial_field.text())
@@ -243,12 +344,17 @@ class OperatorStation(QWidget):
         self.unit_label.setText(serial)
         self.reason.setText("")
         self.files.setText("")
-        self.prompt.setText(f"{serial}: testing - do not touch the fixture")
+        self._running_prompt = f"{serial}: testing - do not touch the fixture"
+        self.prompt.setText(self._running_prompt)
         session, operator = self.session, StationOperator(self, serial)
         why = self.retest.text().strip()
         is_rework = self.retest_kind.currentText() == "rework code"
         rework, reason = (why or None, None) if is_rework else (None, why or None)
         self.retest.clear()
+        self.unit_progress.reset()
+        self.step_label.setText("")
+        self.bar.setValue(0)
+        session.ctx.on_runner = lambda runner: self.unit_progress.follow(runner.bus)  # worker thread
 
         def work() -> None:
             try:
@@ -273,7 +379,7 @@ class OperatorStation(QWidget):
         (box, done), self._answer = self._answer, None
         self.yes_button.setEnabled(False)
         self.no_button.setEnabled(False)
-        self.prompt.setText(f"{self.unit_label.text()}: testing - do not touch the fixture")
+        self.prompt.setText(self._running_prompt)
         box["value"] = value
         done.set()
 
@@ -282,12 +388,22 @@ class OperatorStation(QWidget):
         return self._answer is not None
 
     def _attempt_outcome(self, serial: str, outcome: str, summary: str) -> None:
+        if self.slots:
+            panel = next((p for p in self.slots.values() if p.serial == serial), None)
+            if panel is not None:
+                panel.set_verdict(outcome, summary)
+            return
         self._set_verdict(outcome)
         self.unit_label.setText(serial)
         self.reason.setText(summary)
 
     def _unit_finished(self, payload: Any) -> None:
         serial, result = payload
+        self.unit_progress.detach()
+        self._show_progress()
+        if isinstance(serial, dict):
+            self._batch_finished(serial, result)
+            return
         self.sequence.setEnabled(True)
         self.login_button.setEnabled(True)
         if isinstance(result, BaseException):
@@ -308,6 +424,148 @@ class OperatorStation(QWidget):
         self.units_done.append((serial, outcome))
         self.unit_done.emit(serial, outcome)
         self._ask_serial()
+
+    # --- slots -----------------------------------------------------------------------------------
+    def _next_free(self) -> int | None:
+        """The lowest slot with no unit and not left empty on purpose."""
+        return next((n for n, p in self.slots.items() if p.serial is None and p.outcome != "NOT FITTED"), None)
+
+    def _place(self, text: str) -> None:
+        """A scan into the next empty slot; an empty scan (Enter alone) leaves that slot empty."""
+        if any(p.tested for p in self.slots.values()):  # the last batch's verdicts make way for the next
+            for p in self.slots.values():
+                p.empty()
+        free = self._next_free()
+        if free is None:
+            self.message.setText("every slot is set: Start, or Clear a slot")
+            return
+        if not text.strip():
+            self.slots[free].empty()
+            self.slots[free].set_verdict("NOT FITTED", "left empty: not run")
+            self.slots[free].clear_button.setEnabled(True)
+            self.message.setText("")
+            self._ask_serial()
+            return
+        try:
+            serial = self.session.check_serial(text)
+        except (ValidationError, ValueError) as exc:
+            self.message.setText(str(exc))
+            self.serial_field.selectAll()
+            return
+        taken = next((n for n, p in self.slots.items() if p.serial == serial), None)
+        if taken is not None:
+            self.message.setText(f"{serial} is already in slot {taken}")
+            self.serial_field.selectAll()
+            return
+        self.message.setText("")
+        self.slots[free].place(serial)
+        self.serial_field.clear()
+        self._ask_serial()
+
+    def clear_slot(self, n: int) -> None:
+        if not self.busy():
+            self.slots[n].empty()
+            self._ask_serial()
+
+    def start_batch(self, only: int | None = None) -> bool:
+        """Run the placed units as one batch (or slot `only` alone: a retest); False when nothing starts."""
+        if self.session is None or self.session.ctx is None or self.busy() or not self.slots:
+            return False
+        if self.refused():
+            for p in self.slots.values():
+                if p.serial and (only is None or p.slot == only):
+                    p.set_verdict("REFUSED", self.message.text())
+            return False
+        serials = {n: p.serial for n, p in self.slots.items() if p.serial and (only is None or n == only)}
+        not_fitted = [n for n, p in self.slots.items() if not p.serial]
+        if not serials:
+            self.message.setText("no unit placed: scan a serial into a slot first")
+            return False
+        self.message.setText("")
+        why = self.retest.text().strip()
+        is_rework = self.retest_kind.currentText() == "rework code"
+        rework, reason = (why or None, None) if is_rework else (None, why or None)
+        self.retest.clear()
+        for n, p in self.slots.items():
+            if n in serials:
+                p.set_verdict("RUNNING", "")
+                p.reset_progress()
+                p.tested = False
+            elif only is None:
+                p.set_verdict("NOT FITTED", "empty slot: not run")
+            p.clear_button.setEnabled(False)
+            p.retest_button.setEnabled(False)
+        for w in (self.serial_field, self.start_button, self.login_button, self.sequence):
+            w.setEnabled(False)
+        placed = ", ".join(f"{s} (slot {n})" for n, s in serials.items())
+        self._running_prompt = ("retest of " if only else "") + f"{placed}: testing - do not touch the fixtures"
+        self.prompt.setText(self._running_prompt)
+        session, operator = self.session, StationOperator(self, "")
+
+        def on_batch(batch: Any) -> None:  # worker thread, before each step's batch runs
+            for n, runner in batch.runners.items():
+                if n in self.slots:
+                    self.slots[n].progress.follow(runner.bus)
+
+        session.ctx.on_batch = on_batch
+
+        def work() -> None:
+            try:
+                result: Any = session.run_slots(serials, operator, rework=rework, retest_reason=reason,
+                                                not_fitted=not_fitted, alone=only is not None)
+            except BaseException as exc:  # noqa: BLE001 - said on the screen, never a traceback
+                result = exc
+            self.relay.finished.emit((serials, result))
+
+        self._thread = threading.Thread(target=work, name="line-batch", daemon=True)
+        self._thread.start()
+        return True
+
+    def retest_slot(self, n: int) -> bool:
+        """Slot n's unit alone, again (the retest field gives its rework code or reason)."""
+        return self.start_batch(only=n)
+
+    def _batch_finished(self, serials: dict[int, str], result: Any) -> None:
+        self.sequence.setEnabled(True)
+        self.login_button.setEnabled(True)
+        self.serial_field.setEnabled(True)
+        outcomes: dict[int, str] = {}
+        files = []
+        if isinstance(result, BaseException):
+            self.message.setText(str(result) or type(result).__name__)
+            for n in serials:
+                self.slots[n].set_verdict("NOT RUN", str(result) or type(result).__name__)
+                outcomes[n] = "NOT RUN"
+        else:
+            self.records.extend(result)
+            for rec in result:
+                n = int(rec.get("slot") or next(k for k, s in serials.items() if s == rec["serial"]))
+                retest = " (retest)" if (rec.get("routing") or {}).get("prior_attempts") else ""
+                self.slots[n].set_verdict(str(rec["outcome"]), f"attempt {rec['attempt']}{retest}: "
+                                          + str(rec.get("summary", "")))
+                outcomes[n] = str(rec["outcome"])
+                self.units_done.append((rec["serial"], outcomes[n]))
+                self.unit_done.emit(rec["serial"], outcomes[n])
+                if rec.get("db_error"):
+                    files.append(str(rec["db_error"]))
+            files += [f"slot {rec.get('slot')}: record {rec['record_file']}" for rec in result
+                      if rec.get("record_file")]
+        self.files.setText("\n".join(files))
+        for p in self.slots.values():
+            p.tested = p.serial is not None
+            p.clear_button.setEnabled(p.serial is not None)
+            p.retest_button.setEnabled(p.serial is not None)
+        self.batches_done.append(outcomes)
+        self._ask_serial()
+        self.prompt.setText("Done: Retest a slot, or scan the next units (the slots empty at the first scan)")
+
+    def _show_progress(self) -> None:
+        """The live step and progress (GUI thread, every 100 ms)."""
+        for p in self.slots.values():
+            p.show_progress()
+        if self.unit_progress.drain():
+            self.step_label.setText(self.unit_progress.text)
+            self.bar.setValue(int(round(1000 * self.unit_progress.fraction)))
 
     def _set_verdict(self, outcome: str) -> None:
         shown = "CONDITIONAL" if outcome == "MARGINAL" else outcome

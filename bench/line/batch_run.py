@@ -8,14 +8,17 @@ import signal
 from typing import Any
 
 from .record import now_iso
-from .routing import history, next_attempt
+from .routing import history, next_attempt, route
 from .run import STOP_OUTCOMES, LineContext, abort_on_signals, begin_attempt, finish_record, judge_run
 from .verdict import ABORTED, worst
 
 
 def run_batch_attempt(ctx: LineContext, station: Any, serials: dict[int, str], operator: Any,
-                      attempts: dict[str, int] | None = None) -> list[dict[str, Any]]:
-    """One attempt of every unit (serial by slot) on an opened batch station; their records."""
+                      attempts: dict[str, int] | None = None, *, not_fitted: list[int] | None = None,
+                      alone: bool = False) -> list[dict[str, Any]]:
+    """One attempt of every unit (serial by slot) on an opened batch station; their records, which
+    name the slots left empty (`not_fitted`, default every slot not in serials) and whether one unit
+    was retested alone."""
     from bench.engine.batch import Batch
     from bench.line.record import judged
     from procedures import find_procedure
@@ -71,7 +74,11 @@ def run_batch_attempt(ctx: LineContext, station: Any, serials: dict[int, str], o
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     out = []
-    batch_info = {"station": station.id, "serials": {str(n): s for n, s in serials.items()}}
+    batch_info = {"station": station.id, "serials": {str(n): s for n, s in serials.items()},
+                  "not_fitted": sorted(not_fitted if not_fitted is not None else
+                                       (n for n in range(1, station.n_slots + 1) if n not in serials))}
+    if alone:
+        batch_info["retest_alone"] = True
     for n, serial in serials.items():
         u = per[n]
         attempt = attempts[serial]
@@ -80,3 +87,60 @@ def run_batch_attempt(ctx: LineContext, station: Any, serials: dict[int, str], o
         operator.show_outcome(serial, rec["outcome"], rec["summary"])
         out.append(rec)
     return out
+
+
+def check_batch_sequence(seq: Any, limits: Any, station: Any) -> None:
+    """The sequence fits a slot of the station, its limits are measured, every step runs as a batch;
+    LineError names what does not (before any unit is placed)."""
+    from bench.engine.batch import BatchError, check_batchable
+    from bench.slots import BATCH_ROLES
+    from procedures import find_procedure
+
+    from . import LineError
+    from .checks import check_limits_measured, check_steps
+
+    check_steps(seq, station.slot(1))
+    check_limits_measured(seq, limits)
+    for step in seq.steps:
+        try:
+            check_batchable(find_procedure(step.procedure), BATCH_ROLES)
+        except BatchError as exc:
+            raise LineError(f"{seq.source}: {exc}") from None
+
+
+def run_batch_units(ctx: LineContext, station: Any, serials: dict[int, str], operator: Any, *,
+                    rework: str | None = None, retest_reason: str | None = None,
+                    run: Any = None, not_fitted: list[int] | None = None, alone: bool = False) -> list[dict[str, Any]]:
+    """The units placed (serial by slot; a slot not named is empty: not run, recorded as not fitted)
+    through one batch attempt, as `gyrobench line run` on a station with slots: every unit routed
+    first (bench/line/routing.py), the fixtures confirmed, the station opened, run and closed.
+    `run(work)` runs the attempt (a window's worker thread), default at once; `alone` marks one unit
+    retested by itself (the other slots' units, if any, wait; `not_fitted` names the empty slots)."""
+    from . import LineError
+
+    if not serials:
+        raise LineError(f"station {station.id!r}: no unit placed in any slot")
+    bad = [n for n in serials if not 1 <= n <= station.n_slots]
+    if bad:
+        raise LineError(f"slot(s) {bad}: station {station.id!r} has slots 1..{station.n_slots}")
+    if len(set(serials.values())) != len(serials):
+        raise LineError(f"{', '.join(serials.values())}: a serial is placed twice")
+    for s in serials.values():  # every unit's routing before the batch starts
+        ctx.routing[s], _ = route(history(ctx.db, ctx.runs_dir, s), s, ctx.sequence, rework=rework,
+                                  retest_reason=retest_reason)
+    placed = ", ".join(f"{s} in slot {n}" for n, s in sorted(serials.items()))
+    if not operator.confirm(f"units {placed} are in the fixtures of station {station.id!r}?"):
+        raise LineError("the fixtures were not confirmed; nothing was run")
+    try:
+        station.open()
+    except Exception as exc:  # noqa: BLE001 - a station that does not open is one line
+        raise LineError(f"station {station.id!r} did not open: {type(exc).__name__}: {exc}") from None
+    try:
+        attempts = {s: 1 for s in serials.values()}  # numbered after every attempt on disk and in the database
+
+        def work() -> list[dict[str, Any]]:
+            return run_batch_attempt(ctx, station, serials, operator, attempts, not_fitted=not_fitted, alone=alone)
+
+        return work() if run is None else run(work)
+    finally:
+        station.close()

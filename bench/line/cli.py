@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from . import LineError
+from .checks import check_limits_measured, check_steps
 
 EXIT_OK, EXIT_BAD, EXIT_USAGE = 0, 1, 2
 #: `line run`'s exit code by the unit's final outcome (docs/line.md); a batch exits by its worst unit
@@ -96,38 +97,6 @@ def _station_of(args: argparse.Namespace, seq_station: str) -> str:
     if not name:
         raise LineError("no station: give --station NAME|FILE (the sequence names none)")
     return name
-
-
-def check_limits_measured(seq: Any, limits: Any) -> None:
-    """Every limit names a measurement some step of the sequence measures (else the unit could only
-    end in ERROR): refused before a unit is scanned."""
-    from procedures import find_procedure
-
-    measured = {(m.name, step.procedure) for step in seq.steps for m in find_procedure(step.procedure).measurements}
-    for lim in limits.limits:
-        if not any(name == lim.name and lim.procedure in (None, proc) for name, proc in measured):
-            raise LineError(f"{limits.source}: [limits.{lim.name}] names a measurement no step of sequence "
-                            f"{seq.name!r} measures (its steps: {', '.join(s.procedure for s in seq.steps)})")
-
-
-def check_steps(seq: Any, station: Any) -> None:
-    """Every step's procedure fits the station (its device roles, the kind of gyro, the limits),
-    before a unit is scanned; LineError names the step and why."""
-    from bench.engine.demands import StationMismatch, check_station
-
-    if getattr(seq, "write_trims", False) and "fpga" not in station.config.devices:
-        raise LineError(f"{seq.source}: [trims] write = true needs an FPGA to hold the trims; station "
-                        f"{station.id!r} has {sorted(station.config.devices)}")
-    for i, step in enumerate(seq.steps, 1):
-        proc = step.make()
-        missing = [r for r in proc.requires if r not in station.config.devices]
-        if missing:
-            raise LineError(f"{seq.source}: [[step]] #{i} {step.procedure} needs device role(s) {missing}; "
-                            f"station {station.id!r} has {sorted(station.config.devices)}")
-        try:
-            check_station(proc, station)
-        except StationMismatch as exc:
-            raise LineError(f"{seq.source}: [[step]] #{i} {step.procedure}: {exc}") from None
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -217,11 +186,7 @@ def _parse_slot_fault(text: str) -> tuple[str, float, int | None]:
 
 def _run_batch(args: argparse.Namespace, seq: Any, station: Any, duts: list[str], faults: list) -> int:
     """Several units at once on a several-gyros station: --dut in slot order (slot 1 first)."""
-    from bench.engine.batch import BatchError, check_batchable
-    from bench.slots import BATCH_ROLES
-    from procedures import find_procedure
-
-    from .batch_run import run_batch_attempt
+    from .batch_run import check_batch_sequence, run_batch_units
     from .prompts import make_operator, stdin_is_terminal
 
     if not duts:
@@ -232,13 +197,7 @@ def _run_batch(args: argparse.Namespace, seq: Any, station: Any, duts: list[str]
     serials = dict(enumerate(duts, 1))  # checked by check_inputs
     if len(set(serials.values())) != len(serials):
         raise LineError(f"--dut {', '.join(duts)}: a serial is given twice")
-    check_steps(seq, station.slot(1))
-    check_limits_measured(seq, _limits_of(args, seq))
-    for step in seq.steps:
-        try:
-            check_batchable(find_procedure(step.procedure), BATCH_ROLES)
-        except BatchError as exc:
-            raise LineError(f"{seq.source}: {exc}") from None
+    check_batch_sequence(seq, _limits_of(args, seq), station)
     for kind, at_s, slot in faults:
         station.schedule_fault(kind, at_s, slot)
     if args.runs_dir is None:
@@ -248,30 +207,15 @@ def _run_batch(args: argparse.Namespace, seq: Any, station: Any, duts: list[str]
     ctx = _context(args, station_name=station.id, operator=args.operator, db_url=db_url, config=station.config)
     records: list[dict[str, Any]] = []
     try:
-        from .routing import history, route
+        run = None
+        if args.window:  # the batch in a worker thread, its columns in a window on this thread
+            from bench.gui.batch_window import run_batch_in_window
 
-        for s in serials.values():  # every unit's routing before the batch starts
-            ctx.routing[s], _ = route(history(ctx.db, ctx.runs_dir, s), s, seq, rework=args.rework,
-                                      retest_reason=args.retest_reason)
-        placed = ", ".join(f"{s} in slot {n}" for n, s in serials.items())
-        if not operator.confirm(f"units {placed} are in the fixtures of station {station.id!r}?"):
-            raise LineError("the fixtures were not confirmed; nothing was run")
-        try:
-            station.open()
-        except Exception as exc:  # noqa: BLE001 - a station that does not open is one line
-            raise LineError(f"station {station.id!r} did not open: {type(exc).__name__}: {exc}") from None
-        try:
-            attempts = {s: 1 for s in serials.values()}  # numbered after every attempt on disk and in the database
-            if args.window:  # the batch in a worker thread, its columns in a window on this thread
-                from bench.gui.batch_window import run_batch_in_window
+            def run(work):
+                return run_batch_in_window(serials, work, ctx, close_when_done=args.close_when_done)
 
-                records = run_batch_in_window(
-                    serials, lambda: run_batch_attempt(ctx, station, serials, operator, attempts), ctx,
-                    close_when_done=args.close_when_done)
-            else:
-                records = run_batch_attempt(ctx, station, serials, operator, attempts)
-        finally:
-            station.close()
+        records = run_batch_units(ctx, station, serials, operator, rework=args.rework,
+                                  retest_reason=args.retest_reason, run=run)
     finally:
         ctx.store.close()
         ctx.db.close()

@@ -43,6 +43,7 @@ class LineContext:
     on_record: Callable[[dict[str, Any]], None] | None = None
     aborted: list[str] = field(default_factory=list)
     on_batch: Callable[[Any], None] | None = None  # told each bench.engine.batch.Batch before it runs (the window)
+    on_runner: Callable[[Any], None] | None = None  # told each unit's bench.engine.Runner before its steps run
     signer: Any = None  # bench.line.integrity.Signer: the station's key (None: records chained, not signed)
     routing: dict[str, dict[str, Any]] = field(default_factory=dict)  # serial -> its routing (bench/line/routing.py)
     attempt_ids: dict[str, Any] = field(default_factory=dict)  # serial -> its open attempt (begin_attempt)
@@ -102,6 +103,8 @@ def run_attempt(ctx: LineContext, station: Any, serial: str, attempt: int, opera
     stopped_by: str | None = None
     asked_spin = False
     runner = Runner(station, runs_dir=ctx.runs_dir, store=ctx.store, operator=ctx.operator_name, duts=[serial])
+    if ctx.on_runner is not None:
+        ctx.on_runner(runner)
     previous = abort_on_signals(ctx, runner.abort)
     try:
         for step in seq.steps:
