@@ -9,6 +9,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from bench.validation import range_text
+
 from . import LineError
 from .checks import check_limits_measured, check_steps
 
@@ -514,7 +516,8 @@ def _print_records(records: list[dict[str, Any]], as_json: bool) -> None:
             ivt = "" if iv is None else f" [{iv[0]:.6g}, {iv[1]:.6g}]" if None not in iv else f" {iv}"
             lim = m["limits"]
             v = "-" if m["value"] is None else f"{m['value']:.6g}"
-            print(f"  {m['name']:<24} {v} {m['unit']}{ivt}  limits {lim['low']}..{lim['high']}  "
+            bounds = range_text(lim["low"], lim["high"], m["unit"]) or "none"
+            print(f"  {m['name']:<24} {v} {m['unit']}{ivt}  limits {bounds}  "
                   f"{m['outcome']} ({m['rule']})")
         print(f"  record {r['record_file']}")
 

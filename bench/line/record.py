@@ -12,6 +12,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from bench.validation import range_text
+
 from .verdict import COMPLETE, ERROR, MARGINAL, SKIPPED, Limit, judge
 
 SCHEMA_VERSION = 1
@@ -120,8 +122,8 @@ def summary(record: dict[str, Any]) -> str:
         lim = m["limits"] or {}
         value = "-" if m["value"] is None else f"{m['value']:.6g}"
         kind = f" {m['condition']}" if m.get("condition") else ""
-        words.append(f"{m['name']}={value} {m['unit']} {m['outcome']}{kind} (limits {lim.get('low')}.."
-                     f"{lim.get('high')}, rule {m['rule']})")
+        bounds = range_text(lim.get("low"), lim.get("high"), m["unit"]) or "none"
+        words.append(f"{m['name']}={value} {m['unit']} {m['outcome']}{kind} (limits {bounds}, rule {m['rule']})")
     return f"{record['outcome']}: " + "; ".join(words) + (f"; +{len(bad) - 4} more" if len(bad) > 4 else "")
 
 
