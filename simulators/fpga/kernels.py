@@ -10,7 +10,13 @@ into electrode forces at the angle and phase the wave is predicted to have at th
 block they are held over.  Without that prediction a force held over a block acts along the
 wave's direction one block period ago: while the wave turns at Omega, the amplitude force f_a then
 leaks -f_a Omega T / (2 a) into dtheta/dt, a precession scale error of -gamma T / 2 (0.017 % at
-50 ms blocks).  The quadrature loop is a PI on k plus the split's pattern fed forward: a frequency
+50 ms blocks).  The precession force F_p turns the wave at F_p / (4 a) with a the amplitude while
+the force is held, so F_p = 4 a Omega_cmd takes a predicted at the block's middle too (from its rate
+between estimates): the damping anisotropy pumps the amplitude at 4 theta and the AGC follows it
+with a lag, so an F_p from the block's estimate missed the command by (da/dt / a) x ~1.5 blocks,
+with the damping drift's pattern: it read the drift 1.5 % low and left 0.37 deg/h of 4 theta after
+compensation at 10 deg/s (0.013 now; benchmarks/wa_rate_drift.py).
+The quadrature loop is a PI on k plus the split's pattern fed forward: a frequency
 split pumps quadrature at a rate (d/a) = h_c cos 4 theta + h_s sin 4 theta fixed in the case frame,
 which a PI in the wave's frame must follow as the wave turns and cannot (at 2 deg/s the 4 theta
 pattern turns at 0.14 rad/s, under the PI's 1 rad/s): the k it leaves lags the pattern, and the
@@ -60,7 +66,8 @@ S_SPAN = 41  # the span between the last two wave estimates (the rates' baseline
 # loop saturation (drivers.fpga.protocol SAT_*): the clamps the last update hit (S_SAT_NEXT), and
 # those of the forces held over this block (S_SAT: that update's and wave_force's), streamed
 S_SAT_NEXT, S_SAT = 42, 43
-N_STATE = 44
+S_A_RATE = 44  # the amplitude's rate between the last two wave estimates (1/s x amplitude)
+N_STATE = 45
 MODE_FTR = 1  # OUTPUT_MODE's force-to-rebalance (drivers.fpga.protocol.MODE_FORCE_TO_REBALANCE)
 OBS_MEMORY_S = 100.0  # the observer forgets data older than this (exponential weight)
 OBS_RIDGE = 0.05**3  # damping of the solve: one 50 ms block's weight (weights are span^3: 1/variance)
@@ -151,6 +158,7 @@ def update_loops(
     k = qq / (2.0 * a) if a > 0 else 0.0
     c2, s2 = math.cos(2 * theta), math.sin(2 * theta)
     chi = math.atan2(-(sx * c2 + sy * s2), cx * c2 + cy * s2)
+    a_prev = st[S_A]
     st[S_A] = a
     phase_err = (chi + 0.5 * math.pi) % math.pi - 0.5 * math.pi
     st[S_PHASE_ERR] = phase_err
@@ -171,10 +179,11 @@ def update_loops(
             # chi is relative to the reference: add back the reference's change since the last estimate
             d_chi = _wrap(chi - st[S_CHI], math.pi) + 2.0 * math.pi * (st[S_REF_HZ] - ref_hz) * (t_start - st[S_T_EST])
             st[S_CHI_RATE] = d_chi / span
+            st[S_A_RATE] = (a - a_prev) / span
             st[S_SPAN] = span
             st[S_EST] = 2.0
         else:
-            st[S_THETA_RATE] = st[S_CHI_RATE] = 0.0
+            st[S_THETA_RATE] = st[S_CHI_RATE] = st[S_A_RATE] = 0.0
             st[S_EST] = 1.0
         st[S_THETA] = theta
         st[S_CHI] = chi
@@ -277,9 +286,14 @@ def wave_force(
         )
         if ctrl & _QUAD_EN and st[S_EST] > 1:  # the split's frequency pattern turning with the wave
             chi += split_phase(st, t_mid)
+        # the wave turns at F_p / (4 a) with a its amplitude while the force is held: F_p is the
+        # command times the amplitude predicted at the block's middle, not the one estimated there
+        a_mid = st[S_A] + st[S_A_RATE] * (t_mid - st[S_T_EST])
+        if not ftr and st[S_A] > 0:
+            f_p *= a_mid / st[S_A]
         if ctrl & _WHOLE_ANGLE and ctrl & _DRIFT_COMP_EN and not ftr:
             th_tau = math.radians(prm[P_DRIFT_THETA_TAU_DEG])
-            f_p -= st[S_A] * prm[P_DRIFT_D_PER_S] * math.sin(4.0 * (theta - th_tau))
+            f_p -= a_mid * prm[P_DRIFT_D_PER_S] * math.sin(4.0 * (theta - th_tau))
         # a turning wave: the block mean shrinks the amplitude estimate by s1 and a force held in
         # one direction pushes along the turning wave by s2 on average (both 1 - (Omega T)^2 / 6)
         x = st[S_THETA_RATE] * dt_s
