@@ -76,6 +76,12 @@ def main() -> None:
                   f"{v['mean_bias_dph'][0]:+.4f}  Q {q_rel:+.2e} ({'in' if q_in else 'OUT of'} its interval)  "
                   f"D {d_rel:+.2e}  s_m {sm:.0f} ppm (truth at end {1e6 * sm_true:.0f})  "
                   f"s_d {v.get('loop_gain_diff_ppm', (math.nan,))[0]:.0f} ppm  [{wall:.0f} s wall]", flush=True)
+            if "mean_bias_10h_dph" in v:
+                m10, ci = v["mean_bias_10h_dph"]
+                print(f"    mean bias since start after 10 h {m10:+.4f} [{ci[0]:+.4f}, {ci[1]:+.4f}] deg/h "
+                      f"(paper: under "
+                      f"0.018); angle error at the end {v['angle_error_deg'][0]:+.3f} deg, largest "
+                      f"{v['angle_error_max_deg'][0]:.3f} deg", flush=True)
 
 
 if __name__ == "__main__":
