@@ -30,7 +30,7 @@ STATION_KEYS = {
     "axis_azimuth_deg": Key(float, 0.0, 0.0, 360.0, doc="sensitive axis from north toward east", unit="deg"),
 }
 #: the kind of gyro a simulated station holds when its file does not say
-PRESET_KINDS = {"hrg": "hrg", "hrg-wa": "hrg", "hrg-selfcal": "hrg", "mems": "mems-ring",
+PRESET_KINDS = {"hrg": "hrg", "hrg-wa": "hrg", "hrg-selfcal": "hrg", "hrg-selfcal-gains": "hrg", "mems": "mems-ring",
                 "hrg-realistic": "hrg", "mems-realistic": "mems-ring"}
 SIM_KEYS = {
     "preset": Key(str, "hrg", choices=tuple(PRESET_KINDS),

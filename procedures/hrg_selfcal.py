@@ -40,7 +40,13 @@ CYCLE_COLUMNS = declare(StreamSchema(CYCLES, "hrg-selfcal", (
     Column("q_factor", "1", doc="Q = w0 / gamma"), Column("q_se", "1", doc="its standard error"),
     Column("beta_c_per_s", "1/s", doc="amplitude channel's cos 4 theta term (drift model)"),
     Column("beta_s_per_s", "1/s", doc="amplitude channel's sin 4 theta term (drift model)"),
-    Column("dof", "1", doc="degrees of freedom of the amplitude fit")))).names  # fmt: skip
+    Column("dof", "1", doc="degrees of freedom of the amplitude fit"),
+    Column("loop_gain_cm_ppm", "ppm", doc="common-mode loop gain error s_m (pickoff x forcer) from the "
+           "frequency-control force (0: no such force)"),
+    Column("loop_gain_cm_se_ppm", "ppm", doc="its standard error"),
+    Column("loop_gain_diff_ppm", "ppm", doc="X/Y loop gain difference s_d (pickoff and forcer, over 2) from the "
+           "frequency-control force"),
+    Column("loop_gain_diff_se_ppm", "ppm", doc="its standard error")))).names  # fmt: skip
 RATES = "hrg_selfcal_rates"
 RATE_COLUMNS = declare(StreamSchema(RATES, "hrg-selfcal", (
     Column("t_s", "s", doc="time of the rate sample (midpoint)"),
@@ -51,10 +57,13 @@ RATE_COLUMNS = declare(StreamSchema(RATES, "hrg-selfcal", (
 
 #: model floor added in quadrature to the identified parameters' intervals (docs/selfcal.md, section 4):
 #: terms of second order in the gain difference and the loops' own residual, measured on noise-free runs
-Q_FLOOR_REL = 1e-5
+Q_FLOOR_REL = 3e-5  # with the frequency-control force: its loop-gain floor (LOOP_GAIN_FLOOR_PPM) is in gamma
 D_FLOOR_REL = 1e-3
 ANGLE_FLOOR_DEG = 0.05
 SPLIT_FLOOR_REL = 1e-3
+#: the frequency-control force's own reading with no gain error (+16 ppm, noise-free) and the split's
+#: coupling of the forcer difference into it (+25 ppm at 600 ppm): docs/selfcal.md section 2
+LOOP_GAIN_FLOOR_PPM = 30.0
 
 
 def _truth(key: str, scale: float = 1.0):
@@ -72,12 +81,16 @@ def _floor_truth(truth: dict[str, float]) -> float:
 
 
 def _gain_truth(kind: str):
-    """The true X/Y gain difference at clock time 0 ("start") or its drift (ppm, ppm/h); 0 on a
-    station whose pickoff gains have no error."""
+    """The true X/Y loop gain difference at clock time 0 ("start") or its drift (ppm, ppm/h): the
+    pickoff chains' g_x - g_y plus the forcers' (the amplitude channel's gain term sees both,
+    docs/selfcal.md section 2); 0 on a station whose chains have no gain error."""
     def rule(truth: dict[str, float]) -> float:
         if kind == "start":
-            return truth.get("noise_gain_x_ppm", 0.0) - truth.get("noise_gain_y_ppm", 0.0)
-        return truth.get("noise_gain_x_drift_ppm_h", 0.0) - truth.get("noise_gain_y_drift_ppm_h", 0.0)
+            return (truth.get("noise_gain_x_ppm", 0.0) - truth.get("noise_gain_y_ppm", 0.0)
+                    + 2.0 * truth.get("err_pickoff_gain_diff_ppm", 0.0)
+                    + truth.get("err_forcer_gain_x_ppm", 0.0) - truth.get("err_forcer_gain_y_ppm", 0.0))
+        return (truth.get("noise_gain_x_drift_ppm_h", 0.0) - truth.get("noise_gain_y_drift_ppm_h", 0.0)
+                + 2.0 * truth.get("err_pickoff_gain_diff_drift_ppm_h", 0.0))
     return rule
 
 
@@ -96,8 +109,13 @@ class HrgSelfcal(HrgExcitation, Procedure):
     cycles = Param(4, unit="", low=2, high=1000, doc="forced-precession cycles (the first one only learns)")
     precession_dps = Param(0.05, unit="deg/s", low=1e-3, high=2.0,
                            doc="wave-angle precession command: a cycle (90 deg forward, back) lasts 180 / rate s")
-    fm_amplitude_hz = Param(0.002, unit="Hz", low=0.0, high=1.0, doc="frequency modulation of the frequency loop")
-    fm_rate_hz = Param(0.05, unit="Hz", low=0.0, high=10.0, doc="its rate")
+    fm_amplitude_hz = Param(0.0, unit="Hz", low=0.0, high=1.0,
+                            doc="frequency modulation of the reference (no force: identifies nothing; "
+                                "0 with fm_force_hz)")
+    fm_force_hz = Param(0.01, unit="Hz", low=0.0, high=1.0,
+                        doc="frequency-control force (the paper's FM): a square wave moving the wave's frequency "
+                            "+-this much on an ideal chain; its response gives the loop gains (0: off)")
+    fm_rate_hz = Param(0.025, unit="Hz", low=0.0, high=10.0, doc="rate of either modulation")
     settle_s = Param(30.0, unit="s", low=0.0, high=3600.0, doc="loops settling in whole-angle mode first")
     stream_hz = Param(1.0, unit="Hz", low=0.1, high=100.0, doc="rate of the samples analysed (boxcar stream)")
     bin_s = Param(20.0, unit="s", low=1.0, high=600.0, doc="least-squares bins (the loops' outputs are correlated "
@@ -119,11 +137,17 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("split_hz", "Hz", "frequency split, last cycle", truth="split_hz"),
         Measurement("theta_w_deg", "deg", "stiffness axis in [0, 90), last cycle", truth="theta_w_deg",
                     period=AXIS_PERIOD_DEG),
-        Measurement("gain_diff_start_ppm", "ppm", "X/Y gain difference g_x - g_y at clock time 0, from the straight "
-                    "line through the cycles' identified values", truth=_gain_truth("start")),
+        Measurement("gain_diff_start_ppm", "ppm", "X/Y loop gain difference g_x - g_y (pickoff and forcer) at clock "
+                    "time 0, from the straight line through the cycles' identified values", truth=_gain_truth("start")),
         Measurement("gain_drift_ppm_h", "ppm/h", "drift of the X/Y gain difference (slope of that line)",
                     truth=_gain_truth("drift")),
         Measurement("gain_diff_last_ppm", "ppm", "X/Y gain difference identified in the last cycle"),
+        Measurement("loop_gain_cm_ppm", "ppm", "common-mode loop gain error s_m (pickoff and forcer chains) the "
+                    "frequency-control force met in the last cycle: the commanded precession runs 1 + s_m fast",
+                    when=lambda p: p.fm_force_hz > 0, when_doc="a frequency-control force (fm_force_hz > 0)"),
+        Measurement("loop_gain_diff_ppm", "ppm", "X/Y loop gain difference s_d (pickoff residual after the trims "
+                    "plus forcer, (g_x - g_y) / 2 of each) the frequency-control force met in the last cycle",
+                    when=lambda p: p.fm_force_hz > 0, when_doc="a frequency-control force (fm_force_hz > 0)"),
         Measurement("bias_stability_plain_dph", "deg/h", "plain whole-angle bias stability (smooth_s windows, "
                     "1 sigma), cycles after the first"),
         Measurement("bias_stability_selfcal_dph", "deg/h", "self-calibrated bias stability, same record; truth: the "
@@ -165,7 +189,12 @@ class HrgSelfcal(HrgExcitation, Procedure):
         return []
 
     def preflight(self, devices) -> None:
-        """The cycles' precession command within the FPGA's force limit (read-only)."""
+        """The cycles' precession command within the FPGA's force limit (read-only); one kind of FM."""
+        if self.fm_force_hz > 0 and self.fm_amplitude_hz > 0:
+            raise ValueError("fm_force_hz and fm_amplitude_hz share FM_RATE_HZ and the frequency channel: set one to 0")
+        if self.fm_force_hz > 0 and (self.fm_rate_hz <= 0 or 0.5 / self.fm_rate_hz <= 2 * sc.FM_SETTLE_S):
+            raise ValueError(f"fm_rate_hz={self.fm_rate_hz:g}: the frequency-control force's half period must exceed "
+                             f"twice its {sc.FM_SETTLE_S:g} s settling (fm_rate_hz < {0.25 / sc.FM_SETTLE_S:g})")
         refuse_above_precession_limit(self, devices, "precession_dps", self.precession_dps, "deg/s ")
 
     @step("Excite, hold the amplitude, whole-angle mode with FM")
@@ -177,9 +206,8 @@ class HrgSelfcal(HrgExcitation, Procedure):
         self._start_loops(ctx)
         self._trim0 = {n: float(fpga.read_register(n)) for n in ("TRIM_EN", "TRIM_GAIN_X", "TRIM_GAIN_Y")}
         ctx.defer(lambda: self._restore(fpga), "FPGA gain trims and FM back")
-        fpga.set_whole_angle(True, 0.0)
-        fpga.write_register("FM_RATE_HZ", self.fm_rate_hz)
-        fpga.write_register("FM_AMPLITUDE_HZ", self.fm_amplitude_hz)
+        fpga.set_whole_angle(True, 0.0, self.fm_amplitude_hz, self.fm_rate_hz)
+        fpga.write_register("FM_FORCE_HZ", self.fm_force_hz)
         a = self._hold_amplitude(ctx)
         self._f0_hz = float(fpga.read_register("PLL_FREQ_HZ"))
         ctx.sleep(self.settle_s)
@@ -192,6 +220,7 @@ class HrgSelfcal(HrgExcitation, Procedure):
 
     def _restore(self, fpga) -> None:
         fpga.write_register("FM_AMPLITUDE_HZ", 0.0)
+        fpga.write_register("FM_FORCE_HZ", 0.0)
         fpga.set_whole_angle(True, 0.0)
         for name, v in self._trim0.items():
             fpga.write_register(name, v)
@@ -206,7 +235,8 @@ class HrgSelfcal(HrgExcitation, Procedure):
             fpga.sync()
             t0 = ctx.clock.now()
             for h, sign in enumerate((1.0, -1.0)):
-                fpga.set_whole_angle(True, sign * self.precession_dps)
+                # (the FM registers with it: set_whole_angle writes them too, and used to zero them here)
+                fpga.set_whole_angle(True, sign * self.precession_dps, self.fm_amplitude_hz, self.fm_rate_hz)
                 for k in range(1, n + 1):
                     ctx.sleep_until(t0 + (h + k / n) * half_s)
             fpga.sync()
@@ -245,8 +275,8 @@ class HrgSelfcal(HrgExcitation, Procedure):
             e = slice(3, len(t) - 3)
             fit = sc.fit_cycle(t[e], th_fit[e], thdot[e], cols["amp_ctrl"][e], cols["freq_ctrl"][e],
                                amplitude=self.amplitude, f0_hz=self._f0_hz, bin_s=self.bin_s,
-                               fm_rate_hz=self.fm_rate_hz if self.fm_amplitude_hz > 0 else 0.0,
-                               level=self.confidence)
+                               fm_rate_hz=self.fm_rate_hz if self.fm_amplitude_hz > 0 or self.fm_force_hz > 0 else 0.0,
+                               fm_force_hz=self.fm_force_hz, level=self.confidence)
             g = fit.gain_diff
             cyc_rows.append(self._cycle_row(t0, t1, fit, trim_dg))
             # rates of this cycle: the previous cycle's identification (gain trimmed out since);
@@ -284,7 +314,8 @@ class HrgSelfcal(HrgExcitation, Procedure):
         g, d, tt, sp, tw, q = f.gain_diff, f.delta_inv_tau, f.theta_tau_deg, f.split_hz, f.theta_w_deg, f.q_factor
         return [t0, t1, 1e6 * (trim_dg + g.value), 1e6 * g.se, 1e6 * trim_dg, d.value, d.se, tt.value, tt.se,
                 sp.value, sp.se, tw.value, tw.se, q.value, q.se, float(f.amp_coef[1]), float(f.amp_coef[2]),
-                float(f.dof)]
+                float(f.dof), 1e6 * f.loop_gain_cm.value, 1e6 * f.loop_gain_cm.se, 1e6 * f.loop_gain_diff.value,
+                1e6 * f.loop_gain_diff.se]
 
     @step("Bias stability, mean bias, angle error, Allan deviation")
     def results(self, ctx):
@@ -296,7 +327,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
         if CYCLES not in data or RATES not in data:
             raise ValueError(f"{data.path.name} holds no self-calibration cycles")
         cyc, rates = data.table(CYCLES), data.table(RATES)
-        c = np.column_stack([cyc[n] for n in CYCLE_COLUMNS])
+        n_cyc = len(cyc[CYCLE_COLUMNS[0]])
+        # a record from before the frequency-control force has no loop-gain columns: NaN
+        c = np.column_stack([cyc[n] if n in cyc else np.full(n_cyc, np.nan) for n in CYCLE_COLUMNS])
         r = np.column_stack([rates[n] for n in RATE_COLUMNS])
         dt = float(np.median(np.diff(r[:, 0]))) if len(r) > 1 else 1.0
         return _analyse(c, r, self.smooth_s, dt, self.confidence)
@@ -336,6 +369,12 @@ def _analyse(cyc: np.ndarray, rates: np.ndarray, smooth_s: float, dt: float, lev
         Result("gain_diff_last_ppm", last["gain_diff_ppm"], ci95=_interval(last["gain_diff_ppm"],
                                                                            last["gain_diff_se_ppm"], 0.0, level)),
     ]
+    if np.isfinite(last["loop_gain_cm_ppm"]) and last["loop_gain_cm_se_ppm"] > 0:
+        floor = LOOP_GAIN_FLOOR_PPM
+        out += [Result("loop_gain_cm_ppm", last["loop_gain_cm_ppm"],
+                       ci95=_interval(last["loop_gain_cm_ppm"], last["loop_gain_cm_se_ppm"], floor, level)),
+                Result("loop_gain_diff_ppm", last["loop_gain_diff_ppm"],
+                       ci95=_interval(last["loop_gain_diff_ppm"], last["loop_gain_diff_se_ppm"], floor, level))]
     t_mid_h = 0.5 * (col["t_start_s"] + col["t_end_s"]) / 3600.0
     if len(t_mid_h) >= 3:
         g0, slope = sc.gain_trend(t_mid_h, col["gain_diff_ppm"], col["gain_diff_se_ppm"], level)

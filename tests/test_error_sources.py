@@ -50,8 +50,8 @@ def test_every_source_is_off_by_default():
     assert World(IDEAL).errors is None
     for name in ("hrg", "hrg-wa", "hrg-selfcal", "hrg-ideal", "mems"):
         assert name not in ERROR_PRESETS
-    for name in ERROR_PRESETS:
-        assert name.endswith("-realistic") and ERROR_PRESETS[name].active
+    for name in ERROR_PRESETS:  # the realistic units, and the self-calibration gyro with loop gain errors
+        assert (name.endswith("-realistic") or name == "hrg-selfcal-gains") and ERROR_PRESETS[name].active
 
 
 def test_common_mode_pickoff_gain_scales_the_amplitude():

@@ -17,6 +17,11 @@ from .axes import axis_deg
 AMP_TERMS = ("gamma", "beta_c", "beta_s", "two_dg", "nuisance_c")
 #: frequency-channel regressors: 1, cos 4th, sin 4th (the FM averages out over bins of whole FM periods)
 FREQ_TERMS = ("f_mean_hz", "h_c_hz", "h_s_hz")
+#: with the frequency-control force's square wave m = +-1 (FM_FORCE_HZ F): also m F, m F cos 4th, m F sin 4th,
+#: whose coefficients are the loop gain 1 + s_m + s_d cos 4th + s_s sin 4th the force meets (docs/selfcal.md)
+FM_TERMS = ("fm_gain", "fm_gain_c", "fm_gain_s")
+#: the square wave's switching transient left out of the fit (the PLL settles in about 1 s)
+FM_SETTLE_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -42,10 +47,56 @@ class CycleFit:
     level: float
     f0_hz: float
 
-    def _est(self, value: float, grad: np.ndarray, cov: np.ndarray) -> Estimate:
-        se = float(math.sqrt(max(0.0, grad @ cov @ grad)))
+    def _est(self, value: float, grad: np.ndarray, cov: np.ndarray, grad_f: np.ndarray | None = None) -> Estimate:
+        """value with the delta method's standard error: grad over the amplitude channel's
+        coefficients (cov), grad_f over the frequency channel's (independent of them)."""
+        var = grad @ cov @ grad
+        if grad_f is not None:
+            var += grad_f @ self.freq_cov @ grad_f
+        se = float(math.sqrt(max(0.0, var)))
         t = float(stats.t.ppf(0.5 + self.level / 2.0, self.dof))
         return Estimate(float(value), se, (float(value - t * se), float(value + t * se)))
+
+    @property
+    def has_fm_force(self) -> bool:
+        """The frequency channel carries the frequency-control force's response (FM_TERMS)."""
+        return len(self.freq_coef) == len(FREQ_TERMS) + len(FM_TERMS)
+
+    def _fm_grad(self, j: int) -> np.ndarray:
+        g = np.zeros(len(self.freq_coef))
+        g[len(FREQ_TERMS) + j] = 1.0
+        return g
+
+    @property
+    def loop_gain_cm(self) -> Estimate:
+        """s_m: the common-mode loop gain error (pickoff x forcer) the frequency-control force meets,
+        which scales the commanded precession by 1 + s_m (the paper's delta of its eq. 11); 0 with
+        no frequency-control force (not identified)."""
+        if not self.has_fm_force:
+            return Estimate(0.0, 0.0, (0.0, 0.0))
+        z = np.zeros(len(AMP_TERMS))
+        return self._est(self.freq_coef[len(FREQ_TERMS)] - 1.0, z, self.amp_cov, self._fm_grad(0))
+
+    @property
+    def loop_gain_diff(self) -> Estimate:
+        """s_d: the X/Y difference of the loop gain (pickoff and forcer: g_x - g_y over 2 of each,
+        summed), the cos 4 theta term of the force's response; 0 with no frequency-control force."""
+        if not self.has_fm_force:
+            return Estimate(0.0, 0.0, (0.0, 0.0))
+        z = np.zeros(len(AMP_TERMS))
+        return self._est(self.freq_coef[len(FREQ_TERMS) + 1], z, self.amp_cov, self._fm_grad(1))
+
+    def _gamma(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """The mean damping gamma (1/s): the amplitude channel reads gamma / (1 + s_m) (the AGC's
+        force meets the loop gain), put back with the frequency-control force's s_m when there is one."""
+        gam = float(self.amp_coef[0])
+        g = np.zeros(len(AMP_TERMS))
+        if not self.has_fm_force:
+            g[0] = 1.0
+            return gam, g, np.zeros(len(self.freq_coef))
+        gain = float(self.freq_coef[len(FREQ_TERMS)])  # 1 + s_m
+        g[0] = gain
+        return gam * gain, g, gam * self._fm_grad(0)
 
     @property
     def gain_diff(self) -> Estimate:
@@ -57,34 +108,42 @@ class CycleFit:
     @property
     def q_factor(self) -> Estimate:
         """Q = w0 / gamma."""
-        gam = self.amp_coef[0]
-        g = np.zeros(len(AMP_TERMS))
-        g[0] = -2 * math.pi * self.f0_hz / gam**2
-        return self._est(2 * math.pi * self.f0_hz / gam, g, self.amp_cov)
+        gam, g_a, g_f = self._gamma()
+        k = -2 * math.pi * self.f0_hz / gam**2
+        return self._est(2 * math.pi * self.f0_hz / gam, k * g_a, self.amp_cov, k * g_f)
 
-    def _b(self) -> tuple[float, float, np.ndarray, np.ndarray]:
-        """The damping anisotropy's (b_c, b_s) with the gain's share of the cos term put back:
-        b_c = beta_c + gamma Delta g / 2 (beta_c is the amplitude channel's 4 theta cos term)."""
+    def _b(self) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The damping anisotropy's (b_c, b_s) with the gains' share of the cos term put back:
+        b_c = beta_c + gamma s_d (beta_c is the amplitude channel's 4 theta cos term; s_d the
+        frequency-control force's loop gain difference, pickoff and forcer), or, with no
+        frequency-control force, beta_c + gamma Delta g / 2 (the pickoff's difference alone).
+        Returns b_c, b_s and their gradients over the amplitude and the frequency coefficients."""
         gam, bc_app, bs, two_dg = self.amp_coef[:4]
+        nf = len(self.freq_coef)
+        g_bs, g_bs_f = np.array([0.0, 0.0, 1.0, 0.0, 0.0]), np.zeros(nf)
+        if self.has_fm_force:
+            sd = float(self.freq_coef[len(FREQ_TERMS) + 1])
+            bc = bc_app + gam * sd
+            return float(bc), float(bs), np.array([sd, 1.0, 0.0, 0.0, 0.0]), g_bs, gam * self._fm_grad(1), g_bs_f
         bc = bc_app + gam * two_dg / 4.0
         g_bc = np.array([two_dg / 4.0, 1.0, 0.0, gam / 4.0, 0.0])
-        g_bs = np.array([0.0, 0.0, 1.0, 0.0, 0.0])
-        return float(bc), float(bs), g_bc, g_bs
+        return float(bc), float(bs), g_bc, g_bs, np.zeros(nf), g_bs_f
 
     @property
     def delta_inv_tau(self) -> Estimate:
         """D = Delta(1/tau) = hypot(b_c, b_s) (1/s)."""
-        bc, bs, g_bc, g_bs = self._b()
+        bc, bs, g_bc, g_bs, f_bc, f_bs = self._b()
         d = math.hypot(bc, bs)
-        return self._est(d, (bc * g_bc + bs * g_bs) / d, self.amp_cov)
+        return self._est(d, (bc * g_bc + bs * g_bs) / d, self.amp_cov, (bc * f_bc + bs * f_bs) / d)
 
     @property
     def theta_tau_deg(self) -> Estimate:
         """The damping axis: (1/4) atan2(b_s, b_c), degrees, in [0, 90) (bench.analysis.axes)."""
-        bc, bs, g_bc, g_bs = self._b()
+        bc, bs, g_bc, g_bs, f_bc, f_bs = self._b()
         r2 = bc * bc + bs * bs
-        g = (bc * g_bs - bs * g_bc) / r2 * math.degrees(1.0) / 4.0
-        return self._est(axis_deg(math.degrees(math.atan2(bs, bc)) / 4.0), g, self.amp_cov)
+        k = math.degrees(1.0) / 4.0 / r2
+        return self._est(axis_deg(math.degrees(math.atan2(bs, bc)) / 4.0), k * (bc * g_bs - bs * g_bc), self.amp_cov,
+                         k * (bc * f_bs - bs * f_bc))
 
     @property
     def split_hz(self) -> Estimate:
@@ -108,15 +167,21 @@ class CycleFit:
     def drift_rad_s(self, theta_rad: np.ndarray, cmd_rad_s: np.ndarray, *, gain_removed: bool = False) -> np.ndarray:
         """The wave's drift (rad/s of measured wave angle) these parameters predict at measured angle
         theta under precession command cmd: (beta_c sin 4th - beta_s cos 4th) / 4 (damping, with the
-        amplitude force's gain tilt in it) - cmd (Delta g / 2) cos 4th (the gain's angle pattern).
-        gain_removed: the gain difference has since been trimmed out (FPGA gain trims): the damping
-        drift alone, (b_c sin 4th - b_s cos 4th) / 4."""
-        _gam, bc_app, bs, two_dg = self.amp_coef[:4]
+        amplitude force's gain tilt in it) + cmd (s_m - s_d cos 4th) (the loop gain the precession
+        force meets and the pickoff's angle pattern; with no frequency-control force s_m = 0 and
+        s_d = Delta g / 2, the pickoff's).
+        gain_removed: the pickoff gain difference has since been trimmed out (FPGA gain trims): its
+        tilt of the amplitude force goes back into beta_c and its share of s_d goes."""
+        gam, bc_app, bs, two_dg = self.amp_coef[:4]
         s4, c4 = np.sin(4 * theta_rad), np.cos(4 * theta_rad)
+        dg_half = two_dg / 4.0  # the pickoff's g_x - g_y over 2, seen by the amplitude channel
+        if self.has_fm_force:
+            sm, sd = self.loop_gain_cm.value, self.loop_gain_diff.value
+        else:
+            sm, sd = 0.0, dg_half
         if gain_removed:
-            bc, bs, _, _ = self._b()
-            return 0.25 * (bc * s4 - bs * c4) + 0.0 * cmd_rad_s
-        return 0.25 * (bc_app * s4 - bs * c4) - cmd_rad_s * (two_dg / 4.0) * c4
+            bc_app, sd = bc_app + gam * dg_half, sd - dg_half
+        return 0.25 * (bc_app * s4 - bs * c4) + cmd_rad_s * (sm - sd * c4)
 
 
 def _ols(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -140,11 +205,38 @@ def bin_means(t_s: np.ndarray, bin_s: float, *ys: np.ndarray) -> list[np.ndarray
     return out
 
 
+def fm_square(t_s: np.ndarray, fm_rate_hz: float) -> np.ndarray:
+    """The frequency-control force's square wave (+-1) at times t_s, as the FPGA makes it."""
+    return np.where(np.sin(2.0 * math.pi * fm_rate_hz * np.asarray(t_s, dtype=float)) >= 0.0, 1.0, -1.0)
+
+
+def fit_fm_force(t_s: np.ndarray, theta_rad: np.ndarray, freq_ctrl_hz: np.ndarray, *, fm_force_hz: float,
+                 fm_rate_hz: float, settle_s: float = FM_SETTLE_S) -> tuple[np.ndarray, np.ndarray, int]:
+    """The frequency channel under the frequency-control force (the paper's FM): means over each half
+    period of the square wave with its switching transient (settle_s) left out, regressed on
+    (1, cos 4th, sin 4th, m F, m F cos 4th, m F sin 4th) (FREQ_TERMS + FM_TERMS)."""
+    t = np.asarray(t_s, dtype=float)
+    half = 0.5 / fm_rate_hz
+    since = np.mod(t, half)
+    keep = (since >= settle_s) & (since < half - 1e-9)
+    idx = np.floor(t / half).astype(np.int64)
+    idx = idx - idx.min()
+    m = fm_square(t, fm_rate_hz) * fm_force_hz
+    c4, s4 = np.cos(4 * theta_rad), np.sin(4 * theta_rad)
+    cols = [np.asarray(freq_ctrl_hz, dtype=float), c4, s4, m, m * c4, m * s4]
+    n = np.bincount(idx[keep])
+    ok = n > 0
+    means = [np.bincount(idx[keep], weights=c[keep])[ok] / n[ok] for c in cols]
+    x = np.column_stack([np.ones_like(means[0]), *means[1:]])
+    return _ols(x, means[0])
+
+
 def fit_cycle(t_s: np.ndarray, theta_rad: np.ndarray, thdot_rad_s: np.ndarray, amp_ctrl: np.ndarray,
               freq_ctrl_hz: np.ndarray, *, amplitude: float, f0_hz: float, bin_s: float = 20.0,
-              fm_rate_hz: float = 0.0, level: float = 0.95) -> CycleFit:
+              fm_rate_hz: float = 0.0, fm_force_hz: float = 0.0, level: float = 0.95) -> CycleFit:
     """Identify one cycle: amp_ctrl / amplitude on (1, cos 4th, sin 4th, thdot sin 4th, thdot cos 4th),
-    freq_ctrl on (1, cos 4th, sin 4th) over bins of whole FM periods (which average the FM out);
+    freq_ctrl on (1, cos 4th, sin 4th) over bins of whole FM periods (which average the FM out) or,
+    with the frequency-control force (fm_force_hz > 0), also on its square wave (fit_fm_force);
     theta the measured wave angle (rad), thdot its rate (rad/s).  Fits bin means of bin_s seconds."""
     t_s = np.asarray(t_s, dtype=float)
     if len(t_s) < 8:
@@ -155,7 +247,9 @@ def fit_cycle(t_s: np.ndarray, theta_rad: np.ndarray, thdot_rad_s: np.ndarray, a
                                            thdot_rad_s * s4, thdot_rad_s * c4)
     one = np.ones_like(tb)
     amp_coef, amp_cov, dof = _ols(np.column_stack([one, c4b, s4b, tsb, tcb]), ab)
-    if fm_rate_hz > 0:
+    if fm_force_hz > 0 and fm_rate_hz > 0:
+        freq_coef, freq_cov, _ = fit_fm_force(t_s, theta_rad, f, fm_force_hz=fm_force_hz, fm_rate_hz=fm_rate_hz)
+    elif fm_rate_hz > 0:
         # the FM's period is short against a bin: fit the frequency channel over bins of whole FM periods
         fm_bin = max(1.0, round(bin_s * fm_rate_hz)) / fm_rate_hz
         tf, fb, c4f, s4f = bin_means(t_s, fm_bin, f, c4, s4)

@@ -143,6 +143,9 @@ REGISTERS: tuple[Register, ...] = (
     Register("DRIFT_THETA_TAU_DEG", 0x1C, "f", "rw", -360.0, 360.0, "deg", 0.0,
              "drift compensation: damping axis theta_tau"),
     Register("PLL_FREQ_HZ", 0x1D, "f", "ro", unit="Hz", doc="reference frequency now (PLL output, FM excluded)"),
+    Register("FM_FORCE_HZ", 0x1E, "f", "rw", 0.0, 1e3, "Hz", 0.0,
+             "frequency-control force: a square wave at FM_RATE_HZ of a force in phase with the wave's "
+             "displacement, sized to move its frequency +-this much on an ideal chain (CETC's f_omega)"),
     Register("ERR_CRC", 0x20, "u", "ro", doc="command frames the FPGA rejected (CRC or malformed)"),
     Register("ERR_CMD", 0x21, "u", "ro", doc="NACKs sent"),
     Register("FRAMES_SENT", 0x22, "u", "ro", doc="stream frames produced since the stream was enabled"),

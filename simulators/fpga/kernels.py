@@ -10,7 +10,13 @@ into electrode forces at the angle and phase the wave is predicted to have at th
 block they are held over.  Without that prediction a force held over a block acts along the
 wave's direction one block period ago: while the wave turns at Omega, the amplitude force f_a then
 leaks -f_a Omega T / (2 a) into dtheta/dt, a precession scale error of -gamma T / 2 (0.017 % at
-50 ms blocks).  The quadrature loop is a PI on k plus the split's pattern fed forward: a frequency
+50 ms blocks).  The precession force F_p turns the wave at F_p / (4 a) with a the amplitude while
+the force is held, so F_p = 4 a Omega_cmd takes a predicted at the block's middle too (from its rate
+between estimates): the damping anisotropy pumps the amplitude at 4 theta and the AGC follows it
+with a lag, so an F_p from the block's estimate missed the command by (da/dt / a) x ~1.5 blocks,
+with the damping drift's pattern: it read the drift 1.5 % low and left 0.37 deg/h of 4 theta after
+compensation at 10 deg/s (0.013 now; benchmarks/wa_rate_drift.py).
+The quadrature loop is a PI on k plus the split's pattern fed forward: a frequency
 split pumps quadrature at a rate (d/a) = h_c cos 4 theta + h_s sin 4 theta fixed in the case frame,
 which a PI in the wave's frame must follow as the wave turns and cannot (at 2 deg/s the 4 theta
 pattern turns at 0.14 rad/s, under the PI's 1 rad/s): the k it leaves lags the pattern, and the
@@ -36,10 +42,11 @@ from drivers.fpga.protocol import put_stream_frame
 P_AGC_SETPOINT, P_PLL_KI, P_PLL_KP, P_FORCE_LIMIT, P_AGC_KP, P_AGC_KI, P_DRIVE_FORCE = range(7)
 P_QUAD_KP, P_QUAD_KI, P_PRECESSION_RATE_DPS, P_DRIFT_D_PER_S, P_DRIFT_THETA_TAU_DEG = range(7, 12)
 P_OUTPUT_MODE, P_FTR_ANGLE_DEG, P_FTR_KP, P_FTR_KI, P_FTR_GAIN = range(12, 17)
+P_FM_FORCE_HZ, P_FM_RATE_HZ = range(17, 19)
 PARAM_REGS = (
     "AGC_SETPOINT", "PLL_KI", "PLL_KP", "FORCE_LIMIT", "AGC_KP", "AGC_KI", "DRIVE_FORCE",
     "QUAD_KP", "QUAD_KI", "PRECESSION_RATE_DPS", "DRIFT_D_PER_S", "DRIFT_THETA_TAU_DEG",
-    "OUTPUT_MODE", "FTR_ANGLE_DEG", "FTR_KP", "FTR_KI", "FTR_GAIN",
+    "OUTPUT_MODE", "FTR_ANGLE_DEG", "FTR_KP", "FTR_KI", "FTR_GAIN", "FM_FORCE_HZ", "FM_RATE_HZ",
 )  # fmt: skip
 # loop state
 S_AGC_INT, S_QUAD_INT, S_PLL_INT_HZ, S_A, S_PHASE_ERR, S_PLL_FREQ_HZ = range(6)
@@ -60,7 +67,9 @@ S_SPAN = 41  # the span between the last two wave estimates (the rates' baseline
 # loop saturation (drivers.fpga.protocol SAT_*): the clamps the last update hit (S_SAT_NEXT), and
 # those of the forces held over this block (S_SAT: that update's and wave_force's), streamed
 S_SAT_NEXT, S_SAT = 42, 43
-N_STATE = 44
+S_A_RATE = 44  # the amplitude's rate between the last two wave estimates (1/s x amplitude)
+S_FW, S_FW_PREV = 45, 46  # the frequency-control force held over the last block and the one before
+N_STATE = 47
 MODE_FTR = 1  # OUTPUT_MODE's force-to-rebalance (drivers.fpga.protocol.MODE_FORCE_TO_REBALANCE)
 OBS_MEMORY_S = 100.0  # the observer forgets data older than this (exponential weight)
 OBS_RIDGE = 0.05**3  # damping of the solve: one 50 ms block's weight (weights are span^3: 1/variance)
@@ -151,6 +160,7 @@ def update_loops(
     k = qq / (2.0 * a) if a > 0 else 0.0
     c2, s2 = math.cos(2 * theta), math.sin(2 * theta)
     chi = math.atan2(-(sx * c2 + sy * s2), cx * c2 + cy * s2)
+    a_prev = st[S_A]
     st[S_A] = a
     phase_err = (chi + 0.5 * math.pi) % math.pi - 0.5 * math.pi
     st[S_PHASE_ERR] = phase_err
@@ -171,10 +181,11 @@ def update_loops(
             # chi is relative to the reference: add back the reference's change since the last estimate
             d_chi = _wrap(chi - st[S_CHI], math.pi) + 2.0 * math.pi * (st[S_REF_HZ] - ref_hz) * (t_start - st[S_T_EST])
             st[S_CHI_RATE] = d_chi / span
+            st[S_A_RATE] = (a - a_prev) / span
             st[S_SPAN] = span
             st[S_EST] = 2.0
         else:
-            st[S_THETA_RATE] = st[S_CHI_RATE] = 0.0
+            st[S_THETA_RATE] = st[S_CHI_RATE] = st[S_A_RATE] = 0.0
             st[S_EST] = 1.0
         st[S_THETA] = theta
         st[S_CHI] = chi
@@ -257,11 +268,13 @@ def wave_force(
     compensation evaluated there too; the outputs amp, quad, prec (S_OUT) are these forces."""
     limit = prm[P_FORCE_LIMIT]
     f_a, f_q, f_p = st[S_F_A], st[S_F_Q_P], st[S_F_P]
+    f_w = 0.0
     st[S_RATE_OUT] = 0.0
     if abs(st[S_T_END] - t_start_s) >= 0.5 * dt_s:  # no update from the block just before (a drive cut)
         st[S_U : S_U + 4] = 0.0
         st[S_OUT + 0] = st[S_OUT + 2] = st[S_OUT + 3] = 0.0
         st[S_SAT] = 0.0
+        st[S_FW] = st[S_FW_PREV] = 0.0
         return
     sat = int(st[S_SAT_NEXT])
     ftr = prm[P_OUTPUT_MODE] == MODE_FTR
@@ -277,9 +290,24 @@ def wave_force(
         )
         if ctrl & _QUAD_EN and st[S_EST] > 1:  # the split's frequency pattern turning with the wave
             chi += split_phase(st, t_mid)
+        # the wave turns at F_p / (4 a) with a its amplitude while the force is held: F_p is the
+        # command times the amplitude predicted at the block's middle, not the one estimated there
+        a_mid = st[S_A] + st[S_A_RATE] * (t_mid - st[S_T_EST])
+        if prm[P_FM_FORCE_HZ] > 0.0 and prm[P_FM_RATE_HZ] > 0.0:
+            # the frequency-control force: along d q / d chi, f_w moves chi at f_w / (2 a), so
+            # 4 pi a F moves the frequency by F Hz (times the chains' gains: what the FM measures)
+            sq = 1.0 if math.sin(2.0 * math.pi * prm[P_FM_RATE_HZ] * t_mid) >= 0.0 else -1.0
+            f_w = _clamp(4.0 * math.pi * a_mid * prm[P_FM_FORCE_HZ] * sq, limit)
+        if st[S_EST] > 1 and st[S_A] > 0:
+            # chi's measured rate is the force of the last two blocks' (f_prev + f_last) / (4 a); from
+            # the estimate to t_mid it moves with (f_last + f_w) / (4 a): a switch of the square
+            # wave would otherwise leave chi behind for a block and turn f_w partly into f_a
+            chi += (f_w - st[S_FW_PREV]) / (4.0 * st[S_A]) * (t_mid - st[S_T_EST])
+        if not ftr and st[S_A] > 0:
+            f_p *= a_mid / st[S_A]
         if ctrl & _WHOLE_ANGLE and ctrl & _DRIFT_COMP_EN and not ftr:
             th_tau = math.radians(prm[P_DRIFT_THETA_TAU_DEG])
-            f_p -= st[S_A] * prm[P_DRIFT_D_PER_S] * math.sin(4.0 * (theta - th_tau))
+            f_p -= a_mid * prm[P_DRIFT_D_PER_S] * math.sin(4.0 * (theta - th_tau))
         # a turning wave: the block mean shrinks the amplitude estimate by s1 and a force held in
         # one direction pushes along the turning wave by s2 on average (both 1 - (Omega T)^2 / 6)
         x = st[S_THETA_RATE] * dt_s
@@ -298,13 +326,15 @@ def wave_force(
                 sat |= _SAT_QUAD
             f_q = _clamp(f_q, limit)
     st[S_SAT] = sat
+    st[S_FW_PREV] = st[S_FW]
+    st[S_FW] = f_w
     c2, s2 = math.cos(2 * theta), math.sin(2 * theta)
     cc, sc = math.cos(chi), math.sin(chi)
-    # u = f_a e_a + f_q e_k + f_p e_p with the unit forces along a, k and theta
-    st[S_U + 0] = f_a * (c2 * cc) + f_q * (-s2 * sc) + f_p * (-s2 * cc)
-    st[S_U + 1] = f_a * (-c2 * sc) + f_q * (-s2 * cc) + f_p * (s2 * sc)
-    st[S_U + 2] = f_a * (s2 * cc) + f_q * (c2 * sc) + f_p * (c2 * cc)
-    st[S_U + 3] = f_a * (-s2 * sc) + f_q * (c2 * cc) + f_p * (-c2 * sc)
+    # u = f_a e_a + f_q e_k + f_p e_p + f_w e_chi with the unit forces along a, k, theta and chi
+    st[S_U + 0] = f_a * (c2 * cc) + f_q * (-s2 * sc) + f_p * (-s2 * cc) + f_w * (-c2 * sc)
+    st[S_U + 1] = f_a * (-c2 * sc) + f_q * (-s2 * cc) + f_p * (s2 * sc) + f_w * (-c2 * cc)
+    st[S_U + 2] = f_a * (s2 * cc) + f_q * (c2 * sc) + f_p * (c2 * cc) + f_w * (-s2 * sc)
+    st[S_U + 3] = f_a * (-s2 * sc) + f_q * (c2 * cc) + f_p * (-c2 * sc) + f_w * (-s2 * cc)
     st[S_OUT + 0] = f_a
     st[S_OUT + 2] = f_q
     st[S_OUT + 3] = f_p

@@ -180,6 +180,15 @@ ERROR_PRESETS: dict[str, ErrorSources] = {
         freq_tc_ppm_k=55.0,  # fused silica: dE/dT / E ~ +1.1e-4 / K, f ~ sqrt(E)
         q_tc_per_k=-3e-3,
     ),
+    # the self-calibration gyro (its X/Y pickoff difference is simulators.physics.noise's) with the
+    # loop gain errors the paper's self-calibration identifies: a common-mode pickoff gain, both gains
+    # rising together (CETC fig. 3: the gain term of its eq. 11), and forcer gains (the FM's path)
+    "hrg-selfcal-gains": ErrorSources(
+        pickoff_gain_cm_ppm=-500.0,
+        pickoff_gain_cm_drift_ppm_h=20.0,
+        forcer_gain_x_ppm=800.0,
+        forcer_gain_y_ppm=-400.0,
+    ),
     "mems-realistic": ErrorSources(
         pickoff_gain_cm_ppm=2000.0,
         pickoff_gain_diff_ppm=-3000.0,  # two capacitive channels matched to 0.3 %

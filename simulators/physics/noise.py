@@ -350,6 +350,16 @@ NOISE_PRESETS: dict[str, NoiseParams] = {
         gain_x_drift_ppm_h=10.0,
         gain_y_drift_ppm_h=-10.0,
     ),
+    # the self-calibration gyro with loop gain errors (docs/selfcal.md): the same floor and X/Y gains
+    "hrg-selfcal-gains": NoiseParams(
+        arw_deg_rth=0.006,
+        angle_wander_deg=0.025,
+        angle_wander_tau_s=550.0,
+        gain_x_ppm=750.0,
+        gain_y_ppm=-750.0,
+        gain_x_drift_ppm_h=10.0,
+        gain_y_drift_ppm_h=-10.0,
+    ),
     # the realistic HRG (docs/error_sources.md): the self-calibration gyro's noise floor (its pickoff
     # gains are the error sources' own, simulators.physics.errors)
     "hrg-realistic": NoiseParams(arw_deg_rth=0.006, angle_wander_deg=0.025, angle_wander_tau_s=550.0),

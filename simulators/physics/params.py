@@ -272,6 +272,9 @@ PRESETS["hrg-wa"] = replace(PRESETS["hrg"], delta_inv_tau_per_s=1e-7, noise_sigm
 #: damping anisotropy (58 deg/h drift peak to peak), quiet pickoffs; its noise floor and X/Y gain
 #: errors are simulators.physics.noise.NOISE_PRESETS["hrg-selfcal"].
 PRESETS["hrg-selfcal"] = replace(PRESETS["hrg"], noise_sigma=1e-6)
+#: The same gyro with the loop gain errors the self-calibration's FM identifies (docs/selfcal.md):
+#: its pickoff and forcer chains' errors are simulators.physics.errors.ERROR_PRESETS["hrg-selfcal-gains"].
+PRESETS["hrg-selfcal-gains"] = PRESETS["hrg-selfcal"]
 
 #: The realistic HRG (sim-hrg-realistic, docs/error_sources.md): the hrg's resonator as one unit of a
 #: lot differs from its design: K 0.9 % under the design's 0.277, f0 3.2 Hz over 5500 Hz; quieter
