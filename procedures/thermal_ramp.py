@@ -1,0 +1,184 @@
+"""thermal-ramp: the ramp method of thermal calibration (Niu et al., "Fast Thermal Calibration of
+Low-Grade Inertial Sensors and Inertial Measurement Units", Sensors 2013; docs/chamber.md, "The
+ramp method"): one heating and one cooling branch at a steady chamber ramp, recorded in short
+segments throughout, both branches fitted together so a thermometer's lag cancels to first order.
+
+Steps: excite and hold the amplitude; the chamber to t_low_degc, settled from the resonator
+frequency's drift (as thermal-soak); then at `cycle_degc_per_min` up to t_high_degc and back,
+each branch held `tail_s` once the air has arrived, the unit recorded in segments of `segment_s`
+with the chamber's air and part (case) readings at each segment's start and end.  The analysis
+takes each segment's bias and mean frequency and fits the bias against three thermometers: the
+chamber air, the part thermocouple and the resonator frequency read as a temperature
+(bench.analysis.thermal_ramp), with the rms residual of each; the frequency fit against the part
+thermocouple gives the frequency's coefficient, and its heating-cooling gap the resonator's lag
+behind the thermocouple."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from bench.analysis.cvg_rate import static_bias
+from bench.analysis.thermal_fit import ThermalFit, fit_temperature_polynomial
+from bench.analysis.thermal_ramp import branch_gap, frequency_thermometer, trend_mean
+from bench.engine import Measurement, Param, Procedure, Result, step
+from bench.streams import Column, StreamSchema, declare
+
+from .cvg_output import MODES, static_bias_truth
+from .thermal_soak import REF_TEMPERATURE_C, ThermalChamber, _f0_at_25c_truth, _f0_tc_truth, _pair
+
+BRANCHES = ("heating", "cooling")
+
+SEGMENTS = declare(StreamSchema("thermal_ramp_segments", "thermal-ramp", (
+    Column("t_start_s", "s"), Column("t_end_s", "s"),
+    Column("branch", "1", "i8", legend=dict(enumerate(BRANCHES))),
+    Column("air_c", "degC", doc="chamber air, mean of the segment's start and end readings"),
+    Column("part_c", "degC", doc="the part thermocouple on the unit's case, mean of start and end"),
+    Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
+    Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
+    Column("scale_factor", "1"),
+)))
+
+THERMOMETERS = ("air", "part", "frequency")
+
+
+class ThermalRamp(ThermalChamber, Procedure):
+    """Bias and resonator frequency against temperature from one heating and cooling ramp cycle."""
+
+    name = "thermal-ramp"
+    windows_schema = SEGMENTS
+
+    cycle_degc_per_min = Param(1.0, unit="degC/min", low=0.01, high=50.0,
+                               doc="the chamber's ramp during the cycle (ramp_degc_per_min: the approach to t_low)")
+    segment_s = Param(60.0, unit="s", low=1.0, high=3600.0, doc="length of each recorded segment")
+    tail_s = Param(600.0, unit="s", low=0.0, high=1e5,
+                   doc="record on at each end of the range once the air has arrived (the case catching up)")
+
+    measurements = (
+        Measurement("f0_tc_ppm_k", "ppm/K", "resonator frequency's temperature coefficient at 25 degC against the "
+                    "part thermocouple, both branches", truth=_f0_tc_truth),
+        Measurement("f0_at_25c_hz", "Hz", "resonator frequency at 25 degC from the fit", truth=_f0_at_25c_truth),
+        Measurement("bias_tc_dph_k", "deg/h/K",
+                    "bias's temperature slope at 25 degC against the frequency thermometer"),
+        Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC against the frequency thermometer",
+                    truth=static_bias_truth),
+        Measurement("bias_fit_order", "", "polynomial order of the bias fit against the frequency thermometer (BIC)",
+                    no_interval="an order chosen by a criterion"),
+        Measurement("bias_rms_air_dph", "deg/h", "rms residual of the bias fitted against the chamber air",
+                    no_interval="a residual"),
+        Measurement("bias_rms_part_dph", "deg/h", "rms residual of the bias fitted against the part thermocouple",
+                    no_interval="a residual"),
+        Measurement("bias_rms_frequency_dph", "deg/h", "rms residual of the bias fitted against the resonator "
+                    "frequency read as a temperature", no_interval="a residual"),
+        Measurement("f0_rms_part_hz", "Hz", "rms residual of the frequency fitted against the part thermocouple",
+                    no_interval="a residual"),
+        Measurement("part_lag_degc", "degC", "the resonator's lag behind the part thermocouple, from the frequency "
+                    "fit's heating-cooling gap (positive: the resonator trails)"),
+        Measurement("cycle_s", "s", "simulated time from the cycle's start to its last segment",
+                    no_interval="a time the run took"),
+    )
+
+    @step("Ramp cycle, recorded in segments")
+    def ramp(self, ctx):
+        chamber = ctx.devices.chamber
+        ref_hz = float(ctx.devices.fpga.read_register("REF_FREQ_HZ"))
+        code = MODES.index(self._mode)
+        sf = self._scale_factor()
+        settle_s = self._settle_at(ctx, float(self.t_low_degc), ref_hz)
+        ctx.log.info(f"settled at {self.t_low_degc:g} degC after {settle_s:.0f} s")
+        chamber.set_ramp_rate(self.cycle_degc_per_min)
+        span_c = self.t_high_degc - self.t_low_degc
+        expected_s = 2 * (span_c / self.cycle_degc_per_min * 60.0 + self.tail_s)
+        t_cycle = ctx.clock.now()
+        for branch, target in enumerate((self.t_high_degc, self.t_low_degc)):
+            chamber.set_setpoint(float(target))
+            arrived = None
+            while arrived is None or ctx.clock.now() - arrived < self.tail_s:
+                s0 = chamber.status()
+                t0, t1 = self._record_window(ctx, self.segment_s, f"{BRANCHES[branch]} segment")
+                s1 = chamber.status()
+                row = [t0, t1, branch, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), ref_hz, code, sf]
+                ctx.record(SEGMENTS, SEGMENTS.names, np.array([row]))
+                if arrived is None and abs(s1.air_c - target) < 0.05:
+                    arrived = t1
+                ctx.progress(min(1.0, (ctx.clock.now() - t_cycle) / expected_s), f"{BRANCHES[branch]}, case "
+                             f"{s1.part_c:.1f} degC")
+
+    @step("Fits against temperature")
+    def estimate(self, ctx):
+        for res in self.analysis(ctx.data()):
+            ctx.report(res)
+
+    # --- analysis --------------------------------------------------------------------------
+    def points_table(self, data) -> dict[str, np.ndarray]:
+        """Each segment's branch, air and part readings, bias (deg/h) and frequency (Hz) with
+        standard errors (the frequency's about its own drift within the segment)."""
+        seg = data.table(SEGMENTS.name)
+        fpga = data.table("fpga")
+        t = fpga["t_s"]
+        earth_dph = self.earth_rate_on_axis_dph(data)
+        rows = []
+        for t0, t1, br, air, part, ref, mode, sf in zip(*(seg[c] for c in SEGMENTS.names), strict=True):
+            sel = (t > t0) & (t <= t1)
+            name = MODES[int(mode)]
+            y = fpga["rate_out_dps"][sel] if name == "force-to-rebalance" else fpga["angle_out_deg"][sel]
+            b = static_bias(t[sel], y, mode=name, scale_factor=float(sf), earth_rate_dph=earth_dph,
+                            n_batches=self.batches)
+            f, f_se = trend_mean(fpga["freq_ctrl"][sel], self.batches)
+            rows.append((0.5 * (t0 + t1), br, air, part, b.bias_dph, b.sigma_dph, ref + f, f_se))
+        a = np.array(rows, dtype=float).reshape(-1, 8)
+        keys = ("t_s", "branch", "air_c", "part_c", "bias_dph", "bias_se_dph", "f0_hz", "f0_se_hz")
+        return {k: a[:, i] for i, k in enumerate(keys)}
+
+    def fits(self, data) -> tuple[dict[str, np.ndarray], dict[str, ThermalFit], ThermalFit, ThermalFit]:
+        """The points, the bias fit against each thermometer, the frequency fit against the part
+        thermocouple (BIC order) and the frequency thermometer's straight line."""
+        p = self.points_table(data)
+        if len(p["part_c"]) < 4:
+            raise RuntimeError(f"{len(p['part_c'])} segment(s): the fits need 4 or more")
+        sig_t = self.resolution_degc / math.sqrt(12.0)
+        kw = dict(max_order=int(self.max_order), t_ref_c=REF_TEMPERATURE_C)
+        t_f, t_f_se, line = frequency_thermometer(p["f0_hz"], p["f0_se_hz"], p["part_c"], t_ref_c=REF_TEMPERATURE_C,
+                                                  sigma_t_c=sig_t)
+        p["frequency_c"] = t_f
+        bias = {
+            "air": fit_temperature_polynomial(p["air_c"], p["bias_dph"], p["bias_se_dph"], sigma_t_c=sig_t, **kw),
+            "part": fit_temperature_polynomial(p["part_c"], p["bias_dph"], p["bias_se_dph"], sigma_t_c=sig_t, **kw),
+            # the frequency thermometer's error is each segment's own (its mean frequency's)
+            "frequency": fit_temperature_polynomial(t_f, p["bias_dph"], p["bias_se_dph"],
+                                                    sigma_t_c=float(np.median(t_f_se)), **kw),
+        }
+        f0 = fit_temperature_polynomial(p["part_c"], p["f0_hz"], p["f0_se_hz"], sigma_t_c=sig_t, **kw)
+        return p, bias, f0, line
+
+    def analysis(self, data) -> list[Result]:
+        """The fits' results from a recorded run's `thermal_ramp_segments` and `fpga` streams."""
+        p, bias, f0, line = self.fits(data)
+        f25 = float(f0.coeffs[0])
+        fb = bias["frequency"]
+        if fb.order >= 1:
+            b_slope, b_ci = float(fb.coeffs[1]), _pair(fb.ci95[1])
+        else:  # the BIC kept no slope: the straight line's, with its interval (holding 0)
+            lin = fit_temperature_polynomial(p["frequency_c"], p["bias_dph"], p["bias_se_dph"], max_order=1,
+                                             min_order=1, t_ref_c=REF_TEMPERATURE_C)
+            b_slope, b_ci = float(lin.coeffs[1]), _pair(lin.ci95[1])
+        f0_s = f0 if f0.order >= 1 else line
+        lo, hi = f0_s.ci95[1]
+        gap = branch_gap(f0, p["branch"] == 0, f0.slope_at(float(np.mean(p["part_c"]))))
+        rms = {k: float(np.sqrt(np.mean(fit.residuals**2))) for k, fit in bias.items()}
+        seg = data.table(SEGMENTS.name)
+        return [
+            Result("f0_tc_ppm_k", float(f0_s.coeffs[1] / f25 * 1e6),
+                   ci95=(float(lo / f25 * 1e6), float(hi / f25 * 1e6))),
+            Result("f0_at_25c_hz", f25, ci95=_pair(f0.ci95[0])),
+            Result("bias_tc_dph_k", b_slope, ci95=b_ci),
+            Result("bias_at_25c_dph", float(fb.coeffs[0]), ci95=_pair(fb.ci95[0])),
+            Result("bias_fit_order", float(fb.order)),
+            Result("bias_rms_air_dph", rms["air"]),
+            Result("bias_rms_part_dph", rms["part"]),
+            Result("bias_rms_frequency_dph", rms["frequency"]),
+            Result("f0_rms_part_hz", float(np.sqrt(np.mean(f0.residuals**2)))),
+            Result("part_lag_degc", gap.lag_c, ci95=gap.lag_ci95_c),
+            Result("cycle_s", float(seg["t_end_s"][-1] - seg["t_start_s"][0])),
+        ]
