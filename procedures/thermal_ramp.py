@@ -40,7 +40,15 @@ SEGMENTS = declare(StreamSchema("thermal_ramp_segments", "thermal-ramp", (
     Column("scale_factor", "1"),
 )))
 
-THERMOMETERS = ("air", "part", "frequency")
+VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", (
+    Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
+    Column("air_c", "degC", doc="chamber air at the record's start and end (mean)"),
+    Column("part_c", "degC", doc="the part thermocouple on the unit's case (mean of start and end)"),
+    Column("settle_s", "s", doc="time from the set point to the record's start"),
+    Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
+    Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
+    Column("scale_factor", "1"),
+)))
 
 
 class ThermalRamp(ThermalChamber, Procedure):
@@ -52,6 +60,10 @@ class ThermalRamp(ThermalChamber, Procedure):
     cycle_degc_per_min = Param(1.0, unit="degC/min", low=0.01, high=50.0,
                                doc="the chamber's ramp during the cycle (ramp_degc_per_min: the approach to t_low)")
     segment_s = Param(60.0, unit="s", low=1.0, high=3600.0, doc="length of each recorded segment")
+    verify_points = Param(0, low=0, high=50,
+                          doc="settled verification records after the cycle, at the middles of verify_points equal "
+                              "parts of the range (between any calibration grid's points); 0: none")
+    record_s = Param(300.0, unit="s", low=1.0, high=1e5, doc="each verification record once settled")
     tail_s = Param(600.0, unit="s", low=0.0, high=1e5,
                    doc="record on at each end of the range once the air has arrived (the case catching up)")
 
@@ -75,6 +87,13 @@ class ThermalRamp(ThermalChamber, Procedure):
                     no_interval="a residual"),
         Measurement("part_lag_degc", "degC", "the resonator's lag behind the part thermocouple, from the frequency "
                     "fit's heating-cooling gap (positive: the resonator trails)"),
+        Measurement("verify_residual_dph", "deg/h", "rms bias left at the verification points after the "
+                    "compensation against the frequency thermometer (bias minus the ramp fit there)",
+                    no_interval="a residual"),
+        Measurement("verify_residual_part_dph", "deg/h", "the same with the compensation against the part "
+                    "thermocouple", no_interval="a residual"),
+        Measurement("verify_noise_dph", "deg/h", "rms of the verification records' own bias standard errors "
+                    "(what the unit's noise allows a residual)", no_interval="a noise level"),
         Measurement("cycle_s", "s", "simulated time from the cycle's start to its last segment",
                     no_interval="a time the run took"),
     )
@@ -105,21 +124,45 @@ class ThermalRamp(ThermalChamber, Procedure):
                 ctx.progress(min(1.0, (ctx.clock.now() - t_cycle) / expected_s), f"{BRANCHES[branch]}, case "
                              f"{s1.part_c:.1f} degC")
 
+    def verify_setpoints_c(self) -> np.ndarray:
+        n = int(self.verify_points)
+        return self.t_low_degc + (np.arange(n) + 0.5) * (self.t_high_degc - self.t_low_degc) / max(n, 1)
+
+    @step("Verification at temperatures between")
+    def verify(self, ctx):
+        if not self.verify_points:
+            return
+        chamber = ctx.devices.chamber
+        ref_hz = float(ctx.devices.fpga.read_register("REF_FREQ_HZ"))
+        chamber.set_ramp_rate(self.ramp_degc_per_min)
+        code, sf = MODES.index(self._mode), self._scale_factor()
+        for sp in self.verify_setpoints_c():
+            settle_s = self._settle_at(ctx, float(sp), ref_hz)
+            s0 = chamber.status()
+            t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record")
+            s1 = chamber.status()
+            row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf]
+            ctx.record(VERIFY, VERIFY.names, np.array([row]))
+
     @step("Fits against temperature")
     def estimate(self, ctx):
         for res in self.analysis(ctx.data()):
             ctx.report(res)
 
     # --- analysis --------------------------------------------------------------------------
-    def points_table(self, data) -> dict[str, np.ndarray]:
+    def points_table(self, data, schema: StreamSchema = SEGMENTS) -> dict[str, np.ndarray]:
         """Each segment's branch, air and part readings, bias (deg/h) and frequency (Hz) with
-        standard errors (the frequency's about its own drift within the segment)."""
-        seg = data.table(SEGMENTS.name)
+        standard errors (the frequency's about its own drift within the segment); with VERIFY,
+        the verification records' (branch: -1)."""
+        seg = data.table(schema.name)
         fpga = data.table("fpga")
         t = fpga["t_s"]
         earth_dph = self.earth_rate_on_axis_dph(data)
         rows = []
-        for t0, t1, br, air, part, ref, mode, sf in zip(*(seg[c] for c in SEGMENTS.names), strict=True):
+        branches = seg["branch"] if "branch" in schema.names else np.full(len(seg["t_start_s"]), -1.0)
+        cols = ("t_start_s", "t_end_s", "air_c", "part_c", "ref_freq_hz", "mode", "scale_factor")
+        for br, (t0, t1, air, part, ref, mode, sf) in zip(branches, zip(*(seg[c] for c in cols), strict=True),
+                                                           strict=True):
             sel = (t > t0) & (t <= t1)
             name = MODES[int(mode)]
             y = fpga["rate_out_dps"][sel] if name == "force-to-rebalance" else fpga["angle_out_deg"][sel]
@@ -168,7 +211,17 @@ class ThermalRamp(ThermalChamber, Procedure):
         gap = branch_gap(f0, p["branch"] == 0, f0.slope_at(float(np.mean(p["part_c"]))))
         rms = {k: float(np.sqrt(np.mean(fit.residuals**2))) for k, fit in bias.items()}
         seg = data.table(SEGMENTS.name)
-        return [
+        verify = []
+        if self.verify_points:
+            v = self.points_table(data, VERIFY)
+            t_v = REF_TEMPERATURE_C + (v["f0_hz"] - line.coeffs[0]) / line.coeffs[1]
+            verify = [
+                Result("verify_residual_dph", float(np.sqrt(np.mean((v["bias_dph"] - fb(t_v)) ** 2)))),
+                Result("verify_residual_part_dph",
+                       float(np.sqrt(np.mean((v["bias_dph"] - bias["part"](v["part_c"])) ** 2)))),
+                Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2)))),
+            ]
+        return verify + [
             Result("f0_tc_ppm_k", float(f0_s.coeffs[1] / f25 * 1e6),
                    ci95=(float(lo / f25 * 1e6), float(hi / f25 * 1e6))),
             Result("f0_at_25c_hz", f25, ci95=_pair(f0.ci95[0])),

@@ -1,6 +1,6 @@
 """thermal-ramp on the quick thermal HRG station: one heating and cooling cycle 25 -> 35 -> 25 degC;
 the frequency coefficient against the simulator's truth, the resonator's lag behind the case
-thermocouple seen in the heating-cooling gap, the three thermometers' bias residuals, and the
+thermocouple seen in the heating-cooling gap, a verification record at 30 degC, and the
 pure helpers against known numbers."""
 
 from __future__ import annotations
@@ -37,7 +37,8 @@ def test_branch_gap_finds_a_known_lag():
 @pytest.mark.parametrize("sim_station", ["sim-hrg-thermal-quick"], indirect=True)
 def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station):
     params = {"t_low_degc": 25.0, "t_high_degc": 35.0, "cycle_degc_per_min": 5.0, "segment_s": 20.0,
-              "tail_s": 60.0, "settle_window_s": 20.0, "settle_ppm_per_min": 1.0, "max_order": 2}
+              "tail_s": 60.0, "settle_window_s": 20.0, "settle_ppm_per_min": 1.0, "max_order": 2,
+              "verify_points": 1, "record_s": 60.0}
     record = run_procedure(ThermalRamp, params)
     assert record.outcome == "COMPLETE", (record.end_reason, record.traceback)
     got = {m.name: m for m in record.measurements}
@@ -53,6 +54,9 @@ def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station
     slope_hz_k = tc.value * 1e-6 * got["f0_at_25c_hz"].value
     assert got["f0_rms_part_hz"].value == pytest.approx(slope_hz_k * lag.value, rel=0.3)
     assert got["cycle_s"].value < 400.0
+    # the verification at 30 degC, settled: the compensated bias within 3 of its own noise there
+    # (the fit's interval adds to it; the cycle's 20 s segments give it ~0.4 deg/h at 30 degC)
+    assert got["verify_residual_dph"].value < 3.0 * got["verify_noise_dph"].value + 0.5
     assert sim_station.devices["chamber"].setpoint_c() == 25.0
 
 
