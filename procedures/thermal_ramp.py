@@ -48,6 +48,8 @@ VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", (
     Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
     Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
     Column("scale_factor", "1"),
+    Column("trim_bias_dph", "deg/h", doc="TRIM_BIAS_DPH in force during the record (0: no thermal trim)"),
+    Column("trim_bias_dph_per_hz", "deg/h/Hz", doc="TRIM_BIAS_DPH_PER_HZ in force during the record"),
 )))
 
 
@@ -64,6 +66,9 @@ class ThermalRamp(ThermalChamber, Procedure):
                           doc="settled verification records after the cycle, at the middles of verify_points equal "
                               "parts of the range (between any calibration grid's points); 0: none")
     record_s = Param(300.0, unit="s", low=1.0, high=1e5, doc="each verification record once settled")
+    compensate = Param(True, doc="before the verification, the thermal trim (bias against the resonator frequency) "
+                                 "into the FPGA's registers (RAM; restored at the end), so the verification reads "
+                                 "the unit's own compensated output")
     tail_s = Param(600.0, unit="s", low=0.0, high=1e5,
                    doc="record on at each end of the range once the air has arrived (the case catching up)")
 
@@ -87,8 +92,11 @@ class ThermalRamp(ThermalChamber, Procedure):
                     no_interval="a residual"),
         Measurement("part_lag_degc", "degC", "the resonator's lag behind the part thermocouple, from the frequency "
                     "fit's heating-cooling gap (positive: the resonator trails)"),
-        Measurement("verify_residual_dph", "deg/h", "rms bias left at the verification points after the "
-                    "compensation against the frequency thermometer (bias minus the ramp fit there)",
+        Measurement("thermal_bias_dph", "deg/h", "thermal trim TRIM_BIAS_DPH: the bias at the FPGA's REF_FREQ_HZ "
+                    "from a straight line of the bias against the resonator frequency"),
+        Measurement("thermal_bias_dph_per_hz", "deg/h/Hz", "thermal trim TRIM_BIAS_DPH_PER_HZ: that line's slope"),
+        Measurement("verify_residual_dph", "deg/h", "rms bias left at the verification points by the thermal trim "
+                    "(the FPGA's compensated output with `compensate`, else the trim applied in the analysis)",
                     no_interval="a residual"),
         Measurement("verify_residual_part_dph", "deg/h", "the same with the compensation against the part "
                     "thermocouple", no_interval="a residual"),
@@ -133,16 +141,43 @@ class ThermalRamp(ThermalChamber, Procedure):
         if not self.verify_points:
             return
         chamber = ctx.devices.chamber
-        ref_hz = float(ctx.devices.fpga.read_register("REF_FREQ_HZ"))
+        fpga = ctx.devices.fpga
+        ref_hz = float(fpga.read_register("REF_FREQ_HZ"))
         chamber.set_ramp_rate(self.ramp_degc_per_min)
         code, sf = MODES.index(self._mode), self._scale_factor()
+        trim = (0.0, 0.0)
+        if self.compensate:
+            line = self.trim_line(self.points_table(ctx.data()))
+            trim = (float(line.coeffs[0]), float(line.coeffs[1]))
+            self._write_trim(ctx, trim)
         for sp in self.verify_setpoints_c():
             settle_s = self._settle_at(ctx, float(sp), ref_hz)
             s0 = chamber.status()
             t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record")
             s1 = chamber.status()
-            row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf]
+            row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf,
+                   *trim]
             ctx.record(VERIFY, VERIFY.names, np.array([row]))
+
+    def _write_trim(self, ctx, trim: tuple[float, float]) -> None:
+        """The thermal trim into the FPGA's registers and TRIM_EN's TRIM_THERMAL bit (RAM only: the
+        line commits trims to NVM for PASS units); the registers before are restored at the end."""
+        from drivers.fpga import protocol as fp
+
+        fpga = ctx.devices.fpga
+        names = ("TRIM_EN", "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ")
+        before = {n: fpga.read_register(n) for n in names}
+
+        def restore() -> None:
+            if fpga.connected:
+                for n in names[::-1]:
+                    fpga.write_register(n, before[n])
+
+        ctx.defer(restore, "restore the thermal trim registers")
+        fpga.write_register("TRIM_BIAS_DPH", trim[0])
+        fpga.write_register("TRIM_BIAS_DPH_PER_HZ", trim[1])
+        fpga.write_register("TRIM_EN", int(before["TRIM_EN"]) | fp.TRIM_THERMAL)
+        ctx.log.info(f"thermal trim on: {trim[0]:.4g} deg/h at REF_FREQ_HZ, {trim[1]:.4g} deg/h/Hz")
 
     @step("Fits against temperature")
     def estimate(self, ctx):
@@ -169,10 +204,19 @@ class ThermalRamp(ThermalChamber, Procedure):
             b = static_bias(t[sel], y, mode=name, scale_factor=float(sf), earth_rate_dph=earth_dph,
                             n_batches=self.batches)
             f, f_se = trend_mean(fpga["freq_ctrl"][sel], self.batches)
-            rows.append((0.5 * (t0 + t1), br, air, part, b.bias_dph, b.sigma_dph, ref + f, f_se))
-        a = np.array(rows, dtype=float).reshape(-1, 8)
-        keys = ("t_s", "branch", "air_c", "part_c", "bias_dph", "bias_se_dph", "f0_hz", "f0_se_hz")
+            rows.append((0.5 * (t0 + t1), br, air, part, b.bias_dph, b.sigma_dph, ref + f, f_se, f))
+        a = np.array(rows, dtype=float).reshape(-1, 9)
+        keys = ("t_s", "branch", "air_c", "part_c", "bias_dph", "bias_se_dph", "f0_hz", "f0_se_hz", "f_offset_hz")
         return {k: a[:, i] for i, k in enumerate(keys)}
+
+    def trim_line(self, p: dict[str, np.ndarray]) -> ThermalFit:
+        """The thermal trim: a straight line of the segments' bias against their frequency's offset
+        from REF_FREQ_HZ (what the FPGA's PLL register holds), the frequencies' own errors carried."""
+        seg_ref = p["f0_hz"] - p["f_offset_hz"]
+        if not np.all(seg_ref == seg_ref[0]):
+            raise RuntimeError("REF_FREQ_HZ changed during the cycle: one thermal trim cannot hold it")
+        return fit_temperature_polynomial(p["f_offset_hz"], p["bias_dph"], p["bias_se_dph"], max_order=1, min_order=1,
+                                          t_ref_c=0.0, sigma_t_c=float(np.median(p["f0_se_hz"])))
 
     def fits(self, data) -> tuple[dict[str, np.ndarray], dict[str, ThermalFit], ThermalFit, ThermalFit]:
         """The points, the bias fit against each thermometer, the frequency fit against the part
@@ -211,17 +255,20 @@ class ThermalRamp(ThermalChamber, Procedure):
         gap = branch_gap(f0, p["branch"] == 0, f0.slope_at(float(np.mean(p["part_c"]))))
         rms = {k: float(np.sqrt(np.mean(fit.residuals**2))) for k, fit in bias.items()}
         seg = data.table(SEGMENTS.name)
-        verify = []
+        trim = self.trim_line(p)
+        out = [Result("thermal_bias_dph", float(trim.coeffs[0]), ci95=_pair(trim.ci95[0])),
+               Result("thermal_bias_dph_per_hz", float(trim.coeffs[1]), ci95=_pair(trim.ci95[1]))]
         if self.verify_points:
             v = self.points_table(data, VERIFY)
-            t_v = REF_TEMPERATURE_C + (v["f0_hz"] - line.coeffs[0]) / line.coeffs[1]
-            verify = [
-                Result("verify_residual_dph", float(np.sqrt(np.mean((v["bias_dph"] - fb(t_v)) ** 2)))),
-                Result("verify_residual_part_dph",
-                       float(np.sqrt(np.mean((v["bias_dph"] - bias["part"](v["part_c"])) ** 2)))),
+            vt = data.table(VERIFY.name)
+            # the bias the unit has before any trim: what the record shows plus the trim in force
+            raw = v["bias_dph"] + vt["trim_bias_dph"] + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"]
+            out += [
+                Result("verify_residual_dph", float(np.sqrt(np.mean((raw - trim(v["f_offset_hz"])) ** 2)))),
+                Result("verify_residual_part_dph", float(np.sqrt(np.mean((raw - bias["part"](v["part_c"])) ** 2)))),
                 Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2)))),
             ]
-        return verify + [
+        return out + [
             Result("f0_tc_ppm_k", float(f0_s.coeffs[1] / f25 * 1e6),
                    ci95=(float(lo / f25 * 1e6), float(hi / f25 * 1e6))),
             Result("f0_at_25c_hz", f25, ci95=_pair(f0.ci95[0])),

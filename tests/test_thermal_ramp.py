@@ -54,9 +54,16 @@ def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station
     slope_hz_k = tc.value * 1e-6 * got["f0_at_25c_hz"].value
     assert got["f0_rms_part_hz"].value == pytest.approx(slope_hz_k * lag.value, rel=0.3)
     assert got["cycle_s"].value < 400.0
-    # the verification at 30 degC, settled: the compensated bias within 3 of its own noise there
-    # (the fit's interval adds to it; the cycle's 20 s segments give it ~0.4 deg/h at 30 degC)
+    # the verification at 30 degC, settled, with the thermal trim in the FPGA: the unit's own output
+    # shows the bias (153 deg/h untrimmed) within 3 of its record's noise (the trim's interval adds to it)
+    assert got["thermal_bias_dph"].ci95[0] < 160.0 < got["thermal_bias_dph"].ci95[1] + 10.0
     assert got["verify_residual_dph"].value < 3.0 * got["verify_noise_dph"].value + 0.5
+    from bench.recorder import open_run
+
+    vt = open_run(record.raw_file).table("thermal_ramp_verify")
+    assert vt["trim_bias_dph"][0] == pytest.approx(got["thermal_bias_dph"].value, rel=1e-9)
+    fpga = sim_station.devices["fpga"]
+    assert fpga.read_register("TRIM_EN") == 0 and fpga.read_register("TRIM_BIAS_DPH") == 0.0  # restored
     assert sim_station.devices["chamber"].setpoint_c() == 25.0
 
 
