@@ -77,3 +77,28 @@ def test_the_resonator_trails_the_case_by_its_time_constant():
     r = 0.1  # degC/s
     assert th.air_c - th.case_c == pytest.approx(r * 60.0, rel=1e-3)
     assert th.case_c - th.resonator_c == pytest.approx(r * 20.0, rel=1e-3)
+
+
+def test_line_run_eol_hrg_thermal_leaves_the_thermal_trim_in_nvm(tmp_path, capsys):
+    """The line's sequence: the ramp, the trim verified at 30 degC through the FPGA, then (PASS) the
+    thermal trim into the unit's NVM through the line's gated trims, read back."""
+    import json
+
+    from bench.cli import main
+    from bench.line.compensation import unit_id
+
+    station = tmp_path / "st.toml"
+    text = open("bench/stations/sim-hrg-thermal-quick.toml").read()
+    station.write_text(text.replace('id = "sim-hrg-thermal-quick"', 'id = "nvm-thermal"')
+                       + f'nvm_file = "{tmp_path / "fpga.nvm"}"\n')
+    code = main(["line", "run", "eol-hrg-thermal", "--station", str(station), "--operator", "ada", "--dut",
+                 "HRG-000777", "--yes", "--lot", "L1", "--runs-dir", str(tmp_path / "runs"), "--json"])
+    (rec,) = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert code == 0 and rec["outcome"] == "PASS", rec
+    assert rec["trims"]["written"], rec["trims"]
+    assert rec["trims"]["chosen"]["thermal_bias_dph"]["procedure"] == "thermal-ramp"
+    back = rec["trims"]["read_back"]
+    assert int(back["TRIM_EN"]) == 0x08 and int(back["TRIM_UNIT_ID"]) == unit_id("HRG-000777")
+    m = {x["name"]: x["value"] for x in rec["measurements"]}
+    assert back["TRIM_BIAS_DPH"] == pytest.approx(m["thermal_bias_dph"], rel=1e-12)
+    assert back["TRIM_BIAS_DPH_PER_HZ"] == pytest.approx(m["thermal_bias_dph_per_hz"], rel=1e-12)
