@@ -282,3 +282,9 @@ class ThermalRamp(ThermalChamber, Procedure):
             Result("part_lag_degc", gap.lag_c, ci95=gap.lag_ci95_c),
             Result("cycle_s", float(seg["t_end_s"][-1] - seg["t_start_s"][0])),
         ]
+
+    def figures(self, data) -> list:
+        """The temperatures, the frequency by branch, the bias against each thermometer and the verification."""
+        from procedures.figures.thermal_ramp import fit_figures, temperature_figure
+
+        return temperature_figure(self, data) + fit_figures(self, data)

@@ -60,7 +60,10 @@ def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station
     assert got["verify_residual_dph"].value < 3.0 * got["verify_noise_dph"].value + 0.5
     from bench.recorder import open_run
 
-    vt = open_run(record.raw_file).table("thermal_ramp_verify")
+    data = open_run(record.raw_file)
+    figs = ThermalRamp(record.params).figures(data)
+    assert [f.key for f in figs] == ["thermal-ramp_temperatures", "thermal-ramp_fits"]
+    vt = data.table("thermal_ramp_verify")
     assert vt["trim_bias_dph"][0] == pytest.approx(got["thermal_bias_dph"].value, rel=1e-9)
     fpga = sim_station.devices["fpga"]
     assert fpga.read_register("TRIM_EN") == 0 and fpga.read_register("TRIM_BIAS_DPH") == 0.0  # restored
