@@ -209,6 +209,14 @@ class ThermalRamp(ThermalChamber, Procedure):
         keys = ("t_s", "branch", "air_c", "part_c", "bias_dph", "bias_se_dph", "f0_hz", "f0_se_hz", "f_offset_hz")
         return {k: a[:, i] for i, k in enumerate(keys)}
 
+    def verification(self, data) -> dict[str, np.ndarray]:
+        """The verification records' points (points_table) and raw_bias_dph: the bias the unit has
+        before any trim, what the record shows plus the trim in force during it."""
+        v = self.points_table(data, VERIFY)
+        vt = data.table(VERIFY.name)
+        v["raw_bias_dph"] = v["bias_dph"] + vt["trim_bias_dph"] + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"]
+        return v
+
     def trim_line(self, p: dict[str, np.ndarray]) -> ThermalFit:
         """The thermal trim: a straight line of the segments' bias against their frequency's offset
         from REF_FREQ_HZ (what the FPGA's PLL register holds), the frequencies' own errors carried."""
@@ -259,10 +267,8 @@ class ThermalRamp(ThermalChamber, Procedure):
         out = [Result("thermal_bias_dph", float(trim.coeffs[0]), ci95=_pair(trim.ci95[0])),
                Result("thermal_bias_dph_per_hz", float(trim.coeffs[1]), ci95=_pair(trim.ci95[1]))]
         if self.verify_points:
-            v = self.points_table(data, VERIFY)
-            vt = data.table(VERIFY.name)
-            # the bias the unit has before any trim: what the record shows plus the trim in force
-            raw = v["bias_dph"] + vt["trim_bias_dph"] + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"]
+            v = self.verification(data)
+            raw = v["raw_bias_dph"]
             out += [
                 Result("verify_residual_dph", float(np.sqrt(np.mean((raw - trim(v["f_offset_hz"])) ** 2)))),
                 Result("verify_residual_part_dph", float(np.sqrt(np.mean((raw - bias["part"](v["part_c"])) ** 2)))),

@@ -55,11 +55,8 @@ def fit_figures(proc: Any, data: Any) -> list[ReportFigure]:
     tt = np.linspace(t_f.min(), t_f.max(), 200)
     a.plot(tt, bias["frequency"](tt), "-", color="C3", label=f"order {bias['frequency'].order} (BIC)")
     if proc.verify_points and "thermal_ramp_verify" in data:
-        from procedures.thermal_ramp import VERIFY
-
-        v = proc.points_table(data, VERIFY)
-        vt = data.table(VERIFY.name)
-        raw = v["bias_dph"] + vt["trim_bias_dph"] + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"]
+        v = proc.verification(data)
+        raw = v["raw_bias_dph"]
         line = proc.trim_line(p)
         t_v = 25.0 + (v["f0_hz"] - f0(25.0)) / f0.slope_at(25.0)
         a.plot(t_v, raw, "s", color="C2", label="verification, untrimmed")
