@@ -25,7 +25,7 @@ from bench.analysis.thermal_ramp import branch_gap, frequency_thermometer, trend
 from bench.engine import Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 
-from .cvg_output import MODES, static_bias_truth
+from .cvg_output import MODES, scale_factor_truth, static_bias_truth
 from .thermal_soak import REF_TEMPERATURE_C, ThermalChamber, _f0_at_25c_truth, _f0_tc_truth, _pair
 
 BRANCHES = ("heating", "cooling")
@@ -33,6 +33,7 @@ BRANCHES = ("heating", "cooling")
 SEGMENTS = declare(StreamSchema("thermal_ramp_segments", "thermal-ramp", (
     Column("t_start_s", "s"), Column("t_end_s", "s"),
     Column("branch", "1", "i8", legend=dict(enumerate(BRANCHES))),
+    Column("rate_dps", "deg/s", doc="the table's rate during the segment (rotate-and-static: +-rate_dps in turn)"),
     Column("air_c", "degC", doc="chamber air, mean of the segment's start and end readings"),
     Column("part_c", "degC", doc="the part thermocouple on the unit's case, mean of start and end"),
     Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
@@ -53,6 +54,40 @@ VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", (
 )))
 
 
+def _pairs(p: dict[str, np.ndarray], rate_dps: np.ndarray, sf: np.ndarray) -> dict[str, np.ndarray]:
+    """Rotate-and-static: consecutive +rate, -rate segments as one point each, the bias their mean
+    (the rate cancels), the scale factor their difference over 2 rate (`sf` and `sf_se` added), the
+    temperatures and frequency their means.  The segments' biases carry the rate as
+    rate 3600 SF / sf_nominal (static_bias divides the output by the nominal scale factor)."""
+    plus = np.flatnonzero(rate_dps[:-1] > 0)
+    plus = plus[(rate_dps[plus + 1] == -rate_dps[plus]) & (p["branch"][plus] == p["branch"][plus + 1])]
+    if len(plus) == 0:
+        raise RuntimeError("no +rate, -rate segment pair in the cycle")
+    i, j = plus, plus + 1
+    out = {k: 0.5 * (v[i] + v[j]) for k, v in p.items()}
+    for k in ("bias_se_dph", "f0_se_hz"):
+        out[k] = 0.5 * np.hypot(p[k][i], p[k][j])
+    scale = sf[i] / (2.0 * rate_dps[i] * 3600.0)
+    out["sf"] = scale * (p["bias_dph"][i] - p["bias_dph"][j])
+    out["sf_se"] = scale * np.hypot(p["bias_se_dph"][i], p["bias_se_dph"][j])
+    out["branch"] = p["branch"][i]
+    return out
+
+
+def _sf_tc_truth(truth: dict[str, float]) -> float:
+    """Force-to-rebalance's scale factor goes as 1 / the pickoff gain (the AGC holds the measured
+    amplitude: scale_factor_truth), so its coefficient is minus the gains' common-mode one."""
+    return -truth.get("err_pickoff_gain_tc_ppm_k", 0.0)
+
+
+def _verifying(proc) -> bool:
+    return proc.verify_points > 0
+
+
+def _rotating(proc) -> bool:
+    return proc.rate_dps > 0
+
+
 class ThermalRamp(ThermalChamber, Procedure):
     """Bias and resonator frequency against temperature from one heating and cooling ramp cycle."""
 
@@ -62,6 +97,13 @@ class ThermalRamp(ThermalChamber, Procedure):
     cycle_degc_per_min = Param(1.0, unit="degC/min", low=0.01, high=50.0,
                                doc="the chamber's ramp during the cycle (ramp_degc_per_min: the approach to t_low)")
     segment_s = Param(60.0, unit="s", low=1.0, high=3600.0, doc="length of each recorded segment")
+    rate_dps = Param(0.0, unit="deg/s", low=0.0, high=1000.0,
+                     doc="the table at +rate_dps and -rate_dps in turn, one segment each, so each pair gives the "
+                         "bias (their mean) and the scale factor (their difference) at its temperature; 0: at rest")
+    accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
+    rate_tolerance_dps = Param(0.01, unit="deg/s", low=1e-6, high=10.0, doc="the rate counts as reached within this")
+    rate_hold_s = Param(1.0, unit="s", low=0.0, high=600.0, doc="the rate held within tolerance before a segment")
+    rate_timeout_s = Param(60.0, unit="s", low=1.0, high=3600.0, doc="longest wait for a rate")
     verify_points = Param(0, low=0, high=50,
                           doc="settled verification records after the cycle, at the middles of verify_points equal "
                               "parts of the range (between any calibration grid's points); 0: none")
@@ -97,11 +139,17 @@ class ThermalRamp(ThermalChamber, Procedure):
         Measurement("thermal_bias_dph_per_hz", "deg/h/Hz", "thermal trim TRIM_BIAS_DPH_PER_HZ: that line's slope"),
         Measurement("verify_residual_dph", "deg/h", "rms bias left at the verification points by the thermal trim "
                     "(the FPGA's compensated output with `compensate`, else the trim applied in the analysis)",
-                    no_interval="a residual"),
+                    no_interval="a residual", when=_verifying, when_doc="verify_points > 0"),
         Measurement("verify_residual_part_dph", "deg/h", "the same with the compensation against the part "
                     "thermocouple", no_interval="a residual"),
         Measurement("verify_noise_dph", "deg/h", "rms of the verification records' own bias standard errors "
-                    "(what the unit's noise allows a residual)", no_interval="a noise level"),
+                    "(what the unit's noise allows a residual)", no_interval="a noise level", when=_verifying,
+                    when_doc="verify_points > 0"),
+        Measurement("sf_at_25c", "", "scale factor (output per input rate) at 25 degC against the frequency "
+                    "thermometer, from the +-rate_dps pairs", truth=scale_factor_truth, when=_rotating,
+                    when_doc="rate_dps > 0"),
+        Measurement("sf_tc_ppm_k", "ppm/K", "scale factor's temperature coefficient at 25 degC (straight line "
+                    "against the frequency thermometer)", truth=_sf_tc_truth, when=_rotating, when_doc="rate_dps > 0"),
         Measurement("cycle_s", "s", "simulated time from the cycle's start to its last segment",
                     no_interval="a time the run took"),
     )
@@ -114,23 +162,42 @@ class ThermalRamp(ThermalChamber, Procedure):
         sf = self._scale_factor()
         settle_s = self._settle_at(ctx, float(self.t_low_degc), ref_hz)
         ctx.log.info(f"settled at {self.t_low_degc:g} degC after {settle_s:.0f} s")
+        table = None
+        if self.rate_dps > 0:
+            if self._mode != "force-to-rebalance":
+                raise RuntimeError("rate_dps > 0 needs the force-to-rebalance output (a rate at each segment)")
+            table = ctx.devices.table
+            table.enable()
+            ctx.defer(lambda: table.set_rate(0.0, self.accel_dps2) if table.connected else None, "table to rest")
         chamber.set_ramp_rate(self.cycle_degc_per_min)
         span_c = self.t_high_degc - self.t_low_degc
         expected_s = 2 * (span_c / self.cycle_degc_per_min * 60.0 + self.tail_s)
         t_cycle = ctx.clock.now()
         for branch, target in enumerate((self.t_high_degc, self.t_low_degc)):
             chamber.set_setpoint(float(target))
-            arrived = None
-            while arrived is None or ctx.clock.now() - arrived < self.tail_s:
+            arrived, k = None, 0
+            # with the table turning, a branch ends on a whole +- pair
+            while arrived is None or ctx.clock.now() - arrived < self.tail_s or (table is not None and k % 2):
+                rate = 0.0
+                if table is not None:
+                    rate = self.rate_dps if k % 2 == 0 else -self.rate_dps
+                    table.set_rate(rate, self.accel_dps2)
+                    table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
+                    ctx.sleep(self._settle_s(ctx))  # the rebalance loop's transient outside the segment
+                k += 1
                 s0 = chamber.status()
-                t0, t1 = self._record_window(ctx, self.segment_s, f"{BRANCHES[branch]} segment")
+                t0, t1 = self._record_window(ctx, self.segment_s, f"{BRANCHES[branch]} segment at {rate:+g} deg/s")
                 s1 = chamber.status()
-                row = [t0, t1, branch, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), ref_hz, code, sf]
+                air, part = 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c)
+                row = [t0, t1, branch, rate, air, part, ref_hz, code, sf]
                 ctx.record(SEGMENTS, SEGMENTS.names, np.array([row]))
                 if arrived is None and abs(s1.air_c - target) < 0.05:
                     arrived = t1
                 ctx.progress(min(1.0, (ctx.clock.now() - t_cycle) / expected_s), f"{BRANCHES[branch]}, case "
                              f"{s1.part_c:.1f} degC")
+        if table is not None:
+            table.set_rate(0.0, self.accel_dps2)
+            table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
 
     def verify_setpoints_c(self) -> np.ndarray:
         n = int(self.verify_points)
@@ -207,7 +274,10 @@ class ThermalRamp(ThermalChamber, Procedure):
             rows.append((0.5 * (t0 + t1), br, air, part, b.bias_dph, b.sigma_dph, ref + f, f_se, f))
         a = np.array(rows, dtype=float).reshape(-1, 9)
         keys = ("t_s", "branch", "air_c", "part_c", "bias_dph", "bias_se_dph", "f0_hz", "f0_se_hz", "f_offset_hz")
-        return {k: a[:, i] for i, k in enumerate(keys)}
+        out = {k: a[:, i] for i, k in enumerate(keys)}
+        if "rate_dps" in schema.names and np.any(seg["rate_dps"] != 0):
+            out = _pairs(out, np.asarray(seg["rate_dps"], dtype=float), np.asarray(seg["scale_factor"], dtype=float))
+        return out
 
     def verification(self, data) -> dict[str, np.ndarray]:
         """The verification records' points (points_table) and raw_bias_dph: the bias the unit has
@@ -221,7 +291,7 @@ class ThermalRamp(ThermalChamber, Procedure):
         """The thermal trim: a straight line of the segments' bias against their frequency's offset
         from REF_FREQ_HZ (what the FPGA's PLL register holds), the frequencies' own errors carried."""
         seg_ref = p["f0_hz"] - p["f_offset_hz"]
-        if not np.all(seg_ref == seg_ref[0]):
+        if not np.allclose(seg_ref, seg_ref[0], rtol=0.0, atol=1e-6):
             raise RuntimeError("REF_FREQ_HZ changed during the cycle: one thermal trim cannot hold it")
         return fit_temperature_polynomial(p["f_offset_hz"], p["bias_dph"], p["bias_se_dph"], max_order=1, min_order=1,
                                           t_ref_c=0.0, sigma_t_c=float(np.median(p["f0_se_hz"])))
@@ -264,7 +334,16 @@ class ThermalRamp(ThermalChamber, Procedure):
         rms = {k: float(np.sqrt(np.mean(fit.residuals**2))) for k, fit in bias.items()}
         seg = data.table(SEGMENTS.name)
         trim = self.trim_line(p)
-        out = [Result("thermal_bias_dph", float(trim.coeffs[0]), ci95=_pair(trim.ci95[0])),
+        out = []
+        if "sf" in p:
+            sf_line = fit_temperature_polynomial(p["frequency_c"], p["sf"], p["sf_se"], max_order=1, min_order=1,
+                                                 t_ref_c=REF_TEMPERATURE_C)
+            sf25 = float(sf_line.coeffs[0])
+            sf_lo, sf_hi = sf_line.ci95[1]
+            out += [Result("sf_at_25c", sf25, ci95=_pair(sf_line.ci95[0])),
+                    Result("sf_tc_ppm_k", float(sf_line.coeffs[1] / sf25 * 1e6),
+                           ci95=(float(sf_lo / sf25 * 1e6), float(sf_hi / sf25 * 1e6)))]
+        out += [Result("thermal_bias_dph", float(trim.coeffs[0]), ci95=_pair(trim.ci95[0])),
                Result("thermal_bias_dph_per_hz", float(trim.coeffs[1]), ci95=_pair(trim.ci95[1]))]
         if self.verify_points:
             v = self.verification(data)

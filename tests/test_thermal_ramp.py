@@ -38,7 +38,7 @@ def test_branch_gap_finds_a_known_lag():
 def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station):
     params = {"t_low_degc": 25.0, "t_high_degc": 35.0, "cycle_degc_per_min": 5.0, "segment_s": 20.0,
               "tail_s": 60.0, "settle_window_s": 20.0, "settle_ppm_per_min": 1.0, "max_order": 2,
-              "verify_points": 1, "record_s": 60.0}
+              "verify_points": 1, "record_s": 60.0, "rate_dps": 10.0}
     record = run_procedure(ThermalRamp, params)
     assert record.outcome == "COMPLETE", (record.end_reason, record.traceback)
     got = {m.name: m for m in record.measurements}
@@ -53,7 +53,11 @@ def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station
     # read as a thermometer it has none of its own: the bias fits against part and frequency agree
     slope_hz_k = tc.value * 1e-6 * got["f0_at_25c_hz"].value
     assert got["f0_rms_part_hz"].value == pytest.approx(slope_hz_k * lag.value, rel=0.3)
-    assert got["cycle_s"].value < 400.0
+    # the scale factor from the +-10 deg/s pairs: its coefficient is the pickoff gains' (-30 ppm/K)
+    sf_tc, sf_truth = got["sf_tc_ppm_k"], ThermalRamp.truth_for(truth)
+    assert sf_tc.ci95[0] <= sf_truth["sf_tc_ppm_k"] == -30.0 <= sf_tc.ci95[1], (sf_tc.value, sf_tc.ci95)
+    print("sf truth", sf_truth.get("sf_at_25c"))
+    assert got["cycle_s"].value < 450.0  # 2 x (2 min ramp + 1 min tail) and the table's rate changes
     # the verification at 30 degC, settled, with the thermal trim in the FPGA: the unit's own output
     # shows the bias (153 deg/h untrimmed) within 3 of its record's noise (the trim's interval adds to it)
     assert got["thermal_bias_dph"].ci95[0] < 160.0 < got["thermal_bias_dph"].ci95[1] + 10.0
