@@ -22,7 +22,7 @@ import numpy as np
 from bench.analysis.cvg_rate import static_bias
 from bench.analysis.thermal_fit import ThermalFit, fit_temperature_polynomial
 from bench.analysis.thermal_ramp import branch_gap, frequency_thermometer, trend_mean
-from bench.engine import Measurement, Param, Procedure, Result, step
+from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 
 from .cvg_output import MODES, scale_factor_truth, static_bias_truth
@@ -153,6 +153,12 @@ class ThermalRamp(ThermalChamber, Procedure):
         Measurement("cycle_s", "s", "simulated time from the cycle's start to its last segment",
                     no_interval="a time the run took"),
     )
+
+    def demands(self) -> list[Demand]:
+        if self.rate_dps <= 0:
+            return []
+        return [Demand("table", "max_rate_dps", "rate_dps", self.rate_dps, "deg/s"),
+                Demand("table", "max_accel_dps2", "accel_dps2", self.accel_dps2, "deg/s^2")]
 
     @step("Ramp cycle, recorded in segments")
     def ramp(self, ctx):

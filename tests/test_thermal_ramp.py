@@ -109,3 +109,10 @@ def test_line_run_eol_hrg_thermal_leaves_the_thermal_trim_in_nvm(tmp_path, capsy
     m = {x["name"]: x["value"] for x in rec["measurements"]}
     assert back["TRIM_BIAS_DPH"] == pytest.approx(m["thermal_bias_dph"], rel=1e-12)
     assert back["TRIM_BIAS_DPH_PER_HZ"] == pytest.approx(m["thermal_bias_dph_per_hz"], rel=1e-12)
+
+
+def test_a_turning_ramp_asks_the_table_for_its_rate():
+    assert ThermalRamp().demands() == []
+    d = ThermalRamp({"rate_dps": 20.0, "accel_dps2": 50.0}).demands()
+    assert [(x.role, x.limit_key, x.value) for x in d] == [("table", "max_rate_dps", 20.0),
+                                                           ("table", "max_accel_dps2", 50.0)]
