@@ -54,18 +54,15 @@ def _f0_at_25c_truth(truth: dict[str, float]) -> float:
     return truth["f0_hz"] + truth.get("freq_offset_hz_ref", truth["freq_offset_hz"])
 
 
-class ThermalSoak(CvgOutput, Procedure):
-    """Bias and resonator frequency against temperature from set points with settled soaks."""
+class ThermalChamber(CvgOutput):
+    """Params and steps the chamber procedures share (thermal-soak, thermal-ramp): the range, the
+    settle judgement from the resonator frequency, the fits' settings, the excitation step."""
 
-    name = "thermal-soak"
-    windows_schema = WINDOWS
     requires = ("fpga", "chamber")
     kinds = ("hrg",)
 
     t_low_degc = Param(-40.0, unit="degC", low=-100.0, high=200.0, doc="lowest set point")
     t_high_degc = Param(85.0, unit="degC", low=-100.0, high=200.0, doc="highest set point")
-    points = Param(6, low=3, high=50, doc="set points from t_low_degc to t_high_degc, equally spaced (3 or more: "
-                                         "a line with a degree of freedom left for its interval)")
     ramp_degc_per_min = Param(3.0, unit="degC/min", low=0.1, high=50.0, doc="the chamber's set-point ramp limit")
     settle_window_s = Param(120.0, unit="s", low=5.0, high=3600.0,
                             doc="window whose mean frequency is compared with the one before")
@@ -74,7 +71,6 @@ class ThermalSoak(CvgOutput, Procedure):
                                    "at fused silica's 55 ppm/K)")
     settle_windows = Param(2, low=1, high=100, doc="consecutive windows below the drift threshold")
     settle_timeout_s = Param(6 * 3600.0, unit="s", low=60.0, high=1e6, doc="longest wait at one set point")
-    record_s = Param(300.0, unit="s", low=1.0, high=1e5, doc="static record once settled")
     batches = Param(10, low=2, high=1000, doc="batches of each record for its intervals")
     max_order = Param(3, low=0, high=6, doc="highest polynomial order the fits try")
     resolution_degc = Param(0.1, unit="degC", low=0.0, high=5.0,
@@ -87,29 +83,8 @@ class ThermalSoak(CvgOutput, Procedure):
                          doc="nominal K: whole-angle's nominal scale factor is -K (0: the station's nominal K)")
     nominal_params = {"bryan_factor": "bryan_factor"}
 
-    measurements = (
-        Measurement("f0_tc_ppm_k", "ppm/K", "resonator frequency's temperature coefficient at 25 degC "
-                    "(fit slope over the fitted frequency there)", truth=_f0_tc_truth),
-        Measurement("f0_at_25c_hz", "Hz", "resonator frequency at 25 degC from the fit",
-                    truth=_f0_at_25c_truth),
-        Measurement("bias_tc_dph_k", "deg/h/K", "bias's temperature slope at 25 degC from the fit"),
-        Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC from the fit (the wave's angle held in "
-                    "force-to-rebalance; in whole-angle it precesses through the soak)", truth=static_bias_truth),
-        Measurement("bias_fit_order", "", "polynomial order of the bias fit (lowest BIC)",
-                    no_interval="an order chosen by a criterion"),
-        Measurement("f0_fit_order", "", "polynomial order of the frequency fit (lowest BIC)",
-                    no_interval="an order chosen by a criterion"),
-        Measurement("bias_fit_rms_dph", "deg/h", "rms residual of the bias fit",
-                    no_interval="a residual"),
-        Measurement("settle_mean_s", "s", "mean time from a set point to its settled record",
-                    no_interval="a time the run took"),
-    )
-
     def demands(self) -> list[Demand]:
         return []
-
-    def setpoints_c(self) -> np.ndarray:
-        return np.linspace(self.t_low_degc, self.t_high_degc, int(self.points))
 
     # --- the frequency the stream carries, kept for the settle judgement -----------------------
     def _collect(self, block: np.ndarray) -> None:
@@ -149,6 +124,60 @@ class ThermalSoak(CvgOutput, Procedure):
         ctx.defer(lambda: chamber.set_setpoint(REF_TEMPERATURE_C) if chamber.connected else None,
                   "chamber set point back to 25 degC")
 
+    def _scale_factor(self) -> float:
+        if self.scale_factor:
+            return float(self.scale_factor)
+        return 1.0 if self._mode == "force-to-rebalance" else -float(self.bryan_factor)
+
+    def _settle_at(self, ctx, setpoint_c: float, ref_hz: float) -> float:
+        """Write the set point, then wait until the frequency's drift between consecutive windows
+        stays below settle_ppm_per_min for settle_windows windows; the seconds it took."""
+        ctx.devices.chamber.set_setpoint(setpoint_c)
+        t_set = ctx.clock.now()
+        prev, quiet = None, 0
+        while quiet < self.settle_windows:
+            if ctx.clock.now() - t_set > self.settle_timeout_s:
+                raise TimeoutError(f"set point {setpoint_c:g} degC: the frequency still drifts after "
+                                   f"{self.settle_timeout_s:g} s (threshold {self.settle_ppm_per_min:g} ppm/min)")
+            f = self._window_freq(ctx, self.settle_window_s)
+            if prev is not None:
+                drift = (f - prev) / (ref_hz + f) * 1e6 / (self.settle_window_s / 60.0)
+                quiet = quiet + 1 if abs(drift) < self.settle_ppm_per_min else 0
+            prev = f
+        return ctx.clock.now() - t_set
+
+
+class ThermalSoak(ThermalChamber, Procedure):
+    """Bias and resonator frequency against temperature from set points with settled soaks."""
+
+    name = "thermal-soak"
+    windows_schema = WINDOWS
+
+    points = Param(6, low=3, high=50, doc="set points from t_low_degc to t_high_degc, equally spaced (3 or more: "
+                                         "a line with a degree of freedom left for its interval)")
+    record_s = Param(300.0, unit="s", low=1.0, high=1e5, doc="static record once settled")
+
+    measurements = (
+        Measurement("f0_tc_ppm_k", "ppm/K", "resonator frequency's temperature coefficient at 25 degC "
+                    "(fit slope over the fitted frequency there)", truth=_f0_tc_truth),
+        Measurement("f0_at_25c_hz", "Hz", "resonator frequency at 25 degC from the fit",
+                    truth=_f0_at_25c_truth),
+        Measurement("bias_tc_dph_k", "deg/h/K", "bias's temperature slope at 25 degC from the fit"),
+        Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC from the fit (the wave's angle held in "
+                    "force-to-rebalance; in whole-angle it precesses through the soak)", truth=static_bias_truth),
+        Measurement("bias_fit_order", "", "polynomial order of the bias fit (lowest BIC)",
+                    no_interval="an order chosen by a criterion"),
+        Measurement("f0_fit_order", "", "polynomial order of the frequency fit (lowest BIC)",
+                    no_interval="an order chosen by a criterion"),
+        Measurement("bias_fit_rms_dph", "deg/h", "rms residual of the bias fit",
+                    no_interval="a residual"),
+        Measurement("settle_mean_s", "s", "mean time from a set point to its settled record",
+                    no_interval="a time the run took"),
+    )
+
+    def setpoints_c(self) -> np.ndarray:
+        return np.linspace(self.t_low_degc, self.t_high_degc, int(self.points))
+
     @step("Set points, settle and record")
     def soak(self, ctx):
         chamber = ctx.devices.chamber
@@ -158,19 +187,7 @@ class ThermalSoak(CvgOutput, Procedure):
         sf = self._scale_factor()
         sps = self.setpoints_c()
         for i, sp in enumerate(sps):
-            chamber.set_setpoint(float(sp))
-            t_set = ctx.clock.now()
-            prev, quiet = None, 0
-            while quiet < self.settle_windows:
-                if ctx.clock.now() - t_set > self.settle_timeout_s:
-                    raise TimeoutError(f"set point {sp:g} degC: the frequency still drifts after "
-                                       f"{self.settle_timeout_s:g} s (threshold {self.settle_ppm_per_min:g} ppm/min)")
-                f = self._window_freq(ctx, self.settle_window_s)
-                if prev is not None:
-                    drift = (f - prev) / (ref_hz + f) * 1e6 / (self.settle_window_s / 60.0)
-                    quiet = quiet + 1 if abs(drift) < self.settle_ppm_per_min else 0
-                prev = f
-            settle_s = ctx.clock.now() - t_set
+            settle_s = self._settle_at(ctx, float(sp), ref_hz)
             s0 = chamber.status()
             t0, t1 = self._record_window(ctx, self.record_s, f"set point {sp:g} degC record")
             s1 = chamber.status()
@@ -183,12 +200,6 @@ class ThermalSoak(CvgOutput, Procedure):
     def estimate(self, ctx):
         for res in self.analysis(ctx.data()):
             ctx.report(res)
-
-    # --- analysis --------------------------------------------------------------------------
-    def _scale_factor(self) -> float:
-        if self.scale_factor:
-            return float(self.scale_factor)
-        return 1.0 if self._mode == "force-to-rebalance" else -float(self.bryan_factor)
 
     def points_table(self, data) -> dict[str, np.ndarray]:
         """Each record's case temperature, bias (deg/h) and frequency (Hz) with standard errors."""

@@ -46,13 +46,17 @@ COEFFICIENTS: dict[str, CoefficientSpec] = {
                         -360.0, 360.0, "frequency axis theta_w (quadrature loop's feed-forward)"),
         CoefficientSpec("bryan_factor", "", "TRIM_BRYAN_FACTOR", ("hrg-free-decay",),
                         0.0, 1.0, "Bryan factor K (scale factor: output rate = wave rate / K)"),
+        CoefficientSpec("thermal_bias_dph", "deg/h", "TRIM_BIAS_DPH", ("thermal-ramp",), -1e4, 1e4,
+                        "bias at the FPGA's REF_FREQ_HZ (thermal trim, the resonator frequency as thermometer)"),
+        CoefficientSpec("thermal_bias_dph_per_hz", "deg/h/Hz", "TRIM_BIAS_DPH_PER_HZ", ("thermal-ramp",), -1e4, 1e4,
+                        "bias's slope against the PLL frequency's offset from REF_FREQ_HZ (thermal trim)"),
         CoefficientSpec("gain_x", "", "TRIM_GAIN_X", (), 0.5, 2.0, "pickoff x gain trim"),
         CoefficientSpec("gain_y", "", "TRIM_GAIN_Y", (), 0.5, 2.0, "pickoff y gain trim"),
     )
 }
 # TRIM_EN bits (drivers.fpga.protocol) a set of coefficients switches on
 _TRIM_GROUPS = ((0x01, ("delta_inv_tau_per_s", "theta_tau_deg")), (0x02, ("split_hz", "theta_w_deg")),
-                (0x04, ("gain_x", "gain_y")))  # fmt: skip
+                (0x04, ("gain_x", "gain_y")), (0x08, ("thermal_bias_dph", "thermal_bias_dph_per_hz")))  # fmt: skip
 
 
 class CompensationError(ValueError):

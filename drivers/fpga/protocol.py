@@ -163,14 +163,15 @@ REGISTERS: tuple[Register, ...] = (
 # --- trims held in non-volatile memory (0x40-0x4F; docs/fpga_link.md "Trims in NVM") ----------
 NVM_COMMIT, NVM_RELOAD, NVM_ERASE = 1, 2, 3  # NVM_CMD values
 NVM_VALID, NVM_MATCH, NVM_CRC_BAD = 0x01, 0x02, 0x04  # NVM_STATUS bits
-TRIM_DRIFT, TRIM_SPLIT, TRIM_GAIN = 0x01, 0x02, 0x04  # TRIM_EN bits: which trims the firmware applies
-TRIM_EN_MASK = 0x07
+TRIM_DRIFT, TRIM_SPLIT, TRIM_GAIN, TRIM_THERMAL = 0x01, 0x02, 0x04, 0x08  # TRIM_EN bits: the trims applied
+TRIM_EN_MASK = 0x0F
 TRIM_REGISTERS: tuple[Register, ...] = (
     Register("NVM_CMD", 0x40, "u", "wo", 0, 3, doc="1 commit the trim block to NVM, 2 reload it, 3 erase NVM (0 none)"),
     Register("NVM_STATUS", 0x41, "u", "ro", doc="0x01 NVM valid (CRC checks), 0x02 trims equal NVM, 0x04 CRC bad"),
     Register("NVM_CRC", 0x42, "u", "ro", doc="CRC-16 of the trim block stored in NVM (0: empty)"),
     Register("NVM_COMMITS", 0x43, "u", "ro", doc="commits since manufacture (NVM wear)"),
-    Register("TRIM_EN", 0x44, "u", "rw", 0, TRIM_EN_MASK, doc="trims applied: 0x01 drift, 0x02 split, 0x04 gains"),
+    Register("TRIM_EN", 0x44, "u", "rw", 0, TRIM_EN_MASK,
+             doc="trims applied: 0x01 drift, 0x02 split, 0x04 gains, 0x08 thermal bias"),
     Register("TRIM_DRIFT_D_PER_S", 0x45, "f", "rw", 0.0, 1e3, "1/s", 0.0, "drift trim: damping anisotropy D"),
     Register("TRIM_DRIFT_THETA_TAU_DEG", 0x46, "f", "rw", -360.0, 360.0, "deg", 0.0, "drift trim: damping axis"),
     Register("TRIM_SPLIT_HZ", 0x47, "f", "rw", 0.0, 10.0, "Hz", 0.0, "split trim: frequency split"),
@@ -178,6 +179,11 @@ TRIM_REGISTERS: tuple[Register, ...] = (
     Register("TRIM_GAIN_X", 0x49, "f", "rw", 0.5, 2.0, "", 1.0, "pickoff x gain trim (multiplies cx, sx)"),
     Register("TRIM_GAIN_Y", 0x4A, "f", "rw", 0.5, 2.0, "", 1.0, "pickoff y gain trim (multiplies cy, sy)"),
     Register("TRIM_BRYAN_FACTOR", 0x4B, "f", "rw", 0.0, 1.0, "", 0.0, "scale factor trim: Bryan factor K (0 none)"),
+    Register("TRIM_BIAS_DPH", 0x4C, "f", "rw", -1e4, 1e4, "deg/h", 0.0,
+             "thermal trim: the bias at REF_FREQ_HZ, removed from the force-to-rebalance rate output"),
+    Register("TRIM_BIAS_DPH_PER_HZ", 0x4D, "f", "rw", -1e4, 1e4, "deg/h/Hz", 0.0,
+             "thermal trim: the bias's slope against the PLL frequency's offset from REF_FREQ_HZ (the "
+             "resonator frequency as the thermometer)"),
     Register("TRIM_UNIT_ID", 0x4E, "u", "rw", 0, float(2**48 - 1),
              doc="the unit's serial as 48 bits of its SHA-256 (0: none), so NVM names the unit it trims"),
     Register("TRIM_FILE_ID", 0x4F, "u", "rw", 0, float(2**48 - 1), doc="compensation file id (SHA-256, 6 bytes)"),

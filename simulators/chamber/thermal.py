@@ -1,6 +1,8 @@
 """The chamber's thermal model in virtual time (docs/chamber.md): the air follows the set point
 at the controller's ramp limit, the unit's case follows the air through a first-order time
-constant, and the case temperature is the World's temperature (what the resonator feels)."""
+constant, and the resonator follows the case through its own time constant (in vacuum it takes
+heat by radiation and through its stem; 0: it is at the case's temperature): the resonator's
+temperature is the World's."""
 
 from __future__ import annotations
 
@@ -18,25 +20,39 @@ class ChamberThermal:
     air_c: float = 25.0
     case_c: float = 25.0
     ambient_c: float = 25.0
+    resonator_tau_s: float = 0.0
+    resonator_c: float | None = None
 
     def __post_init__(self) -> None:
         if not (self.case_tau_s > 0 and math.isfinite(self.case_tau_s)):
             raise ValueError(f"case_tau_s={self.case_tau_s!r} must be > 0")
+        if not (self.resonator_tau_s >= 0 and math.isfinite(self.resonator_tau_s)):
+            raise ValueError(f"resonator_tau_s={self.resonator_tau_s!r} must be >= 0")
+        if self.resonator_c is None:
+            self.resonator_c = self.case_c
+
+    @staticmethod
+    def _lag(x0: float, u0: float, u1: float, dt_s: float, tau_s: float) -> float:
+        """Exact first-order response x' = (u - x) / tau over dt_s to an input moving linearly u0 -> u1."""
+        a = math.exp(-dt_s / tau_s)
+        lag = (u1 - u0) / dt_s * tau_s if dt_s > 0 else 0.0
+        return (u1 - lag) + (x0 - u0 + lag) * a
 
     def step(self, dt_s: float) -> None:
-        """Advance the air (ramp-limited toward the set point) and the case (exact first-order
-        response to the air's linear path over dt_s)."""
+        """Advance the air (ramp-limited toward the set point), the case (exact first-order
+        response to the air's linear path over dt_s) and the resonator (the same behind the case,
+        whose path over a short block is taken as a straight line)."""
         air0 = self.air_c
         max_step = self.ramp_c_per_min / 60.0 * dt_s
         err = self.setpoint_c - air0
         air1 = self.setpoint_c if abs(err) <= max_step else air0 + math.copysign(max_step, err)
-        tau = self.case_tau_s
-        a = math.exp(-dt_s / tau)
-        slope = (air1 - air0) / dt_s if dt_s > 0 else 0.0
-        # x' = (air0 + slope t - x) / tau, exact over the step
-        lag = slope * tau
-        self.case_c = (air1 - lag) + (self.case_c - air0 + lag) * a
+        case0 = self.case_c
+        self.case_c = self._lag(case0, air0, air1, dt_s, self.case_tau_s)
         self.air_c = air1
+        if self.resonator_tau_s > 0:
+            self.resonator_c = self._lag(self.resonator_c, case0, self.case_c, dt_s, self.resonator_tau_s)
+        else:
+            self.resonator_c = self.case_c
 
     def ramping(self) -> bool:
         return self.air_c != self.setpoint_c
@@ -44,7 +60,7 @@ class ChamberThermal:
     # --- World device ---------------------------------------------------------------------------
     def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
         self.step(n * dt_s)
-        world.set_temperature(self.case_c)
+        world.set_temperature(self.resonator_c)
 
     def after_block(self, world, block) -> None:
         pass

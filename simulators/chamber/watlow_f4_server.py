@@ -115,7 +115,8 @@ def serve_watlow_f4(
     """Attach a ChamberThermal (starting at the world's temperature) to the world and serve the F4's
     registers over Modbus on loopback (port 0: any); the handle's `.mechanics` is the model."""
     start = world.temperature_c
-    thermal = ChamberThermal(**({"setpoint_c": start, "air_c": start, "case_c": start} | thermal_kw))
+    at_start = {"setpoint_c": start, "air_c": start, "case_c": start, "resonator_c": start}
+    thermal = ChamberThermal(**(at_start | thermal_kw))
     registers = ChamberRegisters(world, thermal, low_c=low_c, high_c=high_c)
     with world.lock:
         world.attach(thermal)
@@ -126,5 +127,6 @@ def serve_watlow_f4(
 def serve_station(world: Any, cfg: dict[str, Any]) -> tuple[ModbusTableServer, dict[str, Any]]:
     """A simulated station's `watlow-f4` chamber: served from its station keys; (handle, address keys)."""
     handle = serve_watlow_f4(world, device_id=cfg["device_id"], low_c=cfg["min_degc"], high_c=cfg["max_degc"],
-                             ramp_c_per_min=cfg["ramp_degc_per_min"], case_tau_s=cfg["case_tau_s"])
+                             ramp_c_per_min=cfg["ramp_degc_per_min"], case_tau_s=cfg["case_tau_s"],
+                             resonator_tau_s=cfg["resonator_tau_s"])
     return handle, {"host": handle.host, "port": handle.port}

@@ -221,6 +221,8 @@ class FpgaFirmware:
             if not int(self.regs["CTRL"]) & p.DRIFT_COMP_EN and int(self.regs["TRIM_EN"]) & p.TRIM_DRIFT:
                 prm[k.P_DRIFT_D_PER_S] = float(self.regs["TRIM_DRIFT_D_PER_S"])
                 prm[k.P_DRIFT_THETA_TAU_DEG] = float(self.regs["TRIM_DRIFT_THETA_TAU_DEG"])
+            if not int(self.regs["TRIM_EN"]) & p.TRIM_THERMAL:
+                prm[k.P_TRIM_BIAS_DPH] = prm[k.P_TRIM_BIAS_DPH_PER_HZ] = 0.0
             self._hot = self._hot_values()
         return prm
 

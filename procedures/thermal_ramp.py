@@ -1,0 +1,381 @@
+"""thermal-ramp: the ramp method of thermal calibration (Niu et al., "Fast Thermal Calibration of
+Low-Grade Inertial Sensors and Inertial Measurement Units", Sensors 2013; docs/chamber.md, "The
+ramp method"): one heating and one cooling branch at a steady chamber ramp, recorded in short
+segments throughout, both branches fitted together so a thermometer's lag cancels to first order.
+
+Steps: excite and hold the amplitude; the chamber to t_low_degc, settled from the resonator
+frequency's drift (as thermal-soak); then at `cycle_degc_per_min` up to t_high_degc and back,
+each branch held `tail_s` once the air has arrived, the unit recorded in segments of `segment_s`
+with the chamber's air and part (case) readings at each segment's start and end.  The analysis
+takes each segment's bias and mean frequency and fits the bias against three thermometers: the
+chamber air, the part thermocouple and the resonator frequency read as a temperature
+(bench.analysis.thermal_ramp), with the rms residual of each; the frequency fit against the part
+thermocouple gives the frequency's coefficient, and its heating-cooling gap the resonator's lag
+behind the thermocouple."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from bench.analysis.cvg_rate import static_bias
+from bench.analysis.thermal_fit import ThermalFit, fit_temperature_polynomial
+from bench.analysis.thermal_ramp import branch_gap, frequency_thermometer, trend_mean
+from bench.engine import Demand, Measurement, Param, Procedure, Result, step
+from bench.streams import Column, StreamSchema, declare
+
+from .cvg_output import MODES, scale_factor_truth, static_bias_truth
+from .thermal_soak import REF_TEMPERATURE_C, ThermalChamber, _f0_at_25c_truth, _f0_tc_truth, _pair
+
+BRANCHES = ("heating", "cooling")
+
+SEGMENTS = declare(StreamSchema("thermal_ramp_segments", "thermal-ramp", (
+    Column("t_start_s", "s"), Column("t_end_s", "s"),
+    Column("branch", "1", "i8", legend=dict(enumerate(BRANCHES))),
+    Column("rate_dps", "deg/s", doc="the table's rate during the segment (rotate-and-static: +-rate_dps in turn)"),
+    Column("air_c", "degC", doc="chamber air, mean of the segment's start and end readings"),
+    Column("part_c", "degC", doc="the part thermocouple on the unit's case, mean of start and end"),
+    Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
+    Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
+    Column("scale_factor", "1"),
+)))
+
+VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", (
+    Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
+    Column("air_c", "degC", doc="chamber air at the record's start and end (mean)"),
+    Column("part_c", "degC", doc="the part thermocouple on the unit's case (mean of start and end)"),
+    Column("settle_s", "s", doc="time from the set point to the record's start"),
+    Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
+    Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
+    Column("scale_factor", "1"),
+    Column("trim_bias_dph", "deg/h", doc="TRIM_BIAS_DPH in force during the record (0: no thermal trim)"),
+    Column("trim_bias_dph_per_hz", "deg/h/Hz", doc="TRIM_BIAS_DPH_PER_HZ in force during the record"),
+)))
+
+
+def _pairs(p: dict[str, np.ndarray], rate_dps: np.ndarray, sf: np.ndarray) -> dict[str, np.ndarray]:
+    """Rotate-and-static: consecutive +rate, -rate segments as one point each, the bias their mean
+    (the rate cancels), the scale factor their difference over 2 rate (`sf` and `sf_se` added), the
+    temperatures and frequency their means.  The segments' biases carry the rate as
+    rate 3600 SF / sf_nominal (static_bias divides the output by the nominal scale factor)."""
+    plus = np.flatnonzero(rate_dps[:-1] > 0)
+    plus = plus[(rate_dps[plus + 1] == -rate_dps[plus]) & (p["branch"][plus] == p["branch"][plus + 1])]
+    if len(plus) == 0:
+        raise RuntimeError("no +rate, -rate segment pair in the cycle")
+    i, j = plus, plus + 1
+    out = {k: 0.5 * (v[i] + v[j]) for k, v in p.items()}
+    for k in ("bias_se_dph", "f0_se_hz"):
+        out[k] = 0.5 * np.hypot(p[k][i], p[k][j])
+    scale = sf[i] / (2.0 * rate_dps[i] * 3600.0)
+    out["sf"] = scale * (p["bias_dph"][i] - p["bias_dph"][j])
+    out["sf_se"] = scale * np.hypot(p["bias_se_dph"][i], p["bias_se_dph"][j])
+    out["branch"] = p["branch"][i]
+    return out
+
+
+def _sf_tc_truth(truth: dict[str, float]) -> float:
+    """Force-to-rebalance's scale factor goes as 1 / the pickoff gain (the AGC holds the measured
+    amplitude: scale_factor_truth), so its coefficient is minus the gains' common-mode one."""
+    return -truth.get("err_pickoff_gain_tc_ppm_k", 0.0)
+
+
+def _verifying(proc) -> bool:
+    return proc.verify_points > 0
+
+
+def _rotating(proc) -> bool:
+    return proc.rate_dps > 0
+
+
+class ThermalRamp(ThermalChamber, Procedure):
+    """Bias and resonator frequency against temperature from one heating and cooling ramp cycle."""
+
+    name = "thermal-ramp"
+    windows_schema = SEGMENTS
+
+    cycle_degc_per_min = Param(1.0, unit="degC/min", low=0.01, high=50.0,
+                               doc="the chamber's ramp during the cycle (ramp_degc_per_min: the approach to t_low)")
+    segment_s = Param(60.0, unit="s", low=1.0, high=3600.0, doc="length of each recorded segment")
+    rate_dps = Param(0.0, unit="deg/s", low=0.0, high=1000.0,
+                     doc="the table at +rate_dps and -rate_dps in turn, one segment each, so each pair gives the "
+                         "bias (their mean) and the scale factor (their difference) at its temperature; 0: at rest")
+    accel_dps2 = Param(100.0, unit="deg/s^2", low=0.1, high=10000.0, doc="table acceleration")
+    rate_tolerance_dps = Param(0.01, unit="deg/s", low=1e-6, high=10.0, doc="the rate counts as reached within this")
+    rate_hold_s = Param(1.0, unit="s", low=0.0, high=600.0, doc="the rate held within tolerance before a segment")
+    rate_timeout_s = Param(60.0, unit="s", low=1.0, high=3600.0, doc="longest wait for a rate")
+    verify_points = Param(0, low=0, high=50,
+                          doc="settled verification records after the cycle, at the middles of verify_points equal "
+                              "parts of the range (between any calibration grid's points); 0: none")
+    record_s = Param(300.0, unit="s", low=1.0, high=1e5, doc="each verification record once settled")
+    compensate = Param(True, doc="before the verification, the thermal trim (bias against the resonator frequency) "
+                                 "into the FPGA's registers (RAM; restored at the end), so the verification reads "
+                                 "the unit's own compensated output")
+    tail_s = Param(600.0, unit="s", low=0.0, high=1e5,
+                   doc="record on at each end of the range once the air has arrived (the case catching up)")
+
+    measurements = (
+        Measurement("f0_tc_ppm_k", "ppm/K", "resonator frequency's temperature coefficient at 25 degC against the "
+                    "part thermocouple, both branches", truth=_f0_tc_truth),
+        Measurement("f0_at_25c_hz", "Hz", "resonator frequency at 25 degC from the fit", truth=_f0_at_25c_truth),
+        Measurement("bias_tc_dph_k", "deg/h/K",
+                    "bias's temperature slope at 25 degC against the frequency thermometer"),
+        Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC against the frequency thermometer",
+                    truth=static_bias_truth),
+        Measurement("bias_fit_order", "", "polynomial order of the bias fit against the frequency thermometer (BIC)",
+                    no_interval="an order chosen by a criterion"),
+        Measurement("bias_rms_air_dph", "deg/h", "rms residual of the bias fitted against the chamber air",
+                    no_interval="a residual"),
+        Measurement("bias_rms_part_dph", "deg/h", "rms residual of the bias fitted against the part thermocouple",
+                    no_interval="a residual"),
+        Measurement("bias_rms_frequency_dph", "deg/h", "rms residual of the bias fitted against the resonator "
+                    "frequency read as a temperature", no_interval="a residual"),
+        Measurement("f0_rms_part_hz", "Hz", "rms residual of the frequency fitted against the part thermocouple",
+                    no_interval="a residual"),
+        Measurement("part_lag_degc", "degC", "the resonator's lag behind the part thermocouple, from the frequency "
+                    "fit's heating-cooling gap (positive: the resonator trails)"),
+        Measurement("thermal_bias_dph", "deg/h", "thermal trim TRIM_BIAS_DPH: the bias at the FPGA's REF_FREQ_HZ "
+                    "from a straight line of the bias against the resonator frequency"),
+        Measurement("thermal_bias_dph_per_hz", "deg/h/Hz", "thermal trim TRIM_BIAS_DPH_PER_HZ: that line's slope"),
+        Measurement("verify_residual_dph", "deg/h", "rms bias left at the verification points by the thermal trim "
+                    "(the FPGA's compensated output with `compensate`, else the trim applied in the analysis)",
+                    no_interval="a residual", when=_verifying, when_doc="verify_points > 0"),
+        Measurement("verify_residual_part_dph", "deg/h", "the same with the compensation against the part "
+                    "thermocouple", no_interval="a residual"),
+        Measurement("verify_noise_dph", "deg/h", "rms of the verification records' own bias standard errors "
+                    "(what the unit's noise allows a residual)", no_interval="a noise level", when=_verifying,
+                    when_doc="verify_points > 0"),
+        Measurement("sf_at_25c", "", "scale factor (output per input rate) at 25 degC against the frequency "
+                    "thermometer, from the +-rate_dps pairs", truth=scale_factor_truth, when=_rotating,
+                    when_doc="rate_dps > 0"),
+        Measurement("sf_tc_ppm_k", "ppm/K", "scale factor's temperature coefficient at 25 degC (straight line "
+                    "against the frequency thermometer)", truth=_sf_tc_truth, when=_rotating, when_doc="rate_dps > 0"),
+        Measurement("cycle_s", "s", "simulated time from the cycle's start to its last segment",
+                    no_interval="a time the run took"),
+    )
+
+    def demands(self) -> list[Demand]:
+        if self.rate_dps <= 0:
+            return []
+        return [Demand("table", "max_rate_dps", "rate_dps", self.rate_dps, "deg/s"),
+                Demand("table", "max_accel_dps2", "accel_dps2", self.accel_dps2, "deg/s^2")]
+
+    @step("Ramp cycle, recorded in segments")
+    def ramp(self, ctx):
+        chamber = ctx.devices.chamber
+        ref_hz = float(ctx.devices.fpga.read_register("REF_FREQ_HZ"))
+        code = MODES.index(self._mode)
+        sf = self._scale_factor()
+        settle_s = self._settle_at(ctx, float(self.t_low_degc), ref_hz)
+        ctx.log.info(f"settled at {self.t_low_degc:g} degC after {settle_s:.0f} s")
+        table = None
+        if self.rate_dps > 0:
+            if self._mode != "force-to-rebalance":
+                raise RuntimeError("rate_dps > 0 needs the force-to-rebalance output (a rate at each segment)")
+            table = ctx.devices.table
+            table.enable()
+            ctx.defer(lambda: table.set_rate(0.0, self.accel_dps2) if table.connected else None, "table to rest")
+        chamber.set_ramp_rate(self.cycle_degc_per_min)
+        span_c = self.t_high_degc - self.t_low_degc
+        expected_s = 2 * (span_c / self.cycle_degc_per_min * 60.0 + self.tail_s)
+        t_cycle = ctx.clock.now()
+        for branch, target in enumerate((self.t_high_degc, self.t_low_degc)):
+            chamber.set_setpoint(float(target))
+            arrived, k = None, 0
+            # with the table turning, a branch ends on a whole +- pair
+            while arrived is None or ctx.clock.now() - arrived < self.tail_s or (table is not None and k % 2):
+                rate = 0.0
+                if table is not None:
+                    rate = self.rate_dps if k % 2 == 0 else -self.rate_dps
+                    table.set_rate(rate, self.accel_dps2)
+                    table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
+                    ctx.sleep(self._settle_s(ctx))  # the rebalance loop's transient outside the segment
+                k += 1
+                s0 = chamber.status()
+                t0, t1 = self._record_window(ctx, self.segment_s, f"{BRANCHES[branch]} segment at {rate:+g} deg/s")
+                s1 = chamber.status()
+                air, part = 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c)
+                row = [t0, t1, branch, rate, air, part, ref_hz, code, sf]
+                ctx.record(SEGMENTS, SEGMENTS.names, np.array([row]))
+                if arrived is None and abs(s1.air_c - target) < 0.05:
+                    arrived = t1
+                ctx.progress(min(1.0, (ctx.clock.now() - t_cycle) / expected_s), f"{BRANCHES[branch]}, case "
+                             f"{s1.part_c:.1f} degC")
+        if table is not None:
+            table.set_rate(0.0, self.accel_dps2)
+            table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
+
+    def verify_setpoints_c(self) -> np.ndarray:
+        n = int(self.verify_points)
+        return self.t_low_degc + (np.arange(n) + 0.5) * (self.t_high_degc - self.t_low_degc) / max(n, 1)
+
+    @step("Verification at temperatures between")
+    def verify(self, ctx):
+        if not self.verify_points:
+            return
+        chamber = ctx.devices.chamber
+        fpga = ctx.devices.fpga
+        ref_hz = float(fpga.read_register("REF_FREQ_HZ"))
+        chamber.set_ramp_rate(self.ramp_degc_per_min)
+        code, sf = MODES.index(self._mode), self._scale_factor()
+        trim = (0.0, 0.0)
+        if self.compensate:
+            line = self.trim_line(self.points_table(ctx.data()))
+            trim = (float(line.coeffs[0]), float(line.coeffs[1]))
+            self._write_trim(ctx, trim)
+        for sp in self.verify_setpoints_c():
+            settle_s = self._settle_at(ctx, float(sp), ref_hz)
+            s0 = chamber.status()
+            t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record")
+            s1 = chamber.status()
+            row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf,
+                   *trim]
+            ctx.record(VERIFY, VERIFY.names, np.array([row]))
+
+    def _write_trim(self, ctx, trim: tuple[float, float]) -> None:
+        """The thermal trim into the FPGA's registers and TRIM_EN's TRIM_THERMAL bit (RAM only: the
+        line commits trims to NVM for PASS units); the registers before are restored at the end."""
+        from drivers.fpga import protocol as fp
+
+        fpga = ctx.devices.fpga
+        names = ("TRIM_EN", "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ")
+        before = {n: fpga.read_register(n) for n in names}
+
+        def restore() -> None:
+            if fpga.connected:
+                for n in names[::-1]:
+                    fpga.write_register(n, before[n])
+
+        ctx.defer(restore, "restore the thermal trim registers")
+        fpga.write_register("TRIM_BIAS_DPH", trim[0])
+        fpga.write_register("TRIM_BIAS_DPH_PER_HZ", trim[1])
+        fpga.write_register("TRIM_EN", int(before["TRIM_EN"]) | fp.TRIM_THERMAL)
+        ctx.log.info(f"thermal trim on: {trim[0]:.4g} deg/h at REF_FREQ_HZ, {trim[1]:.4g} deg/h/Hz")
+
+    @step("Fits against temperature")
+    def estimate(self, ctx):
+        for res in self.analysis(ctx.data()):
+            ctx.report(res)
+
+    # --- analysis --------------------------------------------------------------------------
+    def points_table(self, data, schema: StreamSchema = SEGMENTS) -> dict[str, np.ndarray]:
+        """Each segment's branch, air and part readings, bias (deg/h) and frequency (Hz) with
+        standard errors (the frequency's about its own drift within the segment); with VERIFY,
+        the verification records' (branch: -1)."""
+        seg = data.table(schema.name)
+        fpga = data.table("fpga")
+        t = fpga["t_s"]
+        earth_dph = self.earth_rate_on_axis_dph(data)
+        rows = []
+        branches = seg["branch"] if "branch" in schema.names else np.full(len(seg["t_start_s"]), -1.0)
+        cols = ("t_start_s", "t_end_s", "air_c", "part_c", "ref_freq_hz", "mode", "scale_factor")
+        for br, (t0, t1, air, part, ref, mode, sf) in zip(branches, zip(*(seg[c] for c in cols), strict=True),
+                                                           strict=True):
+            sel = (t > t0) & (t <= t1)
+            name = MODES[int(mode)]
+            y = fpga["rate_out_dps"][sel] if name == "force-to-rebalance" else fpga["angle_out_deg"][sel]
+            b = static_bias(t[sel], y, mode=name, scale_factor=float(sf), earth_rate_dph=earth_dph,
+                            n_batches=self.batches)
+            f, f_se = trend_mean(fpga["freq_ctrl"][sel], self.batches)
+            rows.append((0.5 * (t0 + t1), br, air, part, b.bias_dph, b.sigma_dph, ref + f, f_se, f))
+        a = np.array(rows, dtype=float).reshape(-1, 9)
+        keys = ("t_s", "branch", "air_c", "part_c", "bias_dph", "bias_se_dph", "f0_hz", "f0_se_hz", "f_offset_hz")
+        out = {k: a[:, i] for i, k in enumerate(keys)}
+        if "rate_dps" in schema.names and np.any(seg["rate_dps"] != 0):
+            out = _pairs(out, np.asarray(seg["rate_dps"], dtype=float), np.asarray(seg["scale_factor"], dtype=float))
+        return out
+
+    def verification(self, data) -> dict[str, np.ndarray]:
+        """The verification records' points (points_table) and raw_bias_dph: the bias the unit has
+        before any trim, what the record shows plus the trim in force during it."""
+        v = self.points_table(data, VERIFY)
+        vt = data.table(VERIFY.name)
+        v["raw_bias_dph"] = v["bias_dph"] + vt["trim_bias_dph"] + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"]
+        return v
+
+    def trim_line(self, p: dict[str, np.ndarray]) -> ThermalFit:
+        """The thermal trim: a straight line of the segments' bias against their frequency's offset
+        from REF_FREQ_HZ (what the FPGA's PLL register holds), the frequencies' own errors carried."""
+        seg_ref = p["f0_hz"] - p["f_offset_hz"]
+        if not np.allclose(seg_ref, seg_ref[0], rtol=0.0, atol=1e-6):
+            raise RuntimeError("REF_FREQ_HZ changed during the cycle: one thermal trim cannot hold it")
+        return fit_temperature_polynomial(p["f_offset_hz"], p["bias_dph"], p["bias_se_dph"], max_order=1, min_order=1,
+                                          t_ref_c=0.0, sigma_t_c=float(np.median(p["f0_se_hz"])))
+
+    def fits(self, data) -> tuple[dict[str, np.ndarray], dict[str, ThermalFit], ThermalFit, ThermalFit]:
+        """The points, the bias fit against each thermometer, the frequency fit against the part
+        thermocouple (BIC order) and the frequency thermometer's straight line."""
+        p = self.points_table(data)
+        if len(p["part_c"]) < 4:
+            raise RuntimeError(f"{len(p['part_c'])} segment(s): the fits need 4 or more")
+        sig_t = self.resolution_degc / math.sqrt(12.0)
+        kw = dict(max_order=int(self.max_order), t_ref_c=REF_TEMPERATURE_C)
+        t_f, t_f_se, line = frequency_thermometer(p["f0_hz"], p["f0_se_hz"], p["part_c"], t_ref_c=REF_TEMPERATURE_C,
+                                                  sigma_t_c=sig_t)
+        p["frequency_c"] = t_f
+        bias = {
+            "air": fit_temperature_polynomial(p["air_c"], p["bias_dph"], p["bias_se_dph"], sigma_t_c=sig_t, **kw),
+            "part": fit_temperature_polynomial(p["part_c"], p["bias_dph"], p["bias_se_dph"], sigma_t_c=sig_t, **kw),
+            # the frequency thermometer's error is each segment's own (its mean frequency's)
+            "frequency": fit_temperature_polynomial(t_f, p["bias_dph"], p["bias_se_dph"],
+                                                    sigma_t_c=float(np.median(t_f_se)), **kw),
+        }
+        f0 = fit_temperature_polynomial(p["part_c"], p["f0_hz"], p["f0_se_hz"], sigma_t_c=sig_t, **kw)
+        return p, bias, f0, line
+
+    def analysis(self, data) -> list[Result]:
+        """The fits' results from a recorded run's `thermal_ramp_segments` and `fpga` streams."""
+        p, bias, f0, line = self.fits(data)
+        f25 = float(f0.coeffs[0])
+        fb = bias["frequency"]
+        if fb.order >= 1:
+            b_slope, b_ci = float(fb.coeffs[1]), _pair(fb.ci95[1])
+        else:  # the BIC kept no slope: the straight line's, with its interval (holding 0)
+            lin = fit_temperature_polynomial(p["frequency_c"], p["bias_dph"], p["bias_se_dph"], max_order=1,
+                                             min_order=1, t_ref_c=REF_TEMPERATURE_C)
+            b_slope, b_ci = float(lin.coeffs[1]), _pair(lin.ci95[1])
+        f0_s = f0 if f0.order >= 1 else line
+        lo, hi = f0_s.ci95[1]
+        gap = branch_gap(f0, p["branch"] == 0, f0.slope_at(float(np.mean(p["part_c"]))))
+        rms = {k: float(np.sqrt(np.mean(fit.residuals**2))) for k, fit in bias.items()}
+        seg = data.table(SEGMENTS.name)
+        trim = self.trim_line(p)
+        out = []
+        if "sf" in p:
+            sf_line = fit_temperature_polynomial(p["frequency_c"], p["sf"], p["sf_se"], max_order=1, min_order=1,
+                                                 t_ref_c=REF_TEMPERATURE_C)
+            sf25 = float(sf_line.coeffs[0])
+            sf_lo, sf_hi = sf_line.ci95[1]
+            out += [Result("sf_at_25c", sf25, ci95=_pair(sf_line.ci95[0])),
+                    Result("sf_tc_ppm_k", float(sf_line.coeffs[1] / sf25 * 1e6),
+                           ci95=(float(sf_lo / sf25 * 1e6), float(sf_hi / sf25 * 1e6)))]
+        out += [Result("thermal_bias_dph", float(trim.coeffs[0]), ci95=_pair(trim.ci95[0])),
+               Result("thermal_bias_dph_per_hz", float(trim.coeffs[1]), ci95=_pair(trim.ci95[1]))]
+        if self.verify_points:
+            v = self.verification(data)
+            raw = v["raw_bias_dph"]
+            out += [
+                Result("verify_residual_dph", float(np.sqrt(np.mean((raw - trim(v["f_offset_hz"])) ** 2)))),
+                Result("verify_residual_part_dph", float(np.sqrt(np.mean((raw - bias["part"](v["part_c"])) ** 2)))),
+                Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2)))),
+            ]
+        return out + [
+            Result("f0_tc_ppm_k", float(f0_s.coeffs[1] / f25 * 1e6),
+                   ci95=(float(lo / f25 * 1e6), float(hi / f25 * 1e6))),
+            Result("f0_at_25c_hz", f25, ci95=_pair(f0.ci95[0])),
+            Result("bias_tc_dph_k", b_slope, ci95=b_ci),
+            Result("bias_at_25c_dph", float(fb.coeffs[0]), ci95=_pair(fb.ci95[0])),
+            Result("bias_fit_order", float(fb.order)),
+            Result("bias_rms_air_dph", rms["air"]),
+            Result("bias_rms_part_dph", rms["part"]),
+            Result("bias_rms_frequency_dph", rms["frequency"]),
+            Result("f0_rms_part_hz", float(np.sqrt(np.mean(f0.residuals**2)))),
+            Result("part_lag_degc", gap.lag_c, ci95=gap.lag_ci95_c),
+            Result("cycle_s", float(seg["t_end_s"][-1] - seg["t_start_s"][0])),
+        ]
+
+    def figures(self, data) -> list:
+        """The temperatures, the frequency by branch, the bias against each thermometer and the verification."""
+        from procedures.figures.thermal_ramp import fit_figures, temperature_figure
+
+        return temperature_figure(self, data) + fit_figures(self, data)

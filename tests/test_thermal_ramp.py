@@ -1,0 +1,118 @@
+"""thermal-ramp on the quick thermal HRG station: one heating and cooling cycle 25 -> 35 -> 25 degC;
+the frequency coefficient against the simulator's truth, the resonator's lag behind the case
+thermocouple seen in the heating-cooling gap, a verification record at 30 degC, and the
+pure helpers against known numbers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.analysis.thermal_fit import fit_temperature_polynomial
+from bench.analysis.thermal_ramp import branch_gap, frequency_thermometer, trend_mean
+from procedures.thermal_ramp import ThermalRamp
+
+
+def test_trend_mean_takes_a_ramp_for_no_noise():
+    rng = np.random.default_rng(1)
+    v = np.linspace(0.0, 10.0, 1000) + rng.normal(0.0, 1.0, 1000)
+    m, se = trend_mean(v, 10)
+    assert m == pytest.approx(5.0, abs=0.2)
+    assert 0.5 / np.sqrt(1000) < se < 3.0 / np.sqrt(1000)  # the noise's, not the ramp's 10/sqrt(12)
+
+
+def test_branch_gap_finds_a_known_lag():
+    """y = 2 (T - lag) on heating, 2 (T + lag) on cooling, lag 0.5: the gap is -2 and the lag 0.5."""
+    rng = np.random.default_rng(2)
+    t = np.tile(np.linspace(0.0, 50.0, 20), 2)
+    heating = np.arange(40) < 20
+    y = 2.0 * (t + np.where(heating, -0.5, 0.5)) + rng.normal(0.0, 0.01, 40)
+    fit = fit_temperature_polynomial(t, y, np.full(40, 0.01), max_order=1, min_order=1)
+    g = branch_gap(fit, heating, 2.0)
+    assert g.gap == pytest.approx(-2.0, abs=0.02) and g.lag_ci95_c[0] <= 0.5 <= g.lag_ci95_c[1]
+    tf, _, line = frequency_thermometer(y, np.full(40, 0.01), t)
+    assert line.coeffs[1] == pytest.approx(2.0, rel=1e-3) and np.allclose(tf, y / 2.0, atol=0.01)
+
+
+@pytest.mark.parametrize("sim_station", ["sim-hrg-thermal-quick"], indirect=True)
+def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station):
+    params = {"t_low_degc": 25.0, "t_high_degc": 35.0, "cycle_degc_per_min": 5.0, "segment_s": 20.0,
+              "tail_s": 60.0, "settle_window_s": 20.0, "settle_ppm_per_min": 1.0, "max_order": 2,
+              "verify_points": 1, "record_s": 60.0, "rate_dps": 10.0}
+    record = run_procedure(ThermalRamp, params)
+    assert record.outcome == "COMPLETE", (record.end_reason, record.traceback)
+    got = {m.name: m for m in record.measurements}
+    print({k: (m.value, m.ci95) for k, m in got.items()})
+    truth = sim_station.truth()
+    tc = got["f0_tc_ppm_k"]
+    assert tc.ci95[0] <= truth["err_freq_tc_ppm_k"] <= tc.ci95[1], (tc.value, tc.ci95)
+    assert tc.value == pytest.approx(truth["err_freq_tc_ppm_k"], rel=0.1)  # 52.7: the short cycle's lags
+    lag = got["part_lag_degc"]
+    assert lag.ci95[0] > 0.0  # the resonator trails the case thermocouple (20 s behind it)
+    # against the part thermocouple the frequency keeps that lag as its residual (slope x lag);
+    # read as a thermometer it has none of its own: the bias fits against part and frequency agree
+    slope_hz_k = tc.value * 1e-6 * got["f0_at_25c_hz"].value
+    assert got["f0_rms_part_hz"].value == pytest.approx(slope_hz_k * lag.value, rel=0.3)
+    # the scale factor from the +-10 deg/s pairs: its coefficient is the pickoff gains' (-30 ppm/K)
+    sf_tc, sf_truth = got["sf_tc_ppm_k"], ThermalRamp.truth_for(truth)
+    assert sf_tc.ci95[0] <= sf_truth["sf_tc_ppm_k"] == -30.0 <= sf_tc.ci95[1], (sf_tc.value, sf_tc.ci95)
+    print("sf truth", sf_truth.get("sf_at_25c"))
+    assert got["cycle_s"].value < 450.0  # 2 x (2 min ramp + 1 min tail) and the table's rate changes
+    # the verification at 30 degC, settled, with the thermal trim in the FPGA: the unit's own output
+    # shows the bias (153 deg/h untrimmed) within 3 of its record's noise (the trim's interval adds to it)
+    assert got["thermal_bias_dph"].ci95[0] < 160.0 < got["thermal_bias_dph"].ci95[1] + 10.0
+    assert got["verify_residual_dph"].value < 3.0 * got["verify_noise_dph"].value + 0.5
+    from bench.recorder import open_run
+
+    data = open_run(record.raw_file)
+    figs = ThermalRamp(record.params).figures(data)
+    assert [f.key for f in figs] == ["thermal-ramp_temperatures", "thermal-ramp_fits"]
+    vt = data.table("thermal_ramp_verify")
+    assert vt["trim_bias_dph"][0] == pytest.approx(got["thermal_bias_dph"].value, rel=1e-9)
+    fpga = sim_station.devices["fpga"]
+    assert fpga.read_register("TRIM_EN") == 0 and fpga.read_register("TRIM_BIAS_DPH") == 0.0  # restored
+    assert sim_station.devices["chamber"].setpoint_c() == 25.0
+
+
+def test_the_resonator_trails_the_case_by_its_time_constant():
+    """A steady air ramp r: the case trails the air by r tau_case, the resonator the case by r tau_res."""
+    from simulators.chamber.thermal import ChamberThermal
+
+    th = ChamberThermal(setpoint_c=100.0, ramp_c_per_min=6.0, case_tau_s=60.0, resonator_tau_s=20.0)
+    for _ in range(6000):  # 600 s in 0.1 s blocks: both lags in their steady state
+        th.step(0.1)
+    r = 0.1  # degC/s
+    assert th.air_c - th.case_c == pytest.approx(r * 60.0, rel=1e-3)
+    assert th.case_c - th.resonator_c == pytest.approx(r * 20.0, rel=1e-3)
+
+
+def test_line_run_eol_hrg_thermal_leaves_the_thermal_trim_in_nvm(tmp_path, capsys):
+    """The line's sequence: the ramp, the trim verified at 30 degC through the FPGA, then (PASS) the
+    thermal trim into the unit's NVM through the line's gated trims, read back."""
+    import json
+
+    from bench.cli import main
+    from bench.line.compensation import unit_id
+
+    station = tmp_path / "st.toml"
+    text = open("bench/stations/sim-hrg-thermal-quick.toml").read()
+    station.write_text(text.replace('id = "sim-hrg-thermal-quick"', 'id = "nvm-thermal"')
+                       + f'nvm_file = "{tmp_path / "fpga.nvm"}"\n')
+    code = main(["line", "run", "eol-hrg-thermal", "--station", str(station), "--operator", "ada", "--dut",
+                 "HRG-000777", "--yes", "--lot", "L1", "--runs-dir", str(tmp_path / "runs"), "--json"])
+    (rec,) = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert code == 0 and rec["outcome"] == "PASS", rec
+    assert rec["trims"]["written"], rec["trims"]
+    assert rec["trims"]["chosen"]["thermal_bias_dph"]["procedure"] == "thermal-ramp"
+    back = rec["trims"]["read_back"]
+    assert int(back["TRIM_EN"]) == 0x08 and int(back["TRIM_UNIT_ID"]) == unit_id("HRG-000777")
+    m = {x["name"]: x["value"] for x in rec["measurements"]}
+    assert back["TRIM_BIAS_DPH"] == pytest.approx(m["thermal_bias_dph"], rel=1e-12)
+    assert back["TRIM_BIAS_DPH_PER_HZ"] == pytest.approx(m["thermal_bias_dph_per_hz"], rel=1e-12)
+
+
+def test_a_turning_ramp_asks_the_table_for_its_rate():
+    assert ThermalRamp().demands() == []
+    d = ThermalRamp({"rate_dps": 20.0, "accel_dps2": 50.0}).demands()
+    assert [(x.role, x.limit_key, x.value) for x in d] == [("table", "max_rate_dps", 20.0),
+                                                           ("table", "max_accel_dps2", 50.0)]
