@@ -193,7 +193,7 @@ class Station:
         self._last_health = (now_sim, now_wall)
         # a streaming link's check waits for its reader to catch up with the clock: done in this
         # thread while the other links' round trips (each on its own transport) go out at once from
-        # a pool (benchmarks/link_checks_concurrent.py: x1.36-1.5 per wall s, bit-identical).  Every
+        # a pool (benchmarks/link_checks_concurrent.py: x1.1-1.5 per wall s, bit-identical).  Every
         # check is finished before this returns (nothing in flight when the safe state talks to the
         # devices); results and the first error are taken in a stable order (streaming link first)
         roles = self._health_roles()

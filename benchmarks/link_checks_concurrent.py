@@ -17,7 +17,9 @@ Measured 2026-11-28, load average 9-10 from other jobs on the 2 cores, medians o
 runs (x real time per wall s / per CPU s), the experiment's first form (check_links patched):
   in turn  188 / 397   concurrent 289 / 418   (raw files: every dataset identical)
   in turn  169 / 386   concurrent 230 / 414   (37/37 datasets bit-identical)
-i.e. x1.36-1.54 per wall s, x1.05-1.07 per CPU s.  Separate processes on two trees (sim_world_speed
+and with the adopted form (`_run_checks`), load ~9:
+  in turn  363 / 421   concurrent 399 / 402   (37/37 datasets bit-identical)
+i.e. x1.1-1.54 per wall s, x0.95-1.07 per CPU s (the round trips overlap; the CPU is the same work).  Separate processes on two trees (sim_world_speed
 (c), load 8-16) were within the load's noise: 189 / 329, 192 / 338, 225 / 326 in turn against
 290 / 382, 192 / 311, 208 / 291, 148 / 309 concurrent.  benchmarks/sim_identical.py: damping,
 allan and selfcal identical with the change.
