@@ -14,6 +14,17 @@ With --against, `report --pdf` (HTML + PDF; issue 36: PDF <= 3 s) alternates the
 
 Run: .venv/bin/python benchmarks/report_speed.py [RAW.h5] [--against TREE] [--no-pdf]
 (default RAW: records a seed-0 run first)
+
+Measured 2026-11-28 (issue 36), load average 9-13 from other jobs on the 2 cores; b9415fa (before)
+against this tree, alternately, 4 rounds each, fresh processes, medians (wall / CPU):
+  report RUN          8.95 / 3.02 s  ->  7.56 / 2.67 s   (numba no longer imported: drivers.fpga.stream)
+  report RUN --pdf   28.98 / 9.35 s  -> 19.29 / 5.73 s   (the PDF's figures as 200 dpi PNGs of the drawn figures)
+The phases (CPU s, one in-process report): numpy+h5py 0.15-0.20, matplotlib 0.44-0.52, the procedure
+0.27-0.43 -> 0.04-0.06, building the figures 0.38-0.53, their SVG 1.0-1.5 (half of it the
+constrained layout's pass).  The PDF's profile (cProfile, before): WeasyPrint's SVG drawing 8.7 of
+15.2 s profiled (178,023 calls of svg/utils.size, 2,742 paths); as PNGs it draws the page in
+~1.0 s CPU instead of ~4.1.  The targets (HTML <= 1 s, PDF <= 3 s) are not met: the rest is
+matplotlib (import and drawing 14 axes).
 """
 
 from __future__ import annotations
