@@ -359,7 +359,6 @@ class SlotStation(Station):
 
     def close(self) -> None:
         close_devices(self.devices, list(self.own_roles))  # the shared ones are the batch's to close
-        self._close_check_pool()
 
     def _own_cfg(self, role: str, cfg: dict[str, Any]) -> dict[str, Any]:
         return self.batch._device_cfg(self.slot_number if role in self.own_roles else None, role, cfg)

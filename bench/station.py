@@ -72,7 +72,6 @@ class Station:
         self._lock = threading.RLock()
         #: each streaming device's counters (lost/corrupt frames...) when this run's stream began, by role
         self._stream_since: dict[str, Any] = {}
-        self._check_pool: Any = None  # the threads that issue the round-trip link checks at once
 
     def spec(self, role: str) -> DriverSpec:
         """The spec of the model this station's `role` uses."""
@@ -150,13 +149,6 @@ class Station:
 
     def close(self) -> None:
         close_devices(self.devices)
-        self._close_check_pool()
-
-    def _close_check_pool(self) -> None:
-        """Stop the link checks' threads (idle: every check finished before its checkpoint returned)."""
-        pool, self._check_pool = self._check_pool, None
-        if pool is not None:
-            pool.shutdown(wait=True)
 
     def __enter__(self) -> Station:
         return self.open()
@@ -191,17 +183,16 @@ class Station:
         elif now_sim - last_sim < self.HEALTH_EVERY_SIM_S and now_wall - last_wall < self.HEALTH_EVERY_WALL_S:
             return
         self._last_health = (now_sim, now_wall)
-        # a streaming link's check waits for its reader to catch up with the clock: done in this
-        # thread while the other links' round trips (each on its own transport) go out at once from
-        # a pool (benchmarks/link_checks_concurrent.py: x1.1-1.5 per wall s, bit-identical).  Every
-        # check is finished before this returns (nothing in flight when the safe state talks to the
-        # devices); results and the first error are taken in a stable order (streaming link first)
+        # a streaming link's check waits for its reader to catch up with the clock: checked first,
+        # so the reader works through the frames while this thread waits, and the other links'
+        # round trips after it do not wait for the GIL behind the reader (a stable order)
         roles = self._health_roles()
-        order = [r for r in roles if self.spec(r).stream] + [r for r in roles if self.spec(r).stream is None]
-        order = [r for r in order if self.spec(r).health is not None]
-        results = self._run_checks(order)
-        for role in order:
-            spec, device, rows = self.spec(role), self.devices[role], results[role]
+        for role in [r for r in roles if self.spec(r).stream] + [r for r in roles if self.spec(r).stream is None]:
+            spec = self.spec(role)
+            if spec.health is None:
+                continue
+            device = self.devices[role]
+            rows = spec.health(device, self._stream_since.get(role))
             columns = spec.health_columns or getattr(device, "health_columns", ())  # an instrument's own
             if columns and rows is not None and self._ctx is not None:
                 pending = self._health_rows.setdefault(role, (("t_s", *columns), []))[1]
@@ -211,33 +202,6 @@ class Station:
             or max(len(rows) for _, rows in self._health_rows.values()) >= self.HEALTH_BLOCK_ROWS
         ):
             self._send_health_rows()
-
-    def _run_checks(self, order: list[str]) -> dict[str, Any]:
-        """Each role's health check result: the round trips (roles without a stream) submitted to
-        the pool at once, the streaming links' checks here; all waited for, then the first error
-        in `order` raised."""
-        calls = [r for r in order if not self.spec(r).stream]
-        futures = {}
-        if len(calls) > 1:
-            if self._check_pool is None:
-                from concurrent.futures import ThreadPoolExecutor
-
-                self._check_pool = ThreadPoolExecutor(max_workers=len(calls), thread_name_prefix="link-check")
-            futures = {r: self._check_pool.submit(self.spec(r).health, self.devices[r], self._stream_since.get(r))
-                       for r in calls}
-        results: dict[str, Any] = {}
-        first_error: BaseException | None = None
-        for role in order:
-            try:
-                if role in futures:
-                    results[role] = futures[role].result()
-                else:
-                    results[role] = self.spec(role).health(self.devices[role], self._stream_since.get(role))
-            except BaseException as exc:  # noqa: BLE001 - raised below, after every check has finished
-                first_error = first_error or exc
-        if first_error is not None:
-            raise first_error
-        return results
 
     def _send_health_rows(self) -> None:
         """Record the link checks' rows not yet recorded, one block per device."""

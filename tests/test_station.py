@@ -11,7 +11,6 @@ from bench.composition.sim_station import SimStation
 from bench.devices import StationError
 from bench.engine import Runner, events
 from bench.fault_kinds import FAULTS, parse_fault
-from bench.station import Station
 from bench.station_config import load_config
 from procedures.examples.table_spin import TableSpin
 from simulators.physics.params import preset
@@ -200,45 +199,3 @@ def test_the_force_to_rebalance_station_sets_the_fpga_at_connect():
         assert (truth["cvg_output_mode"], truth["ftr_gain"], truth["ftr_angle_deg"]) == (1.0, 3.6, 0.0)
     with SimStation("sim-hrg", seed=0) as st:
         assert "ftr_gain" not in st.truth()
-
-
-def _bare_station(checks: dict) -> Station:
-    """A Station with only what its link checks use: roles whose health checks are `checks`."""
-    from types import SimpleNamespace
-
-    st = Station.__new__(Station)
-    st.devices = dict.fromkeys(checks, object())
-    st._stream_since, st._check_pool = {}, None
-    specs = {role: SimpleNamespace(stream=None, health=fn) for role, fn in checks.items()}
-    st.spec = specs.__getitem__
-    return st
-
-
-def test_the_round_trip_link_checks_go_out_at_once_and_all_finish_before_an_error_is_raised():
-    """Issue 36: the table's and the front end's checks each on their own transport, issued
-    together (both meet at a barrier only two concurrent calls can pass); the first error in the
-    stable order is raised only after every check has finished (nothing in flight for the safe state)."""
-    import threading
-
-    meet = threading.Barrier(2, timeout=30)
-    finished = []
-
-    def table(device, since):
-        meet.wait()
-        raise ValueError("table: no answer")
-
-    def frontend(device, since):
-        meet.wait()
-        finished.append("frontend")
-        return [1.0]
-
-    st = _bare_station({"table": table, "frontend": frontend})
-    try:
-        with pytest.raises(ValueError, match="table: no answer"):
-            st._run_checks(["table", "frontend"])
-        assert finished == ["frontend"]
-        st.spec("frontend").health = lambda device, since: [threading.current_thread().name]
-        assert st._run_checks(["frontend"]) == {"frontend": ["MainThread"]}  # one round trip: in this thread
-    finally:
-        st._close_check_pool()
-    assert st._check_pool is None
