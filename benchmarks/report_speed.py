@@ -15,8 +15,12 @@ With --against, `report --pdf` (HTML + PDF; issue 36: PDF <= 3 s) alternates the
 Run: .venv/bin/python benchmarks/report_speed.py [RAW.h5] [--against TREE] [--no-pdf]
 (default RAW: records a seed-0 run first)
 
-Measured 2026-11-28 (issue 36), load average 9-13 from other jobs on the 2 cores; b9415fa (before)
-against this tree, alternately, 4 rounds each, fresh processes, medians (wall / CPU):
+Measured 2026-11-28 (issue 36) at a quiet moment (load average 1.1), b9415fa (before) against this
+tree, alternately, 4 rounds each, fresh processes, medians (wall / CPU):
+  report RUN          1.99 / 2.09 s  ->  1.58 / 1.67 s   (target 1 s: not met)
+  report RUN --pdf    6.78 / 6.89 s  ->  4.16 / 4.27 s   (target 3 s: not met)
+phases (CPU s): the procedure 0.29 -> 0.03, building the figures 0.35 -> 0.24, SVG 0.64 -> 0.58,
+matplotlib 0.30-0.35, numpy + h5py 0.17-0.19.  And under load (average 9-13), same procedure:
   report RUN          8.95 / 3.02 s  ->  7.56 / 2.67 s   (numba no longer imported: drivers.fpga.stream)
   report RUN --pdf   28.98 / 9.35 s  -> 19.29 / 5.73 s   (the PDF's figures as 200 dpi PNGs of the drawn figures)
 The phases (CPU s, one in-process report): numpy+h5py 0.15-0.20, matplotlib 0.44-0.52, the procedure

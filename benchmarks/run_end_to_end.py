@@ -13,6 +13,19 @@ alternate between that tree and this one (interleaved, so a busy machine weighs 
 Both use this checkout's compiled-kernel cache (NUMBA_CACHE_DIR), so neither compiles.
 
 Run: .venv/bin/python benchmarks/run_end_to_end.py [--against TREE] [--rounds 3] [--phases]
+
+Measured 2026-11-28 at a quiet moment (load average 1.1-1.4), b9415fa (before) against this tree,
+3 interleaved rounds, medians (command wall / CPU / the run's own wall, ratio):
+  before  5.78 s / 5.20 s / 2.30 s  ratio 2.45
+  after   3.83 s / 3.58 s / 2.25 s  ratio 1.70   (target 1.5: not met)
+Phases (wall s at the end of each, before -> after): imports 0.42 -> 0.43; procedure found 0.57 ->
+0.59; load_station 1.12 -> 0.93 (scipy.stats no longer imported by the simulators); station opened
+1.59 -> 1.43; Runner.run returned 4.37 -> 3.72 (the raw file's compaction, ~0.5 s, now in a
+detached process after the command's output); station closed 4.80 -> 3.84 (the FPGA link's
+socket:// close without pyserial's 0.3 s sleep); then the interpreter's teardown, ~0.5-0.7 s
+before (numba's and LLVM's finalizers), skipped (`bench.cli.entry`).  What is left besides the run:
+~1.4 s of imports (0.4), procedure and station loading (0.5) and opening the station (0.5: the
+simulators' servers, their compiled kernels, the links' connections and identities).
 """
 
 from __future__ import annotations
