@@ -20,6 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 KERNEL_SOURCES = (
     "bench/analysis/free_decay_rk.py",
     "drivers/fpga/protocol.py",
+    "drivers/fpga/stream.py",
     "simulators/fpga/kernels.py",
     "simulators/frontend/kernels.py",
     "simulators/fused_kernel.py",

@@ -109,6 +109,10 @@ class Recorder:
                  param_units: dict[str, str] | None = None) -> None:
         self.path = Path(path).resolve()
         self.failure: str | None = None  # the message, once a write has failed
+        #: close() leaves the compression to the caller (`compact_in_background`): the file as
+        #: written is complete and readable; `compaction_pending` says whether it is left to do
+        self.defer_compaction = False
+        self.compaction_pending = False
         self._lock = threading.RLock()
         self._f: h5py.File | None = None
         self._reserve: Path | None = None
@@ -513,7 +517,10 @@ class Recorder:
                 self._drop_reserve()
                 f.close()
             if STREAM_FILTERS is not None and self.failure is None:
-                compact(self.path, STREAM_FILTERS)
+                if self.defer_compaction:
+                    self.compaction_pending = True
+                else:
+                    compact(self.path, STREAM_FILTERS)
 
 
 def compact(path: str | Path, filters: dict[str, Any], chunk_rows: int = COMPACT_CHUNK_ROWS) -> bool:
@@ -521,6 +528,7 @@ def compact(path: str | Path, filters: dict[str, Any], chunk_rows: int = COMPACT
     atomically and kept as it is if anything fails (a full disk).  True when it was replaced."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.compact-{os.getpid()}")
+    before = _stamp(path)
     st = os.statvfs(path.parent)
     if st.f_bavail * st.f_frsize < path.stat().st_size + RESERVE_BYTES:
         return False  # a write failing inside HDF5 is what the recorder never lets happen
@@ -542,12 +550,31 @@ def compact(path: str | Path, filters: dict[str, Any], chunk_rows: int = COMPACT
                 for a in range(0, n, 8 * chunk_rows):
                     out[a : a + 8 * chunk_rows] = ds[a : a + 8 * chunk_rows]
                 out.attrs.update(ds.attrs)
+        if _stamp(path) != before:  # written meanwhile (an annotation): that file stays, uncompressed
+            raise RuntimeError(f"{path} changed while it was compressed")
         os.replace(tmp, path)
         return True
     except Exception:  # noqa: BLE001 - whatever went wrong, the file as written stays
         with contextlib.suppress(OSError):
             tmp.unlink()
         return False
+
+
+def _stamp(path: Path) -> tuple[int, int, int]:
+    """(inode, size, modification time in ns): whether a file was written since."""
+    st = path.stat()
+    return st.st_ino, st.st_size, st.st_mtime_ns
+
+
+def compact_in_background(path: str | Path) -> Any:
+    """Compress a closed raw file in a detached process (`python -m bench.compaction`), so a command
+    returns without waiting ~1 s for it: until the atomic replace the file is the complete one as
+    written, and a file written meanwhile is left as it is (`compact`).  The Popen."""
+    import subprocess
+    import sys
+
+    return subprocess.Popen([sys.executable, "-m", "bench.compaction", str(path)], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
 
 
 def annotate(path: str | Path, key: str, value: Any) -> None:

@@ -10,8 +10,25 @@ alike) and the CPU time of each is compared; the phases of one in-process report
 building the figures, SVG, page) are printed in CPU time, the profile that chose each change
 (issue 36: HTML <= 1 s).
 
+With --against, `report --pdf` (HTML + PDF; issue 36: PDF <= 3 s) alternates the same way unless --no-pdf.
+
 Run: .venv/bin/python benchmarks/report_speed.py [RAW.h5] [--against TREE] [--no-pdf]
 (default RAW: records a seed-0 run first)
+
+Measured 2026-11-28 (issue 36) at a quiet moment (load average 1.1), b9415fa (before) against this
+tree, alternately, 4 rounds each, fresh processes, medians (wall / CPU):
+  report RUN          1.99 / 2.09 s  ->  1.58 / 1.67 s   (target 1 s: not met)
+  report RUN --pdf    6.78 / 6.89 s  ->  4.16 / 4.27 s   (target 3 s: not met)
+phases (CPU s): the procedure 0.29 -> 0.03, building the figures 0.35 -> 0.24, SVG 0.64 -> 0.58,
+matplotlib 0.30-0.35, numpy + h5py 0.17-0.19.  And under load (average 9-13), same procedure:
+  report RUN          8.95 / 3.02 s  ->  7.56 / 2.67 s   (numba no longer imported: drivers.fpga.stream)
+  report RUN --pdf   28.98 / 9.35 s  -> 19.29 / 5.73 s   (the PDF's figures as 200 dpi PNGs of the drawn figures)
+The phases (CPU s, one in-process report): numpy+h5py 0.15-0.20, matplotlib 0.44-0.52, the procedure
+0.27-0.43 -> 0.04-0.06, building the figures 0.38-0.53, their SVG 1.0-1.5 (half of it the
+constrained layout's pass).  The PDF's profile (cProfile, before): WeasyPrint's SVG drawing 8.7 of
+15.2 s profiled (178,023 calls of svg/utils.size, 2,742 paths); as PNGs it draws the page in
+~1.0 s CPU instead of ~4.1.  The targets (HTML <= 1 s, PDF <= 3 s) are not met: the rest is
+matplotlib (import and drawing 14 axes).
 """
 
 from __future__ import annotations
@@ -61,25 +78,31 @@ def record_run(runs_dir: str) -> Path:
         station.close()
 
 
-def _cli_cpu(tree: Path, raw: Path, out: str) -> tuple[float, float]:
-    """(wall s, CPU s) of `gyrobench report RAW` in a fresh process on `tree`'s code."""
+def _cli_cpu(tree: Path, raw: Path, out: str, pdf: bool = False) -> tuple[float, float]:
+    """(wall s, CPU s) of `gyrobench report RAW` (with pdf: `--pdf`) in a fresh process on `tree`'s code."""
     env = dict(os.environ, PYTHONPATH=str(tree))
     t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
-    subprocess.run([sys.executable, "-m", "bench.cli", "report", str(raw), "-o", out], check=True,
-                   capture_output=True, env=env, cwd=tempfile.gettempdir())
+    subprocess.run([sys.executable, "-m", "bench.cli", "report", str(raw), "-o", out, *(["--pdf"] if pdf else [])],
+                   check=True, capture_output=True, env=env, cwd=tempfile.gettempdir())
     r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     return time.perf_counter() - t0, r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime
 
 
-def compare(raw: Path, against: Path, tmp: str, rounds: int = 4) -> None:
-    """Interleaved fresh-process reports on `against` and on this tree; CPU medians and the phases."""
-    cpu: dict[str, list[float]] = {"before": [], "after": []}
+def compare(raw: Path, against: Path, tmp: str, rounds: int = 4, pdf: bool = True) -> None:
+    """Interleaved fresh-process reports (HTML, and with pdf HTML+PDF) on `against` and on this
+    tree; wall and CPU medians and the phases."""
+    got: dict[tuple[str, bool], list[tuple[float, float]]] = {}
     for k in range(rounds):
-        for label, tree in (("before", against), ("after", ROOT)):
-            cpu[label].append(_cli_cpu(tree, raw, f"{tmp}/{label}{k}.html")[1])
+        for with_pdf in (False, True) if pdf else (False,):
+            for label, tree in (("before", against), ("after", ROOT)):
+                got.setdefault((label, with_pdf), []).append(_cli_cpu(tree, raw, f"{tmp}/{label}{k}.html", with_pdf))
+    for (label, with_pdf), rows in got.items():
+        tree = against if label == "before" else ROOT
+        wall, cpu = (statistics.median(x) for x in zip(*rows, strict=True))
+        print(f"{label} ({tree}) {'HTML+PDF' if with_pdf else 'HTML'}: wall median {wall:.2f} s, CPU median "
+              f"{cpu:.2f} s of {', '.join(f'{c:.2f}' for _, c in rows)}")
     for label, tree in (("before", against), ("after", ROOT)):
-        print(f"{label} ({tree}): CPU median {statistics.median(cpu[label]):.2f} s of "
-              f"{', '.join(f'{x:.2f}' for x in cpu[label])}")
+        print(f"{label}: phases of one in-process report")
         phases = subprocess.run([sys.executable, "-c", _PHASES, str(raw)], check=True, capture_output=True,
                                 text=True, env=dict(os.environ, PYTHONPATH=str(tree)), cwd=tempfile.gettempdir())
         print(phases.stdout, end="")
@@ -97,7 +120,7 @@ def main() -> None:
     args = [a for a in args if a != "--no-pdf"]
     raw = Path(args[0]) if args else record_run(tmp)
     if against is not None:
-        compare(raw, against, tmp)
+        compare(raw, against, tmp, pdf=not no_pdf)
     from bench.recorder import open_run
 
     with open_run(raw) as data:
@@ -129,12 +152,12 @@ def main() -> None:
     print(f"render_html in process: median {statistics.median(inproc):.2f} s; page {len(html) / 1e6:.2f} MB")
     if no_pdf:
         return
-    from bench.pdf import write_pdf
+    from bench.reporting import write_report
 
     t0, c0 = time.perf_counter(), time.process_time()
-    write_pdf(html, f"{tmp}/r.pdf")
+    write_report(raw, None, f"{tmp}/r.html", pdf=True)  # the page, then the PDF with the figures as PNG
     pdf_s, pdf_cpu = time.perf_counter() - t0, time.process_time() - c0
-    print(f"PDF (WeasyPrint) of the page: {pdf_s:.2f} s ({pdf_cpu:.2f} s CPU), "
+    print(f"HTML + PDF (WeasyPrint) in process: {pdf_s:.2f} s ({pdf_cpu:.2f} s CPU), "
           f"{Path(f'{tmp}/r.pdf').stat().st_size / 1e6:.2f} MB")
 
 

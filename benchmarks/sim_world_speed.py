@@ -116,6 +116,10 @@ host (/proc/stat), load 1.1-1.3:
   (357-381 -> 426-597x), 332 -> 435x per CPU s; this script on 14c764f: (a) 5,150x, (b) 3,522x,
   (c) 434x (412-437x).  Why (c) stays far from 1000x: benchmarks/link_check_floor.py and
   benchmarks/lockstep_breakdown.py.
+2026-11-28 (issue 36: report, command end to end; the link checks untouched, the concurrent form
+measured and not adopted: benchmarks/link_checks_concurrent.py), this tree, load average 0.8-0.9,
+medians of 3 (per wall s / per CPU s):
+  (a) 6,291 / 6,306   (b) 4,599 / 4,599   (c) 376 / 315
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
 from bench.engine.recording import in_spans
 from bench.streams import Column, StreamSchema, declare
-from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
+from drivers.fpga.stream import STREAM_SCHEMA as FPGA
 
 from .hrg_excitation import (
     SPLIT_LEARN_DEG,

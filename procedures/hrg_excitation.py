@@ -12,8 +12,8 @@ import numpy as np
 
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Demand, Param, StationMismatch
-from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
-from drivers.fpga.protocol import saturation_text
+from drivers.fpga.stream import STREAM_SCHEMA as FPGA
+from drivers.fpga.stream import saturation_text
 
 
 class LoopSaturated(RuntimeError):

@@ -22,7 +22,7 @@ from bench.analysis.maslov import derived_ci95, free_param_names, identify_free_
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
 from bench.streams import Column, StreamSchema, declare
-from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
+from drivers.fpga.stream import STREAM_SCHEMA as FPGA
 
 from .hrg_excitation import HrgExcitation
 

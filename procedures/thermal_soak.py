@@ -22,7 +22,7 @@ from bench.analysis.cvg_rate import static_bias
 from bench.analysis.thermal_fit import ThermalFit, batch_mean, fit_temperature_polynomial
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
-from drivers.fpga.protocol import STREAM_SCHEMA as FPGA
+from drivers.fpga.stream import STREAM_SCHEMA as FPGA
 
 from .cvg_output import MODES, CvgOutput, static_bias_truth
 

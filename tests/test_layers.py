@@ -22,7 +22,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
                    "bench.kernel_cache", "bench=")),
     ("devices", ("drivers", "simulators")),
     ("engine", ("bench.engine", "bench.station", "bench.station_config", "bench.slots", "bench.recorder",
-                "bench.writer", "bench.results", "bench.progress", "bench.composition")),
+                "bench.compaction", "bench.writer", "bench.results", "bench.progress", "bench.composition")),
     ("procedures", ("procedures", "bench.line")),
     ("faces", ("bench.cli", "bench.campaign", "bench.gui", "bench.reporting", "bench.report", "bench.pytest_plugin",
                "bench.line.cli", "bench.line.fpga_cli", "bench.line.report")),

@@ -240,3 +240,47 @@ def test_leftovers_of_a_killed_recorder_are_removed_by_the_next(tmp_path):
     assert not any(p.exists() for p in stale) and live.exists()
     rec.close()
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, "c.h5"])
+
+
+def _written(path) -> tuple[Recorder, np.ndarray]:
+    """A recorder with 2,000 rows of a stream, not yet closed."""
+    sig = np.column_stack([np.arange(2000) * 1e-3, np.cos(np.arange(2000) * 1e-2)])
+    rec = Recorder(path)
+    rec.on_event(ev.SampleBlock(run_id="r", t_sim_s=2.0, stream="fpga", columns=("t_s", "c"), data=sig))
+    return rec, sig
+
+
+def test_a_deferred_compaction_leaves_the_complete_file_and_a_background_process_compresses_it(tmp_path):
+    """`gyrobench run` returns before the compression (issue 36): the file as closed is complete
+    and readable; `python -m bench.compaction` (detached) then replaces it with the compressed one."""
+    from bench.recorder import compact_in_background
+
+    rec, sig = _written(tmp_path / "d.h5")
+    rec.defer_compaction = True
+    rec.close()
+    assert rec.compaction_pending
+    with open_run(tmp_path / "d.h5") as d:
+        assert d.f["streams/fpga"].compression is None
+        np.testing.assert_array_equal(d.array("fpga"), sig)
+    assert compact_in_background(tmp_path / "d.h5").wait(timeout=120) == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["d.h5"]
+    with open_run(tmp_path / "d.h5") as d:
+        assert d.f["streams/fpga"].compression == "gzip"
+        np.testing.assert_array_equal(d.array("fpga"), sig)
+
+
+def test_a_file_written_while_it_is_compressed_stays_as_written(tmp_path, monkeypatch):
+    """An annotation written during the compaction (another process) is not lost: the compressed
+    copy is dropped and the file stays as it was written."""
+    import bench.recorder as recorder_module
+
+    rec, sig = _written(tmp_path / "e.h5")
+    rec.defer_compaction = True
+    rec.close()
+    stamps = iter([(1, 1, 1), (1, 1, 2)])  # the file's stamp before and after the copy: it changed
+    monkeypatch.setattr(recorder_module, "_stamp", lambda path: next(stamps))
+    assert recorder_module.compact(tmp_path / "e.h5", recorder_module.STREAM_FILTERS) is False
+    assert [p.name for p in tmp_path.iterdir()] == ["e.h5"]
+    with open_run(tmp_path / "e.h5") as d:
+        assert d.f["streams/fpga"].compression is None
+        np.testing.assert_array_equal(d.array("fpga"), sig)

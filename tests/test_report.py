@@ -318,6 +318,33 @@ def test_cli_report_pdf_and_analyze_figures(runs, tmp_path):
     assert sorted(p.name for p in (tmp_path / "figs").iterdir()) == ["table-spin_rate.svg", "table.svg"]
 
 
+def test_the_printed_page_shows_each_figure_as_a_png_of_the_same_layout(runs):
+    """The PDF's page: every figure an <img> of a PNG at PRINT_DPI (the figure's inches x dpi, in
+    the layout the SVG had), everything else the HTML page's text."""
+    import base64
+    import struct
+
+    from bench.figures import PRINT_DPI
+    from bench.reporting import context, with_png_figures
+
+    with open_run(runs["table-spin"]) as data:
+        figs, notes = figures_for(data)
+        ctx = context(data, None, (figs, notes))
+        positions = [[ax.get_position().bounds for ax in f.figure.axes] for f in figs]
+        printed = render_html(data, None, with_png_figures(ctx, figs))
+        html = render_html(data, None, ctx)
+    pngs = re.findall(r'<img class="figure" alt="[^"]*" src="data:image/png;base64,([^"]+)">', printed)
+    assert len(pngs) == len(figs) == 2 and "<svg" not in printed
+    for b64, f, before in zip(pngs, figs, positions, strict=True):
+        png = base64.b64decode(b64)
+        width, height = struct.unpack(">II", png[16:24])  # the IHDR chunk
+        w_in, h_in = f.figure.get_size_inches()
+        assert (width, height) == (round(w_in * PRINT_DPI), round(h_in * PRINT_DPI))
+        assert [ax.get_position().bounds for ax in f.figure.axes] == before  # not laid out again
+    strip = re.compile(r"<figure id=.*?</figure>", re.S)
+    assert strip.sub("", printed) == strip.sub("", html)
+
+
 # --- in a real browser -------------------------------------------------------------------------
 def _chromium() -> str | None:
     return chromium()

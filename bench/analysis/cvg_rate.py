@@ -19,9 +19,16 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
 EARTH_RATE_DPH = 15.041067  # sidereal rotation, deg/h
+
+
+def _stats():
+    """scipy.stats, imported on first use: the simulators import this module for Earth's rate, and
+    scipy.stats costs ~0.4 s of a command's start that never uses it (issue 36)."""
+    from scipy import stats
+
+    return stats
 LEVEL = 0.95
 
 
@@ -86,7 +93,7 @@ def nonlinearity_ppm(rate: np.ndarray, res: np.ndarray, full_scale: float, sigma
     else:
         sigma, dof = sigma_fit, dof_fit
     sd = sigma / np.sqrt(counts)
-    t_joint = float(stats.t.ppf(1.0 - (1.0 - LEVEL) / (2 * len(levels)), dof))
+    t_joint = float(_stats().t.ppf(1.0 - (1.0 - LEVEL) / (2 * len(levels)), dof))
     abs_r = np.abs(mean_res)
     scale = 1e6 / full_scale
     lo = float(np.max(np.clip(abs_r - t_joint * sd, 0.0, None))) * scale
@@ -114,7 +121,7 @@ def fit_scale_factor(
         cols += [basis[:, 0], basis[:, 1]]
     x = np.column_stack(cols)
     beta, cov, res, sigma, dof = _lsq(x, y)
-    t = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
+    t = float(_stats().t.ppf(0.5 + LEVEL / 2, dof))
     b, s = float(beta[0]), float(beta[1])
     sf_ci = _interval(s, math.sqrt(cov[1, 1]), t)
     # input-referred bias b / S - Earth (delta method)
@@ -137,7 +144,7 @@ def fit_scale_factor(
         asym = (sp - sn) / mean * 1e6
         g = np.array([1.0 / mean - (sp - sn) / (2 * mean**2), -1.0 / mean - (sp - sn) / (2 * mean**2)]) * 1e6
         sd_a = math.sqrt(float(g @ ca[1:3, 1:3] @ g))
-        asym_ci = _interval(asym, sd_a, float(stats.t.ppf(0.5 + LEVEL / 2, dof_a)))
+        asym_ci = _interval(asym, sd_a, float(_stats().t.ppf(0.5 + LEVEL / 2, dof_a)))
     fitted = x @ beta
     return ScaleFactorFit(
         scale_factor=s, scale_factor_ci95=sf_ci, bias_out=b, bias_dph=3600.0 * bias_dps, bias_dph_ci95=bias_ci,
@@ -217,7 +224,7 @@ def static_bias(
     batch = np.asarray(rates) / scale_factor * 3600.0 - earth_rate_dph
     mean = float(batch.mean())
     se = float(batch.std(ddof=1) / math.sqrt(n_batches))
-    tq = float(stats.t.ppf(0.5 + LEVEL / 2, n_batches - 1))
+    tq = float(_stats().t.ppf(0.5 + LEVEL / 2, n_batches - 1))
     return BiasEstimate(mean, _interval(mean, se, tq), se, n_batches, batch)
 
 
@@ -247,8 +254,8 @@ def turn_on_repeatability(bias_dph: np.ndarray, sigma_dph: np.ndarray) -> Repeat
     var = float(b.var(ddof=1))
     noise = float(np.mean(s**2))
     dof = n - 1
-    lo_var = var * dof / float(stats.chi2.ppf(0.5 + LEVEL / 2, dof))
-    hi_var = var * dof / float(stats.chi2.ppf(0.5 - LEVEL / 2, dof))
+    lo_var = var * dof / float(_stats().chi2.ppf(0.5 + LEVEL / 2, dof))
+    hi_var = var * dof / float(_stats().chi2.ppf(0.5 - LEVEL / 2, dof))
     spread = math.sqrt(max(var - noise, 0.0))
     ci = (math.sqrt(max(lo_var - noise, 0.0)), math.sqrt(max(hi_var - noise, 0.0)))
     mean = float(b.mean())
@@ -256,9 +263,9 @@ def turn_on_repeatability(bias_dph: np.ndarray, sigma_dph: np.ndarray) -> Repeat
     # never below the records' own noise (a few turn-ons can agree by chance far closer than that)
     se_scatter, se_noise = math.sqrt(var / n), math.sqrt(noise / n)
     if se_scatter >= se_noise:
-        half = float(stats.t.ppf(0.5 + LEVEL / 2, dof)) * se_scatter
+        half = float(_stats().t.ppf(0.5 + LEVEL / 2, dof)) * se_scatter
     else:
-        half = float(stats.norm.ppf(0.5 + LEVEL / 2)) * se_noise
+        half = float(_stats().norm.ppf(0.5 + LEVEL / 2)) * se_noise
     return Repeatability(spread, ci, math.sqrt(var), mean, (mean - half, mean + half), n)
 
 

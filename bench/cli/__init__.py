@@ -90,6 +90,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def entry() -> None:
+    """The `gyrobench` command: `main()`, then exit without the interpreter's teardown of every
+    module (~0.5-0.7 s after a run: numba's and LLVM's finalizers; issue 36) when no other thread
+    is left: stdio flushed and the atexit handlers run (multiprocessing's, logging's, temporary
+    directories') as at a normal exit."""
+    import atexit
+    import os
+
+    code = main()
+    if threading.active_count() > 1:  # a thread still running is joined by the normal exit
+        sys.exit(code)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a reader that left (the pipe), a closed stream
+            pass
+    atexit._run_exitfuncs()
+    os._exit(code)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command.  The one error boundary: a known failure is one line and an exit code;
     anything else is one line and a saved traceback (printed with --debug), never a bare trace."""

@@ -115,8 +115,9 @@ def cmd(args: argparse.Namespace) -> int:
     _check_runs_dir(args.runs_dir or station.runs_dir)
     # a store that is down now still takes the run's record later, through the spool
     store = _store(args.results or station.results_url, offline_ok=True)
-    runner = Runner(
-        station, runs_dir=args.runs_dir or station.runs_dir, store=store, operator=args.operator, duts=args.dut
+    runner = Runner(  # the raw file is compressed after the command has said its result (below)
+        station, runs_dir=args.runs_dir or station.runs_dir, store=store, operator=args.operator, duts=args.dut,
+        compact_later=True,
     )
     previous = {}
     signalled: list[int] = []  # the signal that aborted the run: its exit code once the run is safe
@@ -163,9 +164,16 @@ def cmd(args: argparse.Namespace) -> int:
         print(json.dumps(js))
     else:
         print_record(js)
+        if runner.pending_compaction is not None:
+            print("  the raw file is complete and readable now; a background process compresses its streams "
+                  "and replaces it atomically (bench.compaction)")
         for path in report or []:
             print(f"  report {path}")
     sys.stdout.flush()
+    if runner.pending_compaction is not None:  # last: the limits' annotation and the report have read it
+        from bench.recorder import compact_in_background
+
+        compact_in_background(runner.pending_compaction)
     _warn_unfired_faults(station, faults)
     if rec.store_error:  # the run's record is not in the store (it is in the spool): not a clean exit
         _err(rec.store_error)

@@ -123,8 +123,13 @@ class Runner:
         operator: str = "",
         duts: list[str] | tuple[str, ...] = (),
         step_gate: Any = None,
+        compact_later: bool = False,
     ) -> None:
         self.station = station
+        #: leave the raw file's compression to the caller (bench.recorder.compact_in_background), so
+        #: a command can return first; `pending_compaction` is the file it is left to do for
+        self.compact_later = compact_later
+        self.pending_compaction: Path | None = None
         #: step_gate(proc, name, ctx) runs one step instead of the runner (bench.engine.batch: batch
         #: steps once for every slot, a shared instrument's lock around a slot's step)
         self.step_gate = step_gate
@@ -272,6 +277,7 @@ class Runner:
                 self._fatal = exc
             else:
                 rec.raw_file = str(recorder.path)
+                recorder.defer_compaction = self.compact_later
                 # the recorder is fed by bench.writer (a queue and a thread in real time)
                 writer = WriterThread(recorder, lockstep=lambda: bool(getattr(clock, "lockstep", False)),
                                       on_error=self._recorder_failed)
@@ -378,6 +384,7 @@ class Runner:
                 except Exception as exc:  # noqa: BLE001 - the record and the store must still be written
                     rec.outcome = ERROR
                     rec.end_reason += f" (closing the raw file failed: {exc})"
+                self.pending_compaction = recorder.path if recorder.compaction_pending else None
             ctx.close()
             if self.store is not None:  # saved, or kept in the spool: then store_error says so
                 rec.store_error = self.store.finish_run(rec, spool_dir)

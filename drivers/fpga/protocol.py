@@ -26,7 +26,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench.kernel_cache import njit  # NUMBA_CACHE_DIR keyed on the kernels' sources
-from bench.streams import Column, StreamSchema, declare
+
+from .stream import (  # noqa: F401 - the stream's layout and saturation bits, without numba (procedures)
+    SAT_AMP,
+    SAT_FTR,
+    SAT_NAMES,
+    SAT_PREC,
+    SAT_QUAD,
+    STREAM_COLUMNS,
+    STREAM_SCHEMA,
+    saturation_text,
+)
 
 SYNC = b"\xa5\x5a"
 SYNC_U16 = 0x5AA5
@@ -70,19 +80,6 @@ ST_DRIVE_ON = 0x01
 ST_AGC_SETTLED = 0x02  # amplitude within 1 % of the setpoint
 ST_PLL_LOCKED = 0x04  # phase error under 0.05 rad
 ST_STREAMING = 0x08
-
-# --- loop saturation bits (a stream frame's address field; the stream's sat_flags column) -----
-#: a loop force held at FORCE_LIMIT over the frame's block: the loop is not doing what it is asked
-SAT_AMP = 0x1  # amplitude (AGC, or the open-loop DRIVE_FORCE)
-SAT_QUAD = 0x2  # quadrature loop
-SAT_PREC = 0x4  # whole-angle precession force (a precession command above FORCE_LIMIT / (4 a))
-SAT_FTR = 0x8  # force-to-rebalance loop (a rate above its range)
-SAT_NAMES = {SAT_AMP: "amplitude (AGC)", SAT_QUAD: "quadrature", SAT_PREC: "precession", SAT_FTR: "rebalance"}
-
-
-def saturation_text(flags: int) -> str:
-    """The loops a sat_flags value names, e.g. 'precession, quadrature'."""
-    return ", ".join(name for bit, name in SAT_NAMES.items() if int(flags) & bit) or "none"
 
 FPGA_ID = 0x46504741  # "FPGA"
 #: 2: the stream frame gained the gyro's outputs (angle_out_deg, rate_out_dps); 72 bytes (was 60)
@@ -322,27 +319,6 @@ def encode_frame(ftype: int, seq: int, addr: int, payload: bytes = b"") -> bytes
 
 
 # --- stream -----------------------------------------------------------------------------------
-#: the FPGA stream: sample index and time, the four slow variables (amplitude units, as the AGC
-#: setpoint) and the four loop outputs (forces in 1/s per unit amplitude, the PLL's offset in Hz)
-STREAM_SCHEMA = declare(StreamSchema("fpga", "fpga", (
-    Column("index", "1", "u8", doc="sample number since the FPGA started"),
-    Column("t_s", "s", doc="time of the sample (bench clock)", quantity="time t"),
-    Column("cx", "1", "f4", quantity="slow variable cx"), Column("sx", "1", "f4", quantity="slow variable sx"),
-    Column("cy", "1", "f4", quantity="slow variable cy"), Column("sy", "1", "f4", quantity="slow variable sy"),
-    Column("amp_ctrl", "1/s", "f4", doc="amplitude (AGC) force", quantity="amplitude control"),
-    Column("freq_ctrl", "Hz", "f4", doc="reference frequency minus REF_FREQ_HZ", quantity="frequency control"),
-    Column("quad_ctrl", "1/s", "f4", doc="quadrature force", quantity="quadrature control"),
-    Column("prec_ctrl", "1/s", "f4", doc="whole-angle precession force (the rebalance force in force-to-rebalance)",
-           quantity="precession control"),
-    Column("angle_out_deg", "deg", "f8", doc="wave angle in the case frame, unwrapped (whole-angle output)",
-           quantity="wave angle output"),
-    Column("rate_out_dps", "deg/s", "f4", doc="force-to-rebalance rate output G degrees(F_p / (4 a_set)); 0 otherwise",
-           quantity="rate output"),
-    Column("sat_flags", "1", "u2", doc="loops whose force was held at FORCE_LIMIT over the frame's block: bits "
-           "1 amplitude (AGC), 2 quadrature, 4 precession, 8 rebalance (0: none saturated)",
-           quantity="loop saturation"),
-)))
-STREAM_COLUMNS = STREAM_SCHEMA.names
 STREAM_PAYLOAD = 60
 N_CHANNELS = 11  # 8 float32 channels, the angle (f64), the rate output (f32) and the saturation bits (u16)
 STREAM_DTYPE = np.dtype(

@@ -1,0 +1,133 @@
+"""Benchmark: `gyrobench run hrg-damping` end to end in a fresh process, warm (issue 36: <= 1.5x
+the run's own wall time).
+
+Each round runs the command on a seed-0 default run (1108 s of bench time) with its own runs
+directory and SQLite store, and prints the command's wall and CPU time (user + system of the
+process and the children it waited for: less sensitive to other jobs on a shared machine), the
+run's own wall (the "N s wall" the command prints) and the ratio.  With --phases, one more run
+prints when each phase of the command ended (imports, loading and opening the station, the run,
+closing; wall and CPU of the main process): the profile that chose each change.
+
+With --against TREE (another checkout, e.g. `git archive` of main before a change), the rounds
+alternate between that tree and this one (interleaved, so a busy machine weighs on both alike).
+Both use this checkout's compiled-kernel cache (NUMBA_CACHE_DIR), so neither compiles.
+
+Run: .venv/bin/python benchmarks/run_end_to_end.py [--against TREE] [--rounds 3] [--phases]
+
+Measured 2026-11-28 at a quiet moment (load average 1.1-1.4), b9415fa (before) against this tree,
+3 interleaved rounds, medians (command wall / CPU / the run's own wall, ratio):
+  before  5.78 s / 5.20 s / 2.30 s  ratio 2.45
+  after   3.83 s / 3.58 s / 2.25 s  ratio 1.70   (target 1.5: not met)
+Phases (wall s at the end of each, before -> after): imports 0.42 -> 0.43; procedure found 0.57 ->
+0.59; load_station 1.12 -> 0.93 (scipy.stats no longer imported by the simulators); station opened
+1.59 -> 1.43; Runner.run returned 4.37 -> 3.72 (the raw file's compaction, ~0.5 s, now in a
+detached process after the command's output); station closed 4.80 -> 3.84 (the FPGA link's
+socket:// close without pyserial's 0.3 s sleep); then the interpreter's teardown, ~0.5-0.7 s
+before (numba's and LLVM's finalizers), skipped (`bench.cli.entry`).  What is left besides the run:
+~1.4 s of imports (0.4), procedure and station loading (0.5) and opening the station (0.5: the
+simulators' servers, their compiled kernels, the links' connections and identities).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+TARGET_RATIO = 1.5
+_PHASES = """
+import atexit, sys, time
+T0, C0 = time.perf_counter(), time.process_time()
+def mark(name):
+    print(f"PHASE {time.perf_counter() - T0:6.2f} s wall {time.process_time() - C0:6.2f} s CPU  {name}",
+          file=sys.stderr, flush=True)
+if __name__ == "__main__":
+    import bench.cli.run
+    import bench.composition as comp
+    from bench.engine import runner as rn
+    mark("imports of bench.cli.run")
+    run0, load0 = rn.Runner.run, comp.load_station
+    def run(self, *a, **k):
+        mark("station loaded and opened"); r = run0(self, *a, **k); mark("Runner.run returned"); return r
+    def load(*a, **k):
+        mark("procedure found, parameters checked"); s = load0(*a, **k); mark("load_station returned")
+        close0 = s.close
+        def close():
+            close0(); mark("station closed")
+        s.close = close
+        return s
+    rn.Runner.run, comp.load_station = run, load
+    atexit.register(lambda: mark("interpreter exit"))
+    from bench.cli import main
+    sys.argv = ["gyrobench", *sys.argv[1:]]
+    try:
+        main()
+    finally:
+        mark("main returned (record printed)")
+"""
+
+
+def _env(tree: Path) -> dict[str, str]:
+    cache = os.environ.get("NUMBA_CACHE_DIR") or str(ROOT / ".kernel_cache")
+    return dict(os.environ, PYTHONPATH=str(tree), NUMBA_CACHE_DIR=cache)
+
+
+def one_run(tree: Path, tmp: str) -> tuple[float, float, float]:
+    """(command wall s, command CPU s, the run's own wall s) of one `gyrobench run hrg-damping`."""
+    d = tempfile.mkdtemp(dir=tmp)
+    cmd = [sys.executable, "-m", "bench.cli", "run", "hrg-damping", "--seed", "0", "--runs-dir", f"{d}/runs",
+           "--results", f"{d}/results.sqlite"]
+    t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True, env=_env(tree), cwd=d).stdout
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    run_s = float(re.search(r"([0-9.]+) s wall", out).group(1))
+    return wall, r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime, run_s
+
+
+def phases(tree: Path, tmp: str) -> str:
+    d = tempfile.mkdtemp(dir=tmp)
+    cmd = [sys.executable, "-c", _PHASES, "run", "hrg-damping", "--seed", "0", "--runs-dir", f"{d}/runs",
+           "--results", f"{d}/results.sqlite"]
+    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(tree), cwd=d)
+    lines = [ln for ln in res.stderr.splitlines() if ln.startswith("PHASE")]
+    lines += [ln for ln in res.stdout.splitlines() if " s wall" in ln]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    args = sys.argv[1:]
+    trees = [("this tree", ROOT)]
+    rounds = 3
+    if "--against" in args:
+        i = args.index("--against")
+        trees.insert(0, ("before", Path(args[i + 1]).resolve()))
+    if "--rounds" in args:
+        rounds = int(args[args.index("--rounds") + 1])
+    tmp = tempfile.mkdtemp(prefix="gyrobench-e2e-")
+    got: dict[str, list[tuple[float, float, float]]] = {label: [] for label, _ in trees}
+    for _ in range(rounds):
+        for label, tree in trees:
+            got[label].append(one_run(tree, tmp))
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; {rounds} rounds, interleaved")
+    for label, tree in trees:
+        rows = got[label]
+        wall, cpu, run_s = (statistics.median(x) for x in zip(*rows, strict=True))
+        ratio = statistics.median(w / r for w, _, r in rows)
+        print(f"{label} ({tree}): command wall median {wall:.2f} s, CPU {cpu:.2f} s, the run's own wall "
+              f"{run_s:.2f} s: ratio {ratio:.2f} ({'OK' if ratio <= TARGET_RATIO else 'over'} the target "
+              f"{TARGET_RATIO:g}); rounds (wall/CPU/run): "
+              + ", ".join(f"{w:.2f}/{c:.2f}/{r:.2f}" for w, c, r in rows))
+        if "--phases" in args:
+            print(phases(tree, tmp))
+
+
+if __name__ == "__main__":
+    main()
