@@ -353,6 +353,9 @@ class MainWindow(QMainWindow):
         self.run_info.setText(f"run {self.run_id}  \u00b7  elapsed {_duration(elapsed)}  \u00b7  {left}")
 
     def _on_run_started(self, e: ev.RunStarted) -> None:
+        from .plots import layout_for
+
+        self.plots.set_layout(layout_for(e.procedure))  # the plots follow the procedure
         self.plots.clear()
         self.plots.set_origin(e.t_sim_s if e.t_sim_s > 0 else None)  # a replay's RunStarted says 0
         self.run_t0_s = e.t_sim_s
