@@ -61,6 +61,24 @@ def outcome_colour(outcome: str) -> str:
     return "amber"
 
 LOCKSTEP_WAIT_S = 0.25  # longest the bridge holds a lockstep engine per event
+STATUS_LINES = 2  # the status box's height in lines: a longer status scrolls inside it
+STATION_TREE_PX = 260  # the station's device tree: every device's rows without scrolling
+STEPS_PX = 120  # the step list's fixed height (it scrolls)
+
+
+def _fixed_text_box(label: QLabel, lines: int) -> QScrollArea:
+    """`label` (word-wrapped, its full text kept) in a frameless box `lines` lines high that
+    scrolls: a long message never grows the column, moves the buttons or overlaps anything."""
+    box = QScrollArea()
+    box.setWidget(label)
+    box.setWidgetResizable(True)
+    box.setFrameShape(QScrollArea.Shape.NoFrame)
+    box.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+    label.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
+    label.setContentsMargins(0, 0, 0, 0)
+    label.setMargin(0)
+    box.setFixedHeight(lines * label.fontMetrics().lineSpacing() + 2)
+    return box
 
 
 class MainWindow(QMainWindow):
@@ -123,49 +141,75 @@ class MainWindow(QMainWindow):
         self.log = LogPane()
         self.results = ResultsTable()
 
+        # the left column: the procedure with ALL its parameter fields, then the station's devices,
+        # scroll together (a run scrolls to the station: the form is locked then); the speed, the
+        # buttons, the status and the steps sit below in a fixed place (a long status scrolls
+        # inside its own fixed box: nothing moves, nothing overlaps)
         left = QWidget()
         left_lay = QVBoxLayout(left)
-        box = QGroupBox("Station")
-        QVBoxLayout(box).addWidget(self.station)
-        left_lay.addWidget(box)
+        left_lay.setContentsMargins(4, 4, 4, 4)
         proc_box = QGroupBox("Procedure")
         proc_lay = QVBoxLayout(proc_box)
         proc_lay.addWidget(self.unit)
         proc_lay.addWidget(self.procedure)
-        form_scroll = QScrollArea()
-        form_scroll.setWidget(self.form)
-        form_scroll.setWidgetResizable(True)
-        form_scroll.setFrameShape(QScrollArea.Shape.NoFrame)
-        form_scroll.setMinimumHeight(140)
-        proc_lay.addWidget(form_scroll, 1)
-        buttons = QHBoxLayout()
-        for b in (self.start_button, self.pause_button, self.abort_button):
-            buttons.addWidget(b)
-        proc_lay.addLayout(buttons)
-        proc_lay.addWidget(self.status_line)
-        proc_lay.addWidget(self.safe_label)
-        left_lay.addWidget(proc_box, 2)
-        step_box = QGroupBox("Steps")
-        step_lay = QVBoxLayout(step_box)
-        step_lay.addWidget(self.run_info)
-        step_lay.addWidget(self.run_progress)
-        step_lay.addWidget(self.steps)
-        left_lay.addWidget(step_box, 1)
+        proc_lay.addWidget(self.form)  # every field at its full height: the column scrolls, not the form
+        left_lay.addWidget(proc_box)
+        self.station_box = QGroupBox("Station")
+        QVBoxLayout(self.station_box).addWidget(self.station)
+        self.station.tree.setMinimumHeight(STATION_TREE_PX)
+        left_lay.addWidget(self.station_box)
+        left_lay.addStretch(1)
         left.setMinimumWidth(320)
         left.setMaximumWidth(420)
-        # the column scrolls when the window is too short for it: its boxes never overlap
         left_scroll = QScrollArea()
         left_scroll.setObjectName("left_column")
         left_scroll.setWidget(left)
         left_scroll.setWidgetResizable(True)
         left_scroll.setFrameShape(QScrollArea.Shape.NoFrame)
         left_scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        left_scroll.setMinimumWidth(340)
-        left_scroll.setMaximumWidth(440)
+        self.left_scroll = left_scroll
+
+        controls = QWidget()
+        controls.setObjectName("run_controls")
+        ctl_lay = QVBoxLayout(controls)
+        ctl_lay.setContentsMargins(4, 2, 4, 2)
+        speed_row = QHBoxLayout()  # the station's clock speed and time, always in view
+        speed_row.addWidget(QLabel("speed"))
+        speed_row.addWidget(self.station.speed)
+        speed_row.addWidget(self.station.sim_time, 1)
+        ctl_lay.addLayout(speed_row)
+        buttons = QHBoxLayout()
+        for b in (self.start_button, self.pause_button, self.abort_button):
+            buttons.addWidget(b)
+        ctl_lay.addLayout(buttons)
+        self.status_box = _fixed_text_box(self.status_line, STATUS_LINES)
+        ctl_lay.addWidget(self.status_box)
+        self.safe_label.setWordWrap(False)
+        self.safe_label.setFixedHeight(self.safe_label.fontMetrics().lineSpacing() + 4)
+        ctl_lay.addWidget(self.safe_label)
+        step_box = QGroupBox("Steps")
+        step_lay = QVBoxLayout(step_box)
+        self.run_info.setFixedHeight(2 * self.run_info.fontMetrics().lineSpacing() + 4)
+        self.run_info.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
+        step_lay.addWidget(self.run_info)
+        step_lay.addWidget(self.run_progress)
+        self.steps.setFixedHeight(STEPS_PX)
+        step_lay.addWidget(self.steps)
+
+        column = QWidget()
+        column.setObjectName("left_panel")
+        col_lay = QVBoxLayout(column)
+        col_lay.setContentsMargins(0, 0, 0, 0)
+        col_lay.setSpacing(2)
+        col_lay.addWidget(left_scroll, 1)
+        col_lay.addWidget(controls)
+        col_lay.addWidget(step_box)
+        column.setMinimumWidth(340)
+        column.setMaximumWidth(440)
 
         right, self.tabs = plots_over_tabs(self.plots, self.results, self.log)
         central = QSplitter(Qt.Orientation.Horizontal)
-        central.addWidget(left_scroll)
+        central.addWidget(column)
         central.addWidget(right)
         central.setStretchFactor(1, 1)
         self.setCentralWidget(central)
@@ -230,6 +274,7 @@ class MainWindow(QMainWindow):
     def set_status_line(self, text: str, colour: str) -> None:
         """The line under the buttons (and the status bar): `colour` is one of STATUS_COLOURS."""
         self.status_line.setText(text)
+        self.status_line.setToolTip(text if len(text) > 60 else "")
         self.status_line.setStyleSheet(STATUS_STYLES[colour])
         self.statusBar().showMessage(text.splitlines()[0][:200] if text else "")
 
@@ -371,6 +416,7 @@ class MainWindow(QMainWindow):
         self.results.set_truth(truth_for_run(self.backend, e.procedure, e.run_id),  # the truth column (simulated)
                                measurement_periods(e.procedure))
         self.steps.set_steps(e.steps)
+        self.left_scroll.ensureWidgetVisible(self.station_box, 0, 0)  # the locked form gives way to the station
         self.run_active = True
         self.last_finished = None
         duts, operator = self.run_unit
