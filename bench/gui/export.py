@@ -310,13 +310,24 @@ class ExportDialog(QDialog):
         started = f"exporting {title!r} to {path}..."
         self._status(started)
 
+        signals = self.signals
+
+        def report(fraction: float) -> None:
+            try:
+                signals.progress.emit(fraction)
+            except RuntimeError:  # the dialog was closed meanwhile: the file is still written
+                pass
+
         def work() -> None:
             try:
-                note = export_plot(self.plots, title, self.raw_file, path, progress=self.signals.progress.emit)
+                note = export_plot(self.plots, title, self.raw_file, path, progress=report)
                 ok = True
             except (OSError, KeyError, ValueError, RuntimeError) as exc:
                 note, ok = f"export failed: {exc}", False
-            self.signals.finished.emit(note, ok)
+            try:
+                signals.finished.emit(note, ok)
+            except RuntimeError:
+                pass
 
         self.worker = threading.Thread(target=work, name="gyrobench-export", daemon=True)
         self.worker.start()
