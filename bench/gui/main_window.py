@@ -61,9 +61,16 @@ def outcome_colour(outcome: str) -> str:
     return "amber"
 
 LOCKSTEP_WAIT_S = 0.25  # longest the bridge holds a lockstep engine per event
+LABELS_EVERY_S = 0.1  # the time and progress labels' update period (wall)
+MAX_SPEED_REFRESH_HZ = 5.0  # plot redraws a second at "max" speed (benchmarks/gui_max_speed.py)
 STATUS_LINES = 2  # the status box's height in lines: a longer status scrolls inside it
 STATION_TREE_PX = 260  # the station's device tree: every device's rows without scrolling
 STEPS_PX = 120  # the step list's fixed height (it scrolls)
+
+
+def _wall_s() -> float:
+    """Wall clock of the label throttle (a test replaces it)."""
+    return time.monotonic()
 
 
 def _fixed_text_box(label: QLabel, lines: int) -> QScrollArea:
@@ -137,6 +144,8 @@ class MainWindow(QMainWindow):
         self.run_id = ""
         self.steps_done = 0
         self.step_fraction = 0.0
+        self.refresh_hz = refresh_hz
+        self._labels_wall_s = 0.0  # when the time and progress labels were last set
         self.plots = LivePlots(refresh_hz=refresh_hz)
         self.log = LogPane()
         self.results = ResultsTable()
@@ -269,7 +278,10 @@ class MainWindow(QMainWindow):
     def _set_backpressure(self, speed: float) -> None:
         """Hold the engine for the window only in lockstep on a simulated station (nothing is
         lost there: the world waits); in real time or on a real bench, never."""
-        self.bridge.max_wait_s = LOCKSTEP_WAIT_S if self.backend.simulated and math.isinf(speed) else 0.0
+        lockstep = self.backend.simulated and math.isinf(speed)
+        self.bridge.max_wait_s = LOCKSTEP_WAIT_S if lockstep else 0.0
+        # at "max" a frame's Python painting competes with the engine for the interpreter: fewer frames
+        self.plots.set_refresh_hz(MAX_SPEED_REFRESH_HZ if lockstep else self.refresh_hz)
 
     def set_status_line(self, text: str, colour: str) -> None:
         """The line under the buttons (and the status bar): `colour` is one of STATUS_COLOURS."""
@@ -363,9 +375,12 @@ class MainWindow(QMainWindow):
                 self._on_run_finished(e)
         if pending:
             self._add_blocks(pending)
-        self.station.set_time(self.t_sim_s)
-        if self.run_active:
-            self._show_run_info()
+        now = _wall_s()
+        if now - self._labels_wall_s >= LABELS_EVERY_S or not self.run_active:  # a label a batch would cost
+            self._labels_wall_s = now  # more than the plots at "max" speed: ten times a second is enough
+            self.station.set_time(self.t_sim_s)
+            if self.run_active:
+                self._show_run_info()
 
     def _on_safe_state_report(self, confirmed: bool) -> None:
         """The engine's safe-state report, shown at once (the run's files close after it, then

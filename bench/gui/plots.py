@@ -436,6 +436,11 @@ class LivePlots(QWidget):
         for p in self.time_plots:
             p.setXRange(t0, hi, padding=0.0)
 
+    def set_refresh_hz(self, hz: float) -> None:
+        """Redraws per second from now on (the window draws less often at "max" speed, where each
+        frame's Python painting takes the interpreter from the engine's thread)."""
+        self.timer.setInterval(max(1, int(round(1000.0 / hz))))
+
     def shutdown(self) -> None:
         """Stop redrawing and release the scene explicitly: left to the garbage collector, the
         pyqtgraph scene can be torn down in the wrong order at interpreter exit."""
