@@ -27,10 +27,11 @@ class KernelSplash(QWidget):
         self.bar = QProgressBar()
         self.bar.setRange(0, 0)  # busy: numba does not say how long a kernel takes
         lay.addWidget(self.bar)
-        self.line = QLabel("starting...")
+        self.line = QLabel("")
         self.line.setWordWrap(True)
         lay.addWidget(self.line)
         self.messages: list[str] = []  # every line shown (tests, and what a log would keep)
+        self.show_line("   0 s  starting the compiler (numba)...")
         self.resize(520, 130)
 
     def show_line(self, text: str) -> None:
