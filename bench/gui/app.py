@@ -141,6 +141,7 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
             time.sleep(0.002)
         window.bridge.drain()
         QApplication.processEvents()
+        window.flush_labels()
         window.plots.refresh(force=True)
         QApplication.processEvents()
         path.parent.mkdir(parents=True, exist_ok=True)

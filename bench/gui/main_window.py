@@ -146,6 +146,12 @@ class MainWindow(QMainWindow):
         self.step_fraction = 0.0
         self.refresh_hz = refresh_hz
         self._labels_wall_s = 0.0  # when the time and progress labels were last set
+        from PySide6.QtCore import QTimer
+
+        self._labels_timer = QTimer(self)  # a batch that skipped the labels: they follow within LABELS_EVERY_S
+        self._labels_timer.setSingleShot(True)
+        self._labels_timer.setInterval(int(LABELS_EVERY_S * 1000))
+        self._labels_timer.timeout.connect(lambda: self.flush_labels())
         self.plots = LivePlots(refresh_hz=refresh_hz)
         self.log = LogPane()
         self.results = ResultsTable()
@@ -182,7 +188,10 @@ class MainWindow(QMainWindow):
         controls.setObjectName("run_controls")
         ctl_lay = QVBoxLayout(controls)
         ctl_lay.setContentsMargins(4, 2, 4, 2)
-        speed_row = QHBoxLayout()  # the station's clock speed and time, always in view
+        speed_row = QHBoxLayout()  # the station's clock speed and time, always in view (not in the panel)
+        for lab in self.station.findChildren(QLabel):
+            if lab.text() == "speed":
+                lab.hide()
         speed_row.addWidget(QLabel("speed"))
         speed_row.addWidget(self.station.speed)
         speed_row.addWidget(self.station.sim_time, 1)
@@ -198,7 +207,7 @@ class MainWindow(QMainWindow):
         ctl_lay.addWidget(self.safe_label)
         step_box = QGroupBox("Steps")
         step_lay = QVBoxLayout(step_box)
-        self.run_info.setFixedHeight(2 * self.run_info.fontMetrics().lineSpacing() + 4)
+        self.run_info.setFixedHeight(3 * self.run_info.fontMetrics().lineSpacing() + 4)
         self.run_info.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
         step_lay.addWidget(self.run_info)
         step_lay.addWidget(self.run_progress)
@@ -377,10 +386,16 @@ class MainWindow(QMainWindow):
             self._add_blocks(pending)
         now = _wall_s()
         if now - self._labels_wall_s >= LABELS_EVERY_S or not self.run_active:  # a label a batch would cost
-            self._labels_wall_s = now  # more than the plots at "max" speed: ten times a second is enough
-            self.station.set_time(self.t_sim_s)
-            if self.run_active:
-                self._show_run_info()
+            self.flush_labels(now)  # more than the plots at "max" speed: ten times a second is enough
+        elif not self._labels_timer.isActive():  # the last batch's time is shown within LABELS_EVERY_S
+            self._labels_timer.start()
+
+    def flush_labels(self, now: float | None = None) -> None:
+        """Show the bench time and the run's progress as of the last event (a screenshot calls it)."""
+        self._labels_wall_s = _wall_s() if now is None else now
+        self.station.set_time(self.t_sim_s)
+        if self.run_active:
+            self._show_run_info()
 
     def _on_safe_state_report(self, confirmed: bool) -> None:
         """The engine's safe-state report, shown at once (the run's files close after it, then
@@ -407,7 +422,7 @@ class MainWindow(QMainWindow):
         self.run_progress.setValue(int(round(1000 * frac)))
         left = "time left: estimating..."
         if self.run_active and 0.02 < frac < 1.0 and elapsed > 0:
-            left = f"about {_duration(elapsed * (1.0 - frac) / frac)} left (estimated from the progress so far)"
+            left = f"about {_duration(elapsed * (1.0 - frac) / frac)} left (from the progress)"
         elif not self.run_active:
             left = "finished"
         self.run_info.setText(f"run {self.run_id}  \u00b7  elapsed {_duration(elapsed)}  \u00b7  {left}")
