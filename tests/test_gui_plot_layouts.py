@@ -59,16 +59,23 @@ def test_layout_follows_the_procedure(plots):
 def test_cvg_rate_output_live_and_the_allan_curve_when_recorded(plots):
     plots.set_layout("cvg")
     plots.clear()
-    t = np.arange(0.0, 10.0, 0.1)
+    t = np.arange(0.0, 10.0, 0.01)
     angle = -2.0 / 3600.0 * t  # the wave turning at -2 deg/h: output-referred rate 2 deg/h
     cols = ("t_s", "cx", "sx", "cy", "sy", "angle_out_deg", "rate_out_dps")
     rows = np.column_stack((t, np.ones_like(t), 0 * t, 0 * t, 0 * t, angle, 0 * t))
-    plots.add_samples("fpga", cols, rows[:50])
-    plots.add_samples("fpga", cols, rows[50:])  # across blocks: no gap, no jump
+    plots.add_samples("fpga", cols, rows[:500])
+    plots.add_samples("fpga", cols, rows[500:])  # across blocks: no gap, no jump
     plots.refresh(force=True)
     x, y = plots.c_cvg.getData()
     assert len(x) >= 50
     np.testing.assert_allclose(y, 2.0, rtol=1e-6)
+    jump = rows[-1:].copy()
+    jump[0, 0] += 0.01
+    jump[0, 5] += 300.0  # the output's reset at a mode change: one huge "rate"
+    plots.add_samples("fpga", cols, jump)
+    plots.refresh(force=True)
+    lo, hi = plots.p_cvg.getViewBox().viewRange()[1]
+    assert lo < 2.0 < hi and hi - lo < 1.0  # the axis stays on the rate, not on the one reset
     tau = np.array([1.0, 10.0, 100.0])
     curve = np.column_stack((tau, [3.0, 1.0, 0.8], [2.5, 0.8, 0.5], [3.5, 1.3, 1.4], [100, 10, 1]))
     plots.add_samples("cvg_allan_curve", ("tau_s", "adev_dph", "adev_low_dph", "adev_high_dph", "clusters"), curve)

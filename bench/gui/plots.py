@@ -348,7 +348,9 @@ class LivePlots(QWidget):
         if len(self.table_marks):
             self.c_rate_marks.setData(self.table_marks.column("t_s"), self.table_marks.column("rate_dps"))
         if len(self.cvg):
-            self.c_cvg.setData(*self.cvg.curve("rate_dph"))
+            t_cvg, r_cvg = self.cvg.curve("rate_dph")
+            self.c_cvg.setData(t_cvg, r_cvg)
+            self._robust_y_range(self.p_cvg, r_cvg)
         if len(self.allan):
             ok = np.all(np.isfinite(self.allan) & (self.allan > 0), axis=1)
             tau, adev, lo, hi = self.allan[ok].T
@@ -376,6 +378,18 @@ class LivePlots(QWidget):
         now = time.perf_counter()
         self.refresh_times.append(now)
         self.refresh_cost_s.append(now - t0)
+
+    @staticmethod
+    def _robust_y_range(plot: pg.PlotItem, y: np.ndarray) -> None:
+        """The y axis over the 1st..99th percentile (padded): a wave-angle output's reset at a
+        mode change (one sample of 1e7 deg/h) must not flatten the rate noise to a line."""
+        y = y[np.isfinite(y)]
+        if len(y) < 20:
+            plot.enableAutoRange(y=True)
+            return
+        lo, hi = np.percentile(y, [1.0, 99.0])
+        pad = 0.15 * max(hi - lo, 1e-12)
+        plot.setYRange(lo - pad, hi + pad, padding=0.0)
 
     def _choose_e_scale(self, e: np.ndarray) -> None:
         """E on a log axis when it spans more than a decade (a decay into the noise), else linear: a
