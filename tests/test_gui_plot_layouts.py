@@ -59,15 +59,15 @@ def test_layout_follows_the_procedure(plots):
 def test_cvg_rate_output_live_and_the_allan_curve_when_recorded(plots):
     plots.set_layout("cvg")
     plots.clear()
-    t = np.arange(0.0, 10.0, 0.01)
+    t = np.arange(0.0, 100.0, 0.01)
     angle = -2.0 / 3600.0 * t  # the wave turning at -2 deg/h: output-referred rate 2 deg/h
     cols = ("t_s", "cx", "sx", "cy", "sy", "angle_out_deg", "rate_out_dps")
     rows = np.column_stack((t, np.ones_like(t), 0 * t, 0 * t, 0 * t, angle, 0 * t))
-    plots.add_samples("fpga", cols, rows[:500])
-    plots.add_samples("fpga", cols, rows[500:])  # across blocks: no gap, no jump
+    plots.add_samples("fpga", cols, rows[:5001])
+    plots.add_samples("fpga", cols, rows[5001:])  # across blocks: no gap, no jump
     plots.refresh(force=True)
     x, y = plots.c_cvg.getData()
-    assert len(x) >= 50
+    assert len(x) >= 200  # one rate each RATE_SPAN_S (0.1 s), drawn as a bounded envelope
     np.testing.assert_allclose(y, 2.0, rtol=1e-6)
     jump = rows[-1:].copy()
     jump[0, 0] += 0.01

@@ -27,6 +27,7 @@ from .ringbuffer import MinMaxHistory, RingBuffer
 FPGA_COLS = ("t_s", "cx", "sx", "cy", "sy", "E", "theta_deg")
 TABLE_COLS = ("t_s", "rate_dps", "angle_deg")
 SWEEP_COLS = ("freq_hz", "amplitude", "phase_deg")
+RATE_SPAN_S = 0.1  # the live rate output's differencing span (whole-angle output)
 TABLE_STREAM = "table"  # the table's own rate stream: the table-rate curve (a procedure's readings are markers)
 ALLAN_STREAM, ALLAN_COLS = "cvg_allan_curve", ("tau_s", "adev_dph")  # procedures/cvg_allan.py's curve
 #: the plots each layout shows (attribute names of LivePlots' PlotItems)
@@ -285,12 +286,22 @@ class LivePlots(QWidget):
         t_all = np.concatenate(([prev[0]], t)) if prev else t
         a_all = np.concatenate(([prev[1]], angle[:, 0])) if prev else angle[:, 0]
         h_all = np.concatenate(([True], held)) if prev else held
-        self._angle_last = (float(t[-1]), float(angle[-1, 0])) if held[-1] else None
-        dt = np.diff(t_all)
-        ok = (dt > 0) & h_all[1:] & h_all[:-1]  # never across a quench or a start: only between held rows
+        # rows RATE_SPAN_S apart at least (a 1 kHz stream's sample-to-sample derivative is noise)
+        picks = np.unique(np.searchsorted(t_all, np.arange(t_all[0], t_all[-1] + 1e-12, RATE_SPAN_S)))
+        picks = picks[picks < len(t_all)]
+        last = len(t_all) - 1
+        self._angle_last = (float(t_all[picks[-1]]), float(a_all[picks[-1]])) if h_all[picks[-1]] else None
+        if picks[-1] != last and not h_all[last]:
+            self._angle_last = None
+        if len(picks) < 2:
+            return
+        unheld = np.concatenate(([0], np.cumsum(~h_all)))  # unheld rows before each index
+        gaps = unheld[picks[1:] + 1] - unheld[picks[:-1]]  # unheld rows within each span
+        dt = np.diff(t_all[picks])
+        ok = (dt > 0) & (gaps == 0)  # never across a quench or a start: only over held rows
         if np.any(ok):
-            rate = -np.diff(a_all)[ok] / dt[ok] * 3600.0
-            self.cvg.append(t_all[1:][ok], rate[:, None])
+            rate = -np.diff(a_all[picks])[ok] / dt[ok] * 3600.0
+            self.cvg.append(t_all[picks[1:]][ok], rate[:, None])
 
     def _unwrapped_theta_deg(self, theta_rad: np.ndarray, wave_defined: bool) -> np.ndarray:
         """theta continues across its (-45, 45] deg wrap while a standing wave is there (a
