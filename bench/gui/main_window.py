@@ -84,7 +84,7 @@ def _fixed_text_box(label: QLabel, lines: int) -> QScrollArea:
     label.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
     label.setContentsMargins(0, 0, 0, 0)
     label.setMargin(0)
-    box.setFixedHeight(lines * label.fontMetrics().lineSpacing() + 2)
+    box.setFixedHeight(lines * label.fontMetrics().lineSpacing())  # whole lines: no sliver of the next
     return box
 
 
