@@ -206,6 +206,7 @@ class LivePlots(QWidget):
         self.recent.clear()
         self.sweep.clear()
         self.table_marks.clear()
+        self.p_rate.setTitle(legend_title(("table rate", "#8c564b")))
         self.cvg.clear()
         self._angle_last = None
         self._amp_max = 0.0
@@ -358,6 +359,7 @@ class LivePlots(QWidget):
             self.c_rate.setData(*self.table.curve("rate_dps"))
         if len(self.table_marks):
             self.c_rate_marks.setData(self.table_marks.column("t_s"), self.table_marks.column("rate_dps"))
+            self.p_rate.setTitle(legend_title(("table rate", "#8c564b"), ("procedure's readings", "#17becf")))
         if len(self.cvg):
             t_cvg, r_cvg = self.cvg.curve("rate_dph")
             self.c_cvg.setData(t_cvg, r_cvg)
