@@ -15,6 +15,8 @@ import os
 import tempfile
 import time
 
+CLI_SWITCH_S = 0.005  # Python's default GIL switch interval
+
 
 def _params(record_s: float, verify_s: float) -> dict[str, str]:
     return {"record_s": str(record_s), "verify_s": str(verify_s)}
@@ -22,10 +24,13 @@ def _params(record_s: float, verify_s: float) -> dict[str, str]:
 
 def cli_speed(station: str, params: dict[str, str], seed: int) -> tuple[float, float]:
     """(bench s, wall s) of the run through the CLI's Runner (lockstep, no window)."""
+    import sys
+
     from bench.composition import load_station
     from bench.engine import Runner
     from procedures import find_procedure
 
+    sys.setswitchinterval(CLI_SWITCH_S)  # as `gyrobench run` has it (a window before may have changed it)
     st = load_station(station, seed=seed)
     runner = Runner(st, runs_dir=tempfile.mkdtemp(prefix="gms_cli_"), store=None)
     st.open()
