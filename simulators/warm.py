@@ -20,7 +20,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -30,9 +30,10 @@ _done = False
 _KERNEL_MODULES = ("simulators.", "drivers.fpga.protocol", "bench.analysis.free_decay_rk")
 
 
-def warm_kernels(*, verbose: bool | None = None) -> None:
+def warm_kernels(*, verbose: bool | None = None, on_compile: Callable[[str], None] | None = None) -> None:
     """Once per process: call every compiled kernel of the simulated devices and the stream parser.
-    verbose: lines on stderr while compiling (default: only when the cache is not filled yet)."""
+    verbose: lines on stderr while compiling (default: only when the cache is not filled yet);
+    on_compile: called with each kernel's name as it starts compiling (the window's splash)."""
     global _done
     with _lock:
         if _done:
@@ -43,7 +44,7 @@ def warm_kernels(*, verbose: bool | None = None) -> None:
         if verbose if verbose is not None else cold:
             print(f"gyrobench: compiling the simulated devices' kernels (once per change of their source; "
                   f"cached in {kernel_cache.cache_dir()}) ...", file=sys.stderr, flush=True)
-        with _named_compiles(verbose if verbose is not None else cold):
+        with _named_compiles(verbose if verbose is not None else cold, on_compile):
             _warm_devices()
             warm_analysis()  # the run's analysis process then loads it from the same cache
         if cold:
@@ -65,9 +66,10 @@ def _warm_devices() -> None:
 
 
 @contextmanager
-def _named_compiles(on: bool) -> Iterator[None]:
-    """While on: a line on stderr as each of our kernels starts compiling (not the ones it inlines)."""
-    if not on:
+def _named_compiles(on: bool, on_compile: Callable[[str], None] | None = None) -> Iterator[None]:
+    """While on: a line on stderr as each of our kernels starts compiling (not the ones it inlines);
+    `on_compile(name)` too, when given (also when not on)."""
+    if not on and on_compile is None:
         yield
         return
     from numba.core import event
@@ -79,15 +81,19 @@ def _named_compiles(on: bool) -> Iterator[None]:
             depth[0] += 1
             fn = ev.data["dispatcher"].py_func
             if depth[0] == 1 and fn.__module__.startswith(_KERNEL_MODULES):
-                print(f"  {time.perf_counter() - t0:5.1f} s  compiling {fn.__module__}.{fn.__qualname__}",
-                      file=sys.stderr, flush=True)
+                if on:
+                    print(f"  {time.perf_counter() - t0:5.1f} s  compiling {fn.__module__}.{fn.__qualname__}",
+                          file=sys.stderr, flush=True)
+                if on_compile is not None:
+                    on_compile(f"{fn.__module__}.{fn.__qualname__}")
 
         def on_end(self, ev: event.Event) -> None:
             depth[0] -= 1
 
     with event.install_listener("numba:compile", _Named()):
         yield
-    print(f"  {time.perf_counter() - t0:5.1f} s  kernels ready", file=sys.stderr, flush=True)
+    if on:
+        print(f"  {time.perf_counter() - t0:5.1f} s  kernels ready", file=sys.stderr, flush=True)
 
 
 def warm_analysis() -> None:

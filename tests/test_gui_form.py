@@ -9,8 +9,6 @@ import pytest
 pytest.importorskip("pytestqt")
 pytest.importorskip("pyqtgraph")
 
-from PySide6.QtWidgets import QScrollArea  # noqa: E402
-
 from bench.gui.engine_backend import EngineBackend  # noqa: E402
 from bench.gui.main_window import MainWindow  # noqa: E402
 
@@ -26,7 +24,8 @@ def test_form_fits_the_default_window_and_refusals_show_at_the_field(qtbot, tmp_
         qtbot.wait(50)
         default_w = win.width()
         assert default_w <= 1280
-        scroll = next(a for a in win.findChildren(QScrollArea) if a.widget() is win.form)
+        scroll = win.left_scroll  # the form is in the left column, which scrolls as a whole
+        assert scroll.widget().isAncestorOf(win.form)
         for name in backend.procedures():
             win.procedure.setCurrentText(name)
             qtbot.wait(20)

@@ -81,6 +81,7 @@ def truth_count_line(flags: dict[str, bool]) -> str:
 
 def print_record(js: dict[str, Any]) -> None:
     """The run's record as a table, truths flagged, verdicts beside the values."""
+    from bench import numbers
     from procedures import measurement_truth
 
     print(f"run {js['run_id']}  {js['procedure']}  {js['outcome']}  ({js['end_reason']})")
@@ -95,16 +96,17 @@ def print_record(js: dict[str, Any]) -> None:
     if flags:
         print(f"  {truth_count_line(flags)}" + (" (marked !)" if any(flags.values()) else ""))
 
-    def num(x: Any) -> str:  # as_json gives None for NaN/inf and for an open side of the limits
-        return "-" if x is None else f"{x:.6g}"
+    def num(x: Any) -> str:  # a set value (a limit) as written; None: an open side or NaN/inf
+        return "-" if x is None else numbers.plain(x)
 
     judged = (lab or {}).get("measurements", {})
     rows = [("measurement", "value", "unit", "95% interval", "limits", "outcome", "truth" if truth else "")]
     for name, m in js["measurements"].items():
-        ci = "" if m["ci95"] is None else f"[{num(m['ci95'][0])}, {num(m['ci95'][1])}]"
+        value, ci = numbers.with_interval(m["value"], m["ci95"])  # the report's digit rule
+        ci = "" if ci == numbers.DASH else ci
         lim, outcome = _limits_and_outcome(m, judged.get(name), num)
-        t = num(truth[name]) + (" !" if flags.get(name) else "") if name in truth else ""
-        rows.append((name, num(m["value"]), m["unit"], ci, lim, outcome, t))
+        t = numbers.truth_text(truth[name], m["ci95"]) + (" !" if flags.get(name) else "") if name in truth else ""
+        rows.append((name, value, m["unit"], ci, lim, outcome, t))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for r in rows:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())

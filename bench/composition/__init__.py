@@ -17,6 +17,14 @@ from bench.station import Station
 from bench.station_config import StationConfig, load_config
 
 
+def warm_simulators(on_compile: Any = None) -> None:
+    """Load (on a cold cache: compile) the simulated devices' kernels now, naming each as it
+    compiles to `on_compile(name)` (simulators/warm.py says why this comes before a station serves)."""
+    from simulators.warm import warm_kernels
+
+    warm_kernels(on_compile=on_compile)
+
+
 def _refuse_overrides(config: StationConfig, overrides: dict[str, Any]) -> None:
     """--seed, --speed and the like apply only to a simulated station: name them."""
     if overrides:

@@ -23,6 +23,19 @@ def make_backend(station: str | None, *, seed: int = 0) -> GuiBackend:
     return EngineBackend(station or default_station(), seed=seed)
 
 
+def _simulated(station: str | None) -> bool:
+    """Whether the station (sim-hrg when none) is simulated: only then do kernels compile; a
+    station file that does not read says so later, when the backend opens it."""
+    from bench.station_config import load_config
+
+    from .engine_backend import default_station
+
+    try:
+        return load_config(station or default_station()).simulation is not None
+    except Exception:  # noqa: BLE001 - the backend names the problem
+        return False
+
+
 def has_display(environ: dict[str, str] | None = None) -> bool:
     """Whether a window can be shown: an X or Wayland display on Linux (other systems always)."""
     env = os.environ if environ is None else environ
@@ -128,6 +141,7 @@ def take_screenshot(window, procedure: str, path: str | Path, *, at_s: float | N
             time.sleep(0.002)
         window.bridge.drain()
         QApplication.processEvents()
+        window.flush_labels()
         window.plots.refresh(force=True)
         QApplication.processEvents()
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -249,6 +263,10 @@ def run_gui(station: str | None = None, *, run: str | None = None, screenshot: s
 
     guard = QuitOnSignal().install()
     try:
+        if screenshot is None and _simulated(station):
+            from .splash import warm_with_splash
+
+            warm_with_splash(app)  # a fresh checkout compiles kernels: a splash from the first second
         backend = make_backend(station, seed=seed)
     except BaseException:
         guard.uninstall()

@@ -45,6 +45,7 @@ class EventBridge(QObject):
         self._unsubscribe: Callable[[], None] | None = None
         self._gate: Callable[[Event], None] | None = None
         self.delivered = 0
+        self.held_s = 0.0  # wall seconds the publisher was held by the backpressure (benchmarks/gui_max_speed.py)
         self.latency_s: deque[float] = deque(maxlen=10_000)  # publish -> GUI thread, wall seconds
         self._wake.connect(self._drain, Qt.ConnectionType.QueuedConnection)
         if bus is not None:
@@ -69,7 +70,9 @@ class EventBridge(QObject):
         with self._lock:
             if (self.max_wait_s > 0 and len(self._queue) >= self.max_pending
                     and threading.current_thread() is not threading.main_thread()):
+                t_held = time.perf_counter()
                 self._drained.wait_for(lambda: len(self._queue) < self.max_pending, self.max_wait_s)
+                self.held_s += time.perf_counter() - t_held
             self._queue.append(event)
             wake = not self._pending
             self._pending = True

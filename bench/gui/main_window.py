@@ -61,6 +61,31 @@ def outcome_colour(outcome: str) -> str:
     return "amber"
 
 LOCKSTEP_WAIT_S = 0.25  # longest the bridge holds a lockstep engine per event
+LABELS_EVERY_S = 0.1  # the time and progress labels' update period (wall)
+MAX_SPEED_REFRESH_HZ = 5.0  # plot redraws a second at "max" speed (benchmarks/gui_max_speed.py)
+STATUS_LINES = 2  # the status box's height in lines: a longer status scrolls inside it
+STATION_TREE_PX = 260  # the station's device tree: every device's rows without scrolling
+STEPS_PX = 120  # the step list's fixed height (it scrolls)
+
+
+def _wall_s() -> float:
+    """Wall clock of the label throttle (a test replaces it)."""
+    return time.monotonic()
+
+
+def _fixed_text_box(label: QLabel, lines: int) -> QScrollArea:
+    """`label` (word-wrapped, its full text kept) in a frameless box `lines` lines high that
+    scrolls: a long message never grows the column, moves the buttons or overlaps anything."""
+    box = QScrollArea()
+    box.setWidget(label)
+    box.setWidgetResizable(True)
+    box.setFrameShape(QScrollArea.Shape.NoFrame)
+    box.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+    label.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
+    label.setContentsMargins(0, 0, 0, 0)
+    label.setMargin(0)
+    box.setFixedHeight(lines * label.fontMetrics().lineSpacing())  # whole lines: no sliver of the next
+    return box
 
 
 class MainWindow(QMainWindow):
@@ -119,53 +144,90 @@ class MainWindow(QMainWindow):
         self.run_id = ""
         self.steps_done = 0
         self.step_fraction = 0.0
+        self.refresh_hz = refresh_hz
+        self._labels_wall_s = 0.0  # when the time and progress labels were last set
+        from PySide6.QtCore import QTimer
+
+        self._labels_timer = QTimer(self)  # a batch that skipped the labels: they follow within LABELS_EVERY_S
+        self._labels_timer.setSingleShot(True)
+        self._labels_timer.setInterval(int(LABELS_EVERY_S * 1000))
+        self._labels_timer.timeout.connect(lambda: self.flush_labels())
         self.plots = LivePlots(refresh_hz=refresh_hz)
         self.log = LogPane()
         self.results = ResultsTable()
 
+        # the left column: the procedure with ALL its parameter fields, then the station's devices,
+        # scroll together (a run scrolls to the station: the form is locked then); the speed, the
+        # buttons, the status and the steps sit below in a fixed place (a long status scrolls
+        # inside its own fixed box: nothing moves, nothing overlaps)
         left = QWidget()
         left_lay = QVBoxLayout(left)
-        box = QGroupBox("Station")
-        QVBoxLayout(box).addWidget(self.station)
-        left_lay.addWidget(box)
+        left_lay.setContentsMargins(4, 4, 4, 4)
         proc_box = QGroupBox("Procedure")
         proc_lay = QVBoxLayout(proc_box)
         proc_lay.addWidget(self.unit)
         proc_lay.addWidget(self.procedure)
-        form_scroll = QScrollArea()
-        form_scroll.setWidget(self.form)
-        form_scroll.setWidgetResizable(True)
-        form_scroll.setFrameShape(QScrollArea.Shape.NoFrame)
-        form_scroll.setMinimumHeight(140)
-        proc_lay.addWidget(form_scroll, 1)
-        buttons = QHBoxLayout()
-        for b in (self.start_button, self.pause_button, self.abort_button):
-            buttons.addWidget(b)
-        proc_lay.addLayout(buttons)
-        proc_lay.addWidget(self.status_line)
-        proc_lay.addWidget(self.safe_label)
-        left_lay.addWidget(proc_box, 2)
-        step_box = QGroupBox("Steps")
-        step_lay = QVBoxLayout(step_box)
-        step_lay.addWidget(self.run_info)
-        step_lay.addWidget(self.run_progress)
-        step_lay.addWidget(self.steps)
-        left_lay.addWidget(step_box, 1)
+        proc_lay.addWidget(self.form)  # every field at its full height: the column scrolls, not the form
+        left_lay.addWidget(proc_box)
+        self.station_box = QGroupBox("Station")
+        QVBoxLayout(self.station_box).addWidget(self.station)
+        self.station.tree.setMinimumHeight(STATION_TREE_PX)
+        left_lay.addWidget(self.station_box)
+        left_lay.addStretch(1)
         left.setMinimumWidth(320)
         left.setMaximumWidth(420)
-        # the column scrolls when the window is too short for it: its boxes never overlap
         left_scroll = QScrollArea()
         left_scroll.setObjectName("left_column")
         left_scroll.setWidget(left)
         left_scroll.setWidgetResizable(True)
         left_scroll.setFrameShape(QScrollArea.Shape.NoFrame)
         left_scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        left_scroll.setMinimumWidth(340)
-        left_scroll.setMaximumWidth(440)
+        self.left_scroll = left_scroll
+
+        controls = QWidget()
+        controls.setObjectName("run_controls")
+        ctl_lay = QVBoxLayout(controls)
+        ctl_lay.setContentsMargins(4, 2, 4, 2)
+        speed_row = QHBoxLayout()  # the station's clock speed and time, always in view (not in the panel)
+        for lab in self.station.findChildren(QLabel):
+            if lab.text() == "speed":
+                lab.hide()
+        speed_row.addWidget(QLabel("speed"))
+        speed_row.addWidget(self.station.speed)
+        speed_row.addWidget(self.station.sim_time, 1)
+        ctl_lay.addLayout(speed_row)
+        buttons = QHBoxLayout()
+        for b in (self.start_button, self.pause_button, self.abort_button):
+            buttons.addWidget(b)
+        ctl_lay.addLayout(buttons)
+        self.status_box = _fixed_text_box(self.status_line, STATUS_LINES)
+        ctl_lay.addWidget(self.status_box)
+        self.safe_label.setWordWrap(False)
+        self.safe_label.setFixedHeight(self.safe_label.fontMetrics().lineSpacing() + 4)
+        ctl_lay.addWidget(self.safe_label)
+        step_box = QGroupBox("Steps")
+        step_lay = QVBoxLayout(step_box)
+        self.run_info.setFixedHeight(3 * self.run_info.fontMetrics().lineSpacing() + 4)
+        self.run_info.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
+        step_lay.addWidget(self.run_info)
+        step_lay.addWidget(self.run_progress)
+        self.steps.setFixedHeight(STEPS_PX)
+        step_lay.addWidget(self.steps)
+
+        column = QWidget()
+        column.setObjectName("left_panel")
+        col_lay = QVBoxLayout(column)
+        col_lay.setContentsMargins(0, 0, 0, 0)
+        col_lay.setSpacing(2)
+        col_lay.addWidget(left_scroll, 1)
+        col_lay.addWidget(controls)
+        col_lay.addWidget(step_box)
+        column.setMinimumWidth(340)
+        column.setMaximumWidth(440)
 
         right, self.tabs = plots_over_tabs(self.plots, self.results, self.log)
         central = QSplitter(Qt.Orientation.Horizontal)
-        central.addWidget(left_scroll)
+        central.addWidget(column)
         central.addWidget(right)
         central.setStretchFactor(1, 1)
         self.setCentralWidget(central)
@@ -225,11 +287,15 @@ class MainWindow(QMainWindow):
     def _set_backpressure(self, speed: float) -> None:
         """Hold the engine for the window only in lockstep on a simulated station (nothing is
         lost there: the world waits); in real time or on a real bench, never."""
-        self.bridge.max_wait_s = LOCKSTEP_WAIT_S if self.backend.simulated and math.isinf(speed) else 0.0
+        lockstep = self.backend.simulated and math.isinf(speed)
+        self.bridge.max_wait_s = LOCKSTEP_WAIT_S if lockstep else 0.0
+        # at "max" a frame's Python painting competes with the engine for the interpreter: fewer frames
+        self.plots.set_refresh_hz(MAX_SPEED_REFRESH_HZ if lockstep else self.refresh_hz)
 
     def set_status_line(self, text: str, colour: str) -> None:
         """The line under the buttons (and the status bar): `colour` is one of STATUS_COLOURS."""
         self.status_line.setText(text)
+        self.status_line.setToolTip(text if len(text) > 60 else "")
         self.status_line.setStyleSheet(STATUS_STYLES[colour])
         self.statusBar().showMessage(text.splitlines()[0][:200] if text else "")
 
@@ -318,6 +384,15 @@ class MainWindow(QMainWindow):
                 self._on_run_finished(e)
         if pending:
             self._add_blocks(pending)
+        now = _wall_s()
+        if now - self._labels_wall_s >= LABELS_EVERY_S or not self.run_active:  # a label a batch would cost
+            self.flush_labels(now)  # more than the plots at "max" speed: ten times a second is enough
+        elif not self._labels_timer.isActive():  # the last batch's time is shown within LABELS_EVERY_S
+            self._labels_timer.start()
+
+    def flush_labels(self, now: float | None = None) -> None:
+        """Show the bench time and the run's progress as of the last event (a screenshot calls it)."""
+        self._labels_wall_s = _wall_s() if now is None else now
         self.station.set_time(self.t_sim_s)
         if self.run_active:
             self._show_run_info()
@@ -347,12 +422,15 @@ class MainWindow(QMainWindow):
         self.run_progress.setValue(int(round(1000 * frac)))
         left = "time left: estimating..."
         if self.run_active and 0.02 < frac < 1.0 and elapsed > 0:
-            left = f"about {_duration(elapsed * (1.0 - frac) / frac)} left (estimated from the progress so far)"
+            left = f"about {_duration(elapsed * (1.0 - frac) / frac)} left (from the progress)"
         elif not self.run_active:
             left = "finished"
         self.run_info.setText(f"run {self.run_id}  \u00b7  elapsed {_duration(elapsed)}  \u00b7  {left}")
 
     def _on_run_started(self, e: ev.RunStarted) -> None:
+        from .plots import layout_for
+
+        self.plots.set_layout(layout_for(e.procedure))  # the plots follow the procedure
         self.plots.clear()
         self.plots.set_origin(e.t_sim_s if e.t_sim_s > 0 else None)  # a replay's RunStarted says 0
         self.run_t0_s = e.t_sim_s
@@ -368,6 +446,7 @@ class MainWindow(QMainWindow):
         self.results.set_truth(truth_for_run(self.backend, e.procedure, e.run_id),  # the truth column (simulated)
                                measurement_periods(e.procedure))
         self.steps.set_steps(e.steps)
+        self.left_scroll.ensureWidgetVisible(self.station_box, 0, 0)  # the locked form gives way to the station
         self.run_active = True
         self.last_finished = None
         duts, operator = self.run_unit

@@ -1,5 +1,8 @@
 """Live plots of a run: cx, sx, cy, sy; E on a log axis with its fit; wave angle theta; table
-rate; and the sweep's amplitude and phase against frequency, filling in point by point.
+rate; and the sweep's amplitude and phase against frequency, filling in point by point; a rate
+sensor's (CVG) rate output and its Allan deviation.  Which plots are shown follows the procedure
+(`layout_for`): an HRG run the four time plots, a sweep its two sweep plots large, a CVG run its
+rate output, the table rate and, once computed, the Allan curve.
 
 Samples go into ring buffers as they arrive (cheap); the curves are redrawn from the buffers by
 a QTimer at `refresh_hz`, decimated to `max_points` per curve, never per event.
@@ -24,6 +27,22 @@ from .ringbuffer import MinMaxHistory, RingBuffer
 FPGA_COLS = ("t_s", "cx", "sx", "cy", "sy", "E", "theta_deg")
 TABLE_COLS = ("t_s", "rate_dps", "angle_deg")
 SWEEP_COLS = ("freq_hz", "amplitude", "phase_deg")
+RATE_SPAN_S = 0.1  # the live rate output's differencing span (whole-angle output)
+TABLE_STREAM = "table"  # the table's own rate stream: the table-rate curve (a procedure's readings are markers)
+ALLAN_STREAM, ALLAN_COLS = "cvg_allan_curve", ("tau_s", "adev_dph")  # procedures/cvg_allan.py's curve
+#: the plots each layout shows (attribute names of LivePlots' PlotItems)
+LAYOUTS = {"hrg": ("p_q", "p_e", "p_theta", "p_rate"), "sweep": ("p_amp", "p_phase"),
+           "cvg": ("p_cvg", "p_rate", "p_allan")}
+
+
+def layout_for(procedure: str) -> str:
+    """The plots a procedure's run shows: 'sweep' (a frequency sweep), 'cvg' (a rate sensor's
+    output), else 'hrg' (the resonator's slow variables, energy, angle and the table)."""
+    if procedure.startswith("mems-sweep") or procedure.endswith("sweep"):
+        return "sweep"
+    if procedure.startswith("cvg-"):
+        return "cvg"
+    return "hrg"
 E_FIT_KEYS = ("E_fit", "energy_fit", "E")  # model E(t) keys of a FitUpdate (not the measured "energy")
 PEN_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 FIT_COLOUR = "#d62728"
@@ -64,6 +83,12 @@ class LivePlots(QWidget):
         self.table = MinMaxHistory(TABLE_COLS[1:], max_points, history_s)
         self.recent = RingBuffer(int(recent_s * rate_hz), FPGA_COLS)
         self.sweep = RingBuffer(100_000, SWEEP_COLS)
+        self.table_marks = RingBuffer(100_000, ("t_s", "rate_dps"))  # a procedure's own rate readings
+        self.cvg = MinMaxHistory(("rate_dph",), max_points, history_s)  # the rate output, deg/h
+        self._angle_last: tuple[float, float] | None = None  # (t_s, angle_out_deg) of the last FPGA row
+        self._amp_max = 0.0  # the largest wave amplitude of the run so far
+        self.allan = np.empty((0, 2))
+        self.layout_kind = "hrg"
         self.max_points = max_points
         self.fits: dict[str, dict[str, np.ndarray]] = {}
         self.refresh_count = 0
@@ -79,9 +104,9 @@ class LivePlots(QWidget):
         grid.setSpacing(2)
         self.views: list[pg.PlotWidget] = []
 
-        def add_plot(row: int, col: int, title: str) -> pg.PlotItem:
+        def add_plot(row: int, col: int, title: str, colspan: int = 1) -> pg.PlotItem:
             w = pg.PlotWidget(title=title)
-            grid.addWidget(w, row, col)
+            grid.addWidget(w, row, col, 1, colspan)
             self.views.append(w)
             return w.getPlotItem()
 
@@ -103,6 +128,8 @@ class LivePlots(QWidget):
         self.p_rate = add_plot(1, 1, legend_title(("table rate", "#8c564b")))
         self.p_rate.setLabel("left", "rate", units="deg/s")
         self.c_rate = self.p_rate.plot(pen=pg.mkPen("#8c564b", width=1), name="rate")
+        self.c_rate_marks = self.p_rate.plot(pen=None, symbol="t", symbolSize=7, symbolBrush="#17becf",
+                                             symbolPen=None, name="readings")
         self.p_amp = add_plot(2, 0, legend_title(("sweep amplitude", "#1f77b4"), ("model", FIT_COLOUR)))
         self.p_amp.setLabel("left", "amplitude", units="1")
         self.c_amp = self.p_amp.plot(pen=pg.mkPen("#1f77b4"), symbol="o", symbolSize=5, symbolBrush="#1f77b4",
@@ -113,23 +140,35 @@ class LivePlots(QWidget):
         self.c_phase = self.p_phase.plot(pen=pg.mkPen("#ff7f0e"), symbol="o", symbolSize=5, symbolBrush="#ff7f0e",
                                          name="phase")
         self.c_phase_fit = self.p_phase.plot(pen=pg.mkPen(FIT_COLOUR, width=2), name="model")
+        self.p_cvg = add_plot(3, 0, legend_title(("rate output", "#2ca02c")), colspan=2)
+        self.p_cvg.setLabel("left", "rate output", units="deg/h")
+        self.c_cvg = self.p_cvg.plot(pen=pg.mkPen("#2ca02c", width=1), name="rate output")
+        self.p_allan = add_plot(4, 0, legend_title(("Allan deviation", "#1f77b4"), ("95 % band", "#9ecae1")))
+        self.p_allan.setLogMode(x=True, y=True)
+        self.p_allan.setLabel("left", "σ(τ)", units="deg/h")
+        self.p_allan.setLabel("bottom", "τ", units="s")
+        self.c_allan = self.p_allan.plot(pen=pg.mkPen("#1f77b4", width=2), symbol="o", symbolSize=4,
+                                         symbolBrush="#1f77b4", name="Allan deviation")
+        self.c_allan_lo = self.p_allan.plot(pen=pg.mkPen("#9ecae1", width=1), name="low")
+        self.c_allan_hi = self.p_allan.plot(pen=pg.mkPen("#9ecae1", width=1), name="high")
         from .plot_cursor import CursorReadout
 
         self.cursor_label = QLabel("hover over a plot: x and y under the pointer")
         self.cursor_label.setObjectName("cursor_readout")
-        grid.addWidget(self.cursor_label, 3, 0, 1, 2)
+        grid.addWidget(self.cursor_label, 5, 0, 1, 2)
         self.cursor = CursorReadout(self.views, ("cx..sy", "E", "\u03b8", "table rate", "sweep amplitude",
-                                                 "sweep phase"), self.cursor_label)
+                                                 "sweep phase", "rate output", "Allan deviation"), self.cursor_label)
         self.sweep_views = self.views[4:6]
-        self._show_sweep(False)
+        self.set_layout("hrg")
         # no grid: redrawing grid lines with the axes costs ~10 ms per plot per frame (raster)
-        self.time_plots = (self.p_q, self.p_e, self.p_theta, self.p_rate)
+        self.time_plots = (self.p_q, self.p_e, self.p_theta, self.p_rate, self.p_cvg)
         for p in self.time_plots:
             p.setLabel("bottom", "t since the run started", units="s")
             p.enableAutoRange(x=False)
         self._x_range: tuple[float, float] | None = None
         for p in (self.p_amp, self.p_phase):
             p.setLabel("bottom", "f", units="Hz")
+        self.p_allan.getAxis("bottom").enableAutoSIPrefix(False)
         for w in self.views:  # a fixed width: no relayout when the tick labels change
             axis = w.getPlotItem().getAxis("left")
             axis.setWidth(76)
@@ -166,12 +205,19 @@ class LivePlots(QWidget):
         self.table.clear()
         self.recent.clear()
         self.sweep.clear()
+        self.table_marks.clear()
+        self.p_rate.setTitle(legend_title(("table rate", "#8c564b")))
+        self.cvg.clear()
+        self._angle_last = None
+        self._amp_max = 0.0
+        self.allan = np.empty((0, 2))
         self.fits.clear()
         self._theta_last_rad = None
         self._x_range = None
-        self._show_sweep(False)
-        for c in (*self.c_q, self.c_e, self.c_fit, self.c_theta, self.c_rate, self.c_amp, self.c_phase,
-                  self.c_amp_fit, self.c_phase_fit):
+        self.set_layout(self.layout_kind)
+        for c in (*self.c_q, self.c_e, self.c_fit, self.c_theta, self.c_rate, self.c_rate_marks, self.c_amp,
+                  self.c_phase, self.c_amp_fit, self.c_phase_fit, self.c_cvg, self.c_allan, self.c_allan_lo,
+                  self.c_allan_hi):
             c.setData([], [])
         self._dirty = True
 
@@ -197,12 +243,25 @@ class LivePlots(QWidget):
             self.fpga.append(t[:, 0], values)
             self.recent.append(np.column_stack((t, values)))
             self._dirty = True
+            if self.layout_kind == "cvg":  # while the wave stands at its held amplitude (not while it starts)
+                self._amp_max = max(self._amp_max, float(np.max(el["a"])))
+                held = (el["a"] > 0.5 * self._amp_max) & (np.abs(el["k"]) < 0.3 * np.maximum(el["a"], 1e-300))
+                self._add_rate_output(columns, data, t[:, 0], held)
         rate = _columns(columns, data, ("rate_dps",))
-        if t is not None and rate is not None:
+        if t is not None and rate is not None and stream == TABLE_STREAM:
             angle = _columns(columns, data, ("angle_deg",))
             angle = np.full((len(data), 1), np.nan) if angle is None else angle
             self.table.append(t[:, 0], np.column_stack((rate, angle)))  # TABLE_COLS[1:]
             self._dirty = True
+        elif t is not None and rate is not None:  # a procedure's readings (table-spin's "hold"): markers
+            self.table_marks.append(np.column_stack((t, rate)))
+            self._dirty = True
+        allan = _columns(columns, data, ALLAN_COLS + ("adev_low_dph", "adev_high_dph"))
+        if stream == ALLAN_STREAM and allan is not None:
+            self.allan = allan
+            self._dirty = True
+            if self.layout_kind == "cvg":
+                self.set_layout("cvg")
         sweep = _columns(columns, data, ("freq_hz", "amplitude"))
         if sweep is not None:
             phase = _columns(columns, data, ("phase_deg",))
@@ -211,6 +270,39 @@ class LivePlots(QWidget):
             self._dirty = True
             if not self.sweep_shown:
                 self._show_sweep(True)
+
+    def _add_rate_output(self, columns: tuple[str, ...], data: np.ndarray, t: np.ndarray, held: np.ndarray) -> None:
+        """The rate sensor's output in deg/h where the wave is held (`held`, a row mask): the FPGA's
+        rate output in force-to-rebalance (non-zero there), else the whole-angle output's rate
+        -d(angle_out)/dt between consecutive held rows (output-referred: not divided by K)."""
+        ftr = _columns(columns, data, ("rate_out_dps",))
+        angle = _columns(columns, data, ("angle_out_deg",))
+        if ftr is not None and np.any(ftr[held, 0] != 0.0):
+            self.cvg.append(t[held], 3600.0 * ftr[held, :1])
+            self._angle_last = None
+            return
+        if angle is None:
+            return
+        prev = self._angle_last  # the last row of the block before, if it was held
+        t_all = np.concatenate(([prev[0]], t)) if prev else t
+        a_all = np.concatenate(([prev[1]], angle[:, 0])) if prev else angle[:, 0]
+        h_all = np.concatenate(([True], held)) if prev else held
+        # rows RATE_SPAN_S apart at least (a 1 kHz stream's sample-to-sample derivative is noise)
+        picks = np.unique(np.searchsorted(t_all, np.arange(t_all[0], t_all[-1] + 1e-12, RATE_SPAN_S)))
+        picks = picks[picks < len(t_all)]
+        last = len(t_all) - 1
+        self._angle_last = (float(t_all[picks[-1]]), float(a_all[picks[-1]])) if h_all[picks[-1]] else None
+        if picks[-1] != last and not h_all[last]:
+            self._angle_last = None
+        if len(picks) < 2:
+            return
+        unheld = np.concatenate(([0], np.cumsum(~h_all)))  # unheld rows before each index
+        gaps = unheld[picks[1:] + 1] - unheld[picks[:-1]]  # unheld rows within each span
+        dt = np.diff(t_all[picks])
+        ok = (dt > 0) & (gaps == 0)  # never across a quench or a start: only over held rows
+        if np.any(ok):
+            rate = -np.diff(a_all[picks])[ok] / dt[ok] * 3600.0
+            self.cvg.append(t_all[picks[1:]][ok], rate[:, None])
 
     def _unwrapped_theta_deg(self, theta_rad: np.ndarray, wave_defined: bool) -> np.ndarray:
         """theta continues across its (-45, 45] deg wrap while a standing wave is there (a
@@ -265,6 +357,19 @@ class LivePlots(QWidget):
             self.c_theta.setData(*self.fpga.curve("theta_deg"))
         if len(self.table):
             self.c_rate.setData(*self.table.curve("rate_dps"))
+        if len(self.table_marks):
+            self.c_rate_marks.setData(self.table_marks.column("t_s"), self.table_marks.column("rate_dps"))
+            self.p_rate.setTitle(legend_title(("table rate", "#8c564b"), ("procedure's readings", "#17becf")))
+        if len(self.cvg):
+            t_cvg, r_cvg = self.cvg.curve("rate_dph")
+            self.c_cvg.setData(t_cvg, r_cvg)
+            self._robust_y_range(self.p_cvg, r_cvg)
+        if len(self.allan):
+            ok = np.all(np.isfinite(self.allan) & (self.allan > 0), axis=1)
+            tau, adev, lo, hi = self.allan[ok].T
+            self.c_allan.setData(tau, adev)
+            self.c_allan_lo.setData(tau, lo)
+            self.c_allan_hi.setData(tau, hi)
         if len(self.sweep):
             f, amp, phase = (self.sweep.column(c) for c in SWEEP_COLS)
             order = np.argsort(f, kind="stable")
@@ -287,6 +392,18 @@ class LivePlots(QWidget):
         self.refresh_times.append(now)
         self.refresh_cost_s.append(now - t0)
 
+    @staticmethod
+    def _robust_y_range(plot: pg.PlotItem, y: np.ndarray) -> None:
+        """The y axis over the 1st..99th percentile (padded): a wave-angle output's reset at a
+        mode change (one sample of 1e7 deg/h) must not flatten the rate noise to a line."""
+        y = y[np.isfinite(y)]
+        if len(y) < 20:
+            plot.enableAutoRange(y=True)
+            return
+        lo, hi = np.percentile(y, [1.0, 99.0])
+        pad = 0.15 * max(hi - lo, 1e-12)
+        plot.setYRange(lo - pad, hi + pad, padding=0.0)
+
     def _choose_e_scale(self, e: np.ndarray) -> None:
         """E on a log axis when it spans more than a decade (a decay into the noise), else linear: a
         log axis over less than a decade has one tick or none, and the values cannot be read."""
@@ -304,10 +421,30 @@ class LivePlots(QWidget):
             self.p_e.setTitle(legend_title(("E (log)" if log else "E", "#1f77b4"), ("fit", FIT_COLOUR)))
 
     def _show_sweep(self, shown: bool) -> None:
-        """The sweep row takes room only once a sweep sends points."""
+        """A sweep's points on a run laid out for another kind: its two plots join the others."""
         self.sweep_shown = shown
         for w in self.sweep_views:
             w.setVisible(shown)
+
+    def set_layout(self, kind: str) -> None:
+        """Show the plots of a kind of run (LAYOUTS: 'hrg', 'sweep', 'cvg'), hide the rest; the
+        shown ones share the whole area.  A CVG run's Allan plot appears with its curve."""
+        self.layout_kind = kind if kind in LAYOUTS else "hrg"
+        shown = set(LAYOUTS[self.layout_kind])
+        if self.layout_kind == "cvg" and not len(self.allan):
+            shown.discard("p_allan")
+        for attr in ("p_q", "p_e", "p_theta", "p_rate", "p_amp", "p_phase", "p_cvg", "p_allan"):
+            self.views[self._view_index(attr)].setVisible(attr in shown)
+        self.sweep_shown = "p_amp" in shown
+        # a CVG run: the table's rate under the rate output (beside the Allan curve once it is there)
+        cell = (1, 1, 1, 1) if self.layout_kind != "cvg" else (4, 1, 1, 1) if "p_allan" in shown else (4, 0, 1, 2)
+        grid = self.layout()
+        rate_view = self.views[self._view_index("p_rate")]
+        grid.removeWidget(rate_view)
+        grid.addWidget(rate_view, *cell)
+
+    def _view_index(self, attr: str) -> int:
+        return ("p_q", "p_e", "p_theta", "p_rate", "p_amp", "p_phase", "p_cvg", "p_allan").index(attr)
 
     def _update_x_range(self) -> None:
         """The time axes move in round steps (not every frame): regenerating the ticks of four
@@ -325,6 +462,11 @@ class LivePlots(QWidget):
         self._x_range = (t0, hi)
         for p in self.time_plots:
             p.setXRange(t0, hi, padding=0.0)
+
+    def set_refresh_hz(self, hz: float) -> None:
+        """Redraws per second from now on (the window draws less often at "max" speed, where each
+        frame's Python painting takes the interpreter from the engine's thread)."""
+        self.timer.setInterval(max(1, int(round(1000.0 / hz))))
 
     def shutdown(self) -> None:
         """Stop redrawing and release the scene explicitly: left to the garbage collector, the

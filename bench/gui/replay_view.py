@@ -243,6 +243,9 @@ class ReplayWindow(QMainWindow):
             if isinstance(e, ev.SampleBlock):
                 blocks.setdefault((e.stream, tuple(e.columns)), []).append(np.asarray(e.data))
             elif isinstance(e, ev.RunStarted):
+                from .plots import layout_for
+
+                self.plots.set_layout(layout_for(e.procedure))  # the plots the procedure's run showed live
                 self.plots.clear()
                 self.plots.set_origin(e.t_sim_s)  # time since the run started (bench.gui.replay.run_start_s)
             elif isinstance(e, ev.StreamDeclared):
