@@ -25,8 +25,8 @@ HRG_RUNS = {
 }
 MEMS_RUNS = {"mems-sweep": {"n_points": 17}}
 #: procedures that need a device the realistic stations lack (a chamber): run on the realistic HRG
-#: in its chamber (sim-hrg-thermal) by their own tests (tests/test_thermal_soak.py)
-ELSEWHERE = {"thermal-soak"}
+#: in its chamber (sim-hrg-thermal, -quick) by their own tests (tests/test_thermal_soak.py, test_thermal_ramp.py)
+ELSEWHERE = {"thermal-soak", "thermal-ramp"}
 #: outcomes of a run that ended as planned (a verdict, or results without limits)
 ENDED = {"COMPLETE", "PASS", "FAIL", "MARGINAL"}
 
