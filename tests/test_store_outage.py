@@ -27,6 +27,8 @@ from bench.results.spool import Spool
 from tests import pg_server
 from tests.needs import need
 
+pytestmark = pytest.mark.serial  # its own PostgreSQL server stopped and restarted, waits bounded in wall time (9-20 s)
+
 GYROBENCH = [sys.executable, "-m", "bench.cli"]
 SHORT = ["run", "table-spin", "--set", "hold_s=0.1", "--json", "--runs-dir", "runs"]
 
