@@ -25,8 +25,12 @@ install: $(STAMP)
 run: $(STAMP)
 	$(BIN)/gyrobench run hrg-damping --station sim-hrg --report
 
+# the suite in $(TEST_WORKERS) processes (pytest-xdist), then the tests marked `serial` (bounded in
+# wall-clock time or paced in real time) alone, so no other test's load can stretch their clocks
+TEST_WORKERS ?= 3
 test: $(STAMP)
-	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q
+	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m "not serial"
+	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -m serial
 	$(BIN)/ruff check .
 
 lint: $(STAMP)

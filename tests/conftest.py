@@ -1,9 +1,27 @@
 import os
+import subprocess
+import sys
 import uuid
+from pathlib import Path
 
 import pytest
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def pytest_configure(config):
+    """Under xdist (-n N) the controller fills the compiled-kernel cache (simulators.warm) before the
+    workers start, when it is not filled yet: no two workers compile and write the same kernels."""
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    from bench import kernel_cache
+
+    if not kernel_cache.is_filled():
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+        subprocess.run([sys.executable, "-m", "simulators.warm"], cwd=ROOT, env=env, check=True)
+
 
 PG_URL_ENV = "GYROBENCH_TEST_PG_URL"  # e.g. postgresql+psycopg://postgres@127.0.0.1:5432/gyrobench_test
 

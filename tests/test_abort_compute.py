@@ -49,6 +49,7 @@ def station():
     st.close()
 
 
+@pytest.mark.serial  # an abort answered within 1 s of wall time: run alone
 @pytest.mark.parametrize("think", ["worker", "thread"])
 def test_abort_during_a_long_analysis_returns_within_a_second_with_the_safe_state(station, think):
     runner = Runner(station)

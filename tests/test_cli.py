@@ -217,6 +217,7 @@ def test_the_read_loop_waits_on_a_half_written_file(tmp_path, monkeypatch):
     assert _fpga_rows_so_far(tmp_path / "run.h5") == -1
 
 
+@pytest.mark.serial  # a 100x real-time run with its link watchdogs: run alone
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signal_aborts_into_confirmed_safe_state(tmp_path, sig):
     proc, _ = _start_long_run(tmp_path)
@@ -227,6 +228,7 @@ def test_signal_aborts_into_confirmed_safe_state(tmp_path, sig):
     assert res["outcome"] == "ABORTED" and res["end_reason"] == f"aborted: {sig.name}" and res["safe_state"] is True
 
 
+@pytest.mark.serial  # a 100x real-time run with its link watchdogs: run alone
 def test_sigkilled_run_leaves_a_readable_hdf5_file(tmp_path):
     proc, path = _start_long_run(tmp_path)
     time.sleep(1.0)
@@ -240,6 +242,7 @@ def test_sigkilled_run_leaves_a_readable_hdf5_file(tmp_path):
         assert "outcome" not in f.attrs  # the run never finished
 
 
+@pytest.mark.serial  # devices served at 2x real time to drivers with wall-clock timeouts: run alone
 def test_sim_serves_devices_that_real_drivers_reach(tmp_path):
     proc = subprocess.Popen(
         GYROBENCH + ["sim", "--duration-s", "20", "--speed", "2"],

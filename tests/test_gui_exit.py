@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 from needs import need
+from xvfb import display_args
 
 pytest.importorskip("pyqtgraph")
 
@@ -71,7 +72,7 @@ def test_screenshot_on_a_real_x_server(tmp_path, qapp):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     env["QT_QPA_PLATFORM"] = "xcb"
     out = tmp_path / "shot.png"
-    cmd = [xvfb_run, "-a", "-s", "-screen 0 1600x1000x24", sys.executable, *SHOT, "--screenshot", str(out)]
+    cmd = [xvfb_run, *display_args(), "-s", "-screen 0 1600x1000x24", sys.executable, *SHOT, "--screenshot", str(out)]
     proc = _run(cmd, env, tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "safe state confirmed" in proc.stdout

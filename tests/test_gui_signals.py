@@ -22,6 +22,7 @@ def _gui(tmp_path: Path, *args: str) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
+@pytest.mark.serial  # a run at 1x real time with its link watchdogs: run alone
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signal_aborts_the_run_to_the_safe_state_and_exits(tmp_path, sig):
     proc = _gui(tmp_path, "--station", "sim-hrg", "--run", "hrg-free-decay", "--set", "record_s=3600",

@@ -12,6 +12,7 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 from sqlalchemy import create_engine, delete
 
 from bench.cli import main
@@ -137,6 +138,7 @@ def test_no_record_file_is_replaced_when_the_database_went_down(tmp_path, capsys
     db.close()
 
 
+@pytest.mark.serial  # a unit at 1x real time with its link watchdogs: run alone
 def test_kill_9_mid_unit_leaves_an_interrupted_attempt(tmp_path, store_url):
     station, _ = keyed_station(tmp_path, speed=1.0)  # real time: the unit takes 60 s
     seq = tmp_path / "long.toml"

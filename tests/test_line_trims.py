@@ -201,7 +201,9 @@ def test_line_run_eol_hrg_leaves_the_trims_in_the_units_nvm(tmp_path, capsys):
     station.write_text(text + f'nvm_file = "{tmp_path / "fpga.nvm"}"\n')
     code = main(["line", "run", "eol-hrg", "--station", str(station), "--operator", "ada", "--dut", "HRG-000042",
                  "--yes", "--lot", "L1", "--runs-dir", str(tmp_path / "runs"), "--json"])
-    (rec,) = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    records = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert len(records) == 1, [(r["outcome"], r.get("end_reason"), r.get("failed_step")) for r in records]
+    (rec,) = records
     assert code == 0 and rec["outcome"] == "PASS" and rec["trims"]["written"]
     chosen = rec["trims"]["chosen"]
     assert chosen["delta_inv_tau_per_s"]["procedure"] == chosen["theta_tau_deg"]["procedure"] == "hrg-free-decay"

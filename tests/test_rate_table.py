@@ -267,6 +267,7 @@ def test_lost_reply_to_a_motion_command_is_not_retried(bench):
     assert table.safe_state() is True
 
 
+@pytest.mark.serial  # the world at 50x real time, a driver with a 2 s wall-clock timeout: run alone
 def test_real_time_clock_spin():
     """The same driver with the world running at 50x wall time (the GUI's mode)."""
     world = World(preset("hrg"), seed=1)

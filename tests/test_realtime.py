@@ -19,6 +19,8 @@ from procedures import find_procedure
 from simulators.physics.params import preset
 from simulators.world import World
 
+pytestmark = pytest.mark.serial  # real-time pacing at 100x and wall-clock bounds: run alone, never beside xdist workers
+
 
 class SlowConsumer:
     """A World device that costs wall time per sample, like a stream written to a slow reader:

@@ -19,6 +19,8 @@ from simulators.frontend import serve_frontend
 from simulators.physics.params import ResonatorParams
 from simulators.world import World
 
+pytestmark = pytest.mark.serial  # reply deadlines of 1 s checked to 0.3 s of wall time: run alone
+
 IDN = "GYROBENCH,FE-2CH,TEST,1.0"
 
 

@@ -151,6 +151,7 @@ def test_the_batch_is_one_run_with_four_duts_in_the_store(line_batch):
     assert row["truth"]["S2:tau_s"] == pytest.approx(line_batch["truths"][2]["tau_s"])
 
 
+@pytest.mark.serial  # a watcher thread polling every 5 ms must abort within 0.5 simulated s: run alone
 def test_abort_stops_all_four_safely(tmp_path):
     station = load_station("sim-hrg-4", seed=2).open()
     try:
@@ -192,6 +193,7 @@ def test_seeded_batches_are_the_same_whatever_the_thread_scheduling(tmp_path):
     assert results[0] == results[1]
 
 
+@pytest.mark.serial  # lock hand-overs timed to 0.2 s of wall time: run alone
 def test_a_slot_that_dies_holding_a_shared_instrument_does_not_deadlock_the_others():
     broken = []
     lock = SlotLock("frontend", deadline_wall_s=0.3, on_break=lambda slot, th, why: broken.append((slot, why)))

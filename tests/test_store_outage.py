@@ -71,6 +71,7 @@ def _run(args, cwd, timeout=180):
     return subprocess.run(GYROBENCH + args, cwd=cwd, capture_output=True, text=True, timeout=timeout)
 
 
+@pytest.mark.serial  # a run's end bounded in wall time (90 s): run alone
 def test_black_holed_server_a_run_ends_soon_with_its_record_spooled_and_one_line(server, url, tmp_path):
     """Before: 395 s with nothing printed (three 130 s connect timeouts)."""
     server.black_hole()
@@ -92,6 +93,7 @@ def test_black_holed_server_a_run_ends_soon_with_its_record_spooled_and_one_line
     assert [row["outcome"] for row in json.loads(sync.stdout) if row["run_id"] == js["run_id"]] == ["PASS"]
 
 
+@pytest.mark.serial  # a wait bounded in wall time (9-20 s): run alone
 def test_server_black_holed_mid_run_the_end_waits_at_most_its_bound_then_spools(server, url, tmp_path):
     """A pooled connection to a stopped server: no connect timeout can help; the caller's bound does."""
     told: list[str] = []

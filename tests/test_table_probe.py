@@ -15,6 +15,8 @@ from simulators.physics.params import preset
 from simulators.rate_table import serve_modbus_table
 from simulators.world import World
 
+pytestmark = pytest.mark.serial  # a 0.3 s wall-clock reply timeout and a 1.3 s bound: run alone
+
 LIMITS = TableLimits(max_rate_dps=500.0, max_accel_dps2=300.0)
 
 

@@ -69,6 +69,7 @@ def test_devices_limit_block_size():
     assert [len(b.index) for b in dev.blocks][:3] == [3, 3, 3]
 
 
+@pytest.mark.serial  # 300 simulated s within 5 s of wall time: run alone
 def test_lockstep_sleep_and_wait_until_use_virtual_time():
     world = World(preset("hrg"), seed=0)
     clock = SimClock(world)
@@ -82,6 +83,7 @@ def test_lockstep_sleep_and_wait_until_use_virtual_time():
     assert clock.now() == pytest.approx(312.0, abs=1e-9)
 
 
+@pytest.mark.serial  # real-time pacing at 50x, a wall-clock window: run alone
 def test_real_time_mode_follows_wall_clock_times_speed():
     world = World(preset("hrg"), seed=0)
     clock = SimClock(world, speed=50.0)
@@ -110,6 +112,7 @@ def test_clock_rejects_bad_waits():
         RealClock().sleep(float("nan"))
 
 
+@pytest.mark.serial  # real-time pacing at 20x, a wall-clock bound: run alone
 def test_a_dead_real_time_thread_raises_in_the_waiter_then_runs_lockstep():
     """A device that fails inside the world's advance in real-time mode: the wait raises (it does
     not hang), and the clock goes on in lockstep so a safe state can still wait."""
