@@ -199,3 +199,13 @@ def test_operators_table_with_a_boolean_active_column_on_postgresql(pg_url):
         assert known_operators(db) == ["Grace H"]
     finally:
         db.close()
+
+
+def test_the_operator_station_opens_on_a_sequence_its_station_can_run():
+    """`gui --operator --station sim-hrg-4` used to open on ci-spin, which a station with slots
+    refuses (its steps do not say which devices they use): it opens on one that runs there."""
+    from bench.gui.line_station import default_sequence
+
+    assert default_sequence("sim-hrg") == "ci-spin"
+    assert default_sequence("sim-hrg-4") == "eol-hrg"
+    assert default_sequence("sim-mems-4") == "ci-mems"

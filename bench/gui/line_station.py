@@ -25,6 +25,40 @@ def sequences() -> list[str]:
     return sorted(p.stem for p in folder.glob("*.toml"))
 
 
+def default_sequence(station: str | None, preferred: str = "ci-spin") -> str:
+    """The sequence the operator station opens on: `preferred` when it runs on the station, else the
+    first built-in one that does (a station with slots cannot run ci-spin, whose steps do not say
+    which devices they use); `preferred` when none does or the station cannot be read."""
+    from bench.composition import load_station
+    from bench.line.checks import check_steps
+    from bench.line.sequence import load_sequence
+
+    try:
+        probe = load_station(station) if station else None
+    except Exception:  # the session opening on it says why, in one line
+        return preferred
+    if probe is None:
+        return preferred
+    names = sequences()
+    for name in [preferred, *[n for n in names if n != preferred]]:
+        try:
+            seq = load_sequence(name)
+            if seq.station and station and seq.station != station and not hasattr(probe, "slots"):
+                continue
+            if hasattr(probe, "slots"):
+                from bench.line.batch_run import check_batch_sequence
+                from bench.line.cli import _limits_of
+
+                args = argparse.Namespace(sequence=name, limits=None)
+                check_batch_sequence(seq, _limits_of(args, seq), probe)
+            else:
+                check_steps(seq, probe)
+            return name
+        except Exception:  # this one does not fit the station: the next
+            continue
+    return preferred
+
+
 def known_operators(db: Any) -> list[str] | None:
     """The operators the line database lists (its `operators` table), or None when it has none."""
     from sqlalchemy import MetaData, Table, inspect, select

@@ -29,7 +29,7 @@ from PySide6.QtWidgets import (
 
 from bench.validation import ValidationError
 
-from .line_station import LineSession, sequences
+from .line_station import LineSession, default_sequence, sequences
 from .operator_slots import SlotPanel
 from .operator_view import COLOURS
 from .unit_progress import UnitProgress
@@ -596,7 +596,7 @@ def run_station(station: str | None, *, sequence: str | None = None, runs_dir: s
         raise SystemExit("gyrobench gui --operator: no display (DISPLAY / WAYLAND_DISPLAY unset); use --screenshot "
                          "FILE to run headless, or set QT_QPA_PLATFORM")
     app = _app()
-    win = OperatorStation(station, sequence=sequence or "ci-spin", runs_dir=runs_dir, seed=seed)
+    win = OperatorStation(station, sequence=sequence or default_sequence(station), runs_dir=runs_dir, seed=seed)
     guard = QuitOnSignal().install()
     try:
         win.show()
