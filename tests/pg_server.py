@@ -46,12 +46,12 @@ class PgServer:
     def black_hole(self) -> None:
         """Stop every process of this server (SIGSTOP): it accepts connections and never answers."""
         for pid in self.pids():
-            os.kill(pid, signal.SIGSTOP)
+            _signal(pid, signal.SIGSTOP)
         self.stopped = True
 
     def resume(self) -> None:
         for pid in self.pids():
-            os.kill(pid, signal.SIGCONT)
+            _signal(pid, signal.SIGCONT)
         self.stopped = False
 
     def _pg_ctl(self, *args: str) -> None:
@@ -89,3 +89,11 @@ class PgServer:
         if self.stopped:
             self.resume()
         subprocess.run([str(START), "--stop", self.url], capture_output=True, text=True, timeout=120)
+
+
+def _signal(pid: int, sig: int) -> None:
+    """Send sig to pid; a backend that ended between the listing and the signal has nothing to stop."""
+    try:
+        os.kill(pid, sig)
+    except ProcessLookupError:
+        pass
