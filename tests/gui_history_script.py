@@ -104,7 +104,8 @@ def main(history_shot: str, replay_shot: str, out_dir: str) -> int:
         dialog = replay.export_dialog()
         dialog.plot.setCurrentText(title)
         for ext in ("csv", "h5", "png"):
-            seen[f"export_{ext}"] = dialog.export_to(str(out / f"fpga.{ext}"))
+            dialog.export_to(str(out / f"fpga.{ext}"))  # raw data: written by a worker thread
+            seen[f"export_{ext}"] = dialog.wait()
         dialog.close()
         back = np.loadtxt(out / "fpga.csv", delimiter=",", comments="#", skiprows=3)
         seen["csv_equal"] = bool(back.shape == fpga.shape and np.array_equal(back, fpga))

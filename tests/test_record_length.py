@@ -32,6 +32,7 @@ CASES = {
                                         "whole_turns": True},
                          "cvg_sf_windows", lambda p, row: window_s(row["rate_dps"], p["average_s"], True)[0]),
     "hrg-selfcal": ("sim-hrg-selfcal", {"cycles": 2, "precession_dps": 2.0, "settle_s": 1.0, "bin_s": 2.0,
+                                        "fm_force_hz": 0.0,
                                         "smooth_s": 20.0},
                     "hrg_selfcal_cycles", lambda p, row: 180.0 / p["precession_dps"]),
 }

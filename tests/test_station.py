@@ -57,7 +57,7 @@ def test_real_station_file_is_checked_not_connected(tmp_path):
         (("[station]", "[station\n"), ["not valid TOML"]),
         (("[station]", "[simulation]\nseed = -3\n[station]"), ["[simulation] seed=-3 is below the limit 0"]),
         (("[station]", "[simulation]\npreset = 'fog'\n[station]"),
-         ["preset='fog' is not one of hrg, hrg-wa, hrg-selfcal, mems"]),
+         ["preset='fog' is not one of hrg, hrg-wa, hrg-selfcal, hrg-selfcal-gains, mems"]),
     ],
 )
 def test_bad_station_files_name_file_key_value_and_range(tmp_path, change, expect):
