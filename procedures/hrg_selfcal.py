@@ -98,6 +98,10 @@ def _gain_truth(kind: str):
 _RECORD_STAT = "a statistic of this record, not an estimate of a parameter: no interval"
 
 
+#: bins a cycle's amplitude fit needs: its 5 coefficients (bench.analysis.selfcal.fit_cycle) and one to spare
+AMPLITUDE_FIT_POINTS = 6
+
+
 class HrgSelfcal(HrgExcitation, Procedure):
     """Whole-angle self-calibration: forced precession cycles with FM, gains, damping and stiffness
     anisotropy and Q identified cycle after cycle, the rate compensated."""
@@ -183,18 +187,40 @@ class HrgSelfcal(HrgExcitation, Procedure):
 
     def __init__(self, params: dict[str, Any] | None = None) -> None:
         super().__init__(params)
+        self._check_fm()
         self._tap = _StreamTap(TAP_COLUMNS)
 
-    def demands(self) -> list:
-        return []
-
-    def preflight(self, devices) -> None:
-        """The cycles' precession command within the FPGA's force limit (read-only); one kind of FM."""
+    def _check_fm(self) -> None:
+        """One kind of FM, and a frequency-control force the cycles can fit: ValueError naming the
+        value and its limit before anything runs."""
         if self.fm_force_hz > 0 and self.fm_amplitude_hz > 0:
             raise ValueError("fm_force_hz and fm_amplitude_hz share FM_RATE_HZ and the frequency channel: set one to 0")
         if self.fm_force_hz > 0 and (self.fm_rate_hz <= 0 or 0.5 / self.fm_rate_hz <= 2 * sc.FM_SETTLE_S):
             raise ValueError(f"fm_rate_hz={self.fm_rate_hz:g}: the frequency-control force's half period must exceed "
                              f"twice its {sc.FM_SETTLE_S:g} s settling (fm_rate_hz < {0.25 / sc.FM_SETTLE_S:g})")
+        if self.fm_force_hz > 0 and self.fm_rate_hz > 0:
+            cycle_s = 180.0 / abs(self.precession_dps)
+            halves = int(cycle_s * 2.0 * self.fm_rate_hz)
+            need = len(sc.FREQ_TERMS) + len(sc.FM_TERMS) + 1
+            if halves < need:
+                raise ValueError(
+                    f"precession_dps={self.precession_dps:g}: a cycle of {cycle_s:g} s holds {halves} half periods of "
+                    f"the frequency-control force at fm_rate_hz={self.fm_rate_hz:g}, and its fit needs at least {need} "
+                    f"(precession_dps <= {180.0 * 2.0 * self.fm_rate_hz / need:g}, fm_rate_hz >= "
+                    f"{need / (2.0 * cycle_s):g}, or fm_force_hz=0)")
+
+        cycle_s = 180.0 / abs(self.precession_dps)
+        bins = int(cycle_s / self.bin_s)
+        if bins < AMPLITUDE_FIT_POINTS:
+            raise ValueError(f"bin_s={self.bin_s:g}: a cycle of {cycle_s:g} s holds {bins} bins, and the "
+                             f"amplitude fit needs at least {AMPLITUDE_FIT_POINTS} (bin_s <= "
+                             f"{cycle_s / AMPLITUDE_FIT_POINTS:g}, or a slower precession_dps)")
+
+    def demands(self) -> list:
+        return []
+
+    def preflight(self, devices) -> None:
+        """The cycles' precession command within the FPGA's force limit (read-only)."""
         refuse_above_precession_limit(self, devices, "precession_dps", self.precession_dps, "deg/s ")
 
     @step("Excite, hold the amplitude, whole-angle mode with FM")

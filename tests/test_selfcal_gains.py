@@ -100,3 +100,18 @@ def test_selfcal_with_loop_gain_errors_identifies_them_and_q():
     assert lo <= want_ppm <= hi, (m["loop_gain_cm_ppm"], want_ppm)
     assert not math.isnan(m["loop_gain_diff_ppm"].value)
     assert m["bias_stability_selfcal_dph"].value < 0.6, m["bias_stability_selfcal_dph"]
+
+
+def test_a_cycle_too_short_for_the_fm_fit_is_refused_before_the_run():
+    """2 deg/s makes a 90 s cycle: 4 half periods of the 0.025 Hz force where its fit takes 6
+    coefficients; refused when the procedure is made, naming the value and the limits (it used to end ERROR in
+    the cycles with '5 points for 6 parameters'); so is a bin too long for the amplitude fit."""
+    from procedures import find_procedure
+
+    cls = find_procedure("hrg-selfcal")
+    with pytest.raises(ValueError, match=r"precession_dps=2: a cycle of 90 s holds 4 half periods .* at least 7 "
+                                         r"\(precession_dps <= 1\.28571, fm_rate_hz >= 0\.0388889, or fm_force_hz=0\)"):
+        cls({"precession_dps": 2.0, "cycles": 2})
+    with pytest.raises(ValueError, match=r"bin_s=20: a cycle of 90 s holds 4 bins, and the amplitude fit needs at "
+                                         r"least 6 \(bin_s <= 15, or a slower precession_dps\)"):
+        cls({"precession_dps": 2.0, "cycles": 2, "fm_force_hz": 0.0})
