@@ -317,6 +317,22 @@ class Environment:
         }
 
 
+# the CETC self-calibration paper's gyro (docs/selfcal.md, section 1): a noise floor of the paper's
+# self-calibrated 0.52 deg/h at 100 s made of a small angle random walk (N = 0.006 deg/sqrt(h):
+# 0.036 deg/h at 100 s, 0.0019 deg/h on the 10 h mean) and a bounded angle wander (0.025 deg,
+# 550 s: 0.519 deg/h at 100 s, 0.0035 deg/h on the 10 h mean), so the angle error does not
+# accumulate and the mean bias since start after 10 h has a 3 sigma of 0.012 deg/h, under the
+# paper's 0.018; a 0.15 % X/Y pickoff gain error growing by 20 ppm/h, damping anisotropy stable
+SELFCAL_NOISE = NoiseParams(
+    arw_deg_rth=0.006,
+    angle_wander_deg=0.025,
+    angle_wander_tau_s=550.0,
+    gain_x_ppm=750.0,
+    gain_y_ppm=-750.0,
+    gain_x_drift_ppm_h=10.0,
+    gain_y_drift_ppm_h=-10.0,
+)
+
 #: the noise of each resonator preset that has one (simulators.physics.params.PRESETS)
 NOISE_PRESETS: dict[str, NoiseParams] = {
     # an HRG in whole-angle mode (docs/noise_model.md), its three Allan terms all told apart within
@@ -335,31 +351,9 @@ NOISE_PRESETS: dict[str, NoiseParams] = {
         damping_drift_per_s_h=1e-9,
         theta_tau_drift_deg_h=0.5,
     ),
-    # the CETC self-calibration paper's gyro (docs/selfcal.md, section 1): a noise floor of the paper's
-    # self-calibrated 0.52 deg/h at 100 s made of a small angle random walk (N = 0.006 deg/sqrt(h):
-    # 0.036 deg/h at 100 s, 0.0019 deg/h on the 10 h mean) and a bounded angle wander (0.025 deg,
-    # 550 s: 0.519 deg/h at 100 s, 0.0035 deg/h on the 10 h mean), so the angle error does not
-    # accumulate and the mean bias since start after 10 h has a 3 sigma of 0.012 deg/h, under the
-    # paper's 0.018; a 0.15 % X/Y pickoff gain error growing by 20 ppm/h, damping anisotropy stable
-    "hrg-selfcal": NoiseParams(
-        arw_deg_rth=0.006,
-        angle_wander_deg=0.025,
-        angle_wander_tau_s=550.0,
-        gain_x_ppm=750.0,
-        gain_y_ppm=-750.0,
-        gain_x_drift_ppm_h=10.0,
-        gain_y_drift_ppm_h=-10.0,
-    ),
+    "hrg-selfcal": SELFCAL_NOISE,
     # the self-calibration gyro with loop gain errors (docs/selfcal.md): the same floor and X/Y gains
-    "hrg-selfcal-gains": NoiseParams(
-        arw_deg_rth=0.006,
-        angle_wander_deg=0.025,
-        angle_wander_tau_s=550.0,
-        gain_x_ppm=750.0,
-        gain_y_ppm=-750.0,
-        gain_x_drift_ppm_h=10.0,
-        gain_y_drift_ppm_h=-10.0,
-    ),
+    "hrg-selfcal-gains": SELFCAL_NOISE,
     # the realistic HRG (docs/error_sources.md): the self-calibration gyro's noise floor (its pickoff
     # gains are the error sources' own, simulators.physics.errors)
     "hrg-realistic": NoiseParams(arw_deg_rth=0.006, angle_wander_deg=0.025, angle_wander_tau_s=550.0),
