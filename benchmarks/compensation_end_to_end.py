@@ -24,19 +24,7 @@ from bench.line.fpga_cli import load_trims
 from bench.results import ResultsStore
 from procedures.hrg_damping import HrgDamping
 from procedures.hrg_free_decay import HrgFreeDecay
-
-
-class _Tap:
-    def __init__(self) -> None:
-        self.t_s: list[float] = []
-        self.q: list[np.ndarray] = []
-
-    def before_block(self, *args) -> None:
-        pass
-
-    def after_block(self, world, block) -> None:
-        self.t_s.append(float(block.t_s[-1]))
-        self.q.append(block.q_true[-1].copy())
+from simulators.probes import EndStateProbe
 
 
 def _true_drift_dps(station, theta_deg: float, record_s: float = 40.0) -> float:
@@ -49,7 +37,7 @@ def _true_drift_dps(station, theta_deg: float, record_s: float = 40.0) -> float:
     fpga.set_whole_angle(True, 0.0)
     fpga.set_drive_enabled(True)
     station.clock.sleep(10.0)
-    tap = _Tap()
+    tap = EndStateProbe()
     world.attach(tap)
     station.clock.sleep(record_s)
     world.detach(tap)

@@ -31,22 +31,8 @@ from drivers.fpga import protocol as p
 from procedures.hrg_damping import block_drift
 from simulators.fpga.firmware import FpgaFirmware
 from simulators.physics.params import preset
+from simulators.probes import EndStateProbe
 from simulators.world import World
-
-
-class _Truth:
-    """The world's true state at the end of every block."""
-
-    def __init__(self) -> None:
-        self.t_s: list[float] = []
-        self.q: list[np.ndarray] = []
-
-    def before_block(self, *args) -> None:
-        pass
-
-    def after_block(self, world, block) -> None:
-        self.t_s.append(float(block.t_s[-1]))
-        self.q.append(block.q_true[-1].copy())
 
 
 def drift_table(rate_dps: float, *, compensate: bool = True, turns: int = 2, settle_s: float = 30.0,
@@ -64,7 +50,7 @@ def drift_table(rate_dps: float, *, compensate: bool = True, turns: int = 2, set
     ctrl = p.DRIVE_EN | p.AGC_EN | p.PLL_EN | p.QUAD_EN | p.WHOLE_ANGLE | (p.DRIFT_COMP_EN if compensate else 0)
     fw.write(p.BY_NAME["CTRL"], ctrl)
     world.advance(settle_s)
-    truth = _Truth()
+    truth = EndStateProbe()
     world.attach(truth)
     world.advance(turns * 90.0 / abs(rate_dps))
     t_s = np.array(truth.t_s)

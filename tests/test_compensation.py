@@ -24,6 +24,7 @@ from drivers.fpga import FpgaLink
 from drivers.fpga import protocol as p
 from simulators.fpga import serve_fpga
 from simulators.physics.params import preset
+from simulators.probes import EndStateProbe
 from simulators.world import World
 
 
@@ -129,19 +130,6 @@ def test_corrupted_nvm_powers_up_untrimmed():
         server.stop()
 
 
-class _TrueTheta:
-    def __init__(self) -> None:
-        self.t_s: list[float] = []
-        self.q: list[np.ndarray] = []
-
-    def before_block(self, *args) -> None:
-        pass
-
-    def after_block(self, world, block) -> None:
-        self.t_s.append(float(block.t_s[-1]))
-        self.q.append(block.q_true[-1].copy())
-
-
 def _drift_dps(trims: dict | None) -> float:
     """Whole-angle mode, no command, the wave 22.5 deg off the damping axis: its true drift rate
     (deg/s) over 40 s, with the trims loaded (and a safe state and reconnect between) or without."""
@@ -164,7 +152,7 @@ def _drift_dps(trims: dict | None) -> float:
         link.set_whole_angle(True, 0.0)  # DRIFT_COMP_EN stays clear: only the trims compensate
         link.set_drive_enabled(True)
         clock.sleep(10.0)
-        tap = _TrueTheta()
+        tap = EndStateProbe()
         world.attach(tap)
         clock.sleep(40.0)
         theta = np.unwrap(4.0 * orbit_elements(np.array(tap.q))["theta_rad"]) / 4.0
@@ -338,7 +326,7 @@ def _learning_drift_rms_dph(split_trim: bool) -> float:
         fw.write(p.BY_NAME[name], value)
     fw.write(p.BY_NAME["CTRL"], p.DRIVE_EN | p.AGC_EN | p.PLL_EN | p.QUAD_EN | p.WHOLE_ANGLE)
     world.advance(2.0)
-    tap = _TrueTheta()
+    tap = EndStateProbe()
     world.attach(tap)
     world.advance(10.0)
     t_s = np.array(tap.t_s)

@@ -13,6 +13,7 @@ from bench.nominal import PRODUCT_NOMINAL
 from procedures.cvg_allan import rate_from_stream
 from simulators.physics.errors import ERROR_PRESETS, REFERENCE_TEMPERATURE_C, ErrorSources
 from simulators.physics.params import PRESETS, ResonatorParams, preset
+from simulators.probes import EndStateProbe
 from simulators.world import World
 
 IDEAL = preset("hrg-ideal")  # no anisotropy, split or noise: the wave keeps its angle and amplitude
@@ -222,21 +223,6 @@ def test_energy_modulation_reads_as_damping_anisotropy(errors, depth):
     assert fit.delta_inv_tau_per_s == pytest.approx(expected, rel=0.02)
 
 
-class _TrueWave:
-    """The world's true state at the end of every block (a World device)."""
-
-    def __init__(self) -> None:
-        self.t_s: list[float] = []
-        self.q: list[np.ndarray] = []
-
-    def before_block(self, *args) -> None:
-        pass
-
-    def after_block(self, world, block) -> None:
-        self.t_s.append(float(block.t_s[-1]))
-        self.q.append(block.q_true[-1].copy())
-
-
 def _whole_angle_drift_wave_dph(params, errors: ErrorSources, rate_dps: float):
     """The simulated FPGA's whole-angle loops (AGC, PLL, quadrature) on the World directly at a
     commanded precession; the true wave's drift against its angle (deg/h of wave angle): mean and
@@ -255,7 +241,7 @@ def _whole_angle_drift_wave_dph(params, errors: ErrorSources, rate_dps: float):
         fw.write(p.BY_NAME[name], value)
     fw.write(p.BY_NAME["CTRL"], p.DRIVE_EN | p.AGC_EN | p.PLL_EN | p.QUAD_EN | p.WHOLE_ANGLE)
     world.advance(15.0)
-    wave = _TrueWave()
+    wave = EndStateProbe()
     world.attach(wave)
     world.advance(45.0)  # 180 deg of wave angle at 4 deg/s: whole periods of 4 theta
     theta = np.unwrap(4.0 * orbit_elements(np.array(wave.q))["theta_rad"]) / 4.0

@@ -20,22 +20,8 @@ from drivers.fpga import protocol as p
 from procedures.hrg_damping import block_drift
 from simulators.fpga.firmware import FpgaFirmware
 from simulators.physics.params import preset
+from simulators.probes import EndStateProbe
 from simulators.world import World
-
-
-class _Truth:
-    """The world's true state at the end of every block."""
-
-    def __init__(self) -> None:
-        self.t_s: list[float] = []
-        self.q: list[np.ndarray] = []
-
-    def before_block(self, *args) -> None:
-        pass
-
-    def after_block(self, world, block) -> None:
-        self.t_s.append(float(block.t_s[-1]))
-        self.q.append(block.q_true[-1].copy())
 
 
 def _whole_angle(params, rate_dps: float, settle_s: float, record_s: float, compensate: bool = False):
@@ -52,7 +38,7 @@ def _whole_angle(params, rate_dps: float, settle_s: float, record_s: float, comp
     comp = p.DRIFT_COMP_EN if compensate else 0
     fw.write(p.BY_NAME["CTRL"], p.DRIVE_EN | p.AGC_EN | p.PLL_EN | p.QUAD_EN | p.WHOLE_ANGLE | comp)
     world.advance(settle_s)
-    truth = _Truth()
+    truth = EndStateProbe()
     world.attach(truth)
     world.advance(record_s)
     theta = np.unwrap(4.0 * orbit_elements(np.array(truth.q))["theta_rad"]) / 4.0
