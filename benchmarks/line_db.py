@@ -102,10 +102,10 @@ def main() -> int:
     template = template_record(tmp / "tpl")
     urls = [("SQLite", f"sqlite:///{tmp / 'w.sqlite'}")]
     if os.environ.get("GYROBENCH_TEST_PG_URL"):
-        sys.path.insert(0, str(Path(__file__).parent))
-        from line_lot import _pg_schema
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+        from benchmarks.lot_setup import fresh_pg_schema
 
-        pg, drop = _pg_schema(os.environ["GYROBENCH_TEST_PG_URL"])
+        pg, drop = fresh_pg_schema(os.environ["GYROBENCH_TEST_PG_URL"])
         urls.append(("PostgreSQL", pg))
     for name, url in urls:
         rate, n = concurrent_writes(url, template, args.per_station, tmp / name)

@@ -16,27 +16,13 @@ import os
 import sys
 import tempfile
 import time
-import uuid
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-def _pg_schema(base: str) -> tuple[str, callable]:
-    from sqlalchemy import create_engine, text
-
-    schema = f"line_{uuid.uuid4().hex[:10]}"
-    admin = create_engine(base, isolation_level="AUTOCOMMIT")
-    with admin.connect() as conn:
-        conn.execute(text(f"CREATE SCHEMA {schema}"))
-
-    def drop() -> None:
-        with admin.connect() as conn:
-            conn.execute(text(f"DROP SCHEMA {schema} CASCADE"))
-        admin.dispose()
-
-    sep = "&" if "?" in base else "?"
-    return f"{base}{sep}options=-csearch_path%3D{schema}", drop
+from benchmarks.lot_setup import fresh_pg_schema  # noqa: E402
 
 
 def main() -> int:
@@ -54,7 +40,7 @@ def main() -> int:
     drop = None
     url = args.db
     if url is None and os.environ.get("GYROBENCH_TEST_PG_URL"):
-        url, drop = _pg_schema(os.environ["GYROBENCH_TEST_PG_URL"])
+        url, drop = fresh_pg_schema(os.environ["GYROBENCH_TEST_PG_URL"])
     runs_dir = Path(args.keep or tempfile.mkdtemp(prefix="gyrobench-lot-"))
     url = url or str(runs_dir / "results.sqlite")
     argv = ["line", "simulate", "--units", str(args.units), "--seed", str(args.seed), "--sequence", args.sequence,

@@ -27,24 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.line_lot import _pg_schema  # noqa: E402
-
-STATION_OF = {"ci-mems": "sim-mems", "eol-mems": "sim-mems", "eol-hrg": "sim-hrg", "ci-spin": "sim-hrg"}
-
-
-def _station_file(folder: Path, base: str, k: int) -> tuple[Path, str]:
-    """A copy of a built-in simulated station with its own id (its own chain and lock) and its own
-    Ed25519 key (records signed); the station file and the key's public half."""
-    from bench.line.integrity import generate_key, load_public_key
-    from bench.station_config import find_station_file
-
-    (folder / "keys").mkdir(parents=True, exist_ok=True)
-    key, pub = generate_key(folder / "keys" / f"bench-{k}.key")
-    text = find_station_file(base).read_text().replace(
-        f'id = "{base}"', f'id = "bench-{k}"\nline_key = "{key}"', 1)
-    path = folder / f"bench-{k}.toml"
-    path.write_text(text)
-    return path, load_public_key(pub)
+from benchmarks.lot_setup import STATION_OF, fresh_pg_schema, keyed_station_copy  # noqa: E402
 
 
 def main() -> int:
@@ -59,7 +42,7 @@ def main() -> int:
     drop = None
     url = args.db
     if url is None and os.environ.get("GYROBENCH_TEST_PG_URL"):
-        url, drop = _pg_schema(os.environ["GYROBENCH_TEST_PG_URL"])
+        url, drop = fresh_pg_schema(os.environ["GYROBENCH_TEST_PG_URL"])
     runs = Path(args.keep or tempfile.mkdtemp(prefix="gyrobench-lot50-"))
     runs.mkdir(parents=True, exist_ok=True)
     url = url or str(runs / "results.sqlite")
@@ -72,7 +55,7 @@ def main() -> int:
     for k, n in enumerate(share, 1):
         if n == 0:
             continue
-        st, public = _station_file(runs, base, k)
+        st, public = keyed_station_copy(runs, base, f"bench-{k}")
         trusted.add(public)
         cmd = [sys.executable, "-m", "bench.cli", "line", "simulate", "--units", str(n), "--seed", str(args.seed + k),
                "--sequence", args.sequence, "--station", str(st), "--lot", f"L50-s{k}", "--runs-dir", str(runs),

@@ -18,9 +18,11 @@ import time
 import uuid
 from pathlib import Path
 
-from sqlalchemy import create_engine, text
-
 from bench.results import ResultsStore
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.lot_setup import fresh_pg_schema  # noqa: E402
 
 CREATOR = """
 import sys, time
@@ -82,19 +84,6 @@ def runs(url: str, n: int, workdir: Path) -> tuple[int, int, int, list[str]]:
     return n, clean, lost, errors
 
 
-def fresh_pg_schema(base: str) -> tuple[str, callable]:
-    admin = create_engine(base, isolation_level="AUTOCOMMIT")
-    schema = f"audit_{uuid.uuid4().hex[:10]}"
-    with admin.connect() as conn:
-        conn.execute(text(f"CREATE SCHEMA {schema}"))
-
-    def drop() -> None:
-        with admin.connect() as conn:
-            conn.execute(text(f"DROP SCHEMA {schema} CASCADE"))
-        admin.dispose()
-
-    sep = "&" if "?" in base else "?"
-    return f"{base}{sep}options=-csearch_path%3D{schema}", drop
 
 
 def main() -> int:
@@ -107,7 +96,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         cases = [("sqlite", lambda: (f"sqlite:///{Path(tmp) / uuid.uuid4().hex}.sqlite", lambda: None))]
         if pg:
-            cases.append(("postgresql", lambda: fresh_pg_schema(pg)))
+            cases.append(("postgresql", lambda: fresh_pg_schema(pg, "audit")))
         else:
             print("PostgreSQL: GYROBENCH_TEST_PG_URL is not set; its writers are left out")
         for engine, make in cases:
