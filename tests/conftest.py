@@ -81,3 +81,16 @@ def _window_settings_apart(tmp_path_factory):
     for fmt in (QSettings.Format.NativeFormat, QSettings.Format.IniFormat):
         QSettings.setPath(fmt, QSettings.Scope.UserScope, path)
     yield
+
+
+@pytest.fixture
+def plots(qtbot):
+    """The window's live plots, shown at 1000 x 700 offscreen, redrawn at 25 Hz from 400 points a curve."""
+    from bench.gui.plots import LivePlots
+
+    w = LivePlots(refresh_hz=25.0, max_points=400)
+    qtbot.addWidget(w)
+    w.resize(1000, 700)
+    w.show()
+    yield w
+    w.shutdown()

@@ -11,17 +11,7 @@ import pytest
 pytest.importorskip("pytestqt")
 pytest.importorskip("pyqtgraph")
 
-from bench.gui.plots import LivePlots, layout_for  # noqa: E402
-
-
-@pytest.fixture
-def plots(qtbot):
-    w = LivePlots(refresh_hz=25.0, max_points=400)
-    qtbot.addWidget(w)
-    w.resize(1000, 700)
-    w.show()
-    yield w
-    w.shutdown()
+from bench.gui.plots import layout_for  # noqa: E402
 
 
 def test_hold_readings_are_markers_not_part_of_the_table_curve(plots):

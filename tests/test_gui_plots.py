@@ -13,19 +13,9 @@ pytest.importorskip("pyqtgraph")
 
 import pyqtgraph as pg  # noqa: E402
 
-from bench.gui.plots import FPGA_COLS, LivePlots  # noqa: E402
+from bench.gui.plots import FPGA_COLS  # noqa: E402
 from drivers.fpga.protocol import STREAM_SCHEMA  # noqa: E402
 from drivers.rate_table.base import TABLE_STREAM  # noqa: E402
-
-
-@pytest.fixture
-def plots(qtbot):
-    w = LivePlots(refresh_hz=25.0, max_points=400)
-    qtbot.addWidget(w)
-    w.resize(1000, 700)
-    w.show()
-    yield w
-    w.shutdown()
 
 
 def _decay(n: int, rate_hz: float = 1000.0) -> np.ndarray:
