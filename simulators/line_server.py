@@ -5,14 +5,13 @@ faults a test injects (`hang`, `garble`), for the SCPI instruments (VISA `TCPIP:
 
 from __future__ import annotations
 
-import socket
-import socketserver
-import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, BinaryIO
+
+from .tcp_server import LoopbackTcpServer
 
 
-class LineServer:
+class LineServer(LoopbackTcpServer):
     """Serve `reply(line) -> bytes | None` on a loopback port (0: a free one) until `stop()`."""
 
     def __init__(self, reply: Callable[[str], bytes | None], host: str = "127.0.0.1", port: int = 0,
@@ -22,53 +21,27 @@ class LineServer:
         connection unanswered instead of being answered as it is.  drop_long_lines: a line longer
         than max_line is read to its LF and dropped unanswered (an instrument's input buffer
         overflowing), the connection stays."""
-        self._stop = threading.Event()
-        self._conns: set[socket.socket] = set()
-        self._conns_lock = threading.Lock()
-        outer = self
         self.reply = reply
+        self.max_line, self.whole_lines, self.drop_long_lines = max_line, whole_lines, drop_long_lines
+        super().__init__(host, port, name)
 
-        class Handler(socketserver.StreamRequestHandler):
-            def handle(self) -> None:
-                self.connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                with outer._conns_lock:
-                    if outer._stop.is_set():
-                        return
-                    outer._conns.add(self.connection)
-                try:
-                    while not outer._stop.is_set():
-                        raw = self.rfile.readline(max_line)
-                        if drop_long_lines and len(raw) == max_line and not raw.endswith(b"\n"):
-                            while raw and not raw.endswith(b"\n"):
-                                raw = self.rfile.readline(max_line)
-                            continue
-                        if not raw or (whole_lines and not raw.endswith(b"\n")):
-                            return
-                        out = outer.reply(raw.decode("ascii", "replace"))
-                        if out is not None:
-                            self.wfile.write(out)
-                except OSError:
-                    return
-                finally:
-                    with outer._conns_lock:
-                        outer._conns.discard(self.connection)
-
-        self._tcp = socketserver.ThreadingTCPServer((host, port), Handler, bind_and_activate=False)
-        self._tcp.daemon_threads = True
-        self._tcp.allow_reuse_address = True
-        self._tcp.server_bind()
-        self._tcp.server_activate()
-        self.host, self.port = self._tcp.server_address[:2]
-        self._thread = threading.Thread(
-            target=self._tcp.serve_forever, kwargs={"poll_interval": 0.05}, name=name, daemon=True
-        )
-        self._thread.start()
+    def serve_connection(self, rfile: BinaryIO, wfile: BinaryIO) -> None:
+        """Answer each line read until the peer closes, a line breaks the rules, or `stop()`."""
+        while not self.stopping:
+            raw = rfile.readline(self.max_line)
+            if self.drop_long_lines and len(raw) == self.max_line and not raw.endswith(b"\n"):
+                while raw and not raw.endswith(b"\n"):
+                    raw = rfile.readline(self.max_line)
+                continue
+            if not raw or (self.whole_lines and not raw.endswith(b"\n")):
+                return
+            out = self.reply(raw.decode("ascii", "replace"))
+            if out is not None:
+                wfile.write(out)
 
     def send_all(self, data: bytes) -> None:
         """Write `data` to every connected client now (an unsolicited message)."""
-        with self._conns_lock:
-            conns = list(self._conns)
-        for conn in conns:
+        for conn in self.connections():
             try:
                 conn.sendall(data)
             except OSError:
@@ -78,20 +51,6 @@ class LineServer:
     def resource_name(self) -> str:
         """The socket as a VISA resource (pyvisa-py)."""
         return f"TCPIP::{self.host}::{self.port}::SOCKET"
-
-    def stop(self) -> None:
-        """Stop listening and close every connection (its client sees the link go)."""
-        self._stop.set()
-        self._tcp.shutdown()
-        self._tcp.server_close()
-        self._thread.join(timeout=5.0)
-        with self._conns_lock:
-            conns = list(self._conns)
-        for conn in conns:
-            try:
-                conn.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
 
 
 class TextLineServer(LineServer):

@@ -11,13 +11,13 @@ out; `PortMapper` serves GETPORT on any port (111 needs root)."""
 
 from __future__ import annotations
 
-import socket
-import socketserver
 import struct
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, BinaryIO
+
+from .tcp_server import LoopbackTcpServer
 
 PMAP_PROG, PMAP_VERS, PMAP_GETPORT, PMAP_DUMP = 100000, 2, 3, 4
 CORE_PROG, CORE_VERS = 0x0607AF, 1
@@ -91,46 +91,27 @@ def record(data: bytes) -> bytes:
     return xdr_uint(LAST_FRAGMENT | len(data)) + data
 
 
-class RpcServer:
+class RpcServer(LoopbackTcpServer):
     """ONC RPC over TCP on a loopback port: `dispatch(prog, vers, proc, args, conn) -> (accept_stat,
     results)` for each call; `stop()` ends it and its connections."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, name: str = "rpc-sim") -> None:
-        self._stop = threading.Event()
-        self._conns: set[socket.socket] = set()
-        self._lock = threading.Lock()
-        outer = self
+        self._lock = threading.Lock()  # the subclasses' own state (a VXI-11 server's links)
+        super().__init__(host, port, name)
 
-        class Handler(socketserver.StreamRequestHandler):
-            def handle(self) -> None:
-                self.connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                with outer._lock:
-                    outer._conns.add(self.connection)
-                conn_state: dict[str, Any] = {}
-                try:
-                    while not outer._stop.is_set():
-                        call = read_record(self.rfile)
-                        if call is None:
-                            return
-                        reply = outer._reply(call, conn_state)
-                        if reply is not None:
-                            self.wfile.write(record(reply))
-                except OSError:
+    def serve_connection(self, rfile: BinaryIO, wfile: BinaryIO) -> None:
+        """Answer each call record until the peer closes or `stop()`; then the connection's links end."""
+        conn_state: dict[str, Any] = {}
+        try:
+            while not self.stopping:
+                call = read_record(rfile)
+                if call is None:
                     return
-                finally:
-                    outer.connection_closed(conn_state)
-                    with outer._lock:
-                        outer._conns.discard(self.connection)
-
-        self._tcp = socketserver.ThreadingTCPServer((host, port), Handler, bind_and_activate=False)
-        self._tcp.daemon_threads = True
-        self._tcp.allow_reuse_address = True
-        self._tcp.server_bind()
-        self._tcp.server_activate()
-        self.host, self.port = self._tcp.server_address[:2]
-        self._thread = threading.Thread(target=self._tcp.serve_forever, kwargs={"poll_interval": 0.05},
-                                        name=name, daemon=True)
-        self._thread.start()
+                reply = self._reply(call, conn_state)
+                if reply is not None:
+                    wfile.write(record(reply))
+        finally:
+            self.connection_closed(conn_state)
 
     def _reply(self, call: bytes, conn_state: dict[str, Any]) -> bytes | None:
         x = Xdr(call)
@@ -154,19 +135,6 @@ class RpcServer:
 
     def connection_closed(self, conn_state: dict[str, Any]) -> None:
         """A client went away (its links end)."""
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._tcp.shutdown()
-        self._tcp.server_close()
-        self._thread.join(timeout=5.0)
-        with self._lock:
-            conns = list(self._conns)
-        for conn in conns:
-            try:
-                conn.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
 
 
 class PortMapper(RpcServer):
