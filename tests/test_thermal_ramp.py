@@ -72,6 +72,12 @@ def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station
     fpga = sim_station.devices["fpga"]
     assert fpga.read_register("TRIM_EN") == 0 and fpga.read_register("TRIM_BIAS_DPH") == 0.0  # restored
     assert sim_station.devices["chamber"].setpoint_c() == 25.0
+    # the branches ran as ramp-rate profiles on the controller, each deleted after its branch
+    assert any("on the chamber's controller" in r["msg"] for r in data.log())
+    assert sim_station.devices["chamber"].supports_profiles() and sim_station.devices["chamber"].ramp_profile is None
+    from drivers.chamber import watlow_f4_protocol as fp
+
+    assert sim_station.devices["chamber"]._read(fp.HR_STEPS_AVAILABLE)[0] == 256
 
 
 def test_the_resonator_trails_the_case_by_its_time_constant():

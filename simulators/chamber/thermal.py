@@ -27,6 +27,9 @@ class ChamberThermal:
     #: constant set point (or a profile that has ended holding its last target)
     profile_ramps: list[tuple[float, float]] = field(default_factory=list)
     profile_paused: bool = False
+    #: the chamber's own limit (its heaters and compressor): a profile's set point is followed up
+    #: to it; in constant mode the air moves at the lower of it and ramp_c_per_min
+    max_rate_c_per_min: float = math.inf
 
     def __post_init__(self) -> None:
         if not (self.case_tau_s > 0 and math.isfinite(self.case_tau_s)):
@@ -49,6 +52,7 @@ class ChamberThermal:
         whose path over a short block is taken as a straight line).  A ramp-rate profile step
         first moves the set point toward its target at its rate and ends (holding the target)
         when the set point arrives."""
+        following = bool(self.profile_ramps)  # the air follows a profile's set point at the chamber's limit
         if self.profile_ramps and not self.profile_paused:
             target, rate = self.profile_ramps[0]
             sp_step = rate / 60.0 * dt_s
@@ -59,7 +63,8 @@ class ChamberThermal:
             else:
                 self.setpoint_c += math.copysign(sp_step, gap)
         air0 = self.air_c
-        max_step = self.ramp_c_per_min / 60.0 * dt_s
+        rate = self.max_rate_c_per_min if following else min(self.ramp_c_per_min, self.max_rate_c_per_min)
+        max_step = rate / 60.0 * dt_s
         err = self.setpoint_c - air0
         air1 = self.setpoint_c if abs(err) <= max_step else air0 + math.copysign(max_step, err)
         case0 = self.case_c

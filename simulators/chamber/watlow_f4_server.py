@@ -247,6 +247,7 @@ def serve_watlow_f4(
 def serve_station(world: Any, cfg: dict[str, Any]) -> tuple[ModbusTableServer, dict[str, Any]]:
     """A simulated station's `watlow-f4` chamber: served from its station keys; (handle, address keys)."""
     handle = serve_watlow_f4(world, device_id=cfg["device_id"], low_c=cfg["min_degc"], high_c=cfg["max_degc"],
-                             ramp_c_per_min=cfg["ramp_degc_per_min"], case_tau_s=cfg["case_tau_s"],
+                             ramp_c_per_min=cfg["ramp_degc_per_min"], max_rate_c_per_min=cfg["ramp_degc_per_min"],
+                             case_tau_s=cfg["case_tau_s"],
                              resonator_tau_s=cfg["resonator_tau_s"], profiles=cfg["profiles"])
     return handle, {"host": handle.host, "port": handle.port}
