@@ -4,8 +4,10 @@ Watlow F4 chamber, by default sim-hrg-thermal with the resonator `--resonator-ta
 case), each from a fresh station of the same seed.  Prints each method's simulated and wall time,
 its coefficients with intervals beside the simulator's truth, and the bias residual each leaves
 at the soak's settled points (the soak's own fit there, the ramp's fit against the part
-thermocouple and against the frequency thermometer applied to them).  Target: the ramp within
-1.5x of the soak's residual in at most a third of its simulated time.
+thermocouple, the frequency thermometer and the chamber air applied to them: the numbers
+`gyrobench report RAMP --against SOAK` shows, from bench.reporting.thermal_compare; `--report DIR`
+writes that page).  Target: the ramp within 1.5x of the soak's residual in at most a third of its
+simulated time.
 
 Run: .venv/bin/python benchmarks/thermal_ramp_vs_soak.py [--station sim-hrg-thermal] [--points 10]
 
@@ -19,11 +21,10 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from bench.composition.sim_station import SimStation
 from bench.engine import Runner
 from bench.recorder import open_run
+from bench.reporting.thermal_compare import compare, write_comparison
 from bench.station_config import find_station_file, load_config
 from procedures.thermal_ramp import ThermalRamp
 from procedures.thermal_soak import ThermalSoak
@@ -66,32 +67,28 @@ def main() -> None:
     ap.add_argument("--cycle-degc-per-min", type=float, default=2.0)
     ap.add_argument("--segment-s", type=float, default=300.0)
     ap.add_argument("--tail-s", type=float, default=2400.0)
+    ap.add_argument("--report", default=None, metavar="DIR",
+                    help="keep both runs in DIR and write the comparison page there")
     args = ap.parse_args()
     common = {"t_low_degc": args.low_degc, "t_high_degc": args.high_degc,
               "settle_ppm_per_min": args.settle_ppm_per_min, "max_order": 3}
     with tempfile.TemporaryDirectory() as tmp:
         path = _station_file(args.station, args.resonator_tau_s, Path(tmp))
-        soak = _run(path, ThermalSoak, common | {"points": args.points, "record_s": args.record_s}, Path(tmp) / "a")
+        runs = Path(args.report) if args.report else Path(tmp)
+        soak = _run(path, ThermalSoak, common | {"points": args.points, "record_s": args.record_s}, runs)
         ramp = _run(path, ThermalRamp, common | {"cycle_degc_per_min": args.cycle_degc_per_min,
-                                                 "segment_s": args.segment_s, "tail_s": args.tail_s}, Path(tmp) / "b")
-        sp = ThermalSoak(soak.params).points_table(open_run(soak.raw_file))
-        _, s_bias, _ = ThermalSoak(soak.params).fits(open_run(soak.raw_file))
-        rp, r_bias, _, line = ThermalRamp(ramp.params).fits(open_run(ramp.raw_file))
-    # the soak's settled points, compensated by each fit (the frequency thermometer reads the soak's
-    # frequencies through the ramp's own line)
-    t_freq = 25.0 + (sp["f0_hz"] - line.coeffs[0]) / line.coeffs[1]
-    rms = {
-        "soak fit (its own points)": s_bias(sp["part_c"]),
-        "ramp fit vs part thermocouple": r_bias["part"](sp["part_c"]),
-        "ramp fit vs frequency thermometer": r_bias["frequency"](t_freq),
-        "ramp fit vs chamber air": r_bias["air"](sp["part_c"]),  # settled: the air at the case
-    }
-    print(f"simulated time ramp / soak: {ramp.simulated_s / soak.simulated_s:.3f}")
-    print(f"bias residual at the soak's {len(sp['part_c'])} settled points (rms, deg/h; their mean standard error "
-          f"{np.sqrt(np.mean(sp['bias_se_dph'] ** 2)):.3f}):")
-    for k, fit in rms.items():
-        print(f"  {k}: {np.sqrt(np.mean((sp['bias_dph'] - fit) ** 2)):.4f}")
-
+                                                 "segment_s": args.segment_s, "tail_s": args.tail_s}, runs)
+        with open_run(soak.raw_file) as s_data, open_run(ramp.raw_file) as r_data:
+            cmp, _ = compare(s_data, r_data)  # what `gyrobench report RAMP --against SOAK` shows
+        if args.report:
+            print("page:", *write_comparison(ramp.raw_file, soak.raw_file))
+    print(f"simulated time ramp / soak: {cmp.time_ratio:.3f}")
+    print(f"bias residual at the soak's {len(cmp.part_c)} settled points (rms, deg/h; their mean standard error "
+          f"{cmp.noise_rms_dph:.3f}):")
+    for c in (cmp.soak, *cmp.ramp.values()):
+        print(f"  {c.label}: {c.rms_dph:.4f} ({c.ratio:.2f}x the soak's)")
+    print(f"target (best ramp thermometer within 1.5x in at most 1/3 of the time): "
+          f"{'met' if cmp.meets_target() else 'not met'}")
 
 if __name__ == "__main__":
     main()

@@ -4,7 +4,8 @@ ramp method"): one heating and one cooling branch at a steady chamber ramp, reco
 segments throughout, both branches fitted together so a thermometer's lag cancels to first order.
 
 Steps: excite and hold the amplitude; the chamber to t_low_degc, settled from the resonator
-frequency's drift (as thermal-soak); then at `cycle_degc_per_min` up to t_high_degc and back,
+frequency's drift (as thermal-soak); then at `cycle_degc_per_min` up to t_high_degc and back (a
+ramp-rate profile on the chamber's controller where it runs profiles, else set points from the PC),
 each branch held `tail_s` once the air has arrived, the unit recorded in segments of `segment_s`
 with the chamber's air and part (case) readings at each segment's start and end.  The analysis
 takes each segment's bias and mean frequency and fits the bias against three thermometers: the
@@ -111,6 +112,9 @@ class ThermalRamp(ThermalChamber, Procedure):
     compensate = Param(True, doc="before the verification, the thermal trim (bias against the resonator frequency) "
                                  "into the FPGA's registers (RAM; restored at the end), so the verification reads "
                                  "the unit's own compensated output")
+    controller_ramp = Param(True, doc="each branch's ramp run by the chamber's controller (a ramp-rate profile, "
+                                      "docs/chamber.md) where it runs profiles; off, or a controller without them: "
+                                      "the set point written from the PC with the ramp limit")
     tail_s = Param(600.0, unit="s", low=0.0, high=1e5,
                    doc="record on at each end of the range once the air has arrived (the case catching up)")
 
@@ -175,12 +179,19 @@ class ThermalRamp(ThermalChamber, Procedure):
             table = ctx.devices.table
             table.enable()
             ctx.defer(lambda: table.set_rate(0.0, self.accel_dps2) if table.connected else None, "table to rest")
-        chamber.set_ramp_rate(self.cycle_degc_per_min)
+        on_controller = bool(self.controller_ramp) and chamber.supports_profiles()
+        if not on_controller:
+            chamber.set_ramp_rate(self.cycle_degc_per_min)
+        ctx.log.info("the cycle's ramps run " + ("on the chamber's controller (a ramp-rate profile)" if on_controller
+                                                 else "from the PC (set points with the ramp limit)"))
         span_c = self.t_high_degc - self.t_low_degc
         expected_s = 2 * (span_c / self.cycle_degc_per_min * 60.0 + self.tail_s)
         t_cycle = ctx.clock.now()
         for branch, target in enumerate((self.t_high_degc, self.t_low_degc)):
-            chamber.set_setpoint(float(target))
+            if on_controller:
+                profile = chamber.start_ramp(float(target), self.cycle_degc_per_min)
+            else:
+                chamber.set_setpoint(float(target))
             arrived, k = None, 0
             # with the table turning, a branch ends on a whole +- pair
             while arrived is None or ctx.clock.now() - arrived < self.tail_s or (table is not None and k % 2):
@@ -201,6 +212,8 @@ class ThermalRamp(ThermalChamber, Procedure):
                     arrived = t1
                 ctx.progress(min(1.0, (ctx.clock.now() - t_cycle) / expected_s), f"{BRANCHES[branch]}, case "
                              f"{s1.part_c:.1f} degC")
+            if on_controller:  # the End-Hold holds the target: the constant set point takes it over
+                chamber.end_ramp(profile, float(target))
         if table is not None:
             table.set_rate(0.0, self.accel_dps2)
             table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)

@@ -122,3 +122,81 @@ def test_the_driver_over_rtu_frames():
     finally:
         chamber.close()
         server.stop()
+
+
+def _word(client, address):
+    rr = client.read_holding_registers(address, count=1, device_id=1)
+    assert not rr.isError(), rr
+    return rr.registers[0]
+
+
+def test_a_stock_client_writes_and_runs_a_ramp_rate_profile(served):
+    """The profile registers as ChamberConnectLibrary's F4 interface uses them, written by pymodbus's
+    own client: create, a ramp-rate step (4003 = 2, rate 4043 in tenths, target 4044) before the
+    End-Hold, start (4000..4002 = N, 1, 5); the set point (4122) moves at the step's rate, the air
+    follows it, status 200 reads 2 until the target, then the controller holds it."""
+    world, server = served
+    client = ModbusTcpClient(server.host, port=server.port, timeout=1.0)
+    assert client.connect()
+    try:
+        assert _word(client, fp.HR_STEPS_AVAILABLE) == 256
+        assert not client.write_register(fp.HR_PROFILE_ACTION, fp.ACTION_CREATE, device_id=1).isError()
+        n = _word(client, fp.HR_EDIT_PROFILE)
+        assert n == 1 and _word(client, fp.HR_STEP_TYPE) == fp.STEP_END  # a new profile: its End step
+        assert not client.write_registers(fp.HR_EDIT_STEP, [1, fp.ACTION_INSERT_STEP], device_id=1).isError()
+        for address, word in ((fp.HR_STEP_TYPE, fp.STEP_RAMP_RATE), (fp.HR_RAMP_RATE, 20),
+                              (fp.HR_STEP_TARGET, fp.encode_temperature(45.0, 1))):
+            assert not client.write_register(address, word, device_id=1).isError()
+        assert _word(client, fp.HR_RAMP_RATE) == 20 and _word(client, fp.HR_STEPS_AVAILABLE) == 254
+        rr = client.write_register(fp.HR_STEP_TARGET, fp.encode_temperature(500.0, 1), device_id=1)
+        assert rr.isError() and rr.exception_code == fp.EXC_ILLEGAL_VALUE  # outside the range
+        assert not client.write_registers(fp.HR_EDIT_PROFILE, [n, 1, fp.ACTION_START], device_id=1).isError()
+        assert _word(client, fp.HR_PROFILE_STATUS) == fp.PROFILE_RUNNING and _word(client, fp.HR_RUN_PROFILE) == n
+        world.advance(300.0)  # 5 min at 2 deg/min: the set point at 35; the air (3 deg/min limit) on it
+        assert fp.decode_temperature(_word(client, fp.HR_RUN_SETPOINT), 1) == pytest.approx(35.0, abs=0.05)
+        assert fp.decode_temperature(_word(client, fp.HR_PV_AIR), 1) == pytest.approx(35.0, abs=0.05)
+        assert _word(client, fp.HR_RUN_STEP_LEFT + 1) == 5  # 10 K to go at 2 deg/min
+        assert fp.decode_temperature(_word(client, fp.HR_SETPOINT), 1) == 25.0  # the constant one, untouched
+        world.advance(600.0)
+        assert _word(client, fp.HR_PROFILE_STATUS) == fp.PROFILE_CONSTANT  # ended: End-Hold holds 45
+        assert fp.decode_temperature(_word(client, fp.HR_PV_AIR), 1) == 45.0
+        assert not client.write_registers(fp.HR_EDIT_PROFILE, [n, 1, fp.ACTION_DELETE], device_id=1).isError()
+        assert _word(client, fp.HR_STEPS_AVAILABLE) == 256
+    finally:
+        client.close()
+
+
+def test_the_driver_ramps_on_the_controller_and_the_safe_state_stops_it(served):
+    world, server = served
+    chamber = WatlowF4Chamber(server.host, server.port)
+    chamber.connect()
+    try:
+        assert chamber.supports_profiles()
+        n = chamber.start_ramp(-15.0, 1.0)
+        world.advance(600.0)
+        assert chamber.ramp_running() and chamber.running_setpoint_c() == pytest.approx(15.0, abs=0.05)
+        assert chamber.air_c() == pytest.approx(15.0, abs=0.05)  # 1 deg/min under the chamber's 3
+        chamber.end_ramp(n, 15.0)  # early: the constant set point takes over where the ramp was
+        assert not chamber.ramp_running() and chamber.setpoint_c() == 15.0 and chamber.ramp_profile is None
+        chamber.start_ramp(85.0, 2.0)
+        world.advance(60.0)
+        assert chamber.ramp_running()
+        assert chamber.safe_state()  # the ramp stopped and its profile deleted, ambient set
+        assert not chamber.ramp_running() and chamber.running_setpoint_c() == 25.0 and chamber.ramp_profile is None
+        assert server.mechanics.profile_ramps == [] and chamber._read(fp.HR_STEPS_AVAILABLE)[0] == 256
+        with pytest.raises(ValueError):
+            chamber.start_ramp(300.0, 1.0)
+    finally:
+        chamber.close()
+
+
+def test_a_controller_without_profiles_says_so():
+    world = World(preset("hrg"), seed=1)
+    server = serve_watlow_f4(world, profiles=False)
+    chamber = WatlowF4Chamber(server.host, server.port)
+    try:
+        chamber.connect()
+        assert not chamber.supports_profiles()
+    finally:
+        chamber.close()
+        server.stop()

@@ -72,6 +72,29 @@ def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station
     fpga = sim_station.devices["fpga"]
     assert fpga.read_register("TRIM_EN") == 0 and fpga.read_register("TRIM_BIAS_DPH") == 0.0  # restored
     assert sim_station.devices["chamber"].setpoint_c() == 25.0
+    # the branches ran as ramp-rate profiles on the controller, each deleted after its branch
+    assert any("on the chamber's controller" in r["msg"] for r in data.log())
+    assert sim_station.devices["chamber"].supports_profiles() and sim_station.devices["chamber"].ramp_profile is None
+    from drivers.chamber import watlow_f4_protocol as fp
+
+    assert sim_station.devices["chamber"]._read(fp.HR_STEPS_AVAILABLE)[0] == 256
+
+
+@pytest.mark.parametrize("sim_station", ["sim-hrg-thermal-quick"], indirect=True)
+def test_without_the_controllers_ramp_the_pc_steps_the_set_point(run_procedure, sim_station):
+    """controller_ramp off: the set point written from the PC with the ramp limit, as before; the
+    cycle takes the same time (the air at 5 deg/min either way, 2 x (24 s + 5 s tail) and segments)."""
+    params = {"t_low_degc": 24.0, "t_high_degc": 26.0, "cycle_degc_per_min": 5.0, "segment_s": 5.0, "tail_s": 5.0,
+              "settle_window_s": 10.0, "settle_ppm_per_min": 1.0, "max_order": 1, "controller_ramp": False}
+    record = run_procedure(ThermalRamp, params)
+    assert record.outcome == "COMPLETE", (record.end_reason, record.traceback)
+    from bench.recorder import open_run
+
+    data = open_run(record.raw_file)
+    assert any("from the PC" in r["msg"] for r in data.log())
+    ch = data.table("chamber")
+    assert max(ch["air_degc"]) == pytest.approx(26.0) and sim_station.devices["chamber"].ramp_rate_c_per_min() == 5.0
+    assert {m.name: m.value for m in record.measurements}["cycle_s"] < 90.0
 
 
 def test_the_resonator_trails_the_case_by_its_time_constant():

@@ -27,6 +27,9 @@ def add_parser(sub) -> None:
     report.add_argument("--results", default=None)
     report.add_argument("-o", "--output", default=None)
     report.add_argument("--pdf", action="store_true", help="the report as a PDF too, beside the HTML")
+    report.add_argument("--against", default=None, metavar="RUN",
+                        help="a thermal-ramp and a thermal-soak of the same unit (either way round): the ramp's "
+                        "report with the two methods' residuals compared first, written as RAMP-vs-SOAK.html")
     report.set_defaults(func=cmd_report)
 
 
@@ -91,6 +94,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
+    if args.against:
+        return _report_against(args)
     opened = _open_for_command(args)
     if isinstance(opened, int):
         return opened
@@ -101,6 +106,37 @@ def cmd_report(args: argparse.Namespace) -> int:
     paths = _write_report(raw_file, row, args.output, pdf=args.pdf)
     print("\n".join(str(p) for p in paths))
     return EXIT_USAGE if args.pdf and len(paths) < 2 else EXIT_OK
+
+
+def _report_against(args: argparse.Namespace) -> int:
+    """`report RUN --against OTHER`: the thermal comparison page, or one line why not."""
+    from bench.pdf import PdfUnavailable
+    from bench.reporting.thermal_compare import CompareRefused, write_comparison
+
+    files, rows = [], {}
+    for run in (args.run, args.against):
+        opened = _open_for_command(argparse.Namespace(run=run, results=args.results))
+        if isinstance(opened, int):
+            return opened
+        data, store, run_id = opened
+        with data:
+            files.append(str(data.path))
+            rows[str(run_id)] = store.get_run(run_id) if store is not None else None
+    pdf = args.pdf
+    try:
+        try:
+            paths = write_comparison(files[0], files[1], rows, args.output, pdf=pdf)
+        except PdfUnavailable as exc:  # said before anything is written: the HTML alone, and why
+            _err(str(exc))
+            paths = write_comparison(files[0], files[1], rows, args.output)
+    except CompareRefused as exc:
+        _err(str(exc))
+        return EXIT_USAGE
+    except (KeyError, ValueError, RuntimeError) as exc:  # a run whose data the fits cannot use
+        _err(f"cannot compare runs {args.run} and {args.against}: {exc}")
+        return EXIT_BAD_OUTCOME
+    print("\n".join(str(p) for p in paths))
+    return EXIT_USAGE if pdf and len(paths) < 2 else EXIT_OK
 
 
 def _open_recorded(run: str, results: str | None):

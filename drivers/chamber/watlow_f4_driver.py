@@ -32,7 +32,8 @@ class ChamberStatus:
 
 
 class WatlowF4Chamber:
-    """A Watlow F4 (a TestEquity or ESPEC chamber's controller): constant set point mode."""
+    """A Watlow F4 (a TestEquity or ESPEC chamber's controller): constant set point mode, and a
+    ramp-rate profile for a ramp on the controller's own clock."""
 
     def __init__(self, host: str | None = None, port: int = 502, *, device_id: int = 1, timeout_s: float = 1.0,
                  retries: int = 2, client=None) -> None:
@@ -48,6 +49,8 @@ class WatlowF4Chamber:
         self.decimals_air = 1
         self.decimals_part = 1
         self.range_c = (-70.0, 180.0)
+        #: the ramp profile this driver made and has not deleted (the safe state deletes it)
+        self.ramp_profile: int | None = None
 
     @classmethod
     def rtu(cls, port: str, *, device_id: int = 1, baudrate: int = 9600, timeout_s: float = 1.0) -> WatlowF4Chamber:
@@ -107,6 +110,11 @@ class WatlowF4Chamber:
     def _write(self, address: int, word: int) -> None:
         self._call(f"write {address}", lambda: self.client.write_register(address, word, device_id=self.device_id))
 
+    def _write_many(self, address: int, words: list[int]) -> None:
+        """Consecutive registers in one FC16 write (the F4 takes them in address order)."""
+        self._call(f"write {address}..{address + len(words) - 1}",
+                   lambda: self.client.write_registers(address, words, device_id=self.device_id))
+
     # --- what a procedure uses ----------------------------------------------------------------
     def air_c(self) -> float:
         """The chamber air temperature (input 1), degC."""
@@ -139,13 +147,77 @@ class WatlowF4Chamber:
         """Terminate a running profile: the controller holds its constant set point."""
         self._write(fp.HR_PROFILE_TERMINATE, 1)
 
+    # --- the controller's own ramp: a ramp-rate profile (docs/chamber.md "Ramp profiles") ------
+    def supports_profiles(self) -> bool:
+        """True when the controller answers its profile registers with steps free (an F4 with the
+        profile option); a refused read (Modbus exception) means constant set point only."""
+        try:
+            return self._read(fp.HR_STEPS_AVAILABLE)[0] >= 2
+        except DeviceError:
+            return False
+
+    def start_ramp(self, target_c: float, rate_c_per_min: float) -> int:
+        """Ramp the set point from where it is to target_c at rate_c_per_min on the controller's own
+        clock: a new profile of one ramp-rate step and an End-Hold step, started at once; its
+        number (end_ramp deletes it).  ValueError for a target outside the range or a rate <= 0."""
+        low, high = self.range_c
+        if not low <= target_c <= high:
+            raise ValueError(f"ramp target {target_c:g} degC is outside the chamber's range [{low:g}, {high:g}]")
+        rate = fp.encode_ramp_rate(rate_c_per_min)
+        if rate <= 0:
+            raise ValueError(f"ramp rate {rate_c_per_min!r} deg/min must be >= 0.1 (the register's step)")
+        self._write(fp.HR_PROFILE_ACTION, fp.ACTION_CREATE)
+        number = self._read(fp.HR_EDIT_PROFILE)[0]
+        self._write_many(fp.HR_EDIT_STEP, [1, fp.ACTION_INSERT_STEP])  # step 1 before the End step
+        self._write(fp.HR_STEP_TYPE, fp.STEP_RAMP_RATE)
+        self._write(fp.HR_STEP_WAIT, 0)
+        self._write(fp.HR_RAMP_RATE, rate)
+        self._write(fp.HR_STEP_TARGET, fp.encode_temperature(target_c, self.decimals_air))
+        self._write(fp.HR_STEP_PID_SET, 0)
+        self._write(fp.HR_STEP_GUARANTEED_SOAK, 0)
+        self._write(fp.HR_EDIT_STEP, 2)
+        self._write(fp.HR_END_ACTION, fp.END_HOLD)
+        self._write(fp.HR_SAVE, 0)
+        self._write_many(fp.HR_EDIT_PROFILE, [number, 1, fp.ACTION_START])
+        self.ramp_profile = number
+        return number
+
+    def ramp_running(self) -> bool:
+        """A profile is running (or paused)."""
+        return self._read(fp.HR_PROFILE_STATUS)[0] in (fp.PROFILE_RUNNING, fp.PROFILE_PAUSED)
+
+    def running_setpoint_c(self) -> float:
+        """The set point the controller holds now (the running profile's, else the constant one)."""
+        if self.ramp_running():
+            return fp.decode_temperature(self._read(fp.HR_RUN_SETPOINT)[0], self.decimals_air)
+        return self.setpoint_c()
+
+    def end_ramp(self, number: int, hold_c: float) -> None:
+        """After a ramp: the constant set point to hold_c (where the End-Hold left it), the profile
+        terminated and deleted, so the controller is back in constant mode with nothing left behind."""
+        self.set_setpoint(hold_c)
+        self.stop_profile()
+        self._delete_profile(number)
+
+    def _delete_profile(self, number: int) -> None:
+        self._write_many(fp.HR_EDIT_PROFILE, [number, 1, fp.ACTION_DELETE])
+        self._write(fp.HR_SAVE, 0)
+        if self.ramp_profile == number:
+            self.ramp_profile = None
+
     def status(self) -> ChamberStatus:
         air, part = self.air_c(), self.part_c()
         return ChamberStatus(air, part, self.setpoint_c(), self._read(fp.HR_PROFILE_STATUS)[0])
 
     def safe_state(self) -> bool:
-        """Profile stopped, set point to ambient; True when the read-back confirms both."""
+        """Profile stopped (a ramp profile of ours deleted), set point to ambient; True when the
+        read-back confirms both."""
         self.stop_profile()
+        if self.ramp_profile is not None:
+            try:
+                self._delete_profile(self.ramp_profile)
+            except DeviceError:  # refused: the stopped profile stays stored, harmless; ambient comes first
+                pass
         self.set_setpoint(AMBIENT_C)
         st = self.status()
         constant = st.profile_status in (fp.PROFILE_CONSTANT, fp.PROFILE_CONSTANT_ALT)

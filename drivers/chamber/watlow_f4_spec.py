@@ -50,6 +50,8 @@ SPEC = register_driver(
             "ramp_degc_per_min": Key(float, 2.0, 0.01, 100.0, unit="degC/min", doc="simulator: air ramp limit"),
             "case_tau_s": Key(float, 1200.0, 1.0, 1e6, unit="s",
                               doc="simulator: the unit case's thermal time constant behind the air"),
+            "profiles": Key(bool, True, doc="simulator: the controller runs profiles (a ramp-rate step's ramp); "
+                            "off: it answers the constant set-point registers only"),
             "resonator_tau_s": Key(float, 0.0, 0.0, 1e6, unit="s",
                                    doc="simulator: the resonator's thermal time constant behind the case "
                                        "(0: at the case's temperature)"),

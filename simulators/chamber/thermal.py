@@ -1,5 +1,6 @@
 """The chamber's thermal model in virtual time (docs/chamber.md): the air follows the set point
-at the controller's ramp limit, the unit's case follows the air through a first-order time
+at the controller's ramp limit (a running ramp-rate profile step moves the set point itself at
+its rate, the air following it), the unit's case follows the air through a first-order time
 constant, and the resonator follows the case through its own time constant (in vacuum it takes
 heat by radiation and through its stem; 0: it is at the case's temperature): the resonator's
 temperature is the World's."""
@@ -7,7 +8,7 @@ temperature is the World's."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 @dataclass
@@ -22,6 +23,13 @@ class ChamberThermal:
     ambient_c: float = 25.0
     resonator_tau_s: float = 0.0
     resonator_c: float | None = None
+    #: the running profile's ramp-rate steps still to go, (target degC, rate deg/min) each; empty:
+    #: constant set point (or a profile that has ended holding its last target)
+    profile_ramps: list[tuple[float, float]] = field(default_factory=list)
+    profile_paused: bool = False
+    #: the chamber's own limit (its heaters and compressor): a profile's set point is followed up
+    #: to it; in constant mode the air moves at the lower of it and ramp_c_per_min
+    max_rate_c_per_min: float = math.inf
 
     def __post_init__(self) -> None:
         if not (self.case_tau_s > 0 and math.isfinite(self.case_tau_s)):
@@ -41,9 +49,22 @@ class ChamberThermal:
     def step(self, dt_s: float) -> None:
         """Advance the air (ramp-limited toward the set point), the case (exact first-order
         response to the air's linear path over dt_s) and the resonator (the same behind the case,
-        whose path over a short block is taken as a straight line)."""
+        whose path over a short block is taken as a straight line).  A ramp-rate profile step
+        first moves the set point toward its target at its rate and ends (holding the target)
+        when the set point arrives."""
+        following = bool(self.profile_ramps)  # the air follows a profile's set point at the chamber's limit
+        if self.profile_ramps and not self.profile_paused:
+            target, rate = self.profile_ramps[0]
+            sp_step = rate / 60.0 * dt_s
+            gap = target - self.setpoint_c
+            if abs(gap) <= sp_step:  # the step ends; the next starts with the next block
+                self.setpoint_c = target
+                self.profile_ramps.pop(0)
+            else:
+                self.setpoint_c += math.copysign(sp_step, gap)
         air0 = self.air_c
-        max_step = self.ramp_c_per_min / 60.0 * dt_s
+        rate = self.max_rate_c_per_min if following else min(self.ramp_c_per_min, self.max_rate_c_per_min)
+        max_step = rate / 60.0 * dt_s
         err = self.setpoint_c - air0
         air1 = self.setpoint_c if abs(err) <= max_step else air0 + math.copysign(max_step, err)
         case0 = self.case_c
@@ -55,7 +76,15 @@ class ChamberThermal:
             self.resonator_c = self.case_c
 
     def ramping(self) -> bool:
-        return self.air_c != self.setpoint_c
+        return self.air_c != self.setpoint_c or bool(self.profile_ramps)
+
+    def start_profile(self, ramps: list[tuple[float, float]]) -> None:
+        """Ramp-rate steps from the set point now, each (target degC, rate deg/min > 0), in turn."""
+        for _, rate in ramps:
+            if not (rate > 0 and math.isfinite(rate)):
+                raise ValueError(f"ramp rate {rate!r} deg/min must be > 0")
+        self.profile_ramps = [(float(t), float(r)) for t, r in ramps]
+        self.profile_paused = False
 
     # --- World device ---------------------------------------------------------------------------
     def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
