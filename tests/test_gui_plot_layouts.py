@@ -83,3 +83,70 @@ def test_cvg_rate_output_live_and_the_allan_curve_when_recorded(plots):
     names = ("p_q", "p_e", "p_theta", "p_rate", "p_amp", "p_phase", "p_cvg", "p_allan")
     assert plots.views[names.index("p_allan")].isVisible()
     np.testing.assert_allclose(plots.c_allan.yData, [3.0, 1.0, 0.8])  # getData() gives log10 on a log axis
+
+
+def _rate_rows(t: np.ndarray, amplitude: np.ndarray, angle_deg: np.ndarray, rate_out_dps: np.ndarray) -> np.ndarray:
+    """FPGA rows (t_s, cx, sx, cy, sy, angle_out_deg, rate_out_dps) of a wave along x of the given amplitude."""
+    z = np.zeros_like(t)
+    return np.column_stack((t, amplitude, z, z, z, angle_deg, rate_out_dps))
+
+
+def _joined_across(plots, t_from: float, t_to: float) -> bool:
+    """Does the drawn rate-output curve join a point at or before t_from to one at or after t_to?"""
+    x, _ = plots.c_cvg.getData()
+    connect = plots.c_cvg.opts["connect"]
+    connect = np.ones(len(x), bool) if isinstance(connect, str) else np.asarray(connect, bool)
+    i = np.flatnonzero((x[:-1] <= t_from) & (x[1:] >= t_to))
+    return bool(np.any(connect[i]))
+
+
+@pytest.mark.parametrize("output", ["whole-angle", "force-to-rebalance"])
+def test_cvg_rate_curve_breaks_at_a_quench(plots, output):
+    """cvg-bias quenches the resonator between turn-ons: the live rate curve has no line over the
+    quench (50..60 s here), fed in 1 s blocks; the held spans on either side stay joined."""
+    plots.set_layout("cvg")
+    plots.clear()
+    t = np.arange(0.0, 100.0, 0.01)
+    quench = (t > 50.0) & (t < 60.0)
+    amplitude = np.where(quench, 0.001, 1.0)
+    angle = -2.0 / 3600.0 * t + np.where(t >= 60.0, 5.0, 0.0)  # the wave comes back at another angle
+    rate = np.zeros_like(t) if output == "whole-angle" else np.where(t >= 60.0, 3.0, 2.0) / 3600.0
+    rows = _rate_rows(t, amplitude, angle, rate)
+    cols = ("t_s", "cx", "sx", "cy", "sy", "angle_out_deg", "rate_out_dps")
+    for i in range(0, len(t), 100):
+        plots.add_samples("fpga", cols, rows[i:i + 100])
+    plots.refresh(force=True)
+    x, y = plots.c_cvg.getData()
+    assert x.min() < 50.0 and x.max() > 60.0 and not np.any((x > 50.05) & (x < 60.0))
+    assert not _joined_across(plots, 50.0, 60.0)  # no line over the quench
+    assert _joined_across(plots, 20.0, 20.01) and _joined_across(plots, 80.0, 80.01)  # held spans are lines
+
+
+def test_wave_angle_shows_nothing_on_pickoff_noise_and_the_angle_of_a_wave(plots):
+    """table-spin runs with no wave (pickoff noise only): the wave-angle plot draws no angle and
+    says why; a precessing wave is drawn as a line (unwrapped), fed in blocks of any length."""
+    plots.clear()
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 20.0, 0.001)
+    noise = rng.normal(0.0, 1e-3, (len(t), 4))
+    cols = ("t_s", "cx", "sx", "cy", "sy")
+    for i, n in enumerate((1, 7, 50, 1000, 5000, 13942)):  # blocks of every size
+        start = sum((1, 7, 50, 1000, 5000, 13942)[:i])
+        plots.add_samples("fpga", cols, np.column_stack((t, noise))[start:start + n])
+    plots.refresh(force=True)
+    _, th = plots.c_theta.getData()
+    assert len(th) and not np.isfinite(th).any()
+    assert "no standing wave" in plots.p_theta.titleLabel.text
+    # then a wave turning at 30 deg/s: its angle, unwrapped, is drawn and the title is the plain one
+    t2 = np.arange(20.0, 30.0, 0.001)
+    theta = np.radians(30.0 * (t2 - 20.0))
+    wave = np.column_stack((t2, np.cos(2 * theta), 0 * t2, np.sin(2 * theta), 0 * t2)) + np.column_stack(
+        (0 * t2, rng.normal(0.0, 1e-3, (len(t2), 4))))
+    for i in range(0, len(t2), 250):
+        plots.add_samples("fpga", cols, wave[i:i + 250])
+    plots.refresh(force=True)
+    x, th = plots.c_theta.getData()
+    late = x > 20.5
+    assert np.isfinite(th[late]).all() and np.nanmax(th[late]) > 250.0  # a line up to ~300 deg, not a saw
+    assert not np.isfinite(th[x < 19.9]).any()
+    assert "no standing wave" not in plots.p_theta.titleLabel.text
