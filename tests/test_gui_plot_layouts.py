@@ -135,8 +135,10 @@ def test_wave_angle_shows_nothing_on_pickoff_noise_and_the_angle_of_a_wave(plots
         plots.add_samples("fpga", cols, np.column_stack((t, noise))[start:start + n])
     plots.refresh(force=True)
     _, th = plots.c_theta.getData()
-    assert len(th) and not np.isfinite(th).any()
+    assert th is None or not np.isfinite(th).any()
     assert "no standing wave" in plots.p_theta.titleLabel.text
+    # the title fits above its plot (a long one was cut off at half the window's width)
+    assert plots.p_theta.titleLabel.item.boundingRect().width() < 0.9 * plots.views[2].width()
     # then a wave turning at 30 deg/s: its angle, unwrapped, is drawn and the title is the plain one
     t2 = np.arange(20.0, 30.0, 0.001)
     theta = np.radians(30.0 * (t2 - 20.0))

@@ -32,7 +32,7 @@ RATE_SPAN_S = 0.1  # the live rate output's differencing span (whole-angle outpu
 WAVE_COHERENCE_ALPHA = 0.03  # the weight of each row's 4 theta step in the wave test's running mean
 WAVE_COHERENCE_MIN = 0.5  # |mean step| above which a wave is there (noise alone: ~0.12)
 THETA_TITLE = "wave angle \u03b8"
-NO_WAVE_TITLE = "wave angle \u03b8: no standing wave (pickoff noise only), nothing to show"
+NO_WAVE_TITLE = "wave angle \u03b8: no standing wave"  # pickoff noise alone: no angle to draw
 TABLE_STREAM = "table"  # the table's own rate stream: the table-rate curve (a procedure's readings are markers)
 ALLAN_STREAM, ALLAN_COLS = "cvg_allan_curve", ("tau_s", "adev_dph")  # procedures/cvg_allan.py's curve
 #: the plots each layout shows (attribute names of LivePlots' PlotItems)
@@ -397,8 +397,10 @@ class LivePlots(QWidget):
             self.c_e.setData(e_t, e_v)
             self._choose_e_scale(e_v)
             th_t, th_deg = self.fpga.curve("theta_deg")
-            self.c_theta.setData(th_t, th_deg)
-            self._set_theta_title(NO_WAVE_TITLE if not np.isfinite(th_deg).any() else THETA_TITLE)
+            wave = bool(np.isfinite(th_deg).any())
+            # no wave at all: an empty curve (all-NaN data would pull the plot's x range off the run's)
+            self.c_theta.setData(th_t if wave else [], th_deg if wave else [])
+            self._set_theta_title(THETA_TITLE if wave else NO_WAVE_TITLE)
         if len(self.table):
             self.c_rate.setData(*self.table.curve("rate_dps"))
         if len(self.table_marks):
