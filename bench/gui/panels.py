@@ -171,8 +171,11 @@ class StepList(QWidget):
     def set_status(self, name: str, status: str) -> None:
         self.status[name] = status
         self._item(name).setText(0, STATUS_MARKS.get(status, "?"))
-        if status == "running":
+        if status == "running":  # a new step: its own progress, not the last step's words
             self.progress.setValue(0)
+            self.message.setText("")
+        elif status == "done":  # a finished step is whole (one that reported no progress read 0 %)
+            self.progress.setValue(self.progress.maximum())
 
     def set_progress(self, fraction: float, message: str) -> None:
         self.progress.setValue(int(round(1000 * min(1.0, max(0.0, fraction)))))
