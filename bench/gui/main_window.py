@@ -439,12 +439,12 @@ class MainWindow(QMainWindow):
         self.steps_done = 0
         self.step_fraction = 0.0
         self.results.clear()
-        from procedures import measurement_periods
+        from procedures import measurement_periods, no_truth_reasons
 
         from .run_truth import truth_for_run
 
         self.results.set_truth(truth_for_run(self.backend, e.procedure, e.run_id),  # the truth column (simulated)
-                               measurement_periods(e.procedure))
+                               measurement_periods(e.procedure), no_truth_reasons(e.procedure))
         self.steps.set_steps(e.steps)
         self.left_scroll.ensureWidgetVisible(self.station_box, 0, 0)  # the locked form gives way to the station
         self.run_active = True
