@@ -152,3 +152,38 @@ def test_wave_angle_shows_nothing_on_pickoff_noise_and_the_angle_of_a_wave(plots
     assert np.isfinite(th[late]).all() and np.nanmax(th[late]) > 250.0  # a line up to ~300 deg, not a saw
     assert not np.isfinite(th[x < 19.9]).any()
     assert "no standing wave" not in plots.p_theta.titleLabel.text
+
+
+def test_whole_angle_rate_output_is_the_waves_rate_divided_by_k(plots):
+    """The live rate output reads as the procedures read the gyro's output (-dtheta/dt / K): the
+    window drew the wave's own rate, 3.4 deg/h where cvg-allan's rate_mean_dph read 12.1."""
+    plots.set_layout("cvg")
+    plots.clear()
+    plots.set_bryan_factor(0.277)
+    t = np.arange(0.0, 20.0, 0.01)
+    cols = ("t_s", "cx", "sx", "cy", "sy", "angle_out_deg", "rate_out_dps")
+    plots.add_samples("fpga", cols, _rate_rows(t, np.ones_like(t), -3.4 / 3600.0 * t, 0 * t))
+    plots.refresh(force=True)
+    _, y = plots.c_cvg.getData()
+    np.testing.assert_allclose(y, 3.4 / 0.277, rtol=1e-6)
+    assert "rate output" in plots.p_cvg.titleLabel.text
+    plots.set_bryan_factor(None)  # K unknown: the wave's rate, and the title says so
+    assert "not divided" in plots.p_cvg.titleLabel.text
+
+
+def test_allan_axis_labels_do_not_print_over_each_other(plots):
+    """cvg-allan's curve from 0.09 to 3 deg/h: the y axis labelled 0.6, 0.7, 0.8, 0.9 over each other
+    (pyqtgraph labels every minor tick of a short log axis); now 1, 2, 5 of each decade."""
+    from bench.gui.plots import log_ticks
+
+    plots.set_layout("cvg")
+    tau = np.array([0.1, 1.0, 10.0, 100.0, 200.0])
+    curve = np.column_stack((tau, [2.9, 0.7, 0.24, 0.17, 0.23], [2.7, 0.6, 0.2, 0.1, 0.09],
+                             [3.1, 0.8, 0.3, 0.4, 1.9], [6000, 600, 60, 6, 3]))
+    plots.add_samples("cvg_allan_curve", ("tau_s", "adev_dph", "adev_low_dph", "adev_high_dph", "clusters"), curve)
+    plots.refresh(force=True)
+    major = plots.p_allan.getAxis("left")._tickLevels[0]
+    assert [label for _, label in major] == ["0.1", "0.2", "0.5", "1", "2"]
+    positions = np.array([pos for pos, _ in major])
+    assert np.all(np.diff(positions) >= np.log10(2.0) - 1e-9)  # a factor 2 apart at least: room for a label
+    assert [lab for _, lab in log_ticks(0.01, 500.0)] == ["0.01", "0.1", "1", "10", "100"]

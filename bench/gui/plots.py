@@ -64,6 +64,21 @@ def squared_unit(unit: str) -> str:
     return "1" if unit in ("", "1") else f"{unit}\u00b2"
 
 
+def log_ticks(low: float, high: float) -> list[tuple[float, str]]:
+    """Labelled ticks of a log axis over [low, high] (positive): 1, 2, 5 of each decade over three
+    decades or less, the decades alone over more; as (log10 value, label).  pyqtgraph's own labels
+    every minor tick of a short log axis, and 0.6 .. 0.9 print over each other."""
+    lo_dec, hi_dec = math.floor(math.log10(low)), math.ceil(math.log10(high))
+    steps = (1.0, 2.0, 5.0) if hi_dec - lo_dec <= 3 else (1.0,)
+    ticks = []
+    for d in range(lo_dec, hi_dec + 1):
+        for m in steps:
+            v = m * 10.0 ** d
+            if low / 1.05 <= v <= high * 1.05:
+                ticks.append((math.log10(v), f"{v:g}"))
+    return ticks
+
+
 def _columns(columns: tuple[str, ...], data: np.ndarray, wanted: tuple[str, ...]) -> np.ndarray | None:
     """data's columns named `wanted`, in that order, or None if one is missing."""
     try:
@@ -105,6 +120,7 @@ class LivePlots(QWidget):
         self.cvg_breaks: list[float] = []  # times where the rate output's curve is broken (no held wave)
         self._cvg_last_held = True  # the last FPGA row's wave was held (force-to-rebalance output)
         self._cvg_t_drawn: float | None = None  # the time of the last whole-angle rate drawn
+        self.bryan_factor: float | None = None  # K: the whole-angle rate output is -dtheta/dt / K
         self.t0_s: float | None = 0.0  # the run's start on the bench clock: the time axes are time since then
 
         # one view per plot: a frame repaints only the plots whose data changed
@@ -287,10 +303,18 @@ class LivePlots(QWidget):
             if not self.sweep_shown:
                 self._show_sweep(True)
 
+    def set_bryan_factor(self, k: float | None) -> None:
+        """K of the run (its `bryan_factor`, else the station's nominal): the whole-angle rate output
+        is the wave's rate divided by -K, as the procedures read it (procedures.cvg_allan); unknown
+        (None, 0): the wave's own rate is drawn and the title says so."""
+        self.bryan_factor = float(k) if k and k > 0 else None
+        title = "rate output" if self.bryan_factor else "wave rate \u2212d\u03b8/dt (K unknown: not divided by it)"
+        self.p_cvg.setTitle(legend_title((title, "#2ca02c")))
+
     def _add_rate_output(self, columns: tuple[str, ...], data: np.ndarray, t: np.ndarray, held: np.ndarray) -> None:
         """The rate sensor's output in deg/h where the wave is held (`held`, a row mask): the FPGA's
         rate output in force-to-rebalance (non-zero there), else the whole-angle output's rate
-        -d(angle_out)/dt between consecutive held rows (output-referred: not divided by K)."""
+        -d(angle_out)/dt / K between consecutive held rows (K: set_bryan_factor)."""
         ftr = _columns(columns, data, ("rate_out_dps",))
         angle = _columns(columns, data, ("angle_out_deg",))
         if ftr is not None and np.any(ftr[held, 0] != 0.0):
@@ -325,7 +349,7 @@ class LivePlots(QWidget):
         after_drawn = np.concatenate(([joins_last], ok[:-1]))
         self.cvg_breaks.extend(t_all[picks[1:]][ok & ~after_drawn].tolist())
         if np.any(ok):
-            rate = -np.diff(a_all[picks])[ok] / dt[ok] * 3600.0
+            rate = -np.diff(a_all[picks])[ok] / dt[ok] * 3600.0 / (self.bryan_factor or 1.0)
             self.cvg.append(t_all[picks[1:]][ok], rate[:, None])
             self._cvg_t_drawn = float(t_all[picks[1:]][ok][-1])
 
@@ -416,6 +440,8 @@ class LivePlots(QWidget):
             self.c_allan.setData(tau, adev)
             self.c_allan_lo.setData(tau, lo)
             self.c_allan_hi.setData(tau, hi)
+            if len(tau):
+                self.p_allan.getAxis("left").setTicks([log_ticks(float(np.min(lo)), float(np.max(hi))), []])
         if len(self.sweep):
             f, amp, phase = (self.sweep.column(c) for c in SWEEP_COLS)
             order = np.argsort(f, kind="stable")

@@ -248,6 +248,7 @@ class ReplayWindow(QMainWindow):
 
                 self.plots.set_layout(layout_for(e.procedure))  # the plots the procedure's run showed live
                 self.plots.clear()
+                self.plots.set_bryan_factor(e.params.get("bryan_factor"))  # the K the run used (recorded)
                 self.plots.set_origin(e.t_sim_s)  # time since the run started (bench.gui.replay.run_start_s)
             elif isinstance(e, ev.StreamDeclared):
                 self.plots.declare(e.schema)
