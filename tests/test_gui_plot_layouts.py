@@ -187,3 +187,19 @@ def test_allan_axis_labels_do_not_print_over_each_other(plots):
     positions = np.array([pos for pos, _ in major])
     assert np.all(np.diff(positions) >= np.log10(2.0) - 1e-9)  # a factor 2 apart at least: room for a label
     assert [lab for _, lab in log_ticks(0.01, 500.0)] == ["0.01", "0.1", "1", "10", "100"]
+
+
+def test_a_held_wave_puts_e_on_a_linear_axis_despite_its_climb_from_nothing(plots):
+    """hrg-selfcal holds E at 1 for half an hour after its excitation climbed from 1e-12: E was drawn
+    on a log axis from 1e-12 to 1 (a flat line at the top); a decay still gets the log axis."""
+    plots.clear()
+    t = np.arange(0.0, 100.0, 0.01)
+    a = np.minimum(1.0, np.exp((t - 5.0) * 5.0))  # the climb, then held
+    cols = ("t_s", "cx", "sx", "cy", "sy")
+    plots.add_samples("fpga", cols, np.column_stack((t, a, 0 * t, 0 * t, 0 * t)))
+    plots.refresh(force=True)
+    assert not plots.e_log
+    t2 = np.arange(100.0, 1000.0, 0.1)
+    plots.add_samples("fpga", cols, np.column_stack((t2, np.exp(-(t2 - 100.0) / 300.0), 0 * t2, 0 * t2, 0 * t2)))
+    plots.refresh(force=True)
+    assert plots.e_log  # E falls 400x in the decay

@@ -488,10 +488,14 @@ class LivePlots(QWidget):
         plot.setYRange(lo - pad, hi + pad, padding=0.0)
 
     def _choose_e_scale(self, e: np.ndarray) -> None:
-        """E on a log axis when it spans more than a decade (a decay into the noise), else linear: a
-        log axis over less than a decade has one tick or none, and the values cannot be read."""
+        """E on a log axis when, once excited, it spans more than a decade (a decay into the noise),
+        else linear: a log axis over less than a decade has one tick or none, and the values cannot
+        be read."""
         if not len(e):
             return
+        # from the wave's excitation on (E first at half its largest): the climb from nothing at a
+        # run's start spans ten decades and would put a held wave's flat E on a log axis
+        e = e[int(np.argmax(e >= 0.5 * e.max())):]
         span = float(e.max() / max(e.min(), 1e-300))
         log = self.e_log
         if log and span < E_LINEAR_BELOW:
