@@ -166,7 +166,7 @@ def test_whole_angle_rate_output_is_the_waves_rate_divided_by_k(plots):
     plots.refresh(force=True)
     _, y = plots.c_cvg.getData()
     np.testing.assert_allclose(y, 3.4 / 0.277, rtol=1e-6)
-    assert "rate output" in plots.p_cvg.titleLabel.text
+    assert "\u00f7 K (K = 0.277)" in plots.p_cvg.titleLabel.text
     plots.set_bryan_factor(None)  # K unknown: the wave's rate, and the title says so
     assert "not divided" in plots.p_cvg.titleLabel.text
 

@@ -308,7 +308,8 @@ class LivePlots(QWidget):
         is the wave's rate divided by -K, as the procedures read it (procedures.cvg_allan); unknown
         (None, 0): the wave's own rate is drawn and the title says so."""
         self.bryan_factor = float(k) if k and k > 0 else None
-        title = "rate output" if self.bryan_factor else "wave rate \u2212d\u03b8/dt (K unknown: not divided by it)"
+        title = (f"rate from the output, \u2212d\u03b8/dt \u00f7 K (K = {self.bryan_factor:g})" if self.bryan_factor
+                 else "wave rate \u2212d\u03b8/dt (K unknown: not divided by it)")
         self.p_cvg.setTitle(legend_title((title, "#2ca02c")))
 
     def _add_rate_output(self, columns: tuple[str, ...], data: np.ndarray, t: np.ndarray, held: np.ndarray) -> None:
