@@ -112,9 +112,8 @@ DRIFT_ORDERS = (4, 8, 12)
 
 #: why the mean drift is compared with no truth (docs/damping_drift.md, "The mean drift against a truth of 0")
 MEAN_DRIFT_NO_TRUTH = (
-    "no truth compared: the ideal loops' is 0, but the wave's own mean drift in one 90 s record carries "
-    "the loops' random walk (sd 0.013 deg/h over seeds, 2.4 times the fit's standard error); the interval "
-    "is this record's (docs/damping_drift.md)")
+    "not compared: one record's mean carries the loops' random walk (sd 0.013 deg/h over seeds at 90 s; "
+    "docs/damping_drift.md)")
 
 
 def _drift_declarations() -> tuple[Measurement, ...]:
