@@ -17,7 +17,9 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
+from math import nan
 
+import numpy as np
 from scipy import stats
 
 from bench.composition.sim_station import SimStation
@@ -28,11 +30,12 @@ from procedures import find_procedure
 SHORT = {"hrg-free-decay": {"record_s": 20.0, "rate_dps": 20.0}}
 
 
-def outside_counts(name: str, params: dict, seeds: range, station: str = "sim-hrg") -> tuple[dict, dict, int]:
-    """({measurement: seeds outside}, {measurement: seeds compared}, runs) over the seeds."""
+def outside_counts(name: str, params: dict, seeds: range, station: str = "sim-hrg") -> tuple[dict, dict, int, dict]:
+    """({measurement: seeds outside}, {measurement: seeds compared}, runs, {measurement: [value - truth
+    per seed]}) over the seeds (the deviations of non-periodic measurements: a bias shows in their mean)."""
     cls = find_procedure(name)
     periods = cls.truth_periods()
-    outside, compared = defaultdict(int), defaultdict(int)
+    outside, compared, deviation = defaultdict(int), defaultdict(int), defaultdict(list)
     with tempfile.TemporaryDirectory() as tmp:
         for seed in seeds:
             st = SimStation(station, seed=seed).open()
@@ -49,7 +52,9 @@ def outside_counts(name: str, params: dict, seeds: range, station: str = "sim-hr
                 if flag is not None:
                     compared[m] += 1
                     outside[m] += bool(flag)
-    return dict(outside), dict(compared), len(seeds)
+                    if m not in periods:
+                        deviation[m].append(r["value"] - truth[m])
+    return dict(outside), dict(compared), len(seeds), dict(deviation)
 
 
 def band(n: int, p: float = 0.05, q: float = 0.995) -> int:
@@ -66,17 +71,20 @@ def main(argv: list[str]) -> None:
             k, _, v = argv[i + 1].partition("=")
             params[k] = v
     t0 = time.perf_counter()
-    outside, compared, runs = outside_counts(name, params, range(1, n + 1))
+    outside, compared, runs, deviation = outside_counts(name, params, range(1, n + 1))
     hi = band(n)
     print(f"{name} {params}: {runs} seeds in {time.perf_counter() - t0:.0f} s; chance alone: "
           f"0..{hi} of {n} outside (Binomial({n}, 0.05), 99.5 %)")
-    print(f"{'measurement':30s} {'outside':>8s} {'of':>4s}  verdict")
+    print(f"{'measurement':30s} {'outside':>8s} {'of':>4s}  {'mean(value - truth)':>20s} {'sd':>10s}  verdict")
     rows = []
     for m in sorted(compared, key=lambda k: (-outside.get(k, 0), k)):
         k, c = outside.get(m, 0), compared[m]
         verdict = "model error (above the band)" if k > band(c) else "chance"
-        rows.append({"measurement": m, "outside": k, "compared": c, "verdict": verdict})
-        print(f"{m:30s} {k:8d} {c:4d}  {verdict}")
+        dev = np.asarray(deviation.get(m, []), dtype=float)
+        mean, sd = (float(dev.mean()), float(dev.std(ddof=1)) if len(dev) > 1 else 0.0) if len(dev) else (nan, nan)
+        rows.append({"measurement": m, "outside": k, "compared": c, "verdict": verdict,
+                     "mean_deviation": mean, "sd_deviation": sd})
+        print(f"{m:30s} {k:8d} {c:4d}  {mean:20.4g} {sd:10.3g}  {verdict}")
     total_k, total_c = sum(outside.values()), sum(compared.values())
     print(f"all: {total_k} of {total_c} truths outside ({100.0 * total_k / max(total_c, 1):.1f} %, 5 % expected)")
     print(json.dumps({"procedure": name, "params": params, "seeds": n, "rows": rows}))

@@ -172,3 +172,9 @@ def no_interval_reasons(procedure: str | None) -> dict[str, str]:
     """Why each measurement of a registered procedure that has no 95 % interval has none."""
     cls = procedure_named(procedure) if procedure else None
     return {} if cls is None else cls.no_interval_reasons()
+
+
+def no_truth_reasons(procedure: str | None) -> dict[str, str]:
+    """Why each measurement of a registered procedure that no simulator truth is compared with is not."""
+    cls = procedure_named(procedure) if procedure else None
+    return {} if cls is None else cls.no_truth_reasons()

@@ -7,6 +7,8 @@ check is deterministic).  Kept short for CI: 10 rate windows (one or two table t
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from procedures import find_procedure
@@ -137,3 +139,18 @@ def test_bias_and_repeatability_on_the_noisy_stations(noisy_bias_run):
     record, truth = noisy_bias_run
     assert truth["bias_repeatability_dph"] > 0
     _check_truths(record, truth, ("bias_dph", "bias_repeatability_dph"))
+
+
+def test_bias_figure_states_the_earth_rate_it_removed(noisy_bias_run):
+    """With earth_rate_dph = 0 the bias is read with the projection from the station's latitude
+    removed (15.041 sin 48 deg = 11.18 deg/h on sim-hrg-wa); the figure's note said "Earth's rate
+    removed: 0 deg/h" (the parameter, not the value used)."""
+    from bench.recorder import RunData
+
+    record, _ = noisy_bias_run
+    proc = CvgBias(record.params)
+    with RunData(record.raw_file) as data:
+        removed = proc.earth_rate_on_axis_dph(data)
+        note = proc.figures(data)[0].note
+    assert removed == pytest.approx(15.041 * math.sin(math.radians(48.0)), rel=1e-3)
+    assert f"Earth's rate removed: {removed:.4g} deg/h" in note and "latitude" in note

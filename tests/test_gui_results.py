@@ -93,3 +93,21 @@ def test_truth_column_after_a_run_on_the_simulated_station(qtbot, tmp_path, monk
         assert any(r["95% interval"] for r in rows)
     finally:
         backend.close()
+
+
+def test_a_measurement_compared_with_no_truth_says_why_on_a_simulated_station(qtbot):
+    """hrg-damping's mean drift has no truth one record can be held to (docs/damping_drift.md): its
+    truth cell says "not compared" with the reason as its tooltip, as the report does; on a real
+    bench (no truths) the cell stays empty."""
+    from procedures import no_truth_reasons
+
+    reasons = no_truth_reasons("hrg-damping")
+    t = ResultsTable()
+    qtbot.addWidget(t)
+    t.set_truth({"drift_before_dph": 29.8}, {}, reasons)
+    t.add("drift_before_mean_dph", -0.0066, "deg/h", None, None, "COMPLETE", ci95=(-0.017, 0.004))
+    cell = t.table.item(0, t.HEADERS.index("truth"))
+    assert cell.text() == "not compared" and cell.toolTip() == reasons["drift_before_mean_dph"]
+    t.set_truth({}, {}, reasons)  # a real bench
+    t.add("drift_before_mean_dph", -0.0066, "deg/h", None, None, "COMPLETE", ci95=(-0.017, 0.004))
+    assert t.table.item(1, t.HEADERS.index("truth")).text() == ""

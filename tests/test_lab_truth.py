@@ -298,3 +298,23 @@ def test_every_hrg_selfcal_measurement_has_an_interval_or_says_why_not():
     assert bare == [], bare
     arw = next(r for r in results if r.name == "angle_arw_deg_rth")
     assert arw.ci95[0] == 0.0 and arw.ci95[1] >= arw.value
+
+
+def test_hrg_damping_mean_drift_is_compared_with_no_truth_and_the_report_says_why():
+    """The mean verification drift has no simulator truth that one record can be held to (the loops'
+    random walk, docs/damping_drift.md): it is neither flagged nor counted, and its row says why."""
+    from bench.reporting import _table_rows
+    from procedures.hrg_damping import MEAN_DRIFT_NO_TRUTH, HrgDamping
+
+    truth = HrgDamping.truth_for({"drift_before_mean_dph": 0.0, "drift_after_mean_dph": 0.0,
+                                  "drift_before_8theta_dph": 0.0})
+    assert "drift_before_mean_dph" not in truth and "drift_after_mean_dph" not in truth
+    assert truth["drift_before_8theta_dph"] == 0.0  # the harmonics keep theirs
+    reasons = HrgDamping.no_truth_reasons()
+    assert set(reasons) == {"drift_before_mean_dph", "drift_after_mean_dph"}
+    m = {"value": -0.038, "ci95": [-0.048, -0.027], "unit": "deg/h", "outcome": "COMPLETE", "source": "run"}
+    known = {"truth": truth, "periods": {}, "lab": {}, "why_not": {}, "why_no_truth": reasons}
+    rows = {r["name"]: r for r in _table_rows({"drift_before_mean_dph": m, "drift_before_8theta_dph": m}, known)}
+    mean = rows["drift_before_mean_dph"]
+    assert not mean["outside"] and not mean["compared"] and mean["truth_why"] == MEAN_DRIFT_NO_TRUTH
+    assert rows["drift_before_8theta_dph"]["outside"] and rows["drift_before_8theta_dph"]["truth_why"] == ""

@@ -82,7 +82,7 @@ def truth_count_line(flags: dict[str, bool]) -> str:
 def print_record(js: dict[str, Any]) -> None:
     """The run's record as a table, truths flagged, verdicts beside the values."""
     from bench import numbers
-    from procedures import measurement_truth
+    from procedures import measurement_truth, no_truth_reasons
 
     print(f"run {js['run_id']}  {js['procedure']}  {js['outcome']}  ({js['end_reason']})")
     lab = js.get("limits")
@@ -100,16 +100,24 @@ def print_record(js: dict[str, Any]) -> None:
         return "-" if x is None else numbers.plain(x)
 
     judged = (lab or {}).get("measurements", {})
+    why_no_truth = no_truth_reasons(js.get("procedure")) if truth else {}  # said where the truth would be
+    notes: list[str] = []
     rows = [("measurement", "value", "unit", "95% interval", "limits", "outcome", "truth" if truth else "")]
     for name, m in js["measurements"].items():
         value, ci = numbers.with_interval(m["value"], m["ci95"])  # the report's digit rule
         ci = "" if ci == numbers.DASH else ci
         lim, outcome = _limits_and_outcome(m, judged.get(name), num)
         t = numbers.truth_text(truth[name], m["ci95"]) + (" !" if flags.get(name) else "") if name in truth else ""
+        if name not in truth and name in why_no_truth:
+            if why_no_truth[name] not in notes:
+                notes.append(why_no_truth[name])
+            t = "*" * (notes.index(why_no_truth[name]) + 1)
         rows.append((name, value, m["unit"], ci, lim, outcome, t))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for r in rows:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())
+    for i, why in enumerate(notes):
+        print(f"  {'*' * (i + 1)} {why}")
     print(
         f"  safe state {'confirmed' if js['safe_state'] else 'NOT CONFIRMED'}; "
         f"{js['simulated_s']:.3f} s bench time, {js['wall_s']:.2f} s wall"

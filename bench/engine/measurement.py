@@ -125,6 +125,7 @@ class Measurement:
     when_doc: str = ""  # the condition in words, for `gyrobench list` and the docs' reference
     period: float | None = None  # a periodic quantity (an axis angle: 90 deg): truth compared modulo it
     no_interval: str = ""  # why the value comes without a 95 % interval (shown where the interval would be)
+    no_truth: str = ""  # why no simulator truth is compared with it (shown where the truth would be)
 
     def applies(self, proc: Any) -> bool:
         """Whether the run measures it (its condition, on the procedure's parameters and state)."""
@@ -167,6 +168,7 @@ class Measurement:
             "condition": self.when_doc or ("" if self.when is None else "(conditional)"),
             **({"period": self.period} if self.period is not None else {}),
             **({"no_interval": self.no_interval} if self.no_interval else {}),
+            **({"no_truth": self.no_truth} if self.no_truth else {}),
         }
 
 

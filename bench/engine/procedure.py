@@ -226,6 +226,11 @@ class Procedure:
         """Why each declared measurement that comes without an interval does, by name."""
         return {spec.name: spec.no_interval for spec in cls.measurements if spec.no_interval}
 
+    @classmethod
+    def no_truth_reasons(cls) -> dict[str, str]:
+        """Why each declared measurement that a simulator's truth is not compared with is not, by name."""
+        return {spec.name: spec.no_truth for spec in cls.measurements if spec.no_truth}
+
     # --- analysis hook ---------------------------------------------------------------------
     def analysis(self, data: Any) -> list[Result]:
         """Estimate the measurements from recorded data; override to support `analyze`."""

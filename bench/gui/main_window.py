@@ -427,11 +427,23 @@ class MainWindow(QMainWindow):
             left = "finished"
         self.run_info.setText(f"run {self.run_id}  \u00b7  elapsed {_duration(elapsed)}  \u00b7  {left}")
 
+    def _run_bryan_factor(self, params: dict) -> float | None:
+        """The run's K (its bryan_factor, 0: the station's nominal), for the live rate output."""
+        k = params.get("bryan_factor")
+        if isinstance(k, (int, float)) and k > 0:
+            return float(k)
+        station = getattr(self.backend, "station", None)
+        try:
+            return float(station.nominal()["bryan_factor"])
+        except Exception:  # noqa: BLE001 - no station (a replay), or a kind without K: the wave's rate, said
+            return None
+
     def _on_run_started(self, e: ev.RunStarted) -> None:
         from .plots import layout_for
 
         self.plots.set_layout(layout_for(e.procedure))  # the plots follow the procedure
         self.plots.clear()
+        self.plots.set_bryan_factor(self._run_bryan_factor(e.params))
         self.plots.set_origin(e.t_sim_s if e.t_sim_s > 0 else None)  # a replay's RunStarted says 0
         self.run_t0_s = e.t_sim_s
         self.run_id = e.run_id
@@ -439,12 +451,12 @@ class MainWindow(QMainWindow):
         self.steps_done = 0
         self.step_fraction = 0.0
         self.results.clear()
-        from procedures import measurement_periods
+        from procedures import measurement_periods, no_truth_reasons
 
         from .run_truth import truth_for_run
 
         self.results.set_truth(truth_for_run(self.backend, e.procedure, e.run_id),  # the truth column (simulated)
-                               measurement_periods(e.procedure))
+                               measurement_periods(e.procedure), no_truth_reasons(e.procedure))
         self.steps.set_steps(e.steps)
         self.left_scroll.ensureWidgetVisible(self.station_box, 0, 0)  # the locked form gives way to the station
         self.run_active = True

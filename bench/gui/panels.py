@@ -171,8 +171,11 @@ class StepList(QWidget):
     def set_status(self, name: str, status: str) -> None:
         self.status[name] = status
         self._item(name).setText(0, STATUS_MARKS.get(status, "?"))
-        if status == "running":
+        if status == "running":  # a new step: its own progress, not the last step's words
             self.progress.setValue(0)
+            self.message.setText("")
+        elif status == "done":  # a finished step is whole (one that reported no progress read 0 %)
+            self.progress.setValue(self.progress.maximum())
 
     def set_progress(self, fraction: float, message: str) -> None:
         self.progress.setValue(int(round(1000 * min(1.0, max(0.0, fraction)))))
@@ -198,6 +201,7 @@ class ResultsTable(QWidget):
         lay.addWidget(self.table, 1)  # the room goes to the rows first, up to their height
         self.truths: dict[str, float] = {}
         self.periods: dict[str, float] = {}
+        self.no_truth: dict[str, str] = {}
         self._split_before: list[int] | None = None  # the plots/results split before the rows grew it
         row = QHBoxLayout()
         self.outcome = QLabel("")
@@ -220,13 +224,17 @@ class ResultsTable(QWidget):
         self.report_button.setEnabled(False)
         self.truths = {}
         self.periods = {}
+        self.no_truth = {}
         self._fit_rows()
 
-    def set_truth(self, truths: dict[str, float], periods: dict[str, float] | None = None) -> None:
-        """The simulator's true value of each measurement, by name (empty on a real bench), and the
-        period of each periodic one (an axis angle), compared at its nearest image as in the report."""
+    def set_truth(self, truths: dict[str, float], periods: dict[str, float] | None = None,
+                  no_truth: dict[str, str] | None = None) -> None:
+        """The simulator's true value of each measurement, by name (empty on a real bench), the
+        period of each periodic one (an axis angle), compared at its nearest image as in the report,
+        and why a measurement is compared with no truth (shown in its truth cell when truths are)."""
         self.truths = dict(truths)
         self.periods = dict(periods or {})
+        self.no_truth = dict(no_truth or {}) if self.truths else {}
 
     def add(self, name: str, value: float, unit: str, low: float | None, high: float | None, outcome: str,
             dut: str | None = None, ci95: tuple[float, float] | None = None, truth: float | None = None) -> None:
@@ -245,6 +253,10 @@ class ResultsTable(QWidget):
             item.setFlags(item.flags() & ~Qt.ItemFlag.ItemIsEditable)
             item.setBackground(QBrush(colour))
             if not measured and c in (1, 5):
+                item.setForeground(QBrush(QColor("#707070")))
+            if c == 6 and truth is None and name in self.no_truth:  # compared with no truth: why, as the report
+                item.setText("not compared")
+                item.setToolTip(self.no_truth[name])
                 item.setForeground(QBrush(QColor("#707070")))
             self.table.setItem(r, c, item)
         self._fit_rows()

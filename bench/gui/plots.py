@@ -18,6 +18,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import QGridLayout, QLabel, QWidget
+from scipy.signal import lfilter
 
 from bench.analysis.slow_model import orbit_elements
 from bench.streams import StreamSchema
@@ -28,6 +29,10 @@ FPGA_COLS = ("t_s", "cx", "sx", "cy", "sy", "E", "theta_deg")
 TABLE_COLS = ("t_s", "rate_dps", "angle_deg")
 SWEEP_COLS = ("freq_hz", "amplitude", "phase_deg")
 RATE_SPAN_S = 0.1  # the live rate output's differencing span (whole-angle output)
+WAVE_COHERENCE_ALPHA = 0.03  # the weight of each row's 4 theta step in the wave test's running mean
+WAVE_COHERENCE_MIN = 0.5  # |mean step| above which a wave is there (noise alone: ~0.12)
+THETA_TITLE = "wave angle \u03b8"
+NO_WAVE_TITLE = "wave angle \u03b8: no standing wave"  # pickoff noise alone: no angle to draw
 TABLE_STREAM = "table"  # the table's own rate stream: the table-rate curve (a procedure's readings are markers)
 ALLAN_STREAM, ALLAN_COLS = "cvg_allan_curve", ("tau_s", "adev_dph")  # procedures/cvg_allan.py's curve
 #: the plots each layout shows (attribute names of LivePlots' PlotItems)
@@ -57,6 +62,21 @@ def legend_title(*entries: tuple[str, str]) -> str:
 def squared_unit(unit: str) -> str:
     """The unit of a sum of squares (E = cx^2 + ... ): V -> V\u00b2; dimensionless stays "1"."""
     return "1" if unit in ("", "1") else f"{unit}\u00b2"
+
+
+def log_ticks(low: float, high: float) -> list[tuple[float, str]]:
+    """Labelled ticks of a log axis over [low, high] (positive): 1, 2, 5 of each decade over three
+    decades or less, the decades alone over more; as (log10 value, label).  pyqtgraph's own labels
+    every minor tick of a short log axis, and 0.6 .. 0.9 print over each other."""
+    lo_dec, hi_dec = math.floor(math.log10(low)), math.ceil(math.log10(high))
+    steps = (1.0, 2.0, 5.0) if hi_dec - lo_dec <= 3 else (1.0,)
+    ticks = []
+    for d in range(lo_dec, hi_dec + 1):
+        for m in steps:
+            v = m * 10.0 ** d
+            if low / 1.05 <= v <= high * 1.05:
+                ticks.append((math.log10(v), f"{v:g}"))
+    return ticks
 
 
 def _columns(columns: tuple[str, ...], data: np.ndarray, wanted: tuple[str, ...]) -> np.ndarray | None:
@@ -96,6 +116,11 @@ class LivePlots(QWidget):
         self.refresh_cost_s: deque[float] = deque(maxlen=2000)
         self._dirty = False
         self._theta_last_rad: float | None = None
+        self._wave_phasor: tuple[complex | None, complex] = (None, 0j)  # _wave_present's carry
+        self.cvg_breaks: list[float] = []  # times where the rate output's curve is broken (no held wave)
+        self._cvg_last_held = True  # the last FPGA row's wave was held (force-to-rebalance output)
+        self._cvg_t_drawn: float | None = None  # the time of the last whole-angle rate drawn
+        self.bryan_factor: float | None = None  # K: the whole-angle rate output is -dtheta/dt / K
         self.t0_s: float | None = 0.0  # the run's start on the bench clock: the time axes are time since then
 
         # one view per plot: a frame repaints only the plots whose data changed
@@ -122,9 +147,10 @@ class LivePlots(QWidget):
         self.p_e.setLabel("left", "E", units="1")
         self.c_e = self.p_e.plot(pen=pg.mkPen("#1f77b4", width=1), name="E")
         self.c_fit = self.p_e.plot(pen=pg.mkPen(FIT_COLOUR, width=2, style=pg.QtCore.Qt.PenStyle.DashLine), name="fit")
-        self.p_theta = add_plot(1, 0, legend_title(("wave angle \u03b8", "#9467bd")))
+        self.p_theta = add_plot(1, 0, legend_title((THETA_TITLE, "#9467bd")))
+        self._theta_title = THETA_TITLE
         self.p_theta.setLabel("left", "\u03b8", units="deg")
-        self.c_theta = self.p_theta.plot(pen=pg.mkPen("#9467bd", width=1), name="\u03b8")
+        self.c_theta = self.p_theta.plot(pen=pg.mkPen("#9467bd", width=1), name="\u03b8", connect="finite")
         self.p_rate = add_plot(1, 1, legend_title(("table rate", "#8c564b")))
         self.p_rate.setLabel("left", "rate", units="deg/s")
         self.c_rate = self.p_rate.plot(pen=pg.mkPen("#8c564b", width=1), name="rate")
@@ -213,6 +239,10 @@ class LivePlots(QWidget):
         self.allan = np.empty((0, 2))
         self.fits.clear()
         self._theta_last_rad = None
+        self._wave_phasor = (None, 0j)
+        self.cvg_breaks = []
+        self._cvg_last_held = True
+        self._cvg_t_drawn = None
         self._x_range = None
         self.set_layout(self.layout_kind)
         for c in (*self.c_q, self.c_e, self.c_fit, self.c_theta, self.c_rate, self.c_rate_marks, self.c_amp,
@@ -236,8 +266,10 @@ class LivePlots(QWidget):
         q = _columns(columns, data, ("cx", "sx", "cy", "sy"))
         if t is not None and q is not None:
             el = orbit_elements(q)
-            # the angle means something when the quadrature is small against the amplitude
-            defined = bool(np.median(np.abs(el["k"]) / np.maximum(el["a"], 1e-300)) < 0.3)
+            # the angle means something where a standing wave is there: its 4 theta phasor moves
+            # smoothly (pickoff noise alone has none), with the quadrature small against the amplitude
+            defined = self._wave_present(el["theta_rad"]) & bool(
+                np.median(np.abs(el["k"]) / np.maximum(el["a"], 1e-300)) < 0.3)
             theta_deg = self._unwrapped_theta_deg(el["theta_rad"], defined)
             values = np.column_stack((q, el["E"], theta_deg))  # FPGA_COLS after t_s
             self.fpga.append(t[:, 0], values)
@@ -271,13 +303,25 @@ class LivePlots(QWidget):
             if not self.sweep_shown:
                 self._show_sweep(True)
 
+    def set_bryan_factor(self, k: float | None) -> None:
+        """K of the run (its `bryan_factor`, else the station's nominal): the whole-angle rate output
+        is the wave's rate divided by -K, as the procedures read it (procedures.cvg_allan); unknown
+        (None, 0): the wave's own rate is drawn and the title says so."""
+        self.bryan_factor = float(k) if k and k > 0 else None
+        title = (f"rate from the output, \u2212d\u03b8/dt \u00f7 K (K = {self.bryan_factor:g})" if self.bryan_factor
+                 else "wave rate \u2212d\u03b8/dt (K unknown: not divided by it)")
+        self.p_cvg.setTitle(legend_title((title, "#2ca02c")))
+
     def _add_rate_output(self, columns: tuple[str, ...], data: np.ndarray, t: np.ndarray, held: np.ndarray) -> None:
         """The rate sensor's output in deg/h where the wave is held (`held`, a row mask): the FPGA's
         rate output in force-to-rebalance (non-zero there), else the whole-angle output's rate
-        -d(angle_out)/dt between consecutive held rows (output-referred: not divided by K)."""
+        -d(angle_out)/dt / K between consecutive held rows (K: set_bryan_factor)."""
         ftr = _columns(columns, data, ("rate_out_dps",))
         angle = _columns(columns, data, ("angle_out_deg",))
         if ftr is not None and np.any(ftr[held, 0] != 0.0):
+            was_held = np.concatenate(([self._cvg_last_held], held[:-1]))
+            self.cvg_breaks.extend(t[held & ~was_held].tolist())  # the first held row after unheld ones
+            self._cvg_last_held = bool(held[-1])
             self.cvg.append(t[held], 3600.0 * ftr[held, :1])
             self._angle_last = None
             return
@@ -300,22 +344,45 @@ class LivePlots(QWidget):
         gaps = unheld[picks[1:] + 1] - unheld[picks[:-1]]  # unheld rows within each span
         dt = np.diff(t_all[picks])
         ok = (dt > 0) & (gaps == 0)  # never across a quench or a start: only over held rows
+        # the curve breaks where rates are missing: a rate whose span does not start at the last
+        # rate drawn (the span before it was not held, or the last block ended without a held wave)
+        joins_last = prev is not None and self._cvg_t_drawn == float(t_all[picks[0]])
+        after_drawn = np.concatenate(([joins_last], ok[:-1]))
+        self.cvg_breaks.extend(t_all[picks[1:]][ok & ~after_drawn].tolist())
         if np.any(ok):
-            rate = -np.diff(a_all[picks])[ok] / dt[ok] * 3600.0
+            rate = -np.diff(a_all[picks])[ok] / dt[ok] * 3600.0 / (self.bryan_factor or 1.0)
             self.cvg.append(t_all[picks[1:]][ok], rate[:, None])
+            self._cvg_t_drawn = float(t_all[picks[1:]][ok][-1])
 
-    def _unwrapped_theta_deg(self, theta_rad: np.ndarray, wave_defined: bool) -> np.ndarray:
+    def _wave_present(self, theta_rad: np.ndarray) -> np.ndarray:
+        """Per row: is there a wave whose angle means something?  The step of the 4 theta phasor
+        from row to row, averaged (WAVE_COHERENCE_ALPHA, carried across blocks): a wave's steps
+        line up (|mean| near 1, turning or not), pickoff noise alone gives random steps (|mean|
+        about sqrt(alpha / 2), 0.12; above WAVE_COHERENCE_MIN once in ~1e7 rows)."""
+        z = np.exp(4j * np.asarray(theta_rad, dtype=float))
+        prev_z, prev_m = self._wave_phasor
+        steps = z * np.conj(np.concatenate(([prev_z if prev_z is not None else z[0]], z[:-1])))
+        a = WAVE_COHERENCE_ALPHA
+        m = lfilter([a], [1.0, a - 1.0], steps, zi=[(1.0 - a) * prev_m])[0]
+        self._wave_phasor = (complex(z[-1]), complex(m[-1]))
+        return np.abs(m) > WAVE_COHERENCE_MIN
+
+    def _unwrapped_theta_deg(self, theta_rad: np.ndarray, defined: np.ndarray) -> np.ndarray:
         """theta continues across its (-45, 45] deg wrap while a standing wave is there (a
-        precessing wave is a line, not a saw); on noise alone it stays wrapped."""
-        prev = self._theta_last_rad
-        if not wave_defined:
-            self._theta_last_rad = None
-            return np.degrees(theta_rad)
-        joined = np.unwrap(np.concatenate(([prev if prev is not None else theta_rad[0]], theta_rad)), period=np.pi / 2)
-        if prev is not None:
-            joined += prev - joined[0]
-        self._theta_last_rad = float(joined[-1])
-        return np.degrees(joined[1:])
+        precessing wave is a line, not a saw); rows without a wave are NaN (not drawn: noise has
+        no angle), and the angle starts afresh, wrapped, where a wave comes back."""
+        out = np.full(len(theta_rad), np.nan)
+        # runs of rows with a wave: [start, end) pairs
+        edges = np.flatnonzero(np.diff(np.concatenate(([0], defined.astype(np.int8), [0]))))
+        for start, end in zip(edges[0::2], edges[1::2], strict=True):
+            prev = self._theta_last_rad if start == 0 else None
+            seg = theta_rad[start:end]
+            joined = np.unwrap(np.concatenate(([prev if prev is not None else seg[0]], seg)), period=np.pi / 2)
+            if prev is not None:
+                joined += prev - joined[0]
+            out[start:end] = joined[1:]
+        self._theta_last_rad = float(out[-1]) if len(out) and defined[-1] else None
+        return np.degrees(out)
 
     def _pick_fit(self, x_key: str, y_keys: tuple[str, ...], prefer: str = "") -> tuple[np.ndarray, np.ndarray] | None:
         """(x, y) of the fit to overlay: the one named `prefer` if any, else the latest with x_key
@@ -354,7 +421,11 @@ class LivePlots(QWidget):
             e_t, e_v = self.fpga.curve("E", positive_only=True)
             self.c_e.setData(e_t, e_v)
             self._choose_e_scale(e_v)
-            self.c_theta.setData(*self.fpga.curve("theta_deg"))
+            th_t, th_deg = self.fpga.curve("theta_deg")
+            wave = bool(np.isfinite(th_deg).any())
+            # no wave at all: an empty curve (all-NaN data would pull the plot's x range off the run's)
+            self.c_theta.setData(th_t if wave else [], th_deg if wave else [])
+            self._set_theta_title(THETA_TITLE if wave else NO_WAVE_TITLE)
         if len(self.table):
             self.c_rate.setData(*self.table.curve("rate_dps"))
         if len(self.table_marks):
@@ -362,7 +433,7 @@ class LivePlots(QWidget):
             self.p_rate.setTitle(legend_title(("table rate", "#8c564b"), ("procedure's readings", "#17becf")))
         if len(self.cvg):
             t_cvg, r_cvg = self.cvg.curve("rate_dph")
-            self.c_cvg.setData(t_cvg, r_cvg)
+            self.c_cvg.setData(t_cvg, r_cvg, connect=self._cvg_connect(t_cvg))
             self._robust_y_range(self.p_cvg, r_cvg)
         if len(self.allan):
             ok = np.all(np.isfinite(self.allan) & (self.allan > 0), axis=1)
@@ -370,6 +441,8 @@ class LivePlots(QWidget):
             self.c_allan.setData(tau, adev)
             self.c_allan_lo.setData(tau, lo)
             self.c_allan_hi.setData(tau, hi)
+            if len(tau):
+                self.p_allan.getAxis("left").setTicks([log_ticks(float(np.min(lo)), float(np.max(hi))), []])
         if len(self.sweep):
             f, amp, phase = (self.sweep.column(c) for c in SWEEP_COLS)
             order = np.argsort(f, kind="stable")
@@ -392,6 +465,17 @@ class LivePlots(QWidget):
         self.refresh_times.append(now)
         self.refresh_cost_s.append(now - t0)
 
+    def _set_theta_title(self, title: str) -> None:
+        if title != self._theta_title:
+            self._theta_title = title
+            self.p_theta.setTitle(legend_title((title, "#9467bd")))
+
+    def _cvg_connect(self, t: np.ndarray) -> np.ndarray:
+        """Which drawn rate points join the next: none across a break (a quench, a start)."""
+        breaks = np.asarray(self.cvg_breaks)
+        before = np.searchsorted(breaks, t, side="right")  # breaks at or before each point
+        return np.concatenate((before[1:] == before[:-1], [False]))
+
     @staticmethod
     def _robust_y_range(plot: pg.PlotItem, y: np.ndarray) -> None:
         """The y axis over the 1st..99th percentile (padded): a wave-angle output's reset at a
@@ -405,10 +489,14 @@ class LivePlots(QWidget):
         plot.setYRange(lo - pad, hi + pad, padding=0.0)
 
     def _choose_e_scale(self, e: np.ndarray) -> None:
-        """E on a log axis when it spans more than a decade (a decay into the noise), else linear: a
-        log axis over less than a decade has one tick or none, and the values cannot be read."""
+        """E on a log axis when, once excited, it spans more than a decade (a decay into the noise),
+        else linear: a log axis over less than a decade has one tick or none, and the values cannot
+        be read."""
         if not len(e):
             return
+        # from the wave's excitation on (E first at half its largest): the climb from nothing at a
+        # run's start spans ten decades and would put a held wave's flat E on a log axis
+        e = e[int(np.argmax(e >= 0.5 * e.max())):]
         span = float(e.max() / max(e.min(), 1e-300))
         log = self.e_log
         if log and span < E_LINEAR_BELOW:

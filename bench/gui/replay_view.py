@@ -229,9 +229,10 @@ class ReplayWindow(QMainWindow):
         self.station.expandToDepth(0)
         self.station.resizeColumnToContents(0)
         self.params.resizeRowsToContents()
-        from procedures import measurement_periods
+        from procedures import measurement_periods, no_truth_reasons
 
-        self.results.set_truth(_recorded_truths(a), measurement_periods(str(a.get("procedure", "")) or None))
+        proc = str(a.get("procedure", "")) or None
+        self.results.set_truth(_recorded_truths(a), measurement_periods(proc), no_truth_reasons(proc))
         self._apply(rec.events)
         self.results.set_report(str(rec.path))
         self.statusBar().showMessage(f"replay of {rec.path}")
@@ -247,6 +248,7 @@ class ReplayWindow(QMainWindow):
 
                 self.plots.set_layout(layout_for(e.procedure))  # the plots the procedure's run showed live
                 self.plots.clear()
+                self.plots.set_bryan_factor(e.params.get("bryan_factor"))  # the K the run used (recorded)
                 self.plots.set_origin(e.t_sim_s)  # time since the run started (bench.gui.replay.run_start_s)
             elif isinstance(e, ev.StreamDeclared):
                 self.plots.declare(e.schema)

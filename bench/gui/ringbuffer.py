@@ -77,7 +77,8 @@ class MinMaxHistory:
     Rows are reduced into buckets as they arrive (each bucket keeps, per column, its min and its
     max with their times); when there are too many buckets, neighbours merge and the bucket size
     doubles.  Drawing costs O(max_points) however long the run, and a one-sample spike stays
-    visible.  `history_s` drops buckets older than that (None keeps everything)."""
+    visible.  `history_s` drops buckets older than that (None keeps everything).  A NaN value
+    (nothing to draw at that row) is neither a min nor a max: a bucket of NaN alone is a gap."""
 
     def __init__(self, n_cols: int | tuple[str, ...], max_points: int = 2000, history_s: float | None = None) -> None:
         n_cols, self.columns = _named(n_cols)
@@ -127,8 +128,10 @@ class MinMaxHistory:
             m = n_full * b
             tb = np.broadcast_to(pt[:m].reshape(n_full, b, 1), (n_full, b, self.n_cols))
             vb = pv[:m].reshape(n_full, b, self.n_cols)
-            i_min = np.argmin(vb, axis=1)[:, None, :]
-            i_max = np.argmax(vb, axis=1)[:, None, :]
+            # NaN (nothing to draw there) is neither min nor max; a bucket of NaN alone stays NaN (a gap)
+            nan = np.isnan(vb)
+            i_min = np.argmin(np.where(nan, np.inf, vb), axis=1)[:, None, :]
+            i_max = np.argmax(np.where(nan, -np.inf, vb), axis=1)[:, None, :]
             self._push(np.take_along_axis(tb, i_min, 1)[:, 0], np.take_along_axis(vb, i_min, 1)[:, 0],
                        np.take_along_axis(tb, i_max, 1)[:, 0], np.take_along_axis(vb, i_max, 1)[:, 0])
             pt, pv = pt[m:], pv[m:]
@@ -159,10 +162,10 @@ class MinMaxHistory:
         """Merge neighbouring buckets (an odd last one stays), doubling the bucket size."""
         n = len(self._t_min) // 2 * 2
         a, b = slice(0, n, 2), slice(1, n, 2)
-        take_a = self._v_min[a] <= self._v_min[b]
+        take_a = (self._v_min[a] <= self._v_min[b]) | np.isnan(self._v_min[b])  # NaN: a gap, kept only alone
         t_min = np.where(take_a, self._t_min[a], self._t_min[b])
         v_min = np.where(take_a, self._v_min[a], self._v_min[b])
-        take_a = self._v_max[a] >= self._v_max[b]
+        take_a = (self._v_max[a] >= self._v_max[b]) | np.isnan(self._v_max[b])
         t_max = np.where(take_a, self._t_max[a], self._t_max[b])
         v_max = np.where(take_a, self._v_max[a], self._v_max[b])
         rest = slice(n, None)
@@ -207,7 +210,8 @@ def _minmax_tail(t: np.ndarray, v: np.ndarray, chunks: int = 32) -> tuple[np.nda
     size = -(-n // chunks)
     m = n // size * size
     tb, vb = t[:m].reshape(-1, size), v[:m].reshape(-1, size)
-    i_min, i_max = np.argmin(vb, axis=1), np.argmax(vb, axis=1)
+    nan = np.isnan(vb)
+    i_min, i_max = np.argmin(np.where(nan, np.inf, vb), axis=1), np.argmax(np.where(nan, -np.inf, vb), axis=1)
     rows = np.arange(len(tb))
     first, second = np.minimum(i_min, i_max), np.maximum(i_min, i_max)
     x = np.column_stack((tb[rows, first], tb[rows, second])).reshape(-1)

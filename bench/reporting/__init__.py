@@ -69,7 +69,7 @@ def _is_number(value: Any) -> bool:
 def _measurement_rows(data: Any, row: dict[str, Any] | None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """(the run's own measurements, the re-analyses `gyrobench analyze` stored) as table rows:
     two tables, so a re-fit never reads as part of what the run measured."""
-    from procedures import measurement_periods, measurement_truth, no_interval_reasons
+    from procedures import measurement_periods, measurement_truth, no_interval_reasons, no_truth_reasons
 
     name = data.attrs.get("procedure")
     known = {
@@ -77,6 +77,7 @@ def _measurement_rows(data: Any, row: dict[str, Any] | None) -> tuple[list[dict[
         "periods": measurement_periods(name),  # an axis angle's truth: its nearest image
         "lab": (data.attrs.get("lab_limits") or {}).get("measurements", {}),  # `gyrobench run --limits`' verdicts
         "why_not": no_interval_reasons(name),  # a value without an interval says why
+        "why_no_truth": no_truth_reasons(name),  # and one compared with no truth (on a simulated station)
     }
     own: dict[str, dict[str, Any]] = {}
     for m in data.measurements():
@@ -108,6 +109,7 @@ def _table_rows(found: dict[str, dict[str, Any]], known: dict[str, Any]) -> list
             "name": name, "value": value, "interval": interval, "why": why, "unit": pretty_unit(m.get("unit") or "1"),
             "limits": lims, "outcome": outcome, "outcome_class": outcome.split(" ")[0],
             "truth": truth_text(t, ci) if t is not None else DASH,
+            "truth_why": known["why_no_truth"].get(base, "") if t is None else "",
             "error": error_in_intervals(m.get("value"), t, ci, period) if t is not None else DASH,
             "outside": bool(t is not None and truth_outside(m.get("value"), t, ci, period)),
             "compared": t is not None and truth_outside(m.get("value"), t, ci, period) is not None,

@@ -68,4 +68,6 @@ def bias_figures(proc: Any, data: Any) -> list[ReportFigure]:
     a.set_ylabel("input-referred rate (deg/h)")
     a.legend(loc="best")
     return [ReportFigure("cvg_bias", "Bias at rest, turn-on by turn-on", fig,
-                         f"{len(est)} turn-on(s); Earth's rate removed: {proc.earth_rate_dph:g} deg/h.")]
+                         f"{len(est)} turn-on(s); Earth's rate removed: {proc.earth_rate_on_axis_dph(data):.4g} deg/h"
+                         + ("." if proc.earth_rate_dph else " (on the sensitive axis, from the station's latitude "
+                            "and axis)."))]

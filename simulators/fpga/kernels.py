@@ -26,7 +26,10 @@ part (25 deg/h each, output-referred, for a 5 mHz split).  The observer measures
 on the angle it was seen at, and `wave_force` cancels it at the predicted angle; the PI is left
 with the rest.  At a fixed angle only one combination is seen; the other is learnt once the
 wave turns (about 10 s at 2 deg/s).  The observer keeps its estimate over a drive cut (the
-split is the resonator's) and starts afresh when the quadrature loop is switched on.
+split is the resonator's) and starts afresh when the quadrature loop is switched on.  It learns
+only while the amplitude is held (AGC_SETTLED_REL): while the AGC pushes the amplitude up its force
+leaks into dk/dt, which read as pumping biased h by ~1 % and left -0.04 deg/h of mean drift in
+hrg-damping's verification (docs/damping_drift.md).
 """
 
 from __future__ import annotations
@@ -74,6 +77,7 @@ S_FW, S_FW_PREV = 45, 46  # the frequency-control force held over the last block
 N_STATE = 47
 MODE_FTR = 1  # OUTPUT_MODE's force-to-rebalance (drivers.fpga.protocol.MODE_FORCE_TO_REBALANCE)
 OBS_MEMORY_S = 100.0  # the observer forgets data older than this (exponential weight)
+AGC_SETTLED_REL = 0.01  # the amplitude's band around the setpoint in which the split observer learns
 OBS_RIDGE = 0.05**3  # damping of the solve: one 50 ms block's weight (weights are span^3: 1/variance)
 
 # control bits (drivers.fpga.protocol), repeated here as compile-time constants
@@ -177,7 +181,10 @@ def update_loops(
     else:
         if st[S_EST] > 0 and abs(st[S_T_END] - t_start) < 0.5 * dt_s and t_est > st[S_T_EST]:
             span = t_est - st[S_T_EST]
-            if quad_on and st[S_OBS_OK] > 0:
+            # the observer learns while the amplitude is held (AGC within AGC_SETTLED_REL of its
+            # setpoint, or the AGC off): an AGC pushing the amplitude up leaks into dk/dt
+            settled = not ctrl & _AGC_EN or abs(a - setpoint) <= AGC_SETTLED_REL * setpoint
+            if quad_on and st[S_OBS_OK] > 0 and settled:
                 _observe_split(st, k / a, a, theta, span, n, dt_s, a / max(setpoint, 1e-12))
             st[S_THETA_RATE] = _wrap(theta - st[S_THETA], 0.5 * math.pi) / span
             # chi is relative to the reference: add back the reference's change since the last estimate

@@ -161,7 +161,8 @@ class ResonatorParams:
             "drift_predicted_dph": rad_s_to_dph(self.delta_inv_tau_per_s / 4.0 / self.bryan_factor),
         }
         # the whole-angle drift against the angle with ideal loops: the damping drift's 4 theta term
-        # before compensation, and nothing else (no mean, no 8 or 12 theta term) before or after
+        # before compensation, and nothing else (no mean, no 8 or 12 theta term) before or after; the
+        # mean is the ideal loops' only (hrg-damping compares it with no truth: docs/damping_drift.md)
         model["drift_before_dph"] = model["drift_before_4theta_dph"] = model["drift_predicted_dph"]
         for name in ("before", "after"):
             for term in ("mean", "8theta", "12theta"):
