@@ -12,7 +12,7 @@ building the figures, SVG, page) are printed in CPU time, the profile that chose
 
 With --against, `report --pdf` (HTML + PDF; issue 36: PDF <= 3 s) alternates the same way unless --no-pdf.
 
-Run: .venv/bin/python benchmarks/report_speed.py [RAW.h5] [--against TREE] [--no-pdf]
+Run: .venv/bin/python benchmarks/report_speed.py [RAW.h5] [--against TREE] [--rounds 4] [--no-pdf]
 (default RAW: records a seed-0 run first)
 
 Measured 2026-11-28 (issue 36) at a quiet moment (load average 1.1), b9415fa (before) against this
@@ -62,6 +62,13 @@ figs, _ = figures_for(data, proc); mark("build the figures (read + decimate + pl
 svgs = [f.svg() for f in figs]; mark("render the figures as SVG")
 heavy = [m for m in ("numba", "scipy.optimize", "bench.engine.runner") if m in sys.modules]
 for name, s in out: print(f"  {s:6.3f} s CPU  {name}")
+import bench.reporting as rep
+if hasattr(rep, "drawn_figures"):  # the same figures built and drawn by two processes (wall, this process's CPU)
+    for workers in (1, 2):
+        d, w, c0 = open_run(sys.argv[1]), time.perf_counter(), c()
+        rep.drawn_figures(d, workers=workers)
+        print(f"  {time.perf_counter() - w:6.3f} s wall, {c() - c0:.3f} s CPU here: read, build and draw the figures, "
+              f"{workers} process(es)")
 print(f"  total {c():.3f} s CPU; heavy modules imported: {', '.join(heavy) or 'none'}")
 """
 
@@ -99,8 +106,9 @@ def compare(raw: Path, against: Path, tmp: str, rounds: int = 4, pdf: bool = Tru
     for (label, with_pdf), rows in got.items():
         tree = against if label == "before" else ROOT
         wall, cpu = (statistics.median(x) for x in zip(*rows, strict=True))
-        print(f"{label} ({tree}) {'HTML+PDF' if with_pdf else 'HTML'}: wall median {wall:.2f} s, CPU median "
-              f"{cpu:.2f} s of {', '.join(f'{c:.2f}' for _, c in rows)}")
+        print(f"{label} ({tree}) {'HTML+PDF' if with_pdf else 'HTML'}: wall median {wall:.2f} s (least "
+              f"{min(w for w, _ in rows):.2f}: the nearest a quiet machine), CPU median {cpu:.2f} s of "
+              f"{', '.join(f'{c:.2f}' for _, c in rows)}")
     for label, tree in (("before", against), ("after", ROOT)):
         print(f"{label}: phases of one in-process report")
         phases = subprocess.run([sys.executable, "-c", _PHASES, str(raw)], check=True, capture_output=True,
@@ -118,9 +126,14 @@ def main() -> None:
         del args[i : i + 2]
     no_pdf = "--no-pdf" in args
     args = [a for a in args if a != "--no-pdf"]
+    rounds = 4
+    if "--rounds" in args:
+        i = args.index("--rounds")
+        rounds = int(args[i + 1])
+        del args[i : i + 2]
     raw = Path(args[0]) if args else record_run(tmp)
     if against is not None:
-        compare(raw, against, tmp, pdf=not no_pdf)
+        compare(raw, against, tmp, rounds=rounds, pdf=not no_pdf)
     from bench.recorder import open_run
 
     with open_run(raw) as data:
