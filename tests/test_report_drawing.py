@@ -38,20 +38,52 @@ def _same_svg(svg: str) -> str:
     return re.sub(r"(id=\"|#|url\(#)[A-Za-z0-9_-]+", r"\1ID", svg)
 
 
-def test_figures_drawn_by_two_processes_are_the_serial_ones_in_the_parts_order(tmp_path):
-    marker = tmp_path / "child"
-    assert fork_is_safe()
-    serial = draw_parts(_parts(5), png=True, workers=1)
-    forked = draw_parts(_parts(5), png=True, workers=2, in_child=lambda: marker.write_text("ran"))
-    assert marker.read_text() == "ran"  # a second process was made (which parts it drew is not fixed)
-    assert [f.key for f in forked] == [f.key for f in serial] == [f"fig{k}" for k in range(5)]
-    for a, b in zip(serial, forked, strict=True):
-        assert (a.title, a.note, a.table) == (b.title, b.note, b.table)
-        assert _same_svg(a.svg()) == _same_svg(b.svg())
-        assert a.png() == b.png()
+_IN_A_FRESH_PROCESS = """
+import json, sys
+from pathlib import Path
+from bench.reporting.drawing import draw_parts, fork_is_safe
+from tests.test_report_drawing import _parts, _same_svg
+marker = Path(sys.argv[1])
+out = {"safe": fork_is_safe()}
+serial = draw_parts(_parts(5), png=True, workers=1)
+forked = draw_parts(_parts(5), png=True, workers=2, in_child=lambda: marker.write_text("ran"))
+out["child"] = marker.is_file()
+out["keys"] = [[f.key for f in serial], [f.key for f in forked]]
+out["same"] = all((a.title, a.note, a.table, _same_svg(a.svg()), a.png()) == (b.title, b.note, b.table,
+                  _same_svg(b.svg()), b.png()) for a, b in zip(serial, forked, strict=True))
+def broken():
+    raise ValueError("no such stream")
+parts = _parts(3)
+parts.insert(1, broken)
+try:
+    draw_parts(parts, workers=2, in_child=lambda: marker.write_text("ran again"))
+except ValueError as exc:
+    out["raised"] = str(exc)
+out["child_again"] = marker.read_text() == "ran again"
+print(json.dumps(out))
+"""
 
 
-def test_a_part_that_fails_raises_as_it_does_drawn_serially():
+def test_figures_drawn_by_two_processes_are_the_serial_ones_and_a_failing_part_raises(tmp_path):
+    """In a process of its own (a test worker may run other threads, and then nothing forks): the
+    figures in the parts' order, the same as drawn serially, and a part that fails raises its error
+    as it does drawn serially, whichever process took it."""
+    import json
+    import os
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    res = subprocess.run([sys.executable, "-c", _IN_A_FRESH_PROCESS, str(tmp_path / "child")], capture_output=True,
+                         text=True, cwd=root, env={**os.environ, "PYTHONPATH": str(root)}, timeout=300)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout.splitlines()[-1])
+    assert out["safe"] and out["child"] and out["child_again"]  # a second process was made each time
+    assert out["keys"] == [[f"fig{k}" for k in range(5)]] * 2 and out["same"]
+    assert out["raised"] == "no such stream"
+
+
+def test_a_part_that_fails_raises_here_as_well():
     def broken() -> list[ReportFigure]:
         raise ValueError("no such stream")
 
@@ -71,7 +103,7 @@ def test_no_fork_while_another_thread_runs(tmp_path):
     other = threading.Thread(target=stop.wait)
     other.start()
     try:
-        assert not fork_is_safe()
+        assert not fork_is_safe()  # (a test worker's own threads may already say so)
         drawn = draw_parts(_parts(3), workers=2, in_child=lambda: marker.write_text("ran"))
     finally:
         stop.set()
