@@ -4,6 +4,7 @@ inline SVG), and the same page as a PDF (WeasyPrint, the `pdf` extra) for the ca
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 from typing import Any
@@ -65,9 +66,11 @@ def drawn_figures(data: Any, proc: Any = None, *, png: bool = False, workers: in
     proc = proc if proc is not None else procedure_of(data)
     parts_hook = getattr(proc, "figure_parts", None)
     if parts_hook is not None:
+        ran: list[bool] = []
         failed: list[BaseException] = []
 
         def guarded() -> None:
+            ran.append(True)
             try:
                 if meanwhile is not None:
                     meanwhile()
@@ -83,7 +86,7 @@ def drawn_figures(data: Any, proc: Any = None, *, png: bool = False, workers: in
         except Exception:  # noqa: BLE001 - figures_for says what failed and draws the streams instead
             if failed:  # meanwhile's own error (no PDF library), not a figure's
                 raise
-            meanwhile = None  # done already
+            meanwhile = None if ran else meanwhile  # done once only
     figs, notes = figures_for(data, proc)
     return draw_parts([partial(_one, f) for f in figs], png, workers=workers, meanwhile=meanwhile), notes
 
@@ -198,11 +201,23 @@ def _log_rows(data: Any, limit: int = 200) -> list[tuple[str, str, str]]:
 
 
 def context(data: Any, row: dict[str, Any] | None = None,
-            figures: tuple[list[ReportFigure] | list[DrawnFigure], list[str]] | None = None) -> dict[str, Any]:
+            figures: tuple[list[ReportFigure] | list[DrawnFigure], list[str]] | None = None,
+            page: dict[str, Any] | None = None) -> dict[str, Any]:
     """Everything the template shows, as text (numbers already formatted); figures: the result
-    of `figures_for(data)` when the caller already has it."""
-    proc = procedure_of(data)
+    of `figures_for(data)` when the caller already has it; page: `page_context(data, row)` likewise."""
+    proc = procedure_of(data) if figures is None or not page else None
     figs, notes = figures if figures is not None else figures_for(data, proc)
+    return {
+        **(page or page_context(data, row, proc)),
+        "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key, "table": f.table} for f in figs],
+        "notes": notes + list(getattr(data, "notes", [])),
+    }
+
+
+def page_context(data: Any, row: dict[str, Any] | None = None, proc: Any = None) -> dict[str, Any]:
+    """What the template shows besides the figures and notes: the run's identity, parameters,
+    measurements and log (proc: the run's procedure, when the caller has it)."""
+    proc = proc if proc is not None else procedure_of(data)
     a = data.attrs
     rows, reanalysis = _measurement_rows(data, row)
     # the truth columns on a simulated station, when a measurement has a truth to compare with
@@ -226,8 +241,6 @@ def context(data: Any, row: dict[str, Any] | None = None,
         "truth_outside": (sum(r["outside"] for r in compared), len(compared)) if truth_shown and compared else None,
         "lab_limits": lab or None,
         "no_limits": not judged_any,
-        "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key, "table": f.table} for f in figs],
-        "notes": notes + list(getattr(data, "notes", [])),
         "log": _log_rows(data),
     }
 
@@ -237,11 +250,20 @@ def render_html(data: Any, row: dict[str, Any] | None = None, ctx: dict[str, Any
     """The report page of one run (a RunData) and, when known, its results-store row.  template: a
     template in bench/reporting/templates that extends report.html.j2 and fills its `certificate`
     block (a page before the report); extra: the variables that template adds."""
+    return _template(template).render(**(ctx or context(data, row)), **(extra or {}))
+
+
+@functools.cache
+def _environment() -> Any:
     import jinja2
 
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True,
-                             trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
-    return env.get_template(template).render(**(ctx or context(data, row)), **(extra or {}))
+    return jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True,
+                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
+
+
+def _template(name: str) -> Any:
+    """A template of bench/reporting/templates, compiled once (Jinja2 checks the file for changes)."""
+    return _environment().get_template(name)
 
 
 def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output: str | Path | None = None,
@@ -255,9 +277,16 @@ def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output
     if pdf and workers <= 1:
         require_weasyprint()  # a missing PDF library is said before anything is written
     with open_run(raw_file) as data:
-        # with pdf, WeasyPrint is imported while the other processes draw (and checked before writing)
-        figures = drawn_figures(data, png=pdf, workers=workers, meanwhile=require_weasyprint if pdf else None)
-        ctx = context(data, row, figures)
+        page: dict[str, Any] = {}
+
+        def meanwhile() -> None:  # while the other processes draw: WeasyPrint (checked before writing), the page
+            if pdf:
+                require_weasyprint()
+            page.update(page_context(data, row))
+            _template(template)
+
+        figures = drawn_figures(data, png=pdf, workers=workers, meanwhile=meanwhile)
+        ctx = context(data, row, figures, page)
         html = render_html(data, row, ctx, template=template, extra=extra)
         out = Path(output or data.path.with_suffix(".html"))
         out.write_text(html, encoding="utf-8")
