@@ -72,6 +72,40 @@ if hasattr(rep, "drawn_figures"):  # the same figures built and drawn by two pro
 print(f"  total {c():.3f} s CPU; heavy modules imported: {', '.join(heavy) or 'none'}")
 """
 
+#: `gyrobench report ...` with each drawing process's CPU for its share of the figures noted: the CPU
+#: of the command's critical path on two idle cores (this process's CPU, less its share, plus the
+#: larger share), which a busy machine inflates far less than it does the wall time
+_CRITICAL = """
+import os, sys, time
+T, PID, shares = time.process_time, os.getpid(), []
+try:
+    import bench.reporting.drawing as dr
+    take0 = dr._take
+    def take(parts, png, taken):
+        c = T(); out = take0(parts, png, taken); d = T() - c
+        if os.getpid() == PID:
+            shares.append(d)
+        else:
+            sys.stderr.write(f"SHARE {d:.4f}\\n"); sys.stderr.flush()
+        return out
+    dr._take = take
+except ImportError:  # a tree from before the two-process drawing
+    pass
+from bench.cli import main
+main(sys.argv[1:])
+print(f"PARENT {T():.4f} {sum(shares):.4f}")
+"""
+
+
+def critical_cpu(tree: Path, raw: Path, out: str, pdf: bool) -> float:
+    """CPU s of the critical path of one `gyrobench report RAW` on `tree` (see _CRITICAL)."""
+    res = subprocess.run([sys.executable, "-c", _CRITICAL, "report", str(raw), "-o", out, *(["--pdf"] if pdf else [])],
+                         check=True, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(tree)),
+                         cwd=tempfile.gettempdir())
+    total, mine = (float(x) for x in res.stdout.split("PARENT")[-1].split())
+    child = [float(ln.split()[1]) for ln in res.stderr.splitlines() if ln.startswith("SHARE")]
+    return total - mine + max([mine, *child])
+
 
 def record_run(runs_dir: str) -> Path:
     from bench.composition.sim_station import SimStation
@@ -109,6 +143,15 @@ def compare(raw: Path, against: Path, tmp: str, rounds: int = 4, pdf: bool = Tru
         print(f"{label} ({tree}) {'HTML+PDF' if with_pdf else 'HTML'}: wall median {wall:.2f} s (least "
               f"{min(w for w, _ in rows):.2f}: the nearest a quiet machine), CPU median {cpu:.2f} s of "
               f"{', '.join(f'{c:.2f}' for _, c in rows)}")
+    crit: dict[tuple[str, bool], list[float]] = {}
+    for k in range(3):
+        for with_pdf in (False, True) if pdf else (False,):
+            for label, tree in (("before", against), ("after", ROOT)):
+                got_s = critical_cpu(tree, raw, f"{tmp}/c{label}{k}.html", with_pdf)
+                crit.setdefault((label, with_pdf), []).append(got_s)
+    for (label, with_pdf), rows in crit.items():
+        print(f"{label} {'HTML+PDF' if with_pdf else 'HTML'}: CPU of the critical path (two idle cores) median "
+              f"{statistics.median(rows):.2f} s of {', '.join(f'{c:.2f}' for c in rows)}")
     for label, tree in (("before", against), ("after", ROOT)):
         print(f"{label}: phases of one in-process report")
         phases = subprocess.run([sys.executable, "-c", _PHASES, str(raw)], check=True, capture_output=True,
