@@ -254,16 +254,16 @@ def render_html(data: Any, row: dict[str, Any] | None = None, ctx: dict[str, Any
 
 
 @functools.cache
-def _environment() -> Any:
+def _environment(templates: Path) -> Any:
     import jinja2
 
-    return jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True,
+    return jinja2.Environment(loader=jinja2.FileSystemLoader(templates), autoescape=True,
                               trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
 
 
 def _template(name: str) -> Any:
-    """A template of bench/reporting/templates, compiled once (Jinja2 checks the file for changes)."""
-    return _environment().get_template(name)
+    """A template of TEMPLATES, compiled once a process (Jinja2 checks the file for changes)."""
+    return _environment(TEMPLATES).get_template(name)
 
 
 def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output: str | Path | None = None,
