@@ -29,6 +29,21 @@ constrained layout's pass).  The PDF's profile (cProfile, before): WeasyPrint's 
 15.2 s profiled (178,023 calls of svg/utils.size, 2,742 paths); as PNGs it draws the page in
 ~1.0 s CPU instead of ~4.1.  The targets (HTML <= 1 s, PDF <= 3 s) are not met: the rest is
 matplotlib (import and drawing 14 axes).
+
+Then (2026-11-28 09:10-09:38, load average 11-21 on the 2 cores, so the wall says little): the
+figures built and drawn by two processes (bench.reporting.drawing), WeasyPrint imported and the
+page's tables made meanwhile, the PDF's PNGs as RGB.  Profile that chose it (one process, CPU s,
+load 4): the five figures' build + constrained layout + SVG 0.24 + 0.46 + 0.37 + 0.15 + 0.30 =
+1.52 of ~2.3 s, independent of each other; the rest serial (numpy+h5py 0.18, matplotlib 0.49, the
+FPGA stream's decompression 0.19).  The PDF (cProfile): WeasyPrint's import 0.92 of 7.1 s profiled
+(now overlapped), its image handling 0.30 (RGBA split into image + mask: 10 PNG encodes, now 5), the
+PNGs 1.08 (now split between the processes).  b9415fa+ (before, /tmp/before) against this tree,
+interleaved, 5 rounds, medians:
+  report RUN        wall 30.68 (least 15.48) -> 18.87 (least 14.29) s; CPU 2.59 -> 2.28 s
+  report RUN --pdf  wall 55.79 (least 28.08) -> 44.91 (least 24.29) s; CPU 5.31 -> 5.27 s
+  CPU of the critical path on two idle cores (3 rounds): HTML 2.79 -> 1.92 s (-31 %), HTML+PDF
+  5.58 -> 4.56 s (-18 %).  Scaled to the quiet figures above (before 1.58 s / 4.16 s): about
+  1.1-1.2 s and 3.4 s; the targets (1 s, 3 s) are still not met.
 """
 
 from __future__ import annotations
