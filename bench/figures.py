@@ -100,11 +100,24 @@ class ReportFigure:
         return text[text.index("<svg"):]
 
     def png(self, dpi: int = PRINT_DPI) -> bytes:
-        """The figure as PNG (Agg) at dpi: the PDF's figure, drawn in the layout the SVG had."""
+        """The figure as PNG (Agg) at dpi: the PDF's figure, drawn in the layout the SVG had.  RGB
+        on its opaque background, quickly compressed: WeasyPrint decodes and compresses it again
+        into the PDF, and an alpha channel it splits into a second image (benchmarks/report_speed.py)."""
+        from PIL import Image
+
         buf = io.BytesIO()
-        self.figure.savefig(buf, format="png", dpi=dpi)
+        self.figure.savefig(buf, format="rgba", dpi=dpi)
         self._keep_layout()
-        return buf.getvalue()
+        width, height = (int(s * dpi) for s in self.figure.get_size_inches())
+        rgba = np.frombuffer(buf.getbuffer(), dtype=np.uint8)
+        if self.figure.get_facecolor()[3] < 1.0 or rgba.size != width * height * 4:  # keep what Agg gave
+            out = io.BytesIO()
+            self.figure.savefig(out, format="png", dpi=dpi)
+            return out.getvalue()
+        out = io.BytesIO()
+        Image.fromarray(rgba.reshape(height, width, 4)[:, :, :3]).save(out, format="PNG", compress_level=1,
+                                                                       dpi=(dpi, dpi))
+        return out.getvalue()
 
     def _keep_layout(self) -> None:
         """Freeze the constrained layout just computed: a second format (SVG then PNG) draws the

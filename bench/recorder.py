@@ -720,6 +720,20 @@ class RunData:
             cached = self._arrays[stream] = self._stream(stream)[...]
         return cached.copy()
 
+    def read_streams(self) -> None:
+        """Read and decompress every stream once now (a file this object opened): processes forked
+        after this share the rows instead of each decompressing them again."""
+        if self._own:
+            for stream in self.streams():
+                if stream not in self._arrays:
+                    self._arrays[stream] = self._stream(stream)[...]
+
+    def reopen(self) -> None:
+        """A handle of this process's own on the same file (in a forked process: HDF5's state and
+        the file's descriptor are not shared with the parent's)."""
+        if self._own:
+            self.f = h5py.File(self.path, "r", locking=False)
+
     def table(self, stream: str) -> dict[str, np.ndarray]:
         """Columns of a stream by name: `data.table("fpga")["cx"]`."""
         arr = self.array(stream)

@@ -12,7 +12,7 @@ building the figures, SVG, page) are printed in CPU time, the profile that chose
 
 With --against, `report --pdf` (HTML + PDF; issue 36: PDF <= 3 s) alternates the same way unless --no-pdf.
 
-Run: .venv/bin/python benchmarks/report_speed.py [RAW.h5] [--against TREE] [--no-pdf]
+Run: .venv/bin/python benchmarks/report_speed.py [RAW.h5] [--against TREE] [--rounds 4] [--no-pdf]
 (default RAW: records a seed-0 run first)
 
 Measured 2026-11-28 (issue 36) at a quiet moment (load average 1.1), b9415fa (before) against this
@@ -29,6 +29,21 @@ constrained layout's pass).  The PDF's profile (cProfile, before): WeasyPrint's 
 15.2 s profiled (178,023 calls of svg/utils.size, 2,742 paths); as PNGs it draws the page in
 ~1.0 s CPU instead of ~4.1.  The targets (HTML <= 1 s, PDF <= 3 s) are not met: the rest is
 matplotlib (import and drawing 14 axes).
+
+Then (2026-11-28 09:10-09:38, load average 11-21 on the 2 cores, so the wall says little): the
+figures built and drawn by two processes (bench.reporting.drawing), WeasyPrint imported and the
+page's tables made meanwhile, the PDF's PNGs as RGB.  Profile that chose it (one process, CPU s,
+load 4): the five figures' build + constrained layout + SVG 0.24 + 0.46 + 0.37 + 0.15 + 0.30 =
+1.52 of ~2.3 s, independent of each other; the rest serial (numpy+h5py 0.18, matplotlib 0.49, the
+FPGA stream's decompression 0.19).  The PDF (cProfile): WeasyPrint's import 0.92 of 7.1 s profiled
+(now overlapped), its image handling 0.30 (RGBA split into image + mask: 10 PNG encodes, now 5), the
+PNGs 1.08 (now split between the processes).  b9415fa+ (before, /tmp/before) against this tree,
+interleaved, 5 rounds, medians:
+  report RUN        wall 30.68 (least 15.48) -> 18.87 (least 14.29) s; CPU 2.59 -> 2.28 s
+  report RUN --pdf  wall 55.79 (least 28.08) -> 44.91 (least 24.29) s; CPU 5.31 -> 5.27 s
+  CPU of the critical path on two idle cores (3 rounds): HTML 2.79 -> 1.92 s (-31 %), HTML+PDF
+  5.58 -> 4.56 s (-18 %).  Scaled to the quiet figures above (before 1.58 s / 4.16 s): about
+  1.1-1.2 s and 3.4 s; the targets (1 s, 3 s) are still not met.
 """
 
 from __future__ import annotations
@@ -62,8 +77,49 @@ figs, _ = figures_for(data, proc); mark("build the figures (read + decimate + pl
 svgs = [f.svg() for f in figs]; mark("render the figures as SVG")
 heavy = [m for m in ("numba", "scipy.optimize", "bench.engine.runner") if m in sys.modules]
 for name, s in out: print(f"  {s:6.3f} s CPU  {name}")
+import bench.reporting as rep
+if hasattr(rep, "drawn_figures"):  # the same figures built and drawn by two processes (wall, this process's CPU)
+    for workers in (1, 2):
+        d, w, c0 = open_run(sys.argv[1]), time.perf_counter(), c()
+        rep.drawn_figures(d, workers=workers)
+        print(f"  {time.perf_counter() - w:6.3f} s wall, {c() - c0:.3f} s CPU here: read, build and draw the figures, "
+              f"{workers} process(es)")
 print(f"  total {c():.3f} s CPU; heavy modules imported: {', '.join(heavy) or 'none'}")
 """
+
+#: `gyrobench report ...` with each drawing process's CPU for its share of the figures noted: the CPU
+#: of the command's critical path on two idle cores (this process's CPU, less its share, plus the
+#: larger share), which a busy machine inflates far less than it does the wall time
+_CRITICAL = """
+import os, sys, time
+T, PID, shares = time.process_time, os.getpid(), []
+try:
+    import bench.reporting.drawing as dr
+    take0 = dr._take
+    def take(parts, png, taken):
+        c = T(); out = take0(parts, png, taken); d = T() - c
+        if os.getpid() == PID:
+            shares.append(d)
+        else:
+            sys.stderr.write(f"SHARE {d:.4f}\\n"); sys.stderr.flush()
+        return out
+    dr._take = take
+except ImportError:  # a tree from before the two-process drawing
+    pass
+from bench.cli import main
+main(sys.argv[1:])
+print(f"PARENT {T():.4f} {sum(shares):.4f}")
+"""
+
+
+def critical_cpu(tree: Path, raw: Path, out: str, pdf: bool) -> float:
+    """CPU s of the critical path of one `gyrobench report RAW` on `tree` (see _CRITICAL)."""
+    res = subprocess.run([sys.executable, "-c", _CRITICAL, "report", str(raw), "-o", out, *(["--pdf"] if pdf else [])],
+                         check=True, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(tree)),
+                         cwd=tempfile.gettempdir())
+    total, mine = (float(x) for x in res.stdout.split("PARENT")[-1].split())
+    child = [float(ln.split()[1]) for ln in res.stderr.splitlines() if ln.startswith("SHARE")]
+    return total - mine + max([mine, *child])
 
 
 def record_run(runs_dir: str) -> Path:
@@ -99,8 +155,18 @@ def compare(raw: Path, against: Path, tmp: str, rounds: int = 4, pdf: bool = Tru
     for (label, with_pdf), rows in got.items():
         tree = against if label == "before" else ROOT
         wall, cpu = (statistics.median(x) for x in zip(*rows, strict=True))
-        print(f"{label} ({tree}) {'HTML+PDF' if with_pdf else 'HTML'}: wall median {wall:.2f} s, CPU median "
-              f"{cpu:.2f} s of {', '.join(f'{c:.2f}' for _, c in rows)}")
+        print(f"{label} ({tree}) {'HTML+PDF' if with_pdf else 'HTML'}: wall median {wall:.2f} s (least "
+              f"{min(w for w, _ in rows):.2f}: the nearest a quiet machine), CPU median {cpu:.2f} s of "
+              f"{', '.join(f'{c:.2f}' for _, c in rows)}")
+    crit: dict[tuple[str, bool], list[float]] = {}
+    for k in range(3):
+        for with_pdf in (False, True) if pdf else (False,):
+            for label, tree in (("before", against), ("after", ROOT)):
+                got_s = critical_cpu(tree, raw, f"{tmp}/c{label}{k}.html", with_pdf)
+                crit.setdefault((label, with_pdf), []).append(got_s)
+    for (label, with_pdf), rows in crit.items():
+        print(f"{label} {'HTML+PDF' if with_pdf else 'HTML'}: CPU of the critical path (two idle cores) median "
+              f"{statistics.median(rows):.2f} s of {', '.join(f'{c:.2f}' for c in rows)}")
     for label, tree in (("before", against), ("after", ROOT)):
         print(f"{label}: phases of one in-process report")
         phases = subprocess.run([sys.executable, "-c", _PHASES, str(raw)], check=True, capture_output=True,
@@ -118,9 +184,14 @@ def main() -> None:
         del args[i : i + 2]
     no_pdf = "--no-pdf" in args
     args = [a for a in args if a != "--no-pdf"]
+    rounds = 4
+    if "--rounds" in args:
+        i = args.index("--rounds")
+        rounds = int(args[i + 1])
+        del args[i : i + 2]
     raw = Path(args[0]) if args else record_run(tmp)
     if against is not None:
-        compare(raw, against, tmp, pdf=not no_pdf)
+        compare(raw, against, tmp, rounds=rounds, pdf=not no_pdf)
     from bench.recorder import open_run
 
     with open_run(raw) as data:

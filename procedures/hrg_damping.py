@@ -485,3 +485,10 @@ class HrgDamping(HrgExcitation, Procedure):
         from procedures.figures.hrg_damping import figures
 
         return figures(self, data)
+
+    def figure_parts(self) -> list:
+        """The same figures as independent parts (functions of the run's data) that a report may
+        build and draw in parallel processes."""
+        from procedures.figures.hrg_damping import figure_parts
+
+        return figure_parts(self)

@@ -88,11 +88,14 @@ def _speed(value: float | None) -> float | None:
 def _write_report(raw_file: str, row: dict[str, Any] | None, output: str | None = None, pdf: bool = False) -> Any:
     """Render the HTML report (and with pdf the PDF) of a recorded run beside its raw file (or
     to output); their paths."""
+    import os
+
     from bench.pdf import PdfUnavailable
     from bench.reporting import write_report
 
+    workers = min(2, os.cpu_count() or 1)  # the figures built and drawn by two processes at once
     try:
-        return write_report(raw_file, row, output, pdf=pdf)
+        return write_report(raw_file, row, output, pdf=pdf, workers=workers)
     except PdfUnavailable as exc:  # checked before anything is written: the HTML alone, and why
         _err(str(exc))
-        return write_report(raw_file, row, output)
+        return write_report(raw_file, row, output, workers=workers)

@@ -4,6 +4,7 @@ inline SVG), and the same page as a PDF (WeasyPrint, the `pdf` extra) for the ca
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ from bench.numbers import (
     with_interval,
 )
 from bench.pdf import require_weasyprint, write_pdf
+from bench.reporting.drawing import DrawnFigure
 
 TEMPLATES = Path(__file__).with_name("templates")
 
@@ -49,6 +51,48 @@ def figures_for(data: Any, proc: Any = None) -> tuple[list[ReportFigure], list[s
         why = f"{type(exc).__name__}: {exc}"
         return generic_figures(data), [f"the figures of {proc.name} could not be drawn from this run ({why}); "
                                        "the raw streams are plotted instead"]
+
+
+def drawn_figures(data: Any, proc: Any = None, *, png: bool = False, workers: int = 1,
+                  meanwhile: Any = None) -> tuple[list[DrawnFigure], list[str]]:
+    """(figures drawn, notes): as figures_for, each figure drawn as SVG (and with png as the PDF's
+    PNG); with workers > 1 built and drawn by that many processes at once (bench.reporting.drawing)
+    from the procedure's `figure_parts()` hook, or else built here and drawn so.  meanwhile: as
+    draw_parts."""
+    from functools import partial
+
+    from bench.reporting.drawing import draw_parts
+
+    proc = proc if proc is not None else procedure_of(data)
+    parts_hook = getattr(proc, "figure_parts", None)
+    if parts_hook is not None:
+        ran: list[bool] = []
+        failed: list[BaseException] = []
+
+        def guarded() -> None:
+            ran.append(True)
+            try:
+                if meanwhile is not None:
+                    meanwhile()
+            except BaseException as exc:
+                failed.append(exc)
+                raise
+
+        try:
+            if workers > 1:
+                data.read_streams()  # once, shared by the forked processes
+            parts = [partial(part, data) for part in parts_hook()]
+            return draw_parts(parts, png, workers=workers, meanwhile=guarded, in_child=data.reopen), []
+        except Exception:  # noqa: BLE001 - figures_for says what failed and draws the streams instead
+            if failed:  # meanwhile's own error (no PDF library), not a figure's
+                raise
+            meanwhile = None if ran else meanwhile  # done once only
+    figs, notes = figures_for(data, proc)
+    return draw_parts([partial(_one, f) for f in figs], png, workers=workers, meanwhile=meanwhile), notes
+
+
+def _one(fig: ReportFigure) -> list[ReportFigure]:
+    return [fig]
 
 
 def _param_rows(data: Any, proc: Any) -> list[dict[str, str]]:
@@ -159,11 +203,23 @@ def _log_rows(data: Any, limit: int = 200) -> list[tuple[str, str, str]]:
 
 
 def context(data: Any, row: dict[str, Any] | None = None,
-            figures: tuple[list[ReportFigure], list[str]] | None = None) -> dict[str, Any]:
+            figures: tuple[list[ReportFigure] | list[DrawnFigure], list[str]] | None = None,
+            page: dict[str, Any] | None = None) -> dict[str, Any]:
     """Everything the template shows, as text (numbers already formatted); figures: the result
-    of `figures_for(data)` when the caller already has it."""
-    proc = procedure_of(data)
+    of `figures_for(data)` when the caller already has it; page: `page_context(data, row)` likewise."""
+    proc = procedure_of(data) if figures is None or not page else None
     figs, notes = figures if figures is not None else figures_for(data, proc)
+    return {
+        **(page or page_context(data, row, proc)),
+        "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key, "table": f.table} for f in figs],
+        "notes": notes + list(getattr(data, "notes", [])),
+    }
+
+
+def page_context(data: Any, row: dict[str, Any] | None = None, proc: Any = None) -> dict[str, Any]:
+    """What the template shows besides the figures and notes: the run's identity, parameters,
+    measurements and log (proc: the run's procedure, when the caller has it)."""
+    proc = proc if proc is not None else procedure_of(data)
     a = data.attrs
     rows, reanalysis = _measurement_rows(data, row)
     # the truth columns on a simulated station, when a measurement has a truth to compare with
@@ -187,8 +243,6 @@ def context(data: Any, row: dict[str, Any] | None = None,
         "truth_outside": (sum(r["outside"] for r in compared), len(compared)) if truth_shown and compared else None,
         "lab_limits": lab or None,
         "no_limits": not judged_any,
-        "figures": [{"title": f.title, "svg": f.svg(), "note": f.note, "key": f.key, "table": f.table} for f in figs],
-        "notes": notes + list(getattr(data, "notes", [])),
         "log": _log_rows(data),
     }
 
@@ -198,25 +252,43 @@ def render_html(data: Any, row: dict[str, Any] | None = None, ctx: dict[str, Any
     """The report page of one run (a RunData) and, when known, its results-store row.  template: a
     template in bench/reporting/templates that extends report.html.j2 and fills its `certificate`
     block (a page before the report); extra: the variables that template adds."""
+    return _template(template).render(**(ctx or context(data, row)), **(extra or {}))
+
+
+@functools.cache
+def _environment(templates: Path) -> Any:
     import jinja2
 
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True,
-                             trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
-    return env.get_template(template).render(**(ctx or context(data, row)), **(extra or {}))
+    return jinja2.Environment(loader=jinja2.FileSystemLoader(templates), autoescape=True,
+                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
+
+
+def _template(name: str) -> Any:
+    """A template of TEMPLATES, compiled once a process (Jinja2 checks the file for changes)."""
+    return _environment(TEMPLATES).get_template(name)
 
 
 def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output: str | Path | None = None,
                  pdf: bool = False, *, template: str = "report.html.j2",
-                 extra: dict[str, Any] | None = None) -> list[Path]:
+                 extra: dict[str, Any] | None = None, workers: int = 1) -> list[Path]:
     """Write the HTML report beside the raw file (or to output) and, with pdf, the PDF beside it;
-    template and extra: as render_html (a page that extends the report, e.g. a certificate)."""
+    template and extra: as render_html (a page that extends the report, e.g. a certificate);
+    workers: processes that build and draw the figures at once (drawn_figures)."""
     from bench.recorder import open_run
 
-    if pdf:
+    if pdf and workers <= 1:
         require_weasyprint()  # a missing PDF library is said before anything is written
     with open_run(raw_file) as data:
-        figures = figures_for(data)
-        ctx = context(data, row, figures)
+        page: dict[str, Any] = {}
+
+        def meanwhile() -> None:  # while the other processes draw: WeasyPrint (checked before writing), the page
+            if pdf:
+                require_weasyprint()
+            page.update(page_context(data, row))
+            _template(template)
+
+        figures = drawn_figures(data, png=pdf, workers=workers, meanwhile=meanwhile)
+        ctx = context(data, row, figures, page)
         html = render_html(data, row, ctx, template=template, extra=extra)
         out = Path(output or data.path.with_suffix(".html"))
         out.write_text(html, encoding="utf-8")
@@ -227,7 +299,7 @@ def write_report(raw_file: str | Path, row: dict[str, Any] | None = None, output
     return paths
 
 
-def with_png_figures(ctx: dict[str, Any], figs: list[ReportFigure]) -> dict[str, Any]:
+def with_png_figures(ctx: dict[str, Any], figs: list[ReportFigure] | list[DrawnFigure]) -> dict[str, Any]:
     """The page's context with each figure's inline SVG replaced by the same figure as an inline
     PNG (<img>, bench.figures.PRINT_DPI): what the PDF prints, ~30x faster for WeasyPrint to draw."""
     import base64

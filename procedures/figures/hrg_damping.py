@@ -6,6 +6,8 @@ slow variables.  Every axis takes its quantity and unit from the run's declarati
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -199,12 +201,21 @@ def drift_figure(data: Any) -> list[ReportFigure]:
                          note, (header, rows))]
 
 
+def fpga_figure(data: Any) -> list[ReportFigure]:
+    """The FPGA's slow variables against time (envelopes of the full record)."""
+    if "fpga" not in data:
+        return []
+    fig = stream_figure(data, "fpga", ["cx", "sx", "cy", "sy"], title="FPGA stream: slow variables",
+                        key="hrg-damping_fpga")
+    return [fig] if fig is not None else []
+
+
+def figure_parts(proc: Any) -> list[Callable[[Any], list[ReportFigure]]]:
+    """The figures in the report's order as independent parts, each a function of the run's data:
+    a report builds and draws them in parallel processes (bench.reporting.drawing)."""
+    return [energy_figure, partial(theta_figure, proc), drift_figure, table_figure, fpga_figure]
+
+
 def figures(proc: Any, data: Any) -> list[ReportFigure]:
     """Every figure an hrg-damping run's results need, in the report's order."""
-    out = energy_figure(data) + theta_figure(proc, data) + drift_figure(data) + table_figure(data)
-    if "fpga" in data:
-        fig = stream_figure(data, "fpga", ["cx", "sx", "cy", "sy"], title="FPGA stream: slow variables",
-                            key="hrg-damping_fpga")
-        if fig is not None:
-            out.append(fig)
-    return out
+    return [f for part in figure_parts(proc) for f in part(data)]
