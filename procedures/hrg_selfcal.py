@@ -215,11 +215,11 @@ class HrgSelfcal(HrgExcitation, Procedure):
             raise ValueError(f"phase_cal={self.phase_cal:g}: the readout phase calibration reads the loops' response "
                              "to the frequency-control force: set fm_force_hz > 0 (or phase_cal=0)")
         if self.phase_cal > 0 and self.fm_rate_hz > 0:
-            halves = int((self.phase_cal_hold_s - 1.0) * 2.0 * self.fm_rate_hz)
+            halves = int(self.phase_cal_hold_s * 2.0 * self.fm_rate_hz + 1e-9)
             if halves < 6:
                 raise ValueError(f"phase_cal_hold_s={self.phase_cal_hold_s:g}: a hold of {halves} half periods of the "
                                  f"force at fm_rate_hz={self.fm_rate_hz:g}; the phase reading needs at least 6 "
-                                 f"(phase_cal_hold_s >= {3.0 / self.fm_rate_hz + 1.0:g})")
+                                 f"(phase_cal_hold_s >= {3.0 / self.fm_rate_hz:g})")
         if self.fm_force_hz > 0 and self.fm_amplitude_hz > 0:
             raise ValueError("fm_force_hz and fm_amplitude_hz share FM_RATE_HZ and the frequency channel: set one to 0")
         if self.fm_force_hz > 0 and (self.fm_rate_hz <= 0 or 0.5 / self.fm_rate_hz <= 2 * sc.FM_SETTLE_S):
