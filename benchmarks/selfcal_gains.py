@@ -13,6 +13,9 @@ Measured 2026-11-28 (docs/selfcal.md section 7 has the tables): on sim-hrg-selfc
 after; noise-free 0.897 -> 0.109 deg/h.  Seed 0, 12 cycles at 0.05 deg/s: 0.519 deg/h (1.00 x
 floor), mean bias after 10 h +0.031 [-0.002, +0.064] deg/h (the paper: under 0.018; not met).
 On sim-hrg-realistic 138 -> 141 deg/h: its readout phase delay, which the method cannot see.
+With --phase-cal 3 (docs/readout_phase.md), seed 0: 0.80 deg/h (3 cycles at 0.25 deg/s); 12 cycles
+at 0.05 deg/s 0.599 deg/h (1.15 x floor), mean bias after 10 h -1.675 [-1.764, -1.586] deg/h;
+phases 1.99977 / 2.05014 deg (truth 2.0 / 2.05).
 """
 
 from __future__ import annotations
@@ -62,9 +65,11 @@ def main() -> None:
     ap.add_argument("--precession", type=float, default=0.25)
     ap.add_argument("--noise-free", action="store_true", help="no drift-rate noise, angle wander or pickoff noise")
     ap.add_argument("--only", choices=("before", "after"), default=None)
+    ap.add_argument("--phase-cal", type=int, default=0,
+                    help="passes of the readout phase calibration before the cycles (docs/readout_phase.md)")
     args = ap.parse_args()
-    base = {"cycles": args.cycles, "precession_dps": args.precession, "settle_s": 10.0}
-    cases = {"before": {"fm_force_hz": 0.0}, "after": {}}
+    base = {"cycles": args.cycles, "precession_dps": args.precession, "settle_s": 10.0, "phase_cal": args.phase_cal}
+    cases = {"before": {"fm_force_hz": 0.0, "phase_cal": 0}, "after": {}}
     for seed in args.seeds:
         for label, extra in cases.items():
             if args.only and label != args.only:
@@ -83,6 +88,11 @@ def main() -> None:
                   f"{v['mean_bias_dph'][0]:+.4f}  Q {q_rel:+.2e} ({'in' if q_in else 'OUT of'} its interval)  "
                   f"D {d_rel:+.2e}  s_m {sm:.0f} ppm (truth at end {1e6 * sm_true:.0f})  "
                   f"s_d {v.get('loop_gain_diff_ppm', (math.nan,))[0]:.0f} ppm  [{wall:.0f} s wall]", flush=True)
+            if "readout_phase_x_deg" in v:
+                for ax in ("x", "y"):
+                    val, ci = v[f"readout_phase_{ax}_deg"]
+                    print(f"    readout phase {ax} {val:.5f} [{ci[0]:.5f}, {ci[1]:.5f}] deg (truth "
+                          f"{truth.get(f'err_pickoff_phase_{ax}_deg', 0.0):g})", flush=True)
             if "mean_bias_10h_dph" in v:
                 m10, ci = v["mean_bias_10h_dph"]
                 print(f"    mean bias since start after 10 h {m10:+.4f} [{ci[0]:+.4f}, {ci[1]:+.4f}] deg/h "

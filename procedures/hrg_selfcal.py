@@ -24,6 +24,7 @@ from drivers.fpga import protocol as fp
 
 from .hrg_damping import _StreamTap
 from .hrg_excitation import HrgExcitation, refuse_above_precession_limit
+from .readout_phase import PHASE_COLUMNS, PHASES, calibrate_readout_phase, result_from_rows
 
 TAP_COLUMNS = ("t_s", "angle_out_deg", "amp_ctrl", "freq_ctrl", "prec_ctrl")
 CYCLES = "hrg_selfcal_cycles"
@@ -129,6 +130,16 @@ class HrgSelfcal(HrgExcitation, Procedure):
                          doc="K: the rate is the wave's rate / -K (0: the station's nominal K)")
     nominal_params = {"bryan_factor": "bryan_factor"}
     trim_gains = Param(1, unit="", low=0, high=1, doc="1: trim the identified gain difference out after each cycle")
+    phase_cal = Param(0, unit="", low=0, high=6,
+                      doc="passes of the readout phase calibration before the cycles (docs/readout_phase.md): the "
+                          "chains' phase read from the amplitude loop's response to the frequency-control force at "
+                          "two wave angles and trimmed out (TRIM_PHASE_X/Y_DEG); 0: off (the chains taken as "
+                          "calibrated); 3 null a 2 deg delay to 0.0002 deg")
+    phase_cal_hold_s = Param(120.0, unit="s", low=20.0, high=3600.0,
+                             doc="each hold of the phase calibration (at least 3 periods of the force: 120 s at "
+                                 "0.025 Hz)")
+    phase_cal_move_dps = Param(1.0, unit="deg/s", low=0.01, high=10.0,
+                               doc="precession that turns the wave 45 deg between the phase calibration's two holds")
     confidence = Param(0.95, unit="", low=0.5, high=0.999, doc="level of the intervals")
 
     pause_in_record = "restart"  # a cycle's identification takes one continuous cycle
@@ -152,6 +163,13 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("loop_gain_diff_ppm", "ppm", "X/Y loop gain difference s_d (pickoff residual after the trims "
                     "plus forcer, (g_x - g_y) / 2 of each) the frequency-control force met in the last cycle",
                     when=lambda p: p.fm_force_hz > 0, when_doc="a frequency-control force (fm_force_hz > 0)"),
+        Measurement("readout_phase_x_deg", "deg", "x readout chain's phase delay at the carrier (the trim the phase "
+                    "calibration left in place; interval with its 0.001 deg floor)",
+                    truth=lambda t: t.get("err_pickoff_phase_x_deg", 0.0),
+                    when=lambda p: p.phase_cal > 0, when_doc="the readout phase calibration on (phase_cal > 0)"),
+        Measurement("readout_phase_y_deg", "deg", "y readout chain's phase delay at the carrier, as x",
+                    truth=lambda t: t.get("err_pickoff_phase_y_deg", 0.0),
+                    when=lambda p: p.phase_cal > 0, when_doc="the readout phase calibration on (phase_cal > 0)"),
         Measurement("bias_stability_plain_dph", "deg/h", "plain whole-angle bias stability (smooth_s windows, "
                     "1 sigma), cycles after the first"),
         Measurement("bias_stability_selfcal_dph", "deg/h", "self-calibrated bias stability, same record; truth: the "
@@ -193,6 +211,15 @@ class HrgSelfcal(HrgExcitation, Procedure):
     def _check_fm(self) -> None:
         """One kind of FM, and a frequency-control force the cycles can fit: ValueError naming the
         value and its limit before anything runs."""
+        if self.phase_cal > 0 and not self.fm_force_hz > 0:
+            raise ValueError(f"phase_cal={self.phase_cal:g}: the readout phase calibration reads the loops' response "
+                             "to the frequency-control force: set fm_force_hz > 0 (or phase_cal=0)")
+        if self.phase_cal > 0 and self.fm_rate_hz > 0:
+            halves = int(self.phase_cal_hold_s * 2.0 * self.fm_rate_hz + 1e-9)
+            if halves < 6:
+                raise ValueError(f"phase_cal_hold_s={self.phase_cal_hold_s:g}: a hold of {halves} half periods of the "
+                                 f"force at fm_rate_hz={self.fm_rate_hz:g}; the phase reading needs at least 6 "
+                                 f"(phase_cal_hold_s >= {3.0 / self.fm_rate_hz:g})")
         if self.fm_force_hz > 0 and self.fm_amplitude_hz > 0:
             raise ValueError("fm_force_hz and fm_amplitude_hz share FM_RATE_HZ and the frequency channel: set one to 0")
         if self.fm_force_hz > 0 and (self.fm_rate_hz <= 0 or 0.5 / self.fm_rate_hz <= 2 * sc.FM_SETTLE_S):
@@ -222,6 +249,8 @@ class HrgSelfcal(HrgExcitation, Procedure):
     def preflight(self, devices) -> None:
         """The cycles' precession command within the FPGA's force limit (read-only)."""
         refuse_above_precession_limit(self, devices, "precession_dps", self.precession_dps, "deg/s ")
+        if self.phase_cal > 0:
+            refuse_above_precession_limit(self, devices, "phase_cal_move_dps", self.phase_cal_move_dps, "deg/s ")
 
     @step("Excite, hold the amplitude, whole-angle mode with FM")
     def excite(self, ctx):
@@ -230,8 +259,11 @@ class HrgSelfcal(HrgExcitation, Procedure):
         ctx.subscribe(fpga, self._keep_latest)
         ctx.defer(self._tap.stop)
         self._start_loops(ctx)
-        self._trim0 = {n: float(fpga.read_register(n)) for n in ("TRIM_EN", "TRIM_GAIN_X", "TRIM_GAIN_Y")}
-        ctx.defer(lambda: self._restore(fpga), "FPGA gain trims and FM back")
+        self._trim0 = {n: float(fpga.read_register(n)) for n in ("TRIM_EN", "TRIM_GAIN_X", "TRIM_GAIN_Y",
+                                                                 "TRIM_PHASE_X_DEG", "TRIM_PHASE_Y_DEG")}
+        self._trim_en = int(self._trim0["TRIM_EN"])  # the trims the cycles keep on beside the gains'
+        self._phase = None
+        ctx.defer(lambda: self._restore(fpga), "FPGA gain and phase trims and FM back")
         fpga.set_whole_angle(True, 0.0, self.fm_amplitude_hz, self.fm_rate_hz)
         fpga.write_register("FM_FORCE_HZ", self.fm_force_hz)
         a = self._hold_amplitude(ctx)
@@ -243,6 +275,22 @@ class HrgSelfcal(HrgExcitation, Procedure):
         fpga.start_stream(self._dec)
         ctx.log.info(f"amplitude {a:.4f} held, {self._f0_hz:.3f} Hz, FM {self.fm_amplitude_hz:g} Hz at "
                      f"{self.fm_rate_hz:g} Hz, stream {1 / self._dt:g} Hz")
+
+    @step("Readout phase calibration (phase_cal passes; docs/readout_phase.md)")
+    def phase_calibration(self, ctx):
+        if not self.phase_cal:
+            ctx.log.info("readout phase calibration off (phase_cal=0): the chains are taken as calibrated")
+            return
+        fpga = ctx.devices.fpga
+        self._tap.take(-math.inf, math.inf)
+        self._tap.on = True
+        self._phase = calibrate_readout_phase(
+            ctx, fpga, self._tap, TAP_COLUMNS, passes=int(self.phase_cal), hold_s=self.phase_cal_hold_s,
+            move_dps=self.phase_cal_move_dps, amplitude=self.amplitude, fm_force_hz=self.fm_force_hz,
+            fm_rate_hz=self.fm_rate_hz, fm_amplitude_hz=self.fm_amplitude_hz)
+        self._tap.on = False
+        self._trim_en |= fp.TRIM_PHASE
+        ctx.record(PHASES, PHASE_COLUMNS, self._phase.rows)
 
     def _restore(self, fpga) -> None:
         fpga.write_register("FM_AMPLITUDE_HZ", 0.0)
@@ -323,7 +371,7 @@ class HrgSelfcal(HrgExcitation, Procedure):
                 trim_dg += g.value
                 fpga.write_register("TRIM_GAIN_X", 1.0 / (1.0 + trim_dg / 2.0))
                 fpga.write_register("TRIM_GAIN_Y", 1.0 / (1.0 - trim_dg / 2.0))
-                fpga.write_register("TRIM_EN", int(self._trim0["TRIM_EN"]) | fp.TRIM_GAIN)
+                fpga.write_register("TRIM_EN", self._trim_en | fp.TRIM_GAIN)
             prev = fit
             ctx.record(CYCLES, CYCLE_COLUMNS, np.array([cyc_rows[-1]]))
             ctx.record(RATES, RATE_COLUMNS, rate_rows[-1])
@@ -347,6 +395,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
     def results(self, ctx):
         for res in _analyse(self._cycles, self._rates, self.smooth_s, self._dt, self.confidence):
             ctx.report(res)
+        if self._phase is not None:
+            for res in _phase_results(self._phase.rows, self.confidence):
+                ctx.report(res)
 
     def analysis(self, data) -> list[Result]:
         """Re-compute the results of a recorded run from its cycle and rate streams."""
@@ -358,12 +409,24 @@ class HrgSelfcal(HrgExcitation, Procedure):
         c = np.column_stack([cyc[n] if n in cyc else np.full(n_cyc, np.nan) for n in CYCLE_COLUMNS])
         r = np.column_stack([rates[n] for n in RATE_COLUMNS])
         dt = float(np.median(np.diff(r[:, 0]))) if len(r) > 1 else 1.0
-        return _analyse(c, r, self.smooth_s, dt, self.confidence)
+        out = _analyse(c, r, self.smooth_s, dt, self.confidence)
+        if PHASES in data:
+            ph = data.table(PHASES)
+            out += _phase_results(np.column_stack([ph[n] for n in PHASE_COLUMNS]), self.confidence)
+        return out
 
     def figures(self, data) -> list:
         from procedures.figures.hrg_selfcal import figures
 
         return figures(self, data)
+
+
+def _phase_results(rows: np.ndarray, level: float) -> list[Result]:
+    """The readout chains' phase delays: the trims the calibration's last pass left, with the last
+    residual's standard error and the floor (procedures.readout_phase.PHASE_FLOOR_DEG)."""
+    cal = result_from_rows(rows)
+    return [Result("readout_phase_x_deg", cal.phase_x_deg, ci95=_interval(cal.phase_x_deg, cal.se_x_deg, 0.0, level)),
+            Result("readout_phase_y_deg", cal.phase_y_deg, ci95=_interval(cal.phase_y_deg, cal.se_y_deg, 0.0, level))]
 
 
 def _interval(v: float, se: float, floor: float, level: float) -> tuple[float, float]:

@@ -93,7 +93,7 @@ def _firmware_steady(world: World, fw: FpgaFirmware) -> bool:
     """The firmware's part of the check (under its lock: the FPGA server writes registers from its
     own thread, holding only that lock)."""
     ctrl, _, _, fm_on, _ = fw._hot_now()
-    if fm_on:
+    if fm_on or fw._phase_rot is not None:  # the readout phase trim runs in the per-block path only
         return False
     forces = world._forces
     if ctrl & p.DRIVE_EN:  # the drive on and already applied: its force is refreshed in place

@@ -75,6 +75,21 @@ def test_frequency_control_force_reads_the_loop_gains(errors, s_m, s_d, tol_m):
     assert coef[4] == pytest.approx(s_d, abs=max(30e-6, 0.05 * s_d)), coef
 
 
+@pytest.mark.parametrize("errors", [
+    ErrorSources(pickoff_angle_x_deg=0.05, pickoff_angle_y_deg=-0.08),
+    ErrorSources(forcer_angle_x_deg=0.1, forcer_angle_y_deg=-0.05),
+    ErrorSources(pickoff_angle_x_deg=0.05, pickoff_angle_y_deg=-0.08, forcer_angle_x_deg=0.1, forcer_angle_y_deg=-0.05),
+])
+def test_frequency_control_force_reads_the_electrodes_skew(errors):
+    """The force's sin 4 theta term is the loop's skew s_s = (e_x - e_y) + (f_x - f_y) in radians (pickoff
+    and forcer electrodes: a gain difference along axes 22.5 deg off), to 5 % (measured 2.5 % and 2.5 %
+    low: 2212 of 2269 ppm, 2553 of 2618, 4764 of 4887), which the drift model's cmd s_s sin 4 theta uses."""
+    coef = _fm_response(errors)
+    want = math.radians(errors.pickoff_angle_x_deg - errors.pickoff_angle_y_deg
+                        + errors.forcer_angle_x_deg - errors.forcer_angle_y_deg)
+    assert coef[5] == pytest.approx(want, rel=0.05), coef
+
+
 def test_selfcal_with_loop_gain_errors_identifies_them_and_q():
     """hrg-selfcal on sim-hrg-selfcal-gains (common-mode pickoff -500 ppm rising 20 ppm/h, forcers
     +800 / -400 ppm), 3 cycles at 0.25 deg/s, seed 0: the last cycle's s_m holds the truth at its

@@ -86,6 +86,16 @@ class CycleFit:
         z = np.zeros(len(AMP_TERMS))
         return self._est(self.freq_coef[len(FREQ_TERMS) + 1], z, self.amp_cov, self._fm_grad(1))
 
+    @property
+    def loop_skew(self) -> Estimate:
+        """s_s: the loop's X/Y non-orthogonality, the pickoff and the forcer electrodes' e_x - e_y (radians)
+        summed: a gain difference along axes 22.5 deg off the electrodes', the sin 4 theta term of the
+        force's response (docs/readout_phase.md); 0 with no frequency-control force."""
+        if not self.has_fm_force:
+            return Estimate(0.0, 0.0, (0.0, 0.0))
+        z = np.zeros(len(AMP_TERMS))
+        return self._est(self.freq_coef[len(FREQ_TERMS) + 2], z, self.amp_cov, self._fm_grad(2))
+
     def _gamma(self) -> tuple[float, np.ndarray, np.ndarray]:
         """The mean damping gamma (1/s): the amplitude channel reads gamma / (1 + s_m) (the AGC's
         force meets the loop gain), put back with the frequency-control force's s_m when there is one."""
@@ -121,10 +131,11 @@ class CycleFit:
         gam, bc_app, bs, two_dg = self.amp_coef[:4]
         nf = len(self.freq_coef)
         g_bs, g_bs_f = np.array([0.0, 0.0, 1.0, 0.0, 0.0]), np.zeros(nf)
-        if self.has_fm_force:
-            sd = float(self.freq_coef[len(FREQ_TERMS) + 1])
-            bc = bc_app + gam * sd
-            return float(bc), float(bs), np.array([sd, 1.0, 0.0, 0.0, 0.0]), g_bs, gam * self._fm_grad(1), g_bs_f
+        if self.has_fm_force:  # the skew s_s tilts the amplitude force along sin 4 theta as s_d along cos
+            sd, ss = float(self.freq_coef[len(FREQ_TERMS) + 1]), float(self.freq_coef[len(FREQ_TERMS) + 2])
+            bc, bs_true = bc_app + gam * sd, bs + gam * ss
+            return (float(bc), float(bs_true), np.array([sd, 1.0, 0.0, 0.0, 0.0]), np.array([ss, 0.0, 1.0, 0.0, 0.0]),
+                    gam * self._fm_grad(1), gam * self._fm_grad(2))
         bc = bc_app + gam * two_dg / 4.0
         g_bc = np.array([two_dg / 4.0, 1.0, 0.0, gam / 4.0, 0.0])
         return float(bc), float(bs), g_bc, g_bs, np.zeros(nf), g_bs_f
@@ -167,9 +178,10 @@ class CycleFit:
     def drift_rad_s(self, theta_rad: np.ndarray, cmd_rad_s: np.ndarray, *, gain_removed: bool = False) -> np.ndarray:
         """The wave's drift (rad/s of measured wave angle) these parameters predict at measured angle
         theta under precession command cmd: (beta_c sin 4th - beta_s cos 4th) / 4 (damping, with the
-        amplitude force's gain tilt in it) + cmd (s_m - s_d cos 4th) (the loop gain the precession
-        force meets and the pickoff's angle pattern; with no frequency-control force s_m = 0 and
-        s_d = Delta g / 2, the pickoff's).
+        amplitude force's gain tilt in it) + cmd (s_m - s_d cos 4th - s_s sin 4th) (the loop gain the
+        precession force meets and the pickoff's angle pattern; s_s the electrodes' non-orthogonality,
+        the same pattern 22.5 deg on; with no frequency-control force s_m = s_s = 0 and s_d = Delta g / 2,
+        the pickoff's).
         gain_removed: the pickoff gain difference has since been trimmed out (FPGA gain trims): its
         tilt of the amplitude force goes back into beta_c and its share of s_d goes."""
         gam, bc_app, bs, two_dg = self.amp_coef[:4]
@@ -177,11 +189,12 @@ class CycleFit:
         dg_half = two_dg / 4.0  # the pickoff's g_x - g_y over 2, seen by the amplitude channel
         if self.has_fm_force:
             sm, sd = self.loop_gain_cm.value, self.loop_gain_diff.value
+            ss = self.loop_skew.value
         else:
-            sm, sd = 0.0, dg_half
+            sm, sd, ss = 0.0, dg_half, 0.0
         if gain_removed:
             bc_app, sd = bc_app + gam * dg_half, sd - dg_half
-        return 0.25 * (bc_app * s4 - bs * c4) + cmd_rad_s * (sm - sd * c4)
+        return 0.25 * (bc_app * s4 - bs * c4) + cmd_rad_s * (sm - sd * c4 - ss * s4)
 
 
 def _ols(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:

@@ -250,6 +250,16 @@ class FpgaLink:
             raise DeviceError(f"FPGA NVM commit not confirmed: NVM_STATUS={status:#x} (expected valid and matching)")
         return int(self.read_register("NVM_CRC"))
 
+    def set_readout_phase_trim(self, phase_x_deg: float, phase_y_deg: float) -> None:
+        """Turn each chain's demodulation reference later by its readout phase (deg at the carrier:
+        TRIM_PHASE_X_DEG, TRIM_PHASE_Y_DEG) and switch the trim on (TRIM_EN's TRIM_PHASE bit; the
+        other trims as they are).  RAM only, as write_trims; both values are checked first."""
+        for name, value in (("TRIM_PHASE_X_DEG", phase_x_deg), ("TRIM_PHASE_Y_DEG", phase_y_deg)):
+            _check_register(p.BY_NAME[name], value)
+        self.write_register("TRIM_PHASE_X_DEG", phase_x_deg)
+        self.write_register("TRIM_PHASE_Y_DEG", phase_y_deg)
+        self.write_register("TRIM_EN", int(self.read_register("TRIM_EN")) | p.TRIM_PHASE)
+
     def reload_trims(self) -> None:
         """Trim registers back from NVM (as at power-up)."""
         self.write_register("NVM_CMD", p.NVM_RELOAD)

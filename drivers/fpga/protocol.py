@@ -157,18 +157,19 @@ REGISTERS: tuple[Register, ...] = (
              "rate output gain G: rate_out_dps = G degrees(F_p / (4 AGC_SETPOINT))"),
 )
 
-# --- trims held in non-volatile memory (0x40-0x4F; docs/fpga_link.md "Trims in NVM") ----------
+# --- trims held in non-volatile memory (0x40-0x4F, 0x50-0x51; docs/fpga_link.md "Trims in NVM") -
 NVM_COMMIT, NVM_RELOAD, NVM_ERASE = 1, 2, 3  # NVM_CMD values
 NVM_VALID, NVM_MATCH, NVM_CRC_BAD = 0x01, 0x02, 0x04  # NVM_STATUS bits
 TRIM_DRIFT, TRIM_SPLIT, TRIM_GAIN, TRIM_THERMAL = 0x01, 0x02, 0x04, 0x08  # TRIM_EN bits: the trims applied
-TRIM_EN_MASK = 0x0F
+TRIM_PHASE = 0x10  # the readout phase trim (TRIM_PHASE_X_DEG, TRIM_PHASE_Y_DEG)
+TRIM_EN_MASK = 0x1F
 TRIM_REGISTERS: tuple[Register, ...] = (
     Register("NVM_CMD", 0x40, "u", "wo", 0, 3, doc="1 commit the trim block to NVM, 2 reload it, 3 erase NVM (0 none)"),
     Register("NVM_STATUS", 0x41, "u", "ro", doc="0x01 NVM valid (CRC checks), 0x02 trims equal NVM, 0x04 CRC bad"),
     Register("NVM_CRC", 0x42, "u", "ro", doc="CRC-16 of the trim block stored in NVM (0: empty)"),
     Register("NVM_COMMITS", 0x43, "u", "ro", doc="commits since manufacture (NVM wear)"),
     Register("TRIM_EN", 0x44, "u", "rw", 0, TRIM_EN_MASK,
-             doc="trims applied: 0x01 drift, 0x02 split, 0x04 gains, 0x08 thermal bias"),
+             doc="trims applied: 0x01 drift, 0x02 split, 0x04 gains, 0x08 thermal bias, 0x10 readout phase"),
     Register("TRIM_DRIFT_D_PER_S", 0x45, "f", "rw", 0.0, 1e3, "1/s", 0.0, "drift trim: damping anisotropy D"),
     Register("TRIM_DRIFT_THETA_TAU_DEG", 0x46, "f", "rw", -360.0, 360.0, "deg", 0.0, "drift trim: damping axis"),
     Register("TRIM_SPLIT_HZ", 0x47, "f", "rw", 0.0, 10.0, "Hz", 0.0, "split trim: frequency split"),
@@ -184,6 +185,11 @@ TRIM_REGISTERS: tuple[Register, ...] = (
     Register("TRIM_UNIT_ID", 0x4E, "u", "rw", 0, float(2**48 - 1),
              doc="the unit's serial as 48 bits of its SHA-256 (0: none), so NVM names the unit it trims"),
     Register("TRIM_FILE_ID", 0x4F, "u", "rw", 0, float(2**48 - 1), doc="compensation file id (SHA-256, 6 bytes)"),
+    Register("TRIM_PHASE_X_DEG", 0x50, "f", "rw", -45.0, 45.0, "deg", 0.0,
+             "readout phase trim of the x chain: its demodulation reference turned this much later (cancels "
+             "a chain delay of this phase at the carrier: cx, sx rotated back by it)"),
+    Register("TRIM_PHASE_Y_DEG", 0x51, "f", "rw", -45.0, 45.0, "deg", 0.0,
+             "readout phase trim of the y chain (cy, sy), as TRIM_PHASE_X_DEG"),
 )
 TRIM_BLOCK = tuple(r.name for r in TRIM_REGISTERS if r.access == "rw")  # what NVM holds, in address order
 REGISTERS = REGISTERS + TRIM_REGISTERS

@@ -66,11 +66,16 @@ class FpgaFirmware:
         """The registers the outputs' truth needs beyond the resonator's (procedures.cvg_output):
         in force-to-rebalance its mode, hold angle and gain; nothing in whole-angle, whose scale
         factor (-K) and bias follow from the resonator alone (so a whole-angle station's truth is
-        the resonator's)."""
+        the resonator's); and the readout phase trims while TRIM_PHASE is on (trim_phase_x_deg,
+        trim_phase_y_deg: against the chains' delays err_pickoff_phase_x_deg, _y_deg)."""
         with self.lock:
+            out: dict[str, float] = {}
+            if int(self.regs["TRIM_EN"]) & p.TRIM_PHASE:  # the readout phase trims in place (docs/readout_phase.md)
+                out["trim_phase_x_deg"] = float(self.regs["TRIM_PHASE_X_DEG"])
+                out["trim_phase_y_deg"] = float(self.regs["TRIM_PHASE_Y_DEG"])
             if int(self.regs["OUTPUT_MODE"]) != p.MODE_FORCE_TO_REBALANCE:
-                return {}
-            return {
+                return out
+            return out | {
                 "cvg_output_mode": float(p.MODE_FORCE_TO_REBALANCE),
                 "ftr_angle_deg": float(self.regs["FTR_ANGLE_DEG"]),
                 "ftr_gain": float(self.regs["FTR_GAIN"]),
@@ -191,6 +196,17 @@ class FpgaFirmware:
         gx, gy = float(self.regs["TRIM_GAIN_X"]), float(self.regs["TRIM_GAIN_Y"])
         return None if gx == gy == 1.0 else np.array([gx, gx, gy, gy])
 
+    def _phase_rotation(self) -> tuple[float, float, float, float] | None:
+        """The readout phase trims as (cos p_x, sin p_x, cos p_y, sin p_y), None when off or zero:
+        each chain's (c, s) is turned back by its trim, as a demodulation reference turned p later
+        reads it (cancelling a chain delay p: simulators/physics/errors.py applies that delay)."""
+        if not int(self.regs["TRIM_EN"]) & p.TRIM_PHASE:
+            return None
+        px, py = math.radians(float(self.regs["TRIM_PHASE_X_DEG"])), math.radians(float(self.regs["TRIM_PHASE_Y_DEG"]))
+        if px == py == 0.0:
+            return None
+        return math.cos(px), math.sin(px), math.cos(py), math.sin(py)
+
     def _status(self) -> int:
         ctrl = int(self.regs["CTRL"])
         st = 0
@@ -211,6 +227,7 @@ class FpgaFirmware:
         self._st[k.S_PLL_INT_HZ] = float(self.regs["PLL_FREQ_HZ"])
         self._prm: np.ndarray | None = None  # loop registers packed for the kernel (None: repack)
         self._hot: tuple = ()  # _hot_values(), made with _prm
+        self._phase_rot: tuple[float, float, float, float] | None = None  # made with _hot
         self._owns_ref = False  # the world's reference follows this NCO only while active
         self._u_on = True  # the force is applied (False once the drive is cut, until it is on again)
 
@@ -231,6 +248,7 @@ class FpgaFirmware:
         (every write path clears `_prm`): (loop CTRL, gain trims or None, block limit in samples
         or None, FM on, stream decimation)."""
         regs = self.regs
+        self._phase_rot = self._phase_rotation()  # beside the tuple: the fused path unpacks it
         fm_on = bool(regs["FM_AMPLITUDE_HZ"] and regs["FM_RATE_HZ"])
         limit = None
         if int(regs["CTRL"]) & (p.DRIVE_EN | p.PLL_EN) or fm_on:
@@ -286,6 +304,9 @@ class FpgaFirmware:
             prm = self._params()
             ctrl, gains, _, _, dec = self._hot
             q_meas = block.q_meas if gains is None else block.q_meas * gains
+            rot = self._phase_rot
+            if rot is not None:  # the readout phase trim: each chain's (c, s) turned back by its trim
+                q_meas = _turn_back(q_meas, rot)
             update = bool(ctrl & (p.DRIVE_EN | p.PLL_EN))  # nothing to update with the drive and PLL off
             stream = bool(ctrl & p.STREAM_EN)
             st = self._st
@@ -326,3 +347,15 @@ class FpgaFirmware:
         self.regs["FRAMES_SENT"] += n
         if self.sink is not None:
             self.sink(data, n)
+
+
+def _turn_back(q: np.ndarray, rot: tuple[float, float, float, float]) -> np.ndarray:
+    """The states (n, 4) with each chain's (c, s) turned back by its phase trim (a new array):
+    c = c' cos p + s' sin p, s = -c' sin p + s' cos p, the inverse of a delay p."""
+    cpx, spx, cpy, spy = rot
+    out = np.empty_like(q)
+    out[:, 0] = q[:, 0] * cpx + q[:, 1] * spx
+    out[:, 1] = -q[:, 0] * spx + q[:, 1] * cpx
+    out[:, 2] = q[:, 2] * cpy + q[:, 3] * spy
+    out[:, 3] = -q[:, 2] * spy + q[:, 3] * cpy
+    return out

@@ -339,11 +339,19 @@ def wave_force(
     st[S_FW] = f_w
     c2, s2 = math.cos(2 * theta), math.sin(2 * theta)
     cc, sc = math.cos(chi), math.sin(chi)
+    f_pu = f_p
+    if f_w != 0.0:
+        # the frequency-control force along d q / d chi of the measured orbit (a, k): (d q / d chi) / a
+        # = e_chi + (k / a) e_p.  Along e_chi alone it would turn a wave with quadrature k at
+        # -k f_w / (4 a^2), and the quadrature the force's own leak through skewed forcers pumps
+        # (the loop nulls it a step late) would rectify into a drift ~ F^2 s_s cos 4 theta
+        # (docs/readout_phase.md section 3)
+        f_pu = f_p + f_w * st[S_OBS_K]
     # u = f_a e_a + f_q e_k + f_p e_p + f_w e_chi with the unit forces along a, k, theta and chi
-    st[S_U + 0] = f_a * (c2 * cc) + f_q * (-s2 * sc) + f_p * (-s2 * cc) + f_w * (-c2 * sc)
-    st[S_U + 1] = f_a * (-c2 * sc) + f_q * (-s2 * cc) + f_p * (s2 * sc) + f_w * (-c2 * cc)
-    st[S_U + 2] = f_a * (s2 * cc) + f_q * (c2 * sc) + f_p * (c2 * cc) + f_w * (-s2 * sc)
-    st[S_U + 3] = f_a * (-s2 * sc) + f_q * (c2 * cc) + f_p * (-c2 * sc) + f_w * (-s2 * cc)
+    st[S_U + 0] = f_a * (c2 * cc) + f_q * (-s2 * sc) + f_pu * (-s2 * cc) + f_w * (-c2 * sc)
+    st[S_U + 1] = f_a * (-c2 * sc) + f_q * (-s2 * cc) + f_pu * (s2 * sc) + f_w * (-c2 * cc)
+    st[S_U + 2] = f_a * (s2 * cc) + f_q * (c2 * sc) + f_pu * (c2 * cc) + f_w * (-s2 * sc)
+    st[S_U + 3] = f_a * (-s2 * sc) + f_q * (c2 * cc) + f_pu * (-c2 * sc) + f_w * (-s2 * cc)
     st[S_OUT + 0] = f_a
     st[S_OUT + 2] = f_q
     st[S_OUT + 3] = f_p
