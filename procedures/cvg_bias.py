@@ -20,7 +20,7 @@ from bench.analysis.cvg_rate import static_bias, turn_on_repeatability
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 
-from .cvg_output import MODES, CvgOutput, static_bias_truth, turn_on_sigma_truth
+from .cvg_output import MODES, UNSTATED_BIAS_NO_TRUTH, CvgOutput, static_bias_truth, turn_on_sigma_truth
 
 WINDOWS = declare(StreamSchema("cvg_bias_windows", "cvg-bias", (
     Column("t_start_s", "s"), Column("t_end_s", "s"), Column("turn_on", "1", "i8"),
@@ -53,8 +53,10 @@ class CvgBias(CvgOutput, Procedure):
 
     measurements = (
         Measurement("bias_dph", "deg/h", "bias at rest, Earth's rate removed: mean over the turn-ons",
-                    truth=static_bias_truth),
-        Measurement("bias_first_dph", "deg/h", "bias of the first turn-on's record", truth=static_bias_truth),
+                    truth=static_bias_truth,
+                    no_truth=UNSTATED_BIAS_NO_TRUTH),
+        Measurement("bias_first_dph", "deg/h", "bias of the first turn-on's record", truth=static_bias_truth,
+                    no_truth=UNSTATED_BIAS_NO_TRUTH),
         Measurement("bias_repeatability_dph", "deg/h", "turn-on to turn-on spread of the bias (1 sigma), "
                     "each record's own noise removed", truth=turn_on_sigma_truth,
                     when=lambda p: p.turn_ons >= 2, when_doc="turn_ons >= 2"),

@@ -24,7 +24,7 @@ from bench.analysis.cvg_rate import fit_scale_factor
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 
-from .cvg_output import MODES, CvgOutput, mean_bias_truth, scale_factor_truth, window_outputs
+from .cvg_output import MODES, UNSTATED_BIAS_NO_TRUTH, CvgOutput, mean_bias_truth, scale_factor_truth, window_outputs
 
 WINDOWS = declare(StreamSchema("cvg_sf_windows", "cvg-scale-factor", (
     Column("t_start_s", "s"), Column("t_end_s", "s"), Column("rate_dps", "deg/s", doc="table rate commanded"),
@@ -78,7 +78,8 @@ class CvgScaleFactor(CvgOutput, Procedure):
         Measurement("scale_factor", "", "least-squares scale factor: output per input rate (deg/s per deg/s; "
                     "whole-angle: wave-angle rate per input rate, -K)", truth=scale_factor_truth),
         Measurement("bias_dph", "deg/h", "input-referred bias, Earth's rate removed (whole-angle: the mean over "
-                    "the wave's angle)", truth=mean_bias_truth),
+                    "the wave's angle)", truth=mean_bias_truth,
+                    no_truth=UNSTATED_BIAS_NO_TRUTH),
         Measurement("nonlinearity_ppm", "ppm", "largest residual of the line in ppm of full-scale output",
                     truth=lambda t: 0.0),
         Measurement("asymmetry_ppm", "ppm", "positive minus negative rates' scale factor over their mean, ppm",

@@ -26,7 +26,7 @@ from bench.analysis.thermal_ramp import branch_gap, frequency_thermometer, trend
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 
-from .cvg_output import MODES, scale_factor_truth, static_bias_truth
+from .cvg_output import MODES, UNSTATED_BIAS_NO_TRUTH, scale_factor_truth, static_bias_truth
 from .thermal_soak import REF_TEMPERATURE_C, ThermalChamber, _f0_at_25c_truth, _f0_tc_truth, _pair
 
 BRANCHES = ("heating", "cooling")
@@ -125,7 +125,8 @@ class ThermalRamp(ThermalChamber, Procedure):
         Measurement("bias_tc_dph_k", "deg/h/K",
                     "bias's temperature slope at 25 degC against the frequency thermometer"),
         Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC against the frequency thermometer",
-                    truth=static_bias_truth),
+                    truth=static_bias_truth,
+                    no_truth=UNSTATED_BIAS_NO_TRUTH),
         Measurement("bias_fit_order", "", "polynomial order of the bias fit against the frequency thermometer (BIC)",
                     no_interval="an order chosen by a criterion"),
         Measurement("bias_rms_air_dph", "deg/h", "rms residual of the bias fitted against the chamber air",

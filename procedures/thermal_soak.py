@@ -24,7 +24,7 @@ from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 from drivers.fpga.stream import STREAM_SCHEMA as FPGA
 
-from .cvg_output import MODES, CvgOutput, static_bias_truth
+from .cvg_output import MODES, UNSTATED_BIAS_NO_TRUTH, CvgOutput, static_bias_truth
 
 WINDOWS = declare(StreamSchema("thermal_soak_windows", "thermal-soak", (
     Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
@@ -164,7 +164,8 @@ class ThermalSoak(ThermalChamber, Procedure):
                     truth=_f0_at_25c_truth),
         Measurement("bias_tc_dph_k", "deg/h/K", "bias's temperature slope at 25 degC from the fit"),
         Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC from the fit (the wave's angle held in "
-                    "force-to-rebalance; in whole-angle it precesses through the soak)", truth=static_bias_truth),
+                    "force-to-rebalance; in whole-angle it precesses through the soak)", truth=static_bias_truth,
+                    no_truth=UNSTATED_BIAS_NO_TRUTH),
         Measurement("bias_fit_order", "", "polynomial order of the bias fit (lowest BIC)",
                     no_interval="an order chosen by a criterion"),
         Measurement("f0_fit_order", "", "polynomial order of the frequency fit (lowest BIC)",
