@@ -2,7 +2,7 @@
 at the controller's ramp limit, the unit's case follows the air through a first-order time
 constant, and the resonator follows the case through its own time constant (in vacuum it takes
 heat by radiation and through its stem; 0: it is at the case's temperature): the resonator's
-temperature is the World's."""
+temperature is the World's (every slot World's when several gyros share the chamber)."""
 
 from __future__ import annotations
 
@@ -22,6 +22,9 @@ class ChamberThermal:
     ambient_c: float = 25.0
     resonator_tau_s: float = 0.0
     resonator_c: float | None = None
+    #: every unit in the chamber (a rig's slot worlds, which share its air and housing); empty: the
+    #: World the model is attached to
+    units: tuple = ()
 
     def __post_init__(self) -> None:
         if not (self.case_tau_s > 0 and math.isfinite(self.case_tau_s)):
@@ -59,8 +62,10 @@ class ChamberThermal:
 
     # --- World device ---------------------------------------------------------------------------
     def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
+        """Attached to a rig's table world, whose block runs first: every unit's from this block on."""
         self.step(n * dt_s)
-        world.set_temperature(self.resonator_c)
+        for unit in self.units or (world,):
+            unit.set_temperature(self.resonator_c)
 
     def after_block(self, world, block) -> None:
         pass

@@ -112,11 +112,13 @@ def serve_watlow_f4(
     high_c: float = 180.0,
     **thermal_kw,
 ) -> ModbusTableServer:
-    """Attach a ChamberThermal (starting at the world's temperature) to the world and serve the F4's
+    """Attach a ChamberThermal (starting at the world's temperature) to the world (a rig: to its
+    table world, setting every slot world's temperature) and serve the F4's
     registers over Modbus on loopback (port 0: any); the handle's `.mechanics` is the model."""
-    start = world.temperature_c
+    units = tuple(getattr(world, "worlds", ()))  # a rig: every slot's unit sits in the chamber
+    start = (units[0] if units else world).temperature_c
     at_start = {"setpoint_c": start, "air_c": start, "case_c": start, "resonator_c": start}
-    thermal = ChamberThermal(**(at_start | thermal_kw))
+    thermal = ChamberThermal(**(at_start | thermal_kw), units=units)
     registers = ChamberRegisters(world, thermal, low_c=low_c, high_c=high_c)
     with world.lock:
         world.attach(thermal)
