@@ -60,7 +60,7 @@ class ThermalChamber(CvgOutput):
     settle judgement from the resonator frequency, the fits' settings, the excitation step."""
 
     requires = ("fpga", "chamber")
-    kinds = ("hrg",)
+    kinds = ("hrg", "mems-ring")  # the FPGA holds either in force-to-rebalance (sim-mems-thermal)
 
     t_low_degc = Param(-40.0, unit="degC", low=-100.0, high=200.0, doc="lowest set point")
     t_high_degc = Param(85.0, unit="degC", low=-100.0, high=200.0, doc="highest set point")
