@@ -134,3 +134,37 @@ def test_the_safe_state_after_the_batch(thermal_batch):
     for rec in thermal_batch["records"]:
         run = rec["runs"][0]
         assert run["safe_state"] is True
+
+
+def test_a_soak_batch_settles_on_every_units_frequency(tmp_path):
+    """thermal-soak on the four units at once: each set point written once, the batch settled when
+    every unit's drift is below the limit, each unit's frequency fit against its own truth."""
+    from bench.engine.batch import Batch
+    from procedures.thermal_soak import ThermalSoak
+
+    params = {"t_low_degc": 25.0, "t_high_degc": 30.0, "points": 3, "settle_window_s": 20.0,
+              "settle_ppm_per_min": 1.0, "record_s": 30.0, "max_order": 1}
+    station = load_station("sim-hrg-thermal-4", seed=1).open()
+    try:
+        chamber = station.shared["chamber"]._device
+        writes: list[float] = []
+        real_set = chamber.set_setpoint
+        chamber.set_setpoint = lambda c: (writes.append(c), real_set(c))[1]
+        batch = Batch(station, {n: f"S{n}" for n in station.slots}, runs_dir=tmp_path)
+        records = batch.run(lambda: ThermalSoak(params))
+        truths = {n: station.truth(n) for n in station.slots}
+    finally:
+        station.close()
+    assert writes == [25.0, 27.5, 30.0, 25.0]  # the three set points and ambient at the end, once each
+    settle = set()
+    for n, rec in records.items():
+        assert rec.outcome == "COMPLETE", (n, rec.end_reason)
+        got = {m.name: m for m in rec.measurements}
+        truth = truths[n]
+        f25 = truth["f0_hz"] + truth.get("freq_offset_hz_ref", truth["freq_offset_hz"])
+        lo, hi = got["f0_at_25c_hz"].ci95
+        assert lo <= f25 <= hi, (n, got["f0_at_25c_hz"].value, f25)
+        lo, hi = got["f0_tc_ppm_k"].ci95
+        assert lo <= 55.0 <= hi, (n, got["f0_tc_ppm_k"].value)
+        settle.add(got["settle_mean_s"].value)
+    assert len(settle) == 1  # every unit waited for the slowest: one settle time for all
