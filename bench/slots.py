@@ -27,8 +27,9 @@ from bench.station import Station
 from bench.station_config import StationConfig
 from drivers.errors import DeviceError, LinkLostError, SafetyTripError
 
-#: roles only batch steps drive (run once for every slot)
-BATCH_ROLES = frozenset({"table"})
+#: roles only batch steps (or a slot step's `ctx.shared`) drive, run once for every slot: the table
+#: they all sit on and the chamber they all sit in (docs/chamber.md, "Several gyros in one chamber")
+BATCH_ROLES = frozenset({"table", "chamber"})
 
 
 class LockBroken(DeviceError):
@@ -302,11 +303,11 @@ class BatchStation:
                     ctx.record(role, ("t_s", *spec.health_columns), np.column_stack([[now], rows]))
 
     def table_to_rest(self) -> SafeStateReport:
-        """The shared table to rest (its spec's safe state), once no slot needs it, confirmed by read-back."""
+        """The shared table to rest and the shared chamber to ambient (their specs' safe states, in
+        the safe state's order), once no slot needs them, each confirmed by read-back."""
         report = SafeStateReport(confirmed=True)
-        for role in self.config.devices:
-            if role not in BATCH_ROLES:
-                continue
+        plan = by_part({r: self.spec(r).part for r in self.config.devices if r in BATCH_ROLES})
+        for role in (r for _, roles in plan for r in roles):  # the table to rest, then the chamber to ambient
             report.order.append(role)
             try:
                 ok = bool(self.spec(role).safe_state(self.shared[role]))

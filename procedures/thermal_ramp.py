@@ -165,7 +165,7 @@ class ThermalRamp(ThermalChamber, Procedure):
         return [Demand("table", "max_rate_dps", "rate_dps", self.rate_dps, "deg/s"),
                 Demand("table", "max_accel_dps2", "accel_dps2", self.accel_dps2, "deg/s^2")]
 
-    @step("Ramp cycle, recorded in segments")
+    @step("Ramp cycle, recorded in segments", uses=("fpga",), shares=("chamber", "table"))
     def ramp(self, ctx):
         chamber = ctx.devices.chamber
         ref_hz = float(ctx.devices.fpga.read_register("REF_FREQ_HZ"))
@@ -178,11 +178,12 @@ class ThermalRamp(ThermalChamber, Procedure):
             if self._mode != "force-to-rebalance":
                 raise RuntimeError("rate_dps > 0 needs the force-to-rebalance output (a rate at each segment)")
             table = ctx.devices.table
-            table.enable()
-            ctx.defer(lambda: table.set_rate(0.0, self.accel_dps2) if table.connected else None, "table to rest")
+            ctx.shared(table.enable, "table enabled")
+            if not ctx.in_batch:  # a batch's table comes to rest once, when the batch ends
+                ctx.defer(lambda: table.set_rate(0.0, self.accel_dps2) if table.connected else None, "table to rest")
         on_controller = bool(self.controller_ramp) and chamber.supports_profiles()
         if not on_controller:
-            chamber.set_ramp_rate(self.cycle_degc_per_min)
+            ctx.shared(lambda: chamber.set_ramp_rate(self.cycle_degc_per_min), "cycle ramp rate")
         ctx.log.info("the cycle's ramps run " + ("on the chamber's controller (a ramp-rate profile)" if on_controller
                                                  else "from the PC (set points with the ramp limit)"))
         span_c = self.t_high_degc - self.t_low_degc
@@ -190,22 +191,22 @@ class ThermalRamp(ThermalChamber, Procedure):
         t_cycle = ctx.clock.now()
         for branch, target in enumerate((self.t_high_degc, self.t_low_degc)):
             if on_controller:
-                profile = chamber.start_ramp(float(target), self.cycle_degc_per_min)
+                profile = ctx.shared(lambda target=target: chamber.start_ramp(float(target), self.cycle_degc_per_min),
+                                     f"{BRANCHES[branch]} ramp")
             else:
-                chamber.set_setpoint(float(target))
+                ctx.shared(lambda target=target: chamber.set_setpoint(float(target)), f"{BRANCHES[branch]} set point")
             arrived, k = None, 0
             # with the table turning, a branch ends on a whole +- pair
             while arrived is None or ctx.clock.now() - arrived < self.tail_s or (table is not None and k % 2):
                 rate = 0.0
                 if table is not None:
                     rate = self.rate_dps if k % 2 == 0 else -self.rate_dps
-                    table.set_rate(rate, self.accel_dps2)
-                    table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
+                    self._table_at(ctx, table, rate)
                     ctx.sleep(self._settle_s(ctx))  # the rebalance loop's transient outside the segment
                 k += 1
-                s0 = chamber.status()
+                s0 = self._chamber_status(ctx)
                 t0, t1 = self._record_window(ctx, self.segment_s, f"{BRANCHES[branch]} segment at {rate:+g} deg/s")
-                s1 = chamber.status()
+                s1 = self._chamber_status(ctx)
                 air, part = 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c)
                 row = [t0, t1, branch, rate, air, part, ref_hz, code, sf]
                 ctx.record(SEGMENTS, SEGMENTS.names, np.array([row]))
@@ -214,23 +215,31 @@ class ThermalRamp(ThermalChamber, Procedure):
                 ctx.progress(min(1.0, (ctx.clock.now() - t_cycle) / expected_s), f"{BRANCHES[branch]}, case "
                              f"{s1.part_c:.1f} degC")
             if on_controller:  # the End-Hold holds the target: the constant set point takes it over
-                chamber.end_ramp(profile, float(target))
+                ctx.shared(lambda profile=profile, target=target: chamber.end_ramp(profile, float(target)),
+                           f"{BRANCHES[branch]} ramp ended")
         if table is not None:
-            table.set_rate(0.0, self.accel_dps2)
+            self._table_at(ctx, table, 0.0)
+
+    def _table_at(self, ctx, table, rate_dps: float) -> None:
+        """The table to rate_dps and held there (once for a batch)."""
+        def move() -> None:
+            table.set_rate(rate_dps, self.accel_dps2)
             table.wait_at_rate(self.rate_tolerance_dps, self.rate_hold_s, self.rate_timeout_s)
+
+        ctx.shared(move, f"table at {rate_dps:+g} deg/s")
 
     def verify_setpoints_c(self) -> np.ndarray:
         n = int(self.verify_points)
         return self.t_low_degc + (np.arange(n) + 0.5) * (self.t_high_degc - self.t_low_degc) / max(n, 1)
 
-    @step("Verification at temperatures between")
+    @step("Verification at temperatures between", uses=("fpga",), shares=("chamber",))
     def verify(self, ctx):
         if not self.verify_points:
             return
         chamber = ctx.devices.chamber
         fpga = ctx.devices.fpga
         ref_hz = float(fpga.read_register("REF_FREQ_HZ"))
-        chamber.set_ramp_rate(self.ramp_degc_per_min)
+        ctx.shared(lambda: chamber.set_ramp_rate(self.ramp_degc_per_min), "verification ramp rate")
         code, sf = MODES.index(self._mode), self._scale_factor()
         trim = (0.0, 0.0)
         if self.compensate:
@@ -239,9 +248,9 @@ class ThermalRamp(ThermalChamber, Procedure):
             self._write_trim(ctx, trim)
         for sp in self.verify_setpoints_c():
             settle_s = self._settle_at(ctx, float(sp), ref_hz)
-            s0 = chamber.status()
+            s0 = self._chamber_status(ctx)
             t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record")
-            s1 = chamber.status()
+            s1 = self._chamber_status(ctx)
             row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf,
                    *trim]
             ctx.record(VERIFY, VERIFY.names, np.array([row]))
@@ -266,7 +275,7 @@ class ThermalRamp(ThermalChamber, Procedure):
         fpga.write_register("TRIM_EN", int(before["TRIM_EN"]) | fp.TRIM_THERMAL)
         ctx.log.info(f"thermal trim on: {trim[0]:.4g} deg/h at REF_FREQ_HZ, {trim[1]:.4g} deg/h/Hz")
 
-    @step("Fits against temperature")
+    @step("Fits against temperature", uses=())
     def estimate(self, ctx):
         for res in self.analysis(ctx.data()):
             ctx.report(res)

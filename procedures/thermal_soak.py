@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import threading
+from typing import Any
 
 import numpy as np
 
@@ -59,7 +60,7 @@ class ThermalChamber(CvgOutput):
     settle judgement from the resonator frequency, the fits' settings, the excitation step."""
 
     requires = ("fpga", "chamber")
-    kinds = ("hrg",)
+    kinds = ("hrg", "mems-ring")  # the FPGA holds either in force-to-rebalance (sim-mems-thermal)
 
     t_low_degc = Param(-40.0, unit="degC", low=-100.0, high=200.0, doc="lowest set point")
     t_high_degc = Param(85.0, unit="degC", low=-100.0, high=200.0, doc="highest set point")
@@ -107,7 +108,7 @@ class ThermalChamber(CvgOutput):
                 raise RuntimeError(f"no stream sample in a {seconds:g} s settle window")
             return self._f_sum / self._f_n
 
-    @step("Excite and hold the amplitude")
+    @step("Excite and hold the amplitude", uses=("fpga",), shares=("chamber",))
     def excite(self, ctx):
         if self.t_high_degc <= self.t_low_degc:
             raise ValueError(f"t_high_degc={self.t_high_degc:g} must be above t_low_degc={self.t_low_degc:g}")
@@ -119,23 +120,29 @@ class ThermalChamber(CvgOutput):
         self._start_loops(ctx)
         self._hold_amplitude(ctx)
         chamber = ctx.devices.chamber
-        chamber.stop_profile()
-        chamber.set_ramp_rate(self.ramp_degc_per_min)
-        ctx.defer(lambda: chamber.set_setpoint(REF_TEMPERATURE_C) if chamber.connected else None,
-                  "chamber set point back to 25 degC")
+        ctx.shared(lambda: (chamber.stop_profile(), chamber.set_ramp_rate(self.ramp_degc_per_min)), "chamber ready")
+        if not ctx.in_batch:  # a batch's chamber goes to ambient once, when the batch ends (bench.slots)
+            ctx.defer(lambda: chamber.set_setpoint(REF_TEMPERATURE_C) if chamber.connected else None,
+                      "chamber set point back to 25 degC")
 
     def _scale_factor(self) -> float:
         if self.scale_factor:
             return float(self.scale_factor)
         return 1.0 if self._mode == "force-to-rebalance" else -float(self.bryan_factor)
 
+    def _chamber_status(self, ctx) -> Any:
+        """The chamber's air and part readings, read once for a batch (every slot gets the same)."""
+        return ctx.shared(ctx.devices.chamber.status, "chamber reading")
+
     def _settle_at(self, ctx, setpoint_c: float, ref_hz: float) -> float:
         """Write the set point, then wait until the frequency's drift between consecutive windows
-        stays below settle_ppm_per_min for settle_windows windows; the seconds it took."""
-        ctx.devices.chamber.set_setpoint(setpoint_c)
-        t_set = ctx.clock.now()
+        stays below settle_ppm_per_min for settle_windows windows; the seconds it took.  In a batch
+        the set point is written once and every unit waits until all of them have settled (each
+        judged from its own frequency: the slowest sets the pace)."""
+        chamber = ctx.devices.chamber
+        t_set = ctx.shared(lambda: (chamber.set_setpoint(setpoint_c), ctx.clock.now())[1], f"set point {setpoint_c:g}")
         prev, quiet = None, 0
-        while quiet < self.settle_windows:
+        while min(ctx.gather(quiet, f"settled at {setpoint_c:g}")) < self.settle_windows:
             if ctx.clock.now() - t_set > self.settle_timeout_s:
                 raise TimeoutError(f"set point {setpoint_c:g} degC: the frequency still drifts after "
                                    f"{self.settle_timeout_s:g} s (threshold {self.settle_ppm_per_min:g} ppm/min)")
@@ -179,9 +186,8 @@ class ThermalSoak(ThermalChamber, Procedure):
     def setpoints_c(self) -> np.ndarray:
         return np.linspace(self.t_low_degc, self.t_high_degc, int(self.points))
 
-    @step("Set points, settle and record")
+    @step("Set points, settle and record", uses=("fpga",), shares=("chamber",))
     def soak(self, ctx):
-        chamber = ctx.devices.chamber
         fpga = ctx.devices.fpga
         ref_hz = float(fpga.read_register("REF_FREQ_HZ"))
         code = MODES.index(self._mode)
@@ -189,15 +195,15 @@ class ThermalSoak(ThermalChamber, Procedure):
         sps = self.setpoints_c()
         for i, sp in enumerate(sps):
             settle_s = self._settle_at(ctx, float(sp), ref_hz)
-            s0 = chamber.status()
+            s0 = self._chamber_status(ctx)
             t0, t1 = self._record_window(ctx, self.record_s, f"set point {sp:g} degC record")
-            s1 = chamber.status()
+            s1 = self._chamber_status(ctx)
             row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf]
             ctx.record(WINDOWS, WINDOWS.names, np.array([row]))
             ctx.log.info(f"set point {sp:g} degC: settled after {settle_s:.0f} s, case {row[4]:.1f} degC")
             ctx.progress((i + 1) / len(sps), f"set point {i + 1} / {len(sps)}")
 
-    @step("Fits against temperature")
+    @step("Fits against temperature", uses=())
     def estimate(self, ctx):
         for res in self.analysis(ctx.data()):
             ctx.report(res)

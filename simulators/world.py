@@ -212,6 +212,7 @@ class World:
             if errs.thermal_active:
                 c = self.resonator.coeffs
                 self.resonator.set_thermal(*errs.thermal(c.gamma, c.c_m, self.params.f0_hz, self.temperature_c))
+            rate_rad_s += math.radians(errs.thermal_bias_dps(self.temperature_c))  # 0 at the reference
         env = self.environment
         gains = None
         if env is not None:

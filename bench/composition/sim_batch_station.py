@@ -11,7 +11,7 @@ from typing import Any
 
 from bench.devices import DRIVERS, StationError
 from bench.fault_kinds import check_kind
-from bench.slots import BatchStation
+from bench.slots import BATCH_ROLES, BatchStation
 from bench.station_config import SIM_KEYS, StationConfig
 from simulators.faults import FaultScheduler, stop_simulators
 from simulators.faults import inject as inject_fault
@@ -81,7 +81,7 @@ class SimBatchStation(BatchStation):
             raise StationError(f"{self.config.source}: {role} driver {spec.name!r} has no simulator")
         if slot is not None:
             world = self.rig.worlds[slot - 1]
-        elif role == "table":
+        elif role in BATCH_ROLES:  # the table turns every slot; the chamber holds every slot's unit
             world = self.rig
         else:  # a shared instrument: behind the switch that connects it to one slot at a time
             world = SwitchedWorld(self.rig)

@@ -30,7 +30,7 @@ from drivers.errors import LinkLostError, SafetyTripError
 
 from .context import RunAborted
 from .measurement import ERROR
-from .procedure import Procedure, step_uses
+from .procedure import Procedure, step_shares, step_uses
 from .runner import Runner, RunRecord
 from .safety import SafeStateReport
 
@@ -44,16 +44,18 @@ class BatchError(ValueError):
 
 
 def check_batchable(cls: type[Procedure], batch_roles: frozenset[str]) -> None:
-    """Every step says what it uses, and none mixes the shared table with a slot's devices."""
+    """Every step says what it uses, and none mixes the shared table with a slot's devices unless
+    it declares the shared roles it drives through `ctx.shared` (`@step(..., shares=...)`)."""
     for name, title in cls.step_specs():
         uses = step_uses(cls, name)
         if uses is None:
             raise BatchError(f"procedure {cls.name!r} step {title!r} does not say which devices it uses "
                              "(@step(..., uses=(...))): it cannot run on several gyros at once")
         shared, own = set(uses) & batch_roles, set(uses) - batch_roles
-        if shared and own:
+        if shared and own and not shared <= set(step_shares(cls, name)):
             raise BatchError(f"procedure {cls.name!r} step {title!r} uses the shared {sorted(shared)} and the "
-                             f"slot's {sorted(own)}: split it into a table step and a slot step")
+                             f"slot's {sorted(own)}: split it into a table step and a slot step, or drive the "
+                             f"shared ones through ctx.shared (@step(..., shares=(...)))")
 
 
 class Batch:
@@ -79,6 +81,9 @@ class Batch:
         self._active: set[int] = set()
         self._arrived: dict[str, set[int]] = {}
         self._done: dict[str, tuple[int, BaseException | None]] = {}
+        self._values: dict[str, dict[int, Any]] = {}  # a sync's slot values (ctx.gather)
+        self._results: dict[str, Any] = {}  # a sync's action's result (ctx.shared)
+        self._sync_seq: dict[int, int] = {}
         self._threads: dict[int, threading.Thread] = {}
         self._idents: dict[int, int] = {}
         self._abort_reason: str | None = None
@@ -113,6 +118,9 @@ class Batch:
         self._active = set(self.runners)
         self._arrived.clear()
         self._done.clear()
+        self._values.clear()
+        self._results.clear()
+        self._sync_seq.clear()
         self.station._on_lock_broken = self._lock_broken
 
         start = threading.Barrier(len(self.runners))
@@ -207,6 +215,8 @@ class Batch:
     def _gate(self, slot: int) -> Callable[[Procedure, str, Any], None]:
         def gate(proc: Procedure, name: str, ctx: Any) -> None:
             self.current[slot] = name
+            if ctx.batch is None:
+                ctx.batch = _SlotSync(self, slot)
             uses = set(step_uses(proc, name) or ())
             if uses and uses <= self.batch_roles:
                 self._batch_step(slot, proc, name, ctx)
@@ -221,7 +231,9 @@ class Batch:
             raise RunAborted(self._abort_reason)
         self.station.check_shared(None)
 
-    def _batch_step(self, slot: int, proc: Procedure, name: str, ctx: Any) -> None:
+    def _barrier(self, slot: int, key: str, value: Any = None) -> bool:
+        """Wait (parked in the clock) until every slot still in the batch has reached `key`; True
+        for the one that leads it (the lowest slot): it runs what is run once and then `_release`s."""
         runner = self.runners[slot]
         clock = self.station.base_clock
         park = hasattr(clock, "park")
@@ -231,15 +243,17 @@ class Batch:
         try:
             with self._cond:
                 self._idents[slot] = threading.get_ident()
-                arrived = self._arrived.setdefault(name, set())
+                arrived = self._arrived.setdefault(key, set())
                 arrived.add(slot)
+                self._values.setdefault(key, {})[slot] = value
                 self._cond.notify_all()
-                while name not in self._done:
+                while key not in self._done:
                     if self._active <= arrived and slot == min(self._active):
                         lead = True
                         break
                     if runner.stopping:
                         arrived.discard(slot)
+                        self._values[key].pop(slot, None)
                         self._cond.notify_all()
                         break
                     self._cond.wait(0.05)
@@ -247,7 +261,65 @@ class Batch:
             if park:
                 clock.unpark()
         runner.checkpoint()  # an abort while waiting at the barrier ends the slot's run here
-        if lead:
+        return lead
+
+    def _release(self, slot: int, key: str, exc: BaseException | None, result: Any = None) -> None:
+        """The leader of `key` is done: the slots that waited hold the world back again (before
+        this slot's next wait), and learn the result."""
+        clock = self.station.base_clock
+        with self._cond:
+            self._results[key] = result
+            self._done[key] = (slot, exc)
+            if hasattr(clock, "park"):
+                for other in self._arrived[key] - {slot}:
+                    clock.unpark(self._idents[other])
+            self._cond.notify_all()
+
+    def _follow(self, slot: int, key: str, what: str, ctx: Any) -> Any:
+        """A slot that waited for `key`'s leader: its result, or its failure raised in this slot."""
+        runner = self.runners[slot]
+        leader, exc = self._done[key]
+        if exc is None:
+            return self._results.get(key)
+        text = f"batch step {what!r} (run by slot {leader}) failed: {exc}"
+        if isinstance(exc, SafetyTripError | LinkLostError):
+            raise type(exc)(text)
+        if isinstance(exc, RunAborted):
+            runner.checkpoint()
+            raise RunAborted(exc.reason)
+        raise RuntimeError(text)
+
+    def sync(self, slot: int, ctx: Any, *, action: Callable[[], Any] | None = None, value: Any = None,
+             what: str = "") -> tuple[Any, list[Any]]:
+        """ctx.shared / ctx.gather within a slot step: the slots meet at their n-th sync (they run
+        the same code); the lowest runs `action` once (the shared devices' clock guarded by the
+        batch's checks); every slot gets its result and the values the slots gave, slot order."""
+        n = self._sync_seq.get(slot, 0) + 1
+        self._sync_seq[slot] = n
+        key = f"sync#{n}"
+        what = what or key
+        if self._barrier(slot, key, value):
+            table_clock = self.station.table_clock
+            table_clock.guard = self._batch_check
+            exc: BaseException | None = None
+            result = None
+            try:
+                if action is not None:
+                    result = action()
+            except BaseException as e:
+                exc = e
+                raise
+            finally:
+                table_clock.guard = None
+                self._release(slot, key, exc, result)
+        else:
+            result = self._follow(slot, key, what, ctx)
+        with self._cond:
+            values = [v for _, v in sorted(self._values.get(key, {}).items())]
+        return result, values
+
+    def _batch_step(self, slot: int, proc: Procedure, name: str, ctx: Any) -> None:
+        if self._barrier(slot, name):
             table_clock = self.station.table_clock
             table_clock.guard = self._batch_check
             exc: BaseException | None = None
@@ -258,21 +330,18 @@ class Batch:
                 raise
             finally:
                 table_clock.guard = None
-                with self._cond:
-                    self._done[name] = (slot, exc)
-                    if park:  # the others hold the world back again before this slot's next wait
-                        for other in self._arrived[name] - {slot}:
-                            clock.unpark(self._idents[other])
-                    self._cond.notify_all()
+                self._release(slot, name, exc)
             return
-        leader, exc = self._done[name]
-        if exc is None:
-            ctx.log.info(f"batch step {name!r}: run once for the {len(self._arrived[name])} slots by slot {leader}")
-            return
-        text = f"batch step {name!r} (run by slot {leader}) failed: {exc}"
-        if isinstance(exc, SafetyTripError | LinkLostError):
-            raise type(exc)(text)
-        if isinstance(exc, RunAborted):
-            runner.checkpoint()
-            raise RunAborted(exc.reason)
-        raise RuntimeError(text)
+        leader, _ = self._done[name]
+        self._follow(slot, name, name, ctx)
+        ctx.log.info(f"batch step {name!r}: run once for the {len(self._arrived[name])} slots by slot {leader}")
+
+
+class _SlotSync:
+    """A slot run's handle on its batch (RunContext.batch): ctx.shared and ctx.gather go through it."""
+
+    def __init__(self, batch: Batch, slot: int) -> None:
+        self.batch, self.slot = batch, slot
+
+    def sync(self, ctx: Any, **kw: Any) -> tuple[Any, list[Any]]:
+        return self.batch.sync(self.slot, ctx, **kw)

@@ -180,6 +180,30 @@ class RunContext:
     def close(self) -> None:
         self.log.removeHandler(self._handler)
 
+    # --- several gyros in one batch (bench.engine.batch) --------------------------------------
+    #: the batch's sync for this slot's run (set by bench.engine.batch); None: a run on its own
+    batch: Any = None
+
+    @property
+    def in_batch(self) -> bool:
+        """This run is one slot of a batch: the shared devices are the batch's (their safe state too)."""
+        return self.batch is not None
+
+    def shared(self, action: Callable[[], Any], what: str = "") -> Any:
+        """Run `action` (a use of a device the slots share: the chamber, the table) once for the
+        batch, after every slot still in it has reached this call, and hand its result to every
+        slot; on its own, run it.  The slots must call it in the same order (the same code)."""
+        if self.batch is None:
+            return action()
+        return self.batch.sync(self, action=action, what=what)[0]
+
+    def gather(self, value: Any, what: str = "") -> list[Any]:
+        """Every slot's `value` (slot order) once every slot still in the batch has given its own:
+        a judgement over all units (settled when every unit's drift is below the limit); alone, [value]."""
+        if self.batch is None:
+            return [value]
+        return self.batch.sync(self, value=value, what=what)[1]
+
     # --- resources that live as long as the run --------------------------------------------
     def defer(self, fn: Callable[[], Any], what: str = "") -> None:
         """Run `fn` when the run ends, whatever happens (last deferred, first run), before the

@@ -63,21 +63,26 @@ from .params import Param, declared_params, resolve_params
 
 _STEP_ATTR = "_gyrobench_step_title"
 _USES_ATTR = "_gyrobench_step_uses"
+_SHARES_ATTR = "_gyrobench_step_shares"
 
 
-def step(title: str | Callable | None = None, *, uses: tuple[str, ...] | None = None):
+def step(title: str | Callable | None = None, *, uses: tuple[str, ...] | None = None, shares: tuple[str, ...] = ()):
     """Mark a method `def name(self, ctx)` as a step; `@step` or `@step("Title")`.  `uses` names the
     device roles the step touches (`("table",)`, `("fpga", "frontend")`, `()` for analysis): with
     several gyros on one table a step that uses only the shared table is a batch step (run once for
-    every slot), the others run per slot (bench.engine.batch); None = not said."""
+    every slot), the others run per slot (bench.engine.batch); None = not said.  `shares` names the
+    shared roles (the chamber, the table) a slot step drives only through `ctx.shared` (run once for
+    the batch, its result handed to every slot), so a per-unit loop can move the shared chamber."""
     if callable(title):
         setattr(title, _STEP_ATTR, title.__name__.replace("_", " ").capitalize())
         setattr(title, _USES_ATTR, uses)
+        setattr(title, _SHARES_ATTR, tuple(shares))
         return title
 
     def mark(fn: Callable) -> Callable:
         setattr(fn, _STEP_ATTR, title or fn.__name__.replace("_", " ").capitalize())
         setattr(fn, _USES_ATTR, None if uses is None else tuple(uses))
+        setattr(fn, _SHARES_ATTR, tuple(shares))
         return fn
 
     return mark
@@ -86,6 +91,11 @@ def step(title: str | Callable | None = None, *, uses: tuple[str, ...] | None = 
 def step_uses(proc: Any, name: str) -> tuple[str, ...] | None:
     """The device roles step `name` of a procedure (class or instance) declares, None if undeclared."""
     return getattr(getattr(proc, name), _USES_ATTR, None)
+
+
+def step_shares(proc: Any, name: str) -> tuple[str, ...]:
+    """The shared roles step `name` drives through `ctx.shared` only (see `step`)."""
+    return getattr(getattr(proc, name), _SHARES_ATTR, ())
 
 
 def _kebab(name: str) -> str:

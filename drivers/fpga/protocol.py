@@ -177,9 +177,9 @@ TRIM_REGISTERS: tuple[Register, ...] = (
     Register("TRIM_GAIN_X", 0x49, "f", "rw", 0.5, 2.0, "", 1.0, "pickoff x gain trim (multiplies cx, sx)"),
     Register("TRIM_GAIN_Y", 0x4A, "f", "rw", 0.5, 2.0, "", 1.0, "pickoff y gain trim (multiplies cy, sy)"),
     Register("TRIM_BRYAN_FACTOR", 0x4B, "f", "rw", 0.0, 1.0, "", 0.0, "scale factor trim: Bryan factor K (0 none)"),
-    Register("TRIM_BIAS_DPH", 0x4C, "f", "rw", -1e4, 1e4, "deg/h", 0.0,
+    Register("TRIM_BIAS_DPH", 0x4C, "f", "rw", -1e6, 1e6, "deg/h", 0.0,
              "thermal trim: the bias at REF_FREQ_HZ, removed from the force-to-rebalance rate output"),
-    Register("TRIM_BIAS_DPH_PER_HZ", 0x4D, "f", "rw", -1e4, 1e4, "deg/h/Hz", 0.0,
+    Register("TRIM_BIAS_DPH_PER_HZ", 0x4D, "f", "rw", -1e6, 1e6, "deg/h/Hz", 0.0,
              "thermal trim: the bias's slope against the PLL frequency's offset from REF_FREQ_HZ (the "
              "resonator frequency as the thermometer)"),
     Register("TRIM_UNIT_ID", 0x4E, "u", "rw", 0, float(2**48 - 1),

@@ -19,10 +19,19 @@ def _build(cfg: dict[str, Any], clock: Any) -> Any:
     link.connect()
     try:  # the station's output mode, hold angle and rate-output gain, written at connect
         link.set_output_mode(cfg["output_mode"], ftr_angle_deg=cfg["ftr_angle_deg"], ftr_gain=cfg["ftr_gain"])
+        for key, register in LOOP_KEYS.items():  # a resonator far from the firmware's defaults (a MEMS ring)
+            if cfg.get(key):
+                link.write_register(register, float(cfg[key]))
     except BaseException:
         link.close()
         raise
     return link
+
+
+#: station keys for the loops' limit and gains (0: the firmware's own), written at connect: a MEMS
+#: ring decays in ~50 ms and has a split of Hz where the HRG's loops are set for minutes and mHz
+LOOP_KEYS = {"force_limit": "FORCE_LIMIT", "agc_kp": "AGC_KP", "agc_ki": "AGC_KI", "pll_kp": "PLL_KP",
+             "pll_ki": "PLL_KI", "quad_kp": "QUAD_KP", "quad_ki": "QUAD_KI", "ftr_kp": "FTR_KP", "ftr_ki": "FTR_KI"}
 
 
 def _counters(link: Any) -> tuple[int, int, int]:
@@ -83,6 +92,8 @@ SPEC = register_driver(
                                  doc="force-to-rebalance: the wave angle the rebalance loop holds"),
             "ftr_gain": Key(float, 1.0, -1e6, 1e6,
                             doc="force-to-rebalance rate-output gain G (scale factor G K, K the Bryan factor)"),
+            **{k: Key(float, 0.0, 0.0, 1e4, doc=f"{r} written at connect (0: the firmware's own)")
+               for k, r in LOOP_KEYS.items()},
         },
         build=_build,
         serve="simulators.fpga.server:serve_station",

@@ -3,7 +3,7 @@ at the controller's ramp limit (a running ramp-rate profile step moves the set p
 its rate, the air following it), the unit's case follows the air through a first-order time
 constant, and the resonator follows the case through its own time constant (in vacuum it takes
 heat by radiation and through its stem; 0: it is at the case's temperature): the resonator's
-temperature is the World's."""
+temperature is the World's (every slot World's when several gyros share the chamber)."""
 
 from __future__ import annotations
 
@@ -30,6 +30,9 @@ class ChamberThermal:
     #: the chamber's own limit (its heaters and compressor): a profile's set point is followed up
     #: to it; in constant mode the air moves at the lower of it and ramp_c_per_min
     max_rate_c_per_min: float = math.inf
+    #: every unit in the chamber (a rig's slot worlds, which share its air and housing); empty: the
+    #: World the model is attached to
+    units: tuple = ()
 
     def __post_init__(self) -> None:
         if not (self.case_tau_s > 0 and math.isfinite(self.case_tau_s)):
@@ -88,8 +91,10 @@ class ChamberThermal:
 
     # --- World device ---------------------------------------------------------------------------
     def before_block(self, world, t_s: float, n: int, dt_s: float) -> None:
+        """Attached to a rig's table world, whose block runs first: every unit's from this block on."""
         self.step(n * dt_s)
-        world.set_temperature(self.resonator_c)
+        for unit in self.units or (world,):
+            unit.set_temperature(self.resonator_c)
 
     def after_block(self, world, block) -> None:
         pass

@@ -231,12 +231,14 @@ def serve_watlow_f4(
     profiles: bool = True,
     **thermal_kw,
 ) -> ModbusTableServer:
-    """Attach a ChamberThermal (starting at the world's temperature) to the world and serve the F4's
-    registers over Modbus on loopback (port 0: any; profiles: answer the profile registers too); the
-    handle's `.mechanics` is the model."""
-    start = world.temperature_c
+    """Attach a ChamberThermal (starting at the world's temperature) to the world (a rig: to its
+    table world, setting every slot world's temperature) and serve the F4's registers over Modbus on
+    loopback (port 0: any; profiles: answer the profile registers too); the handle's `.mechanics` is
+    the model."""
+    units = tuple(getattr(world, "worlds", ()))  # a rig: every slot's unit sits in the chamber
+    start = (units[0] if units else world).temperature_c
     at_start = {"setpoint_c": start, "air_c": start, "case_c": start, "resonator_c": start}
-    thermal = ChamberThermal(**(at_start | thermal_kw))
+    thermal = ChamberThermal(**(at_start | thermal_kw), units=units)
     registers = ChamberRegisters(world, thermal, low_c=low_c, high_c=high_c, profiles=profiles)
     with world.lock:
         world.attach(thermal)

@@ -42,6 +42,9 @@ class ErrorSources:
     forcer_angle_x_deg, forcer_angle_y_deg: misalignment of the X and Y forcer electrodes.
     freq_tc_ppm_k: df0/dT / f0 (ppm per K); q_tc_per_k: dtau/dT / tau (relative, per K; Q = pi f0 tau
         moves by that and by f0's TCF).
+    bias_tc_dps_k, bias_tc2_dps_k2: a rate-equivalent bias following the unit's temperature,
+        b(T) = bias_tc (T - 25) + bias_tc2 (T - 25)^2 deg/s at the sensitive axis (the datasheet
+        figure of a MEMS gyro's zero-rate level against temperature, docs/chamber.md).
     """
 
     pickoff_gain_cm_ppm: float = 0.0
@@ -60,6 +63,8 @@ class ErrorSources:
     forcer_angle_y_deg: float = 0.0
     freq_tc_ppm_k: float = 0.0
     q_tc_per_k: float = 0.0
+    bias_tc_dps_k: float = 0.0
+    bias_tc2_dps_k2: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -129,6 +134,11 @@ class ErrorSources:
         df_hz = f0_hz * 1e-6 * self.freq_tc_ppm_k * dt_k
         return gamma / (1.0 + self.q_tc_per_k * dt_k), c_m + 2.0 * TWO_PI * df_hz
 
+    def thermal_bias_dps(self, temperature_c: float) -> float:
+        """The rate-equivalent bias the temperature adds (deg/s at the sensitive axis)."""
+        dt_k = temperature_c - REFERENCE_TEMPERATURE_C
+        return self.bias_tc_dps_k * dt_k + self.bias_tc2_dps_k2 * dt_k * dt_k
+
     @property
     def thermal_active(self) -> bool:
         return bool(self.freq_tc_ppm_k or self.q_tc_per_k)
@@ -151,6 +161,7 @@ class ErrorSources:
             "temperature_c": float(temperature_c),
             "f0_at_temperature_hz": f0_hz + r["freq_offset_hz"] + df_hz,
             "q_factor_at_temperature": r["q_factor"] * q_scale,
+            "thermal_bias_dps": self.thermal_bias_dps(temperature_c),
         }
         if dt_k and self.thermal_active:
             now = {"tau_s": r["tau_s"] * tau_scale, "q_factor": r["q_factor"] * q_scale, "Q": r["Q"] * q_scale,
@@ -206,5 +217,9 @@ ERROR_PRESETS: dict[str, ErrorSources] = {
         forcer_angle_y_deg=0.2,
         freq_tc_ppm_k=-30.0,  # silicon: dE/dT / E ~ -60 ppm / K
         q_tc_per_k=-2e-3,
+        # the zero-rate level against temperature of MEMS gyro datasheets (0.01..0.16 deg/s/K,
+        # docs/chamber.md): 0.03 deg/s/K, curved by 5e-5 deg/s/K^2 (+0.18 deg/s at -35 and +85 degC)
+        bias_tc_dps_k=0.03,
+        bias_tc2_dps_k2=5e-5,
     ),
 }
