@@ -181,7 +181,7 @@ class ThermalRamp(ThermalChamber, Procedure):
             ctx.shared(table.enable, "table enabled")
             if not ctx.in_batch:  # a batch's table comes to rest once, when the batch ends
                 ctx.defer(lambda: table.set_rate(0.0, self.accel_dps2) if table.connected else None, "table to rest")
-        on_controller = bool(self.controller_ramp) and chamber.supports_profiles()
+        on_controller = bool(self.controller_ramp) and ctx.shared(chamber.supports_profiles, "controller profiles")
         if not on_controller:
             ctx.shared(lambda: chamber.set_ramp_rate(self.cycle_degc_per_min), "cycle ramp rate")
         ctx.log.info("the cycle's ramps run " + ("on the chamber's controller (a ramp-rate profile)" if on_controller
