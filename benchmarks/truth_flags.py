@@ -8,6 +8,7 @@ bench.numbers.truth_outside).  With honest intervals the count is Binomial(N, 0.
 above the binomial band's 99.5 % quantile (N = 20: 4 or more) is not chance: the interval or the
 model is wrong for that parameter.
 Run: PYTHONPATH=. .venv/bin/python benchmarks/truth_flags.py [n_seeds] [procedure] [--set NAME=VALUE ...]
+     [--station NAME] (default sim-hrg)
 """
 
 from __future__ import annotations
@@ -66,14 +67,17 @@ def main(argv: list[str]) -> None:
     n = int(argv[0]) if argv and argv[0].isdigit() else 20
     name = argv[1] if len(argv) > 1 and not argv[1].startswith("--") else "hrg-free-decay"
     params = dict(SHORT.get(name, {}))
+    station = "sim-hrg"
     for i, a in enumerate(argv):
         if a == "--set":
             k, _, v = argv[i + 1].partition("=")
             params[k] = v
+        if a == "--station":
+            station = argv[i + 1]
     t0 = time.perf_counter()
-    outside, compared, runs, deviation = outside_counts(name, params, range(1, n + 1))
+    outside, compared, runs, deviation = outside_counts(name, params, range(1, n + 1), station)
     hi = band(n)
-    print(f"{name} {params}: {runs} seeds in {time.perf_counter() - t0:.0f} s; chance alone: "
+    print(f"{name} on {station} {params}: {runs} seeds in {time.perf_counter() - t0:.0f} s; chance alone: "
           f"0..{hi} of {n} outside (Binomial({n}, 0.05), 99.5 %)")
     print(f"{'measurement':30s} {'outside':>8s} {'of':>4s}  {'mean(value - truth)':>20s} {'sd':>10s}  verdict")
     rows = []
