@@ -22,9 +22,19 @@ def test_bias_truth_on_a_plain_unit_and_none_on_a_realistic_one():
 
 def test_the_reason_is_declared_where_the_truth_would_be():
     for proc, name in (("thermal-soak", "bias_at_25c_dph"), ("thermal-ramp", "bias_at_25c_dph"),
-                       ("cvg-bias", "bias_first_dph"), ("cvg-scale-factor", "bias_dph")):
+                       ("cvg-scale-factor", "bias_dph")):
         cls = find_procedure(proc)
         declared = {m.name for m in cls.measurements}
         if name not in declared:  # the scale-factor series names its mean bias its own way
             name = next(m.name for m in cls.measurements if m.truth is mean_bias_truth)
         assert no_truth_reasons(proc)[name] == UNSTATED_BIAS_NO_TRUTH
+
+
+def test_the_first_turn_on_bias_has_no_truth_where_turn_ons_vary():
+    from procedures.cvg_bias import FIRST_TURN_ON_NO_TRUTH, first_turn_on_bias_truth
+
+    varies = load_station("sim-hrg-wa", seed=0).truth()  # turn-on bias sd 2 deg/h
+    assert varies["turn_on_bias_sd_dph"] > 0 and first_turn_on_bias_truth(varies) is None
+    same = dict(varies, turn_on_bias_sd_dph=0.0)
+    assert first_turn_on_bias_truth(same) == static_bias_truth(same)
+    assert no_truth_reasons("cvg-bias")["bias_first_dph"] == FIRST_TURN_ON_NO_TRUTH
