@@ -249,6 +249,24 @@ def test_one_bad_reply_is_retried_on_reads(bench, kind):
     assert st.rate_dps == pytest.approx(0.0, abs=0.02) and not st.tripped
 
 
+def test_rtu_read_retried_after_a_late_reply():
+    """A reply 1.5 timeouts late (a stalled line): the retry goes out only once the line has been
+    quiet, so neither it nor the next transaction sees the straggler (RTU has no transaction id,
+    and a straggler arriving with the retry's reply spoils both)."""
+    world, clock, server, table = make_bench("modbus-rtu")
+    try:
+        server.corrupt_replies("late", 1, late_s=1.5 * table.timeout_s)
+        st = table.status()
+        assert st.rate_dps == pytest.approx(0.0, abs=0.02) and not st.tripped
+        table.enable()  # the write after it gets its own echo
+        assert server.mechanics.enabled
+        assert table.status().enabled
+    finally:
+        table.close()
+        server.stop()
+        clock.close()
+
+
 def test_persistent_bad_replies_raise(bench):
     world, clock, server, table = bench
     server.corrupt_replies("garbage", 50)
