@@ -285,6 +285,29 @@ def test_lost_reply_to_a_motion_command_is_not_retried(bench):
     assert table.safe_state() is True
 
 
+@pytest.mark.parametrize("model", ["modbus-tcp", "ascii-tcp"])
+def test_starved_heartbeat_in_lockstep_does_not_trip_a_table_the_bench_reads(model):
+    """A loaded machine starves the heartbeat thread (here: stopped) for 1.5 s of wall time, while
+    the bench reads the table every 0.4 s of simulated time (the station's lockstep link checks):
+    alive in the table's time, no trip.  Reads stop for 1.1 s of simulated time: it trips."""
+    world, clock, server, table = make_bench(model, watchdog_s=1.0)
+    try:
+        table.enable()
+        table.set_rate(20.0, 300.0)
+        table.heartbeat.stop()
+        for _ in range(5):
+            time.sleep(0.3)
+            clock.sleep(0.4)
+            assert not table.status().tripped
+        clock.sleep(1.1)
+        st = table.status()
+        assert st.watchdog_expired and st.fault_code == mp.FAULT_WATCHDOG
+    finally:
+        table.close()
+        server.stop()
+        clock.close()
+
+
 @pytest.mark.serial  # the world at 50x real time, a driver with a 2 s wall-clock timeout: run alone
 def test_real_time_clock_spin():
     """The same driver with the world running at 50x wall time (the GUI's mode)."""
