@@ -214,9 +214,9 @@ def test_fault_and_interlock_trip(bench, kind, bit):
 
 @pytest.mark.parametrize("model", ["modbus-tcp", "ascii-tcp"])
 def test_watchdog_fed_by_heartbeat_and_expiry_stops_table(model):
-    """Watchdog 1 s of wall time: with the heartbeat, 1.5 s of silence from the procedure is
-    fine; with the heartbeat gone (a dead bench), the table latches the expiry, ramps down and
-    disables itself."""
+    """Watchdog 1 s: with the heartbeat, 1.5 s of wall-time silence from the procedure is
+    fine; with the heartbeat gone (a dead bench), 1.5 s of wall time and 1.1 s of simulated time
+    without a request, the table latches the expiry, ramps down and disables itself."""
     world, clock, server, table = make_bench(model, watchdog_s=1.0)
     try:
         table.enable()
@@ -228,7 +228,7 @@ def test_watchdog_fed_by_heartbeat_and_expiry_stops_table(model):
         assert table.heartbeat.beats >= 3
         table.heartbeat.stop()  # the bench dies
         time.sleep(1.5)
-        clock.sleep(0.1)
+        clock.sleep(1.1)
         with world.lock:
             rate, _, bits, code = server.mechanics.status()
         assert bits & mp.ST_WATCHDOG_EXPIRED and code == mp.FAULT_WATCHDOG
@@ -249,6 +249,24 @@ def test_one_bad_reply_is_retried_on_reads(bench, kind):
     assert st.rate_dps == pytest.approx(0.0, abs=0.02) and not st.tripped
 
 
+def test_rtu_read_retried_after_a_late_reply():
+    """A reply 1.5 timeouts late (a stalled line): the retry goes out only once the line has been
+    quiet, so neither it nor the next transaction sees the straggler (RTU has no transaction id,
+    and a straggler arriving with the retry's reply spoils both)."""
+    world, clock, server, table = make_bench("modbus-rtu")
+    try:
+        server.corrupt_replies("late", 1, late_s=1.5 * table.timeout_s)
+        st = table.status()
+        assert st.rate_dps == pytest.approx(0.0, abs=0.02) and not st.tripped
+        table.enable()  # the write after it gets its own echo
+        assert server.mechanics.enabled
+        assert table.status().enabled
+    finally:
+        table.close()
+        server.stop()
+        clock.close()
+
+
 def test_persistent_bad_replies_raise(bench):
     world, clock, server, table = bench
     server.corrupt_replies("garbage", 50)
@@ -265,6 +283,29 @@ def test_lost_reply_to_a_motion_command_is_not_retried(bench):
         table.set_rate(10.0)
     assert server.mechanics.mode == mp.MODE_RATE  # it did arrive: a blind retry would repeat it
     assert table.safe_state() is True
+
+
+@pytest.mark.parametrize("model", ["modbus-tcp", "ascii-tcp"])
+def test_starved_heartbeat_in_lockstep_does_not_trip_a_table_the_bench_reads(model):
+    """A loaded machine starves the heartbeat thread (here: stopped) for 1.5 s of wall time, while
+    the bench reads the table every 0.4 s of simulated time (the station's lockstep link checks):
+    alive in the table's time, no trip.  Reads stop for 1.1 s of simulated time: it trips."""
+    world, clock, server, table = make_bench(model, watchdog_s=1.0)
+    try:
+        table.enable()
+        table.set_rate(20.0, 300.0)
+        table.heartbeat.stop()
+        for _ in range(5):
+            time.sleep(0.3)
+            clock.sleep(0.4)
+            assert not table.status().tripped
+        clock.sleep(1.1)
+        st = table.status()
+        assert st.watchdog_expired and st.fault_code == mp.FAULT_WATCHDOG
+    finally:
+        table.close()
+        server.stop()
+        clock.close()
 
 
 @pytest.mark.serial  # the world at 50x real time, a driver with a 2 s wall-clock timeout: run alone

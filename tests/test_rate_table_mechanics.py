@@ -98,6 +98,28 @@ def test_watchdog_on_an_injected_wall_clock():
     assert not mech.watchdog_expired
     wall[0] = 3.0
     world.advance(0.1)
+    assert not mech.watchdog_expired  # 2.1 s of wall silence, but only 0.2 s of simulated time
+    world.advance(1.0)
     assert mech.watchdog_expired and mech.fault_code == mp.FAULT_WATCHDOG
     world.advance(1.0)  # ramps down at 200 deg/s^2, then disables
     assert not mech.enabled and mech.rate_dps == 0.0
+
+
+def test_starved_heartbeat_does_not_trip_a_table_read_in_lockstep():
+    """A loaded machine: no write for 10 s of wall time while lockstep reads the table at every
+    0.4 s grid point: the host is alive in simulated time, no trip.  When the reads stop too, the
+    watchdog expires within one block of watchdog_s of simulated silence."""
+    wall = [0.0]
+    world, mech = make(watchdog_s=1.0, wall_clock=lambda: wall[0])
+    mech.command(mp.MODE_RATE, 20.0, 0.0, 200.0)
+    wall[0] = 10.0
+    for _ in range(10):
+        world.advance(0.4)
+        mech.status()
+    assert not mech.watchdog_expired and mech.enabled
+    t_read = world.t_s
+    world.advance(0.9)
+    assert not mech.watchdog_expired
+    world.advance(0.3)  # blocks of at most 0.1 s: one starts more than 1 s after the read
+    assert mech.watchdog_expired and mech.fault_code == mp.FAULT_WATCHDOG
+    assert world.t_s - t_read > 1.0

@@ -4,7 +4,9 @@ Why wall time: the table measures its watchdog on its own (wall) clock, because 
 controller does and because the bench's virtual time can run ~1000x faster than wall time in
 lockstep (a virtual-time heartbeat would then starve in real time and flood in lockstep).  Every
 command also feeds the watchdog, so the thread only writes when the driver has been silent for a
-period.  A bench process that dies takes the thread with it and the table stops itself.
+period.  A bench process that dies takes the thread with it and the table stops itself.  In
+lockstep a loaded machine can starve this thread for seconds: the simulated table then counts
+the station's reads at every grid point as signs of life in simulated time (docs/rate_table_modbus.md).
 """
 
 from __future__ import annotations

@@ -56,6 +56,7 @@ class ModbusRateTable(RateTable):
         self.heartbeat = Heartbeat(self._beat, heartbeat_s if heartbeat_s else max(0.05, self.watchdog_s / 8))
         self._beat_count = 0
         self._rx: _ReceivedBytes | None = None  # RTU: what a transaction received, to spot extra frames
+        self._line_dirty = False  # RTU: the last transaction failed, a late reply may still come
         self.timeout_s = float(timeout_s)
         self._probe_tid = 0  # transaction id of probe_status's own requests (TCP)
 
@@ -112,7 +113,11 @@ class ModbusRateTable(RateTable):
                 with self._io_lock:
                     if self._rx is not None:
                         self._rx.n_bytes = 0
-                        _flush_input(self.client)  # what is left of an earlier, spoiled reply
+                        if self._line_dirty:  # a reply that missed its timeout may still be coming
+                            _drain_until_quiet(self.client, quiet_s=self.timeout_s, most_s=3.0 * self.timeout_s)
+                        else:
+                            _flush_input(self.client)  # what is left of an earlier, spoiled reply
+                        self._line_dirty = True  # until this transaction gives a valid reply
                     rr = fn()
                     received = self._rx.n_bytes + _waiting(self.client) if self._rx is not None else 0
             except (ModbusIOException, ConnectionException, OSError) as exc:
@@ -127,6 +132,7 @@ class ModbusRateTable(RateTable):
                 # stale reply to an earlier request, so neither can be trusted
                 last = ProtocolError(f"{received} bytes came for a {_rtu_reply_bytes(rr)}-byte reply")
                 continue
+            self._line_dirty = False
             if rr.isError():
                 code = getattr(rr, "exception_code", None)
                 name = mp.EXCEPTION_NAMES.get(code, "unknown")
@@ -280,6 +286,23 @@ def _flush_input(client) -> None:
         client.socket.reset_input_buffer()
     except (AttributeError, OSError):
         pass
+
+
+def _drain_until_quiet(client, *, quiet_s: float, most_s: float) -> None:
+    """Discard a serial client's input until it has been silent for quiet_s (at most most_s in
+    all): on RTU, with no transaction id, a reply that missed its timeout must be gone before
+    the retry goes out, or it is taken for (or spoils) the retry's reply."""
+    start = last_byte = time.monotonic()
+    while (now := time.monotonic()) - last_byte < quiet_s and now - start < most_s:
+        n = _waiting(client)
+        if n > 0:
+            try:
+                client.socket.read(n)
+            except (AttributeError, OSError):
+                return
+            last_byte = time.monotonic()
+        else:
+            time.sleep(min(0.002, quiet_s))
 
 
 def _waiting(client) -> int:

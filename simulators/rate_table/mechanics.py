@@ -6,8 +6,13 @@ Motion model, per sample of dt: the profile velocity `ref` moves toward its goal
 accel*dt (goal = commanded rate; in position mode a sqrt(2 a |error|) approach law; 0 when
 stopping); the actual rate follows `ref` through a first-order lag of tau_s; the angle integrates
 the actual rate (trapezoid).  Trips brake at `brake_decel_dps2`; a watchdog expiry ramps down at
-the commanded acceleration, then disables.  The watchdog runs on the wall clock, so a bench that
-stops feeding it stops the table whatever the speed of virtual time.
+the commanded acceleration, then disables.  The watchdog trips when the host has been silent for
+watchdog_s both on the wall clock (its writes: commands and heartbeats, as a real controller
+counts them) and in the table's simulated time (any request, reads too): in real time the wall
+clause decides, so a bench that stops feeding it stops the table whatever the speed; in lockstep
+the world moves only while the bench drives it and reads the table at every grid point, so a
+loaded machine that starves the heartbeat thread of wall time cannot trip it
+(docs/rate_table_modbus.md).
 """
 
 from __future__ import annotations
@@ -107,12 +112,18 @@ class TableMechanics:
         self.watchdog_expired = False
         self.fault_code = mp.FAULT_NONE
         self._last_feed_wall = wall_clock()
+        self._last_contact_t_s = 0.0  # simulated time of the host's last request
         self._position_done = False
 
     # --- commands (servers call these under world.lock) ---------------------------------------
     def feed(self) -> None:
-        """Feed the watchdog (lock-free: a float store)."""
+        """Feed the watchdog: a write came (lock-free: float stores)."""
         self._last_feed_wall = self.wall_clock()
+        self._last_contact_t_s = self.t_s
+
+    def note_contact(self) -> None:
+        """The host asked something: it is alive in simulated time (lock-free: a float store)."""
+        self._last_contact_t_s = self.t_s
 
     @property
     def tripped(self) -> bool:
@@ -213,11 +224,13 @@ class TableMechanics:
         self.mode = mp.MODE_STOP
 
     def check_watchdog(self) -> None:
-        """Latch a watchdog expiry (wall clock) while the drive is enabled."""
+        """Latch a watchdog expiry while the drive is enabled: the host silent for watchdog_s on
+        the wall clock (no write) and in simulated time (no request)."""
         if (
             self.enabled
             and self.watchdog_s > 0
             and not self.watchdog_expired
+            and self.t_s - self._last_contact_t_s > self.watchdog_s
             and self.wall_clock() - self._last_feed_wall > self.watchdog_s
         ):
             self.watchdog_expired = True
@@ -232,8 +245,10 @@ class TableMechanics:
         return self.ripple_deg[0] * np.sin(th) + self.ripple_deg[1] * np.sin(2.0 * th)
 
     def status(self) -> tuple[float, float, int, int]:
-        """(rate_dps, angle_deg in [0, 360), status bits, fault code) as the controller reports them."""
+        """(rate_dps, angle_deg in [0, 360), status bits, fault code) as the controller reports
+        them; the request is a sign of life in simulated time (check_watchdog)."""
         self.check_watchdog()
+        self.note_contact()
         th = math.radians(self.angle_deg)
         ripple_rate = (self.ripple_deg[0] * math.cos(th) + 2.0 * self.ripple_deg[1] * math.cos(2.0 * th)) * (
             math.radians(self.rate_dps)

@@ -13,12 +13,13 @@ import socket
 import socketserver
 import struct
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
 from drivers.rate_table import modbus_protocol as mp
 
-from .fault_controls import TableFaultControls
+from .fault_controls import REPLY_FAULTS, TableFaultControls
 from .mechanics import CommandRejected, TableMechanics
 from .pty_bridge import PtyBridge
 
@@ -51,10 +52,12 @@ def crc16_modbus(data: bytes) -> bytes:
 
 @dataclass
 class _LinkFaults:
-    """Reply corruption the tests ask for: kind in "short", "garbage", "drop"; count replies."""
+    """Reply corruption the tests ask for: kind in "short", "garbage", "drop", "late" (the whole
+    reply after late_s of wall time, as from a controller or a line that stalled); count replies."""
 
     kind: str = ""
     count: int = 0
+    late_s: float = 0.0
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def apply(self, sending: bool, data: bytes) -> bytes:
@@ -69,6 +72,9 @@ class _LinkFaults:
             return data[: max(1, len(data) // 2)]
         if kind == "garbage":
             return bytes((b ^ 0x5A) for b in data)
+        if kind == "late":  # this connection's thread: the next request waits behind it, as on a line
+            time.sleep(self.late_s)
+            return data
         return b""  # drop
 
 
@@ -192,6 +198,8 @@ class ModbusTableServer(TableFaultControls):
     server"); another unit id gets exception 0x0B, as a gateway to one unit answers.  RTU: only
     its own address is answered; a request for another, or with a bad CRC, gets silence, as on a
     serial line (docs/rate_table_modbus.md)."""
+
+    reply_faults = (*REPLY_FAULTS, "late")
 
     def __init__(
         self, world, mechanics: TableMechanics, *, host: str, port: int, framer: str, device_id: int, use_pty=False,
