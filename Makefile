@@ -13,7 +13,9 @@ STAMP  := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	# --no-compile: pip would byte-compile every installed module (most never imported, e.g. the
+	# libraries' own tests); Python compiles the ones a command imports, once, on first import
+	$(BIN)/python -m pip install --quiet --no-compile -e '.[dev]'
 	$(BIN)/python -m simulators.warm  # compile the kernels now, so a first run finds them cached
 	touch $(STAMP)
 
