@@ -7,13 +7,16 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+# extra pip flags for the install: .ci/run passes --no-compile (pip byte-compiles every installed
+# module, most never imported; CI writes the bytecode of what it imports on first import instead)
+PIP_FLAGS ?=
 
 .PHONY: run test lint bench clean install docs warm
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet $(PIP_FLAGS) -e '.[dev]'
 	$(BIN)/python -m simulators.warm  # compile the kernels now, so a first run finds them cached
 	touch $(STAMP)
 
@@ -27,10 +30,12 @@ run: $(STAMP)
 
 # the suite in $(TEST_WORKERS) processes (pytest-xdist), then the tests marked `serial` (bounded in
 # wall-clock time or paced in real time) alone, so no other test's load can stretch their clocks
+# (with the bytecode written even under PYTHONDONTWRITEBYTECODE: the suite starts ~200 Python processes,
+# and without it each compiles every module of ours it imports, and pytest rewrites every test module, again)
 TEST_WORKERS ?= 3
 test: $(STAMP)
-	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m "not serial"
-	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -m serial
+	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m "not serial"
+	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -m serial
 	$(BIN)/ruff check .
 
 lint: $(STAMP)

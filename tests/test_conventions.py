@@ -78,7 +78,7 @@ def test_every_procedure_module_imports_and_is_registered():
 @pytest.mark.parametrize("name", sorted(all_procedures()))
 def test_a_procedure_found_by_name_is_the_registered_one(name):
     """`procedure_named` (a run imports its own procedure's module only) finds what the registry
-    has, its own module's or, failing that, any module's (the examples' table-spin)."""
+    has, its own module's (in the package or its examples) or, failing that, any module's."""
     from procedures import find_procedure, procedure_named
 
     assert procedure_named(name) is all_procedures()[name]

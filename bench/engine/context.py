@@ -147,9 +147,10 @@ class RunContext:
         station: Any = None,
         procedure: Any = None,
     ) -> None:
-        from .compute import warm
+        if getattr(procedure, "uses_compute", True):
+            from .compute import warm
 
-        warm()  # the workers of `compute` start from a forkserver: its imports go on beside the run
+            warm()  # the workers of `compute` start from a forkserver: its imports go on beside the run
         self.run_id = run_id
         self.procedure = procedure  # its declared measurements check and complete what is reported
         self.params = params

@@ -118,6 +118,10 @@ class Procedure:
     #: parameters whose 0 means "the station's nominal value" (param name: bench.nominal key), e.g.
     #: {"bryan_factor": "bryan_factor"}: a procedure never assumes a unit's K or f0 by default
     nominal_params: ClassVar[dict[str, str]] = {}
+    #: whether its steps may call `ctx.compute`: the run then starts the compute workers' forkserver
+    #: as it begins (its ~0.8 s of CPU importing numpy, scipy and the estimators, beside the run);
+    #: False spares a run that never computes that start (a `ctx.compute` still works, starting it then)
+    uses_compute: ClassVar[bool] = True
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

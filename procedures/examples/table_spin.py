@@ -12,6 +12,7 @@ class TableSpin(Procedure):
 
     name = "table-spin"
     requires = ("table",)
+    uses_compute = False  # no `ctx.compute`: a run need not start the compute workers' forkserver
     rate_dps = Param(100.0, unit="deg/s", low=-1000.0, high=1000.0, doc="table rate")
     hold_s = Param(2.0, unit="s", low=0.1, high=600.0, doc="time held at rate")
     tolerance_dps = Param(0.5, unit="deg/s", low=0.01, high=10.0, doc="allowed rate error")
