@@ -155,6 +155,11 @@ def test_drain_waits_for_what_was_queued_before_it_even_while_real_time_keeps_co
     try:
         w.drain(timeout_s=5.0)  # returns although the queue never empties
         assert any(isinstance(e, ev.Log) for e in sink.seen)
+        # the producer outruns the 5 ms sink: the full queue drops blocks sooner or later (on a loaded
+        # machine the producer thread may not have had its turn yet when the drain returned)
+        deadline = time.monotonic() + 30.0
+        while w.overflow_blocks == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
     finally:
         stop.set()
         producer.join()
