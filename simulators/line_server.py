@@ -25,7 +25,7 @@ class LineServer(LoopbackTcpServer):
         self.max_line, self.whole_lines, self.drop_long_lines = max_line, whole_lines, drop_long_lines
         super().__init__(host, port, name)
 
-    def serve_connection(self, rfile: BinaryIO, wfile: BinaryIO) -> None:
+    def serve_connection(self, conn: Any, rfile: BinaryIO, wfile: BinaryIO) -> None:
         """Answer each line read until the peer closes, a line breaks the rules, or `stop()`."""
         while not self.stopping:
             raw = rfile.readline(self.max_line)

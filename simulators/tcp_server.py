@@ -2,7 +2,8 @@
 connections known, and `stop()` that ends them all (their clients see the link go).
 
 Subclasses say how one connection is served (`serve_connection`): LF-terminated lines
-(simulators.line_server) or ONC RPC records (simulators.vxi11)."""
+(simulators.line_server), ONC RPC records (simulators.vxi11) or Modbus frames
+(simulators.rate_table.modbus_server)."""
 
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ class LoopbackTcpServer:
                         return
                     outer._conns.add(self.connection)
                 try:
-                    outer.serve_connection(self.rfile, self.wfile)
+                    outer.serve_connection(self.connection, self.rfile, self.wfile)
                 except OSError:
                     return
                 finally:
@@ -47,8 +48,9 @@ class LoopbackTcpServer:
         )
         self._thread.start()
 
-    def serve_connection(self, rfile: BinaryIO, wfile: BinaryIO) -> None:
-        """Read requests from `rfile` and write answers to `wfile` until the peer or `stop()` ends it."""
+    def serve_connection(self, conn: socket.socket, rfile: BinaryIO, wfile: BinaryIO) -> None:
+        """Read requests (from `rfile`, or the socket `conn` itself) and write answers until the peer
+        or `stop()` ends it."""
         raise NotImplementedError
 
     @property
@@ -62,7 +64,9 @@ class LoopbackTcpServer:
             return list(self._conns)
 
     def stop(self) -> None:
-        """Stop listening and close every connection (its client sees the link go)."""
+        """Stop listening and close every connection (its client sees the link go); once."""
+        if self._stop.is_set():
+            return
         self._stop.set()
         self._tcp.shutdown()
         self._tcp.server_close()

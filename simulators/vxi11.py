@@ -99,7 +99,7 @@ class RpcServer(LoopbackTcpServer):
         self._lock = threading.Lock()  # the subclasses' own state (a VXI-11 server's links)
         super().__init__(host, port, name)
 
-    def serve_connection(self, rfile: BinaryIO, wfile: BinaryIO) -> None:
+    def serve_connection(self, conn: Any, rfile: BinaryIO, wfile: BinaryIO) -> None:
         """Answer each call record until the peer closes or `stop()`; then the connection's links end."""
         conn_state: dict[str, Any] = {}
         try:

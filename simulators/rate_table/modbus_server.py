@@ -10,7 +10,6 @@ several times that, which the lockstep link checks pay thousands of times a run)
 from __future__ import annotations
 
 import socket
-import socketserver
 import struct
 import threading
 import time
@@ -19,6 +18,7 @@ from typing import Any
 
 from drivers.rate_table import modbus_protocol as mp
 
+from ..tcp_server import LoopbackTcpServer
 from .fault_controls import REPLY_FAULTS, TableFaultControls
 from .mechanics import CommandRejected, TableMechanics
 from .pty_bridge import PtyBridge
@@ -191,7 +191,7 @@ def _rtu_request_length(head: bytes) -> int | None:
     return None
 
 
-class ModbusTableServer(TableFaultControls):
+class ModbusTableServer(TableFaultControls, LoopbackTcpServer):
     """Handle of a running Modbus table: `.host`, `.port`, `.url`, `.mechanics`, `.stop()`.
 
     TCP: it answers its unit id and 255 (the id the Modbus TCP guide reserves for "this
@@ -212,47 +212,19 @@ class ModbusTableServer(TableFaultControls):
         # another controller on the same framing (simulators/chamber) brings its own register map
         self._registers = registers if registers is not None else _TableRegisters(world, mechanics)
         self._units = {device_id, 255} if framer == "tcp" else {device_id}
-        self._conns: set[socket.socket] = set()
-        self._conns_lock = threading.Lock()
-        self._stopping = threading.Event()
-        outer = self
-
-        class Handler(socketserver.BaseRequestHandler):
-            def handle(self) -> None:
-                outer._serve(self.request)
-
-        self._tcp = socketserver.ThreadingTCPServer((host, port), Handler, bind_and_activate=False)
-        self._tcp.daemon_threads = True
-        self._tcp.allow_reuse_address = True
-        self._tcp.server_bind()
-        self._tcp.server_activate()
-        self.host, self.port = self._tcp.server_address[:2]
-        self._thread = threading.Thread(
-            target=self._tcp.serve_forever, kwargs={"poll_interval": 0.05}, name="modbus-table", daemon=True
-        )
-        self._thread.start()
+        LoopbackTcpServer.__init__(self, host, port, "modbus-table")
         self._bridge = PtyBridge(self.host, self.port) if use_pty else None
 
     # --- one connection -------------------------------------------------------------------------
-    def _serve(self, sock: socket.socket) -> None:
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        with self._conns_lock:
-            if self._stopping.is_set():
+    def serve_connection(self, conn: socket.socket, rfile: Any, wfile: Any) -> None:
+        """Answer each request frame read from the socket until the peer goes or `stop()`."""
+        while not self.stopping:
+            reply = self._serve_tcp(conn) if self.framer == "tcp" else self._serve_rtu(conn)
+            if reply is None:
                 return
-            self._conns.add(sock)
-        try:
-            while not self._stopping.is_set():
-                reply = self._serve_tcp(sock) if self.framer == "tcp" else self._serve_rtu(sock)
-                if reply is None:
-                    return
-                out = self.link_faults.apply(True, reply)
-                if out:
-                    sock.sendall(out)
-        except OSError:
-            return
-        finally:
-            with self._conns_lock:
-                self._conns.discard(sock)
+            out = self.link_faults.apply(True, reply)
+            if out:
+                conn.sendall(out)
 
     def _serve_tcp(self, sock: socket.socket) -> bytes | None:
         """One MBAP request in, its reply frame out (b"": none); None when the peer has gone."""
@@ -316,18 +288,8 @@ class ModbusTableServer(TableFaultControls):
         if self._bridge is not None:
             self._bridge.close()
             self._bridge = None
-        if not self._stopping.is_set():
-            self._stopping.set()
-            self._tcp.shutdown()
-            self._tcp.server_close()
-            self._thread.join(timeout=5.0)
-            with self._conns_lock:
-                conns = list(self._conns)
-            for sock in conns:  # the clients see the link close, as when a controller goes away
-                try:
-                    sock.shutdown(socket.SHUT_RDWR)
-                except OSError:
-                    pass
+        if not self.stopping:
+            LoopbackTcpServer.stop(self)  # the clients see the link close, as when a controller goes away
             with self.world.lock:
                 self.world.detach(self.mechanics)
 
