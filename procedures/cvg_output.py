@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.analysis.cvg_rate import earth_rate_projection_dph, window_output
+from bench.analysis.cvg_rate import earth_rate_projection_dph, window_distortion, window_output
 from bench.engine import Param, recorded_text
 
 from .hrg_excitation import SETTLE_FRACTION, HrgExcitation, loops_time_constant_s, pi_loop_time_constant_s
@@ -209,8 +209,10 @@ class CvgOutput(HrgExcitation):
 
 
 def window_outputs(data: Any, windows: dict[str, np.ndarray], mode: str) -> np.ndarray:
-    """(m, 3): each window's output (mean rate output, or rate of the angle) and the means of
-    cos 4 theta and sin 4 theta over it weighted alike (`window_output`), from the `fpga` stream."""
+    """(m, 5): each window's output (mean rate output, or rate of the angle), the means of
+    cos 4 theta and sin 4 theta over it weighted alike (`window_output`) and, whole-angle, what its
+    rate reads per degree of a sin 4 theta / cos 4 theta angle distortion (`window_distortion`;
+    0 with the wave held), from the `fpga` stream."""
     fpga = data.table("fpga")
     t = fpga["t_s"]
     boxes = windows.get("box_s", np.zeros(len(windows["t_start_s"])))
@@ -219,5 +221,8 @@ def window_outputs(data: Any, windows: dict[str, np.ndarray], mode: str) -> np.n
         sel = (t > t0) & (t <= t1)
         if sel.sum() < 3:
             raise RuntimeError(f"the window {t0:.2f}-{t1:.2f} s holds {int(sel.sum())} stream samples; 3 are needed")
-        out.append(window_output(t[sel], fpga["rate_out_dps"][sel], fpga["angle_out_deg"][sel], mode, float(box_s)))
+        ang = fpga["angle_out_deg"][sel]
+        row = window_output(t[sel], fpga["rate_out_dps"][sel], ang, mode, float(box_s))
+        dist = window_distortion(t[sel], ang, float(box_s)) if mode == "whole-angle" else (0.0, 0.0)
+        out.append((*row, *dist))
     return np.array(out)

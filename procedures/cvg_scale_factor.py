@@ -6,11 +6,14 @@ FPGA has learnt the split's pattern before the first window); then for each tabl
 series from -R to +R and back (both directions) set the rate, wait until it is stable, settle,
 and average the output over a window (by default whole turns of the table, so its
 angle-dependent ripple averages out); fit
-by least squares (bench.analysis.cvg_rate.fit_scale_factor): the scale factor, the bias
-(input-referred, Earth's rate removed), the nonlinearity in ppm of full scale and the asymmetry
-of the positive and negative rates' scale factors, each with a 95 % interval.  In whole-angle
-mode the output of a window is the slope of the wave angle, and the damping drift that turns
-with the wave (a 90-degree period in its angle) is fitted beside the line.  The windows go to
+by generalised least squares (bench.analysis.cvg_rate.fit_scale_factor; the windows' errors a
+bias wandering from the turn-on, as rate random walk and flicker make it): the scale factor, the
+bias (input-referred, Earth's rate removed), the nonlinearity in ppm of full scale and the
+asymmetry of the positive and negative rates' scale factors, each with a 95 % interval.  In
+whole-angle mode the output of a window is the slope of the wave angle; the damping drift that
+turns with the wave and the read-out's distortion of the angle (unequal pickoff gains: the read
+angle is off by a sin 4 theta + b cos 4 theta, a rate-proportional error that whole table turns
+do not average out, +26 ppm of K on sim-hrg-wa before it was fitted) are fitted beside the line.  The windows go to
 the `cvg_sf_windows` stream, so `analysis(data)` re-fits a recorded run with the same code.
 """
 
@@ -132,8 +135,11 @@ class CvgScaleFactor(CvgOutput, Procedure):
         win = data.table(WINDOWS.name)
         mode = MODES[int(win["mode"][-1])]
         out = window_outputs(data, win, mode)
-        basis = out[:, 1:3] if mode == "whole-angle" else None
-        return fit_scale_factor(win["rate_dps"], out[:, 0], drift_basis=basis,
+        wa = mode == "whole-angle"
+        # the bias wanders from the turn-on (the drive comes on in the first step, at the record's start)
+        t_mid = 0.5 * (win["t_start_s"] + win["t_end_s"]) - float(data.table("fpga")["t_s"][0])
+        return fit_scale_factor(win["rate_dps"], out[:, 0], drift_basis=out[:, 1:3] if wa else None,
+                                distortion_basis=out[:, 3:5] if wa else None, t_mid_s=t_mid,
                                 earth_rate_dph=self.earth_rate_on_axis_dph(data))
 
     @staticmethod

@@ -4,8 +4,11 @@ arrays in, frozen results with 95 % intervals out (docs/cvg_rate_tests.md gives 
 * `fit_scale_factor(rate_dps, output)`: the outputs averaged at each table rate of a series from
   -R to +R; least squares for the scale factor and bias, nonlinearity (largest residual in ppm of
   full scale) and asymmetry (the positive against the negative rates' scale factor, ppm), with an
-  optional nuisance drift with a 90-degree period in the wave's angle (whole-angle mode).
+  optional nuisance drift and angle distortion with a 90-degree period in the wave's angle
+  (whole-angle mode) and an optional bias wandering from the turn-on (generalised least squares).
 * `window_output(...)`: one window's output: the mean of a rate output, or the slope of an angle.
+* `window_distortion(...)`: what a whole-angle window's rate reads from a 4-theta distortion of
+  the angle read-out (unequal pickoff gains), the basis of its rate-proportional terms.
 * `static_bias(...)`: the bias of a static record from batch means (or batch slopes of an angle).
 * `turn_on_repeatability(...)`: the spread of the bias from turn-on to turn-on, each turn-on's
   estimation noise removed.
@@ -55,18 +58,34 @@ class ScaleFactorFit:
     fitted: np.ndarray = field(repr=False)
     residual_ppm: np.ndarray = field(repr=False)
     drift_terms: tuple[float, float] | None = None  # whole-angle: (c, s) of the cos/sin 4 theta drift, output units
+    distortion_terms: tuple[float, float] | None = None  # whole-angle: (a, b) deg of the angle's sin/cos 4 theta
 
 
-def _lsq(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, int]:
-    """Ordinary least squares: (coefficients, covariance, residuals, sigma, dof)."""
-    beta, *_ = np.linalg.lstsq(x, y, rcond=None)
-    res = y - x @ beta
+def _lsq(x: np.ndarray, y: np.ndarray, whiten: np.ndarray | None = None
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, int]:
+    """Least squares, ordinary or (whiten: L^-1 of the errors' correlation L L^T) generalised:
+    (coefficients, covariance, residuals y - x beta, sigma of the whitened residuals, dof)."""
+    xw, yw = (x, y) if whiten is None else (whiten @ x, whiten @ y)
+    beta, *_ = np.linalg.lstsq(xw, yw, rcond=None)
     dof = len(y) - x.shape[1]
     if dof < 1:
         raise ValueError(f"{len(y)} points for {x.shape[1]} unknowns: too few to estimate the scatter")
-    sigma = float(np.sqrt(res @ res / dof))
-    cov = sigma**2 * np.linalg.inv(x.T @ x)
-    return beta, cov, res, sigma, dof
+    res_w = yw - xw @ beta
+    sigma = float(np.sqrt(res_w @ res_w / dof))
+    cov = sigma**2 * np.linalg.inv(xw.T @ xw)
+    return beta, cov, y - x @ beta, sigma, dof
+
+
+def wander_whitening(t_mid_s: np.ndarray) -> np.ndarray:
+    """L^-1 for window errors that are a random walk of the bias from t = 0 (the turn-on): their
+    correlation min(t_i, t_j) = L L^T.  Least squares on L^-1 y is then ordinary least squares on
+    the first window's output and the changes from window to window, each over the square root of
+    its time step: a constant bias and its wander (rate random walk, the slow part of flicker) do
+    not bias it and its intervals hold them; white noise is counted twice per step, which widens."""
+    tau = np.asarray(t_mid_s, dtype=float)
+    if np.any(tau <= 0.0) or np.any(np.diff(tau) <= 0.0):
+        raise ValueError("window times must be positive and increasing (time since the turn-on, in order)")
+    return np.linalg.inv(np.linalg.cholesky(np.minimum.outer(tau, tau)))
 
 
 def _interval(value: float, sd: float, t: float) -> tuple[float, float]:
@@ -102,25 +121,37 @@ def nonlinearity_ppm(rate: np.ndarray, res: np.ndarray, full_scale: float, sigma
 
 
 def fit_scale_factor(
-    rate_dps: np.ndarray, output: np.ndarray, *, drift_basis: np.ndarray | None = None, earth_rate_dph: float = 0.0
+    rate_dps: np.ndarray, output: np.ndarray, *, drift_basis: np.ndarray | None = None,
+    distortion_basis: np.ndarray | None = None, t_mid_s: np.ndarray | None = None, earth_rate_dph: float = 0.0,
 ) -> ScaleFactorFit:
     """Scale factor, bias, nonlinearity and asymmetry of outputs averaged at table rates.
 
-    Model: output_i = S (rate_i + Earth + B) + [c C_i + s S_i] + e_i, e_i independent with a common
-    variance; drift_basis (m, 2) holds C_i, S_i, the means of cos 4 theta and sin 4 theta over point
-    i's window (whole-angle: the damping drift turns with the wave; leave it None when the wave is
-    held, where it is one constant with the bias).  Asymmetry: the same model with separate slopes
-    for positive and negative rates.  Nonlinearity: `nonlinearity_ppm` of the residuals, full scale
-    |S| R with R = max |rate|."""
+    Model: output_i = S (rate_i + Earth + B) + [c C_i + s S_i] + [a A_i + b B_i] + e_i.
+    drift_basis (m, 2) holds C_i, S_i, the means of cos 4 theta and sin 4 theta over point i's
+    window (whole-angle: the damping drift turns with the wave; leave it None when the wave is
+    held, where it is one constant with the bias).  distortion_basis (m, 2) holds A_i, B_i, what
+    window i's rate reads from an angle read-out distortion a sin 4 theta + b cos 4 theta
+    (`window_distortion`; whole-angle: unequal X/Y pickoff gains): a rate-proportional error with a
+    90-degree period in the wave angle that windows of whole table turns do not average out.
+    Errors: with t_mid_s (the windows' mid times since the turn-on, increasing) e_i is a random
+    walk of the bias from the turn-on (`wander_whitening`: rate random walk and flicker make
+    neighbouring windows' errors alike, which ordinary least squares reads as 2-3x too little
+    scatter on the scale factor), fitted by generalised least squares; without, independent with a
+    common variance.  Intervals: Student's t on the (whitened) residuals.  Asymmetry: the same
+    model with separate slopes for positive and negative rates.  Nonlinearity: `nonlinearity_ppm`
+    of the residuals, full scale |S| R with R = max |rate|."""
     rate = np.asarray(rate_dps, dtype=float)
     y = np.asarray(output, dtype=float)
     m = len(rate)
     cols = [np.ones(m), rate]
-    if drift_basis is not None:
-        basis = np.asarray(drift_basis, dtype=float).reshape(m, 2)
-        cols += [basis[:, 0], basis[:, 1]]
+    for basis in (drift_basis, distortion_basis):
+        if basis is not None:
+            basis = np.asarray(basis, dtype=float).reshape(m, 2)
+            cols += [basis[:, 0], basis[:, 1]]
+    whiten = None if t_mid_s is None else wander_whitening(t_mid_s)
     x = np.column_stack(cols)
-    beta, cov, res, sigma, dof = _lsq(x, y)
+    beta, cov, res, _sigma_w, dof = _lsq(x, y, whiten)
+    sigma = float(np.sqrt(res @ res / dof))  # one window's scatter about the line, output units
     t = float(_stats().t.ppf(0.5 + LEVEL / 2, dof))
     b, s = float(beta[0]), float(beta[1])
     sf_ci = _interval(s, math.sqrt(cov[1, 1]), t)
@@ -138,7 +169,7 @@ def fit_scale_factor(
     xa = np.column_stack([np.ones(m), np.clip(rate, 0.0, None), np.clip(rate, None, 0.0), *cols[2:]])
     asym, asym_ci = float("nan"), (float("nan"), float("nan"))
     if (rate > 0).sum() >= 1 and (rate < 0).sum() >= 1 and m - xa.shape[1] >= 1:
-        ba, ca, _, _, dof_a = _lsq(xa, y)
+        ba, ca, _, _, dof_a = _lsq(xa, y, whiten)
         sp, sn = float(ba[1]), float(ba[2])
         mean = 0.5 * (sp + sn)
         asym = (sp - sn) / mean * 1e6
@@ -152,6 +183,7 @@ def fit_scale_factor(
         full_scale_out=full_scale, sigma_out=sigma, dof=dof, rate_dps=rate, output=y, fitted=fitted,
         residual_ppm=res / full_scale * 1e6,
         drift_terms=None if drift_basis is None else (float(beta[2]), float(beta[3])),
+        distortion_terms=None if distortion_basis is None else (float(beta[-2]), float(beta[-1])),
     )
 
 
@@ -172,11 +204,7 @@ def window_output(t_s: np.ndarray, rate_out_dps: np.ndarray, angle_out_deg: np.n
         return float(np.mean(rate_out_dps)), float(np.mean(np.cos(4 * theta))), float(np.mean(np.sin(4 * theta)))
     nb = int(np.sum(t <= t[0] + box_s - 1e-9)) if box_s > 0 else 0
     if 1 <= nb <= len(t) // 2:
-        # m2 - m1 = sum_k c_k (theta_k+1 - theta_k), c_k = (#box-2 samples after k - #box-1 samples after k) / nb
-        idx = np.arange(len(t) - 1)
-        after1 = np.clip(nb - 1 - idx, 0, None)
-        after2 = np.clip(len(t) - 1 - np.maximum(idx, len(t) - 1 - nb), 0, nb)
-        c = (after2 - after1) / nb
+        c = _box_weights(len(t), nb)  # m2 - m1 = sum_k c_k (theta_k+1 - theta_k)
         dt = np.diff(t)
         span = float(c @ dt)
         rate = float(ang[-nb:].mean() - ang[:nb].mean()) / span
@@ -187,6 +215,34 @@ def window_output(t_s: np.ndarray, rate_out_dps: np.ndarray, angle_out_deg: np.n
     w = w / w.sum()
     slope = float(np.polyfit(t - t.mean(), ang, 1)[0])
     return slope, float(w @ np.cos(4 * theta)), float(w @ np.sin(4 * theta))
+
+
+def window_distortion(t_s: np.ndarray, angle_out_deg: np.ndarray, box_s: float = 0.0) -> tuple[float, float]:
+    """What one whole-angle window's rate (`window_output`, same box_s) reads from an angle
+    read-out distortion a sin 4 theta + b cos 4 theta (deg; unequal X/Y pickoff gains g_x, g_y give
+    a = degrees((g_y - g_x) / 4)): (A, B), the change of sin 4 theta and cos 4 theta the window's
+    rate sees (the box means' difference over the time between them, or their least-squares
+    slope), so the window reads a A + b B more.  Per unit rate it goes as the mean of
+    4 cos 4 theta over the wave's travel: a scale-factor error that a window of whole table turns
+    (not whole 90-degree periods of the wave) keeps, the same sign every run."""
+    t = np.asarray(t_s, dtype=float)
+    four_theta = 4.0 * np.radians(np.asarray(angle_out_deg, dtype=float))
+    s4, c4 = np.sin(four_theta), np.cos(four_theta)
+    nb = int(np.sum(t <= t[0] + box_s - 1e-9)) if box_s > 0 else 0
+    if 1 <= nb <= len(t) // 2:
+        span = float(_box_weights(len(t), nb) @ np.diff(t))
+        return float(s4[-nb:].mean() - s4[:nb].mean()) / span, float(c4[-nb:].mean() - c4[:nb].mean()) / span
+    tc = t - t.mean()
+    return float(np.polyfit(tc, s4, 1)[0]), float(np.polyfit(tc, c4, 1)[0])
+
+
+def _box_weights(n: int, nb: int) -> np.ndarray:
+    """c_k of m2 - m1 = sum_k c_k (x_k+1 - x_k), m1, m2 the means of the first and last nb of n
+    samples: (#box-2 samples after k - #box-1 samples after k) / nb."""
+    idx = np.arange(n - 1)
+    after1 = np.clip(nb - 1 - idx, 0, None)
+    after2 = np.clip(n - 1 - np.maximum(idx, n - 1 - nb), 0, nb)
+    return (after2 - after1) / nb
 
 
 @dataclass(frozen=True)
