@@ -71,25 +71,34 @@ def unstated_bias_sources(truth: dict[str, float]) -> list[str]:
     return [k for k in UNSTATED_BIAS_SOURCES if truth.get(f"err_{k}", 0.0)]
 
 
-def static_bias_truth(truth: dict[str, float]) -> float | None:
+def static_bias_truth(truth: dict[str, float], turn_on_bias_dph: float | None = None) -> float | None:
     """The bias of a static record after a turn-on: at the held angle in force-to-rebalance; in
-    whole-angle at 0, where a turn-on starts the wave (on the x pickoff axis); plus the mean of the
-    turn-on bias the World draws (its spread is the repeatability's truth); None on a unit with
-    error sources whose bias it leaves out."""
+    whole-angle at 0, where a turn-on starts the wave (on the x pickoff axis); plus the turn-on's
+    bias (default: the mean of the turn-on bias the World draws, its spread the repeatability's
+    truth); None on a unit with error sources whose bias it leaves out."""
     if unstated_bias_sources(truth):
         return None
-    return bias_at_dph(truth, truth["ftr_angle_deg"] if _ftr(truth) else 0.0) + truth.get("turn_on_bias_mean_dph", 0.0)
+    turn_on = truth.get("turn_on_bias_mean_dph", 0.0) if turn_on_bias_dph is None else turn_on_bias_dph
+    return bias_at_dph(truth, truth["ftr_angle_deg"] if _ftr(truth) else 0.0) + turn_on
+
+
+def run_turn_on_bias_dph(truth: dict[str, float]) -> float:
+    """The turn-on bias of a run that switches the drive on once (or finds it on and keeps it), from
+    the truth at its start: the draw in force with the drive on, else the next turn-on's draw (the
+    World draws one per drive-on); the draws' mean in a truth that names neither."""
+    key = "turn_on_bias_dph" if truth.get("drive_on", 0.0) else "turn_on_bias_next_dph"
+    return truth.get(key, truth.get("turn_on_bias_mean_dph", 0.0))
 
 
 def mean_bias_truth(truth: dict[str, float]) -> float | None:
-    """The bias a scale-factor series measures: at the held angle in force-to-rebalance, the mean
-    over the angle in whole-angle (where the drift that turns with the wave is fitted apart); None on a
-    unit with error sources whose bias it leaves out."""
+    """The bias a scale-factor series measures (one turn-on: `run_turn_on_bias_dph`): at the held
+    angle in force-to-rebalance, the mean over the angle in whole-angle (where the drift that turns
+    with the wave is fitted apart); None on a unit with error sources whose bias it leaves out."""
     if unstated_bias_sources(truth):
         return None
     if _ftr(truth):
-        return static_bias_truth(truth)
-    return 3600.0 * truth["zero_rate_dps"] + truth.get("turn_on_bias_mean_dph", 0.0)
+        return static_bias_truth(truth, run_turn_on_bias_dph(truth))
+    return 3600.0 * truth["zero_rate_dps"] + run_turn_on_bias_dph(truth)
 
 
 def turn_on_sigma_truth(truth: dict[str, float]) -> float:

@@ -80,8 +80,8 @@ class CvgScaleFactor(CvgOutput, Procedure):
     measurements = (
         Measurement("scale_factor", "", "least-squares scale factor: output per input rate (deg/s per deg/s; "
                     "whole-angle: wave-angle rate per input rate, -K)", truth=scale_factor_truth),
-        Measurement("bias_dph", "deg/h", "input-referred bias, Earth's rate removed (whole-angle: the mean over "
-                    "the wave's angle)", truth=mean_bias_truth,
+        Measurement("bias_dph", "deg/h", "input-referred bias of this turn-on, Earth's rate removed (whole-angle: "
+                    "the mean over the wave's angle)", truth=mean_bias_truth,
                     no_truth=UNSTATED_BIAS_NO_TRUTH),
         Measurement("nonlinearity_ppm", "ppm", "largest residual of the line in ppm of full-scale output",
                     truth=lambda t: 0.0),

@@ -249,7 +249,9 @@ class World:
         """Ground truth for reports and tests; never travels over a device protocol."""
         truth = self.params.truth()
         if self.environment is not None:
-            truth |= self.environment.truth()
+            # drive_on: whether the turn-on drive holds its force now (turn_on_bias_dph is then the
+            # bias in force; else the next drive-on makes turn_on_bias_next_dph's)
+            truth |= self.environment.truth() | {"drive_on": float(TURN_ON_SOURCE in self._forces)}
         if self.errors is not None:
             truth |= self.errors.truth(self.t_s, self.temperature_c, truth)
         return truth

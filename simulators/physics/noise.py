@@ -314,6 +314,9 @@ class Environment:
             "earth_rate_dph": self.earth_rate_dph,
             "turn_on_bias_dph": self.turn_on_bias_dph,
             "turn_on_count": float(self.turn_on_count),
+            # the next turn-on's draw: a truth taken at a run's start, the drive off, names the bias of
+            # the turn-on the run makes when it switches the drive on (World.truth's drive_on)
+            "turn_on_bias_next_dph": self.turn_on_bias_of(self.turn_on_count + 1),
         }
 
 
