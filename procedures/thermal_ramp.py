@@ -146,7 +146,7 @@ class ThermalRamp(ThermalChamber, Procedure):
                     "(the FPGA's compensated output with `compensate`, else the trim applied in the analysis)",
                     no_interval="a residual", when=_verifying, when_doc="verify_points > 0"),
         Measurement("verify_residual_part_dph", "deg/h", "the same with the compensation against the part "
-                    "thermocouple", no_interval="a residual"),
+                    "thermocouple", no_interval="a residual", when=_verifying, when_doc="verify_points > 0"),
         Measurement("verify_noise_dph", "deg/h", "rms of the verification records' own bias standard errors "
                     "(what the unit's noise allows a residual)", no_interval="a noise level", when=_verifying,
                     when_doc="verify_points > 0"),

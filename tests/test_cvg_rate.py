@@ -16,6 +16,7 @@ from bench.analysis.cvg_rate import (
     fit_scale_factor,
     static_bias,
     turn_on_repeatability,
+    window_distortion,
     window_output,
 )
 
@@ -156,3 +157,41 @@ def test_earth_rate_projection():
     assert earth_rate_projection_dph(lat, elevation_deg=90.0) == pytest.approx(15.041067 * math.sin(math.radians(lat)))
     assert earth_rate_projection_dph(lat, 0.0, 0.0) == pytest.approx(15.041067 * math.cos(math.radians(lat)))
     assert earth_rate_projection_dph(lat, 90.0, 0.0) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_window_distortion_is_what_the_window_rate_reads_from_a_4theta_angle_distortion():
+    """A wave turning at -5.54 deg/s over 19 s read as theta + a sin 4 theta + b cos 4 theta (unequal
+    pickoff gains): each whole-angle estimator (slope; boxes of 1 s) reads -5.54 + a A + b B with
+    (A, B) = window_distortion, to 1e-6 deg/s (the basis is taken at the read angle: second order in a);
+    unfitted, a = -0.0086 deg puts it over 3e-5 deg/s off."""
+    t = np.arange(0.0, 19.0 + 1e-9, 0.01)
+    th = 10.0 - 5.54 * t
+    a, b = -0.0086, 0.002
+    r4 = np.radians(4 * th)
+    read = th + a * np.sin(r4) + b * np.cos(r4)
+    for box in (0.0, 1.0):
+        rate = window_output(t, np.zeros_like(t), read, "whole-angle", box)[0]
+        big_a, big_b = window_distortion(t, read, box)
+        assert rate == pytest.approx(-5.54 + a * big_a + b * big_b, abs=1e-6)
+        assert abs(rate + 5.54) > 3e-5
+
+
+def test_scale_factor_intervals_hold_a_bias_wandering_from_the_turn_on():
+    """Window errors a random walk of the bias from the turn-on (rate random walk) plus a little
+    white noise, at sim-hrg-wa's window times: with t_mid_s the scale factor's and the bias's
+    intervals cover about 95 % of 400 series; ordinary least squares (independent errors) covers
+    the bias about a third of the time and the scale factor under 90 %."""
+    rate = np.r_[np.linspace(-20.0, 20.0, 5), np.linspace(20.0, -20.0, 5)]  # steps 2, up then down
+    t_mid = np.array([57.0, 96.0, 131.0, 166.0, 206.0, 236.0, 275.0, 310.0, 345.0, 384.0])
+    rng = np.random.default_rng(5)
+    n, bias_dph = 400, 3600 * 3e-4 / -0.277
+    hits = np.zeros((2, 2))
+    for _ in range(n):
+        walk = np.cumsum(rng.normal(0.0, 1e-6, 10) * np.sqrt(np.diff(np.r_[0.0, t_mid])))
+        y = -0.277 * rate + 3e-4 + walk + rng.normal(0.0, 3e-6, 10)
+        for k, fit in enumerate((fit_scale_factor(rate, y, t_mid_s=t_mid), fit_scale_factor(rate, y))):
+            hits[k] += (fit.scale_factor_ci95[0] <= -0.277 <= fit.scale_factor_ci95[1],
+                        fit.bias_dph_ci95[0] <= bias_dph <= fit.bias_dph_ci95[1])
+    cover = hits / n
+    assert 0.92 <= cover[0, 0] <= 0.995 and 0.92 <= cover[0, 1] <= 0.995, cover
+    assert cover[1, 0] < 0.9 and cover[1, 1] < 0.5, cover

@@ -139,3 +139,12 @@ def test_a_turning_ramp_asks_the_table_for_its_rate():
     d = ThermalRamp({"rate_dps": 20.0, "accel_dps2": 50.0}).demands()
     assert [(x.role, x.limit_key, x.value) for x in d] == [("table", "max_rate_dps", 20.0),
                                                            ("table", "max_accel_dps2", 50.0)]
+
+
+def test_the_verification_measurements_are_expected_only_with_verification_points():
+    """verify_residual_part_dph came out NOT MEASURED with no reason on every run without a
+    verification (verify_points 0): like its siblings it is expected only with verify_points > 0."""
+    for points, expected in ((0, False), (2, True)):
+        proc = ThermalRamp({"verify_points": points})
+        applies = {m.name: m.applies(proc) for m in proc.measurements if m.name.startswith("verify_")}
+        assert len(applies) == 3 and set(applies.values()) == {expected}, applies
