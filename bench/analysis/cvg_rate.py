@@ -38,8 +38,9 @@ LEVEL = 0.95
 @dataclass(frozen=True)
 class ScaleFactorFit:
     """A scale-factor series' least-squares results; intervals are 95 % (Student's t on the fit's
-    residual scatter).  Output units are the output's (deg/s for a rate output, deg/s of wave angle
-    for whole-angle); input-referred values are in deg/h."""
+    residual scatter, whitened for a wandering bias when the windows' times were given).  Output
+    units are the output's (deg/s for a rate output, deg/s of wave angle for whole-angle);
+    input-referred values are in deg/h."""
 
     scale_factor: float
     scale_factor_ci95: tuple[float, float]

@@ -47,7 +47,9 @@ def scale_factor_figures(proc: Any, data: Any) -> list[ReportFigure]:
             f"[{fit.nonlinearity_ppm_ci95[0]:.3g}, {fit.nonlinearity_ppm_ci95[1]:.3g}]; "
             f"asymmetry {fit.asymmetry_ppm:.3g} ppm; bias {fit.bias_dph:.3g} deg/h.")
     if fit.drift_terms is not None:
-        note += " Whole-angle: the drift with a 90-degree period in the wave's angle is fitted beside the line."
+        note += (" Whole-angle: the drift with a 90-degree period in the wave's angle"
+                 + (" and the read-out's distortion of the angle (a sin 4θ + b cos 4θ)"
+                    if fit.distortion_terms is not None else "") + " are fitted beside the line.")
     return [ReportFigure("cvg_scale_factor", "Scale factor: output against rate, residuals", fig, note)]
 
 
