@@ -52,6 +52,8 @@ VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", (
     Column("scale_factor", "1"),
     Column("trim_bias_dph", "deg/h", doc="TRIM_BIAS_DPH in force during the record (0: no thermal trim)"),
     Column("trim_bias_dph_per_hz", "deg/h/Hz", doc="TRIM_BIAS_DPH_PER_HZ in force during the record"),
+    Column("approach", "1", "i8", legend={0: "from below (heating)", 1: "from above (cooling)"},
+           doc="the side the set point was settled from (verify_both_branches: each point from both)"),
 )))
 
 
@@ -95,6 +97,10 @@ def _verifying(proc) -> bool:
     return proc.verify_points > 0
 
 
+def _verifying_both(proc) -> bool:
+    return proc.verify_points > 0 and bool(proc.verify_both_branches)
+
+
 def _rotating(proc) -> bool:
     return proc.rate_dps > 0
 
@@ -127,6 +133,9 @@ class ThermalRamp(ThermalChamber, Procedure):
                                       "the set point written from the PC with the ramp limit")
     tail_s = Param(600.0, unit="s", low=0.0, high=1e5,
                    doc="record on at each end of the range once the air has arrived (the case catching up)")
+    verify_both_branches = Param(False, doc="also settle each verification point from above (after settling "
+                                            "hyst_guard_degc over it) and record it again: the settled bias on "
+                                            "the two branches at one temperature (verify_hysteresis_dph)")
     hyst_guard_degc = Param(1.0, unit="degC", low=0.0, high=100.0,
                             doc="the hysteresis fit leaves out each branch's points within this of its turning "
                                 "point (the loop's corner, on neither branch yet): more than the loop's width")
@@ -173,6 +182,10 @@ class ThermalRamp(ThermalChamber, Procedure):
                     "frequency (bench.analysis.thermal_ramp.branch_hysteresis)", truth=_bias_hyst_truth),
         Measurement("bias_per_freq_rate_dph_s_per_hz", "deg/h/(Hz/s)", "the bias the frequency's rate of change "
                     "adds (the PLL trailing a moving frequency), fitted with the hysteresis"),
+        Measurement("verify_hysteresis_dph", "deg/h", "thermal hysteresis from settled records: the bias "
+                    "settled from below minus settled from above at each verification point (no rate term, no lag), "
+                    "their weighted mean", truth=_bias_hyst_truth, when=_verifying_both,
+                    when_doc="verify_points > 0 and verify_both_branches"),
         Measurement("sf_hysteresis_ppm", "ppm", "scale factor on heating minus on cooling at the same temperature, "
                     "over the scale factor at 25 degC (the +-rate_dps pairs)", truth=_sf_hyst_truth, when=_rotating,
                     when_doc="rate_dps > 0"),
@@ -267,13 +280,20 @@ class ThermalRamp(ThermalChamber, Procedure):
             line = self.trim_line(self.points_table(ctx.data()))
             trim = (float(line.coeffs[0]), float(line.coeffs[1]))
             self._write_trim(ctx, trim)
-        for sp in self.verify_setpoints_c():
-            settle_s = self._settle_at(ctx, float(sp), ref_hz)
+        sps = list(self.verify_setpoints_c())
+        visits = [(float(sp), 0) for sp in sps]  # the cycle ended at t_low: each point from below
+        if self.verify_both_branches:  # then each from above, highest first, after settling over it
+            visits += [(float(sp), 1) for sp in sps[::-1]]
+        for sp, approach in visits:
+            if approach == 1:
+                self._settle_at(ctx, sp + float(self.hyst_guard_degc), ref_hz)
+            settle_s = self._settle_at(ctx, sp, ref_hz)
             s0 = self._chamber_status(ctx)
-            t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record")
+            side = ("from below", "from above")[approach]
+            t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record ({side})")
             s1 = self._chamber_status(ctx)
             row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf,
-                   *trim]
+                   *trim, approach]
             ctx.record(VERIFY, VERIFY.names, np.array([row]))
 
     def _write_trim(self, ctx, trim: tuple[float, float]) -> None:
@@ -406,6 +426,7 @@ class ThermalRamp(ThermalChamber, Procedure):
                 Result("verify_residual_part_dph", float(np.sqrt(np.mean((raw - bias["part"](v["part_c"])) ** 2)))),
                 Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2)))),
             ]
+            out += self._verify_hysteresis(data, v)
         return out + [
             Result("f0_tc_ppm_k", float(f0_s.coeffs[1] / f25 * 1e6),
                    ci95=(float(lo / f25 * 1e6), float(hi / f25 * 1e6))),
@@ -420,6 +441,26 @@ class ThermalRamp(ThermalChamber, Procedure):
             Result("part_lag_degc", gap.lag_c, ci95=gap.lag_ci95_c),
             Result("cycle_s", float(seg["t_end_s"][-1] - seg["t_start_s"][0])),
         ]
+
+    def _verify_hysteresis(self, data, v: dict[str, np.ndarray]) -> list[Result]:
+        """Settled from below minus settled from above at each verification point (the unit's own bias,
+        the trim in force added back), their inverse-variance mean with a normal 95 % interval."""
+        vt = data.table(VERIFY.name)
+        if "approach" not in vt or not np.any(vt["approach"] == 1):
+            return []
+        gaps, var = [], []
+        for sp in np.unique(vt["setpoint_c"]):
+            up = (vt["setpoint_c"] == sp) & (vt["approach"] == 0)
+            down = (vt["setpoint_c"] == sp) & (vt["approach"] == 1)
+            if np.any(up) and np.any(down):
+                gaps.append(np.mean(v["raw_bias_dph"][up]) - np.mean(v["raw_bias_dph"][down]))
+                var.append(np.mean(v["bias_se_dph"][up] ** 2) + np.mean(v["bias_se_dph"][down] ** 2))
+        if not gaps:
+            return []
+        w = 1.0 / np.asarray(var)
+        gap = float(np.sum(w * np.asarray(gaps)) / np.sum(w))
+        half = 1.959963984540054 / math.sqrt(float(np.sum(w)))
+        return [Result("verify_hysteresis_dph", gap, ci95=(gap - half, gap + half))]
 
     def _hysteresis(self, p: dict[str, np.ndarray], order: int) -> list[Result]:
         """Heating minus cooling at the same temperature, of the bias and (with the table turning) of

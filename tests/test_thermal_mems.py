@@ -61,7 +61,9 @@ def test_the_package_stress_plays_behind_the_temperature():
 def test_the_ramp_measures_the_hysteresis_against_its_truth(tmp_path, capsys):
     """thermal-ramp on the MEMS ring (seed 0, 25..29 degC at 4 degC/min, 5 s segments at rest, 60 s
     tails): bias_hysteresis_dph, fitted beside the bias that the frequency's rate adds, holds the
-    unit's -0.06 deg/s (-216 deg/h) within its interval."""
+    unit's -0.06 deg/s (-216 deg/h) within its interval; so does verify_hysteresis_dph, the
+    verification point at 27 degC settled from below and from above (20 s records), in an interval
+    several times narrower (no rate term to separate)."""
     from pathlib import Path
 
     from bench.cli import main
@@ -71,7 +73,8 @@ def test_the_ramp_measures_the_hysteresis_against_its_truth(tmp_path, capsys):
                        .replace('id = "sim-mems-thermal"', 'id = "mems-hyst-test"')
                        .replace("case_tau_s = 60.0", "case_tau_s = 15.0"))
     sets = {"t_low_degc": 25, "t_high_degc": 29, "cycle_degc_per_min": 4, "segment_s": 5, "rate_dps": 0,
-            "tail_s": 60, "settle_window_s": 5, "settle_ppm_per_min": 6, "verify_points": 0, "stream_hz": 10}
+            "tail_s": 60, "settle_window_s": 5, "settle_ppm_per_min": 6, "verify_points": 1, "record_s": 20,
+            "verify_both_branches": "true", "stream_hz": 10}
     args = ["run", "thermal-ramp", "--station", str(station), "--seed", "0", "--json",
             "--runs-dir", str(tmp_path / "runs"), "--results", str(tmp_path / "r.sqlite")]
     for k, v in sets.items():
@@ -84,6 +87,9 @@ def test_the_ramp_measures_the_hysteresis_against_its_truth(tmp_path, capsys):
     lo, hi = m["ci95"]
     assert lo <= truth_dph <= hi, m
     assert hi - lo < 3000.0  # a measurement, if a coarse one on 4 K of ramp
+    v = out["measurements"]["verify_hysteresis_dph"]
+    assert v["ci95"][0] <= truth_dph <= v["ci95"][1], v
+    assert v["ci95"][1] - v["ci95"][0] < 0.5 * (hi - lo)
 
 
 #: the shipped sequence's parameters made shorter for a test (the ring's nonlinear averaged model
