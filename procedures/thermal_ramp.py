@@ -22,7 +22,7 @@ import numpy as np
 
 from bench.analysis.cvg_rate import static_bias
 from bench.analysis.thermal_fit import ThermalFit, fit_temperature_polynomial
-from bench.analysis.thermal_ramp import branch_gap, frequency_thermometer, trend_mean
+from bench.analysis.thermal_ramp import branch_gap, branch_hysteresis, frequency_thermometer, record_slope, trend_mean
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 
@@ -52,6 +52,8 @@ VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", (
     Column("scale_factor", "1"),
     Column("trim_bias_dph", "deg/h", doc="TRIM_BIAS_DPH in force during the record (0: no thermal trim)"),
     Column("trim_bias_dph_per_hz", "deg/h/Hz", doc="TRIM_BIAS_DPH_PER_HZ in force during the record"),
+    Column("approach", "1", "i8", legend={0: "from below (heating)", 1: "from above (cooling)"},
+           doc="the side the set point was settled from (verify_both_branches: each point from both)"),
 )))
 
 
@@ -81,8 +83,22 @@ def _sf_tc_truth(truth: dict[str, float]) -> float:
     return -truth.get("err_pickoff_gain_tc_ppm_k", 0.0)
 
 
+def _bias_hyst_truth(truth: dict[str, float]) -> float:
+    """The unit's heating-minus-cooling bias on saturated branches (ErrorSources.bias_hyst_dps), deg/h."""
+    return 3600.0 * truth.get("err_bias_hyst_dps", 0.0)
+
+
+def _sf_hyst_truth(truth: dict[str, float]) -> float:
+    """The unit's heating-minus-cooling scale factor on saturated branches (ErrorSources.sf_hyst_ppm)."""
+    return truth.get("err_sf_hyst_ppm", 0.0)
+
+
 def _verifying(proc) -> bool:
     return proc.verify_points > 0
+
+
+def _verifying_both(proc) -> bool:
+    return proc.verify_points > 0 and bool(proc.verify_both_branches)
 
 
 def _rotating(proc) -> bool:
@@ -117,6 +133,12 @@ class ThermalRamp(ThermalChamber, Procedure):
                                       "the set point written from the PC with the ramp limit")
     tail_s = Param(600.0, unit="s", low=0.0, high=1e5,
                    doc="record on at each end of the range once the air has arrived (the case catching up)")
+    verify_both_branches = Param(False, doc="also settle each verification point from above (after settling "
+                                            "hyst_guard_degc over it) and record it again: the settled bias on "
+                                            "the two branches at one temperature (verify_hysteresis_dph)")
+    hyst_guard_degc = Param(1.0, unit="degC", low=0.0, high=100.0,
+                            doc="the hysteresis fit leaves out each branch's points within this of its turning "
+                                "point (the loop's corner, on neither branch yet): more than the loop's width")
 
     measurements = (
         Measurement("f0_tc_ppm_k", "ppm/K", "resonator frequency's temperature coefficient at 25 degC against the "
@@ -155,6 +177,18 @@ class ThermalRamp(ThermalChamber, Procedure):
                     when_doc="rate_dps > 0"),
         Measurement("sf_tc_ppm_k", "ppm/K", "scale factor's temperature coefficient at 25 degC (straight line "
                     "against the frequency thermometer)", truth=_sf_tc_truth, when=_rotating, when_doc="rate_dps > 0"),
+        Measurement("bias_hysteresis_dph", "deg/h", "thermal hysteresis: bias on heating minus bias on cooling at "
+                    "the same temperature (frequency thermometer), fitted beside the PLL's trail on the moving "
+                    "frequency (bench.analysis.thermal_ramp.branch_hysteresis)", truth=_bias_hyst_truth),
+        Measurement("bias_per_freq_rate_dph_s_per_hz", "deg/h/(Hz/s)", "the bias the frequency's rate of change "
+                    "adds (the PLL trailing a moving frequency), fitted with the hysteresis"),
+        Measurement("verify_hysteresis_dph", "deg/h", "thermal hysteresis from settled records: the bias "
+                    "settled from below minus settled from above at each verification point (no rate term, no lag), "
+                    "their weighted mean", truth=_bias_hyst_truth, when=_verifying_both,
+                    when_doc="verify_points > 0 and verify_both_branches"),
+        Measurement("sf_hysteresis_ppm", "ppm", "scale factor on heating minus on cooling at the same temperature, "
+                    "over the scale factor at 25 degC (the +-rate_dps pairs)", truth=_sf_hyst_truth, when=_rotating,
+                    when_doc="rate_dps > 0"),
         Measurement("cycle_s", "s", "simulated time from the cycle's start to its last segment",
                     no_interval="a time the run took"),
     )
@@ -246,13 +280,20 @@ class ThermalRamp(ThermalChamber, Procedure):
             line = self.trim_line(self.points_table(ctx.data()))
             trim = (float(line.coeffs[0]), float(line.coeffs[1]))
             self._write_trim(ctx, trim)
-        for sp in self.verify_setpoints_c():
-            settle_s = self._settle_at(ctx, float(sp), ref_hz)
+        sps = list(self.verify_setpoints_c())
+        visits = [(float(sp), 0) for sp in sps]  # the cycle ended at t_low: each point from below
+        if self.verify_both_branches:  # then each from above, highest first, after settling over it
+            visits += [(float(sp), 1) for sp in sps[::-1]]
+        for sp, approach in visits:
+            if approach == 1:
+                self._settle_at(ctx, sp + float(self.hyst_guard_degc), ref_hz)
+            settle_s = self._settle_at(ctx, sp, ref_hz)
             s0 = self._chamber_status(ctx)
-            t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record")
+            side = ("from below", "from above")[approach]
+            t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record ({side})")
             s1 = self._chamber_status(ctx)
             row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf,
-                   *trim]
+                   *trim, approach]
             ctx.record(VERIFY, VERIFY.names, np.array([row]))
 
     def _write_trim(self, ctx, trim: tuple[float, float]) -> None:
@@ -300,9 +341,11 @@ class ThermalRamp(ThermalChamber, Procedure):
             b = static_bias(t[sel], y, mode=name, scale_factor=float(sf), earth_rate_dph=earth_dph,
                             n_batches=self.batches)
             f, f_se = trend_mean(fpga["freq_ctrl"][sel], self.batches)
-            rows.append((0.5 * (t0 + t1), br, air, part, b.bias_dph, b.sigma_dph, ref + f, f_se, f))
-        a = np.array(rows, dtype=float).reshape(-1, 9)
-        keys = ("t_s", "branch", "air_c", "part_c", "bias_dph", "bias_se_dph", "f0_hz", "f0_se_hz", "f_offset_hz")
+            f_rate = record_slope(t[sel], fpga["freq_ctrl"][sel])
+            rows.append((0.5 * (t0 + t1), br, air, part, b.bias_dph, b.sigma_dph, ref + f, f_se, f, f_rate))
+        a = np.array(rows, dtype=float).reshape(-1, 10)
+        keys = ("t_s", "branch", "air_c", "part_c", "bias_dph", "bias_se_dph", "f0_hz", "f0_se_hz", "f_offset_hz",
+                "f_rate_hz_s")
         out = {k: a[:, i] for i, k in enumerate(keys)}
         if "rate_dps" in schema.names and np.any(seg["rate_dps"] != 0):
             out = _pairs(out, np.asarray(seg["rate_dps"], dtype=float), np.asarray(seg["scale_factor"], dtype=float))
@@ -374,6 +417,7 @@ class ThermalRamp(ThermalChamber, Procedure):
                            ci95=(float(sf_lo / sf25 * 1e6), float(sf_hi / sf25 * 1e6)))]
         out += [Result("thermal_bias_dph", float(trim.coeffs[0]), ci95=_pair(trim.ci95[0])),
                Result("thermal_bias_dph_per_hz", float(trim.coeffs[1]), ci95=_pair(trim.ci95[1]))]
+        out += self._hysteresis(p, min(max(fb.order, 1), 2))
         if self.verify_points:
             v = self.verification(data)
             raw = v["raw_bias_dph"]
@@ -382,6 +426,7 @@ class ThermalRamp(ThermalChamber, Procedure):
                 Result("verify_residual_part_dph", float(np.sqrt(np.mean((raw - bias["part"](v["part_c"])) ** 2)))),
                 Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2)))),
             ]
+            out += self._verify_hysteresis(data, v)
         return out + [
             Result("f0_tc_ppm_k", float(f0_s.coeffs[1] / f25 * 1e6),
                    ci95=(float(lo / f25 * 1e6), float(hi / f25 * 1e6))),
@@ -396,6 +441,45 @@ class ThermalRamp(ThermalChamber, Procedure):
             Result("part_lag_degc", gap.lag_c, ci95=gap.lag_ci95_c),
             Result("cycle_s", float(seg["t_end_s"][-1] - seg["t_start_s"][0])),
         ]
+
+    def _verify_hysteresis(self, data, v: dict[str, np.ndarray]) -> list[Result]:
+        """Settled from below minus settled from above at each verification point (the unit's own bias,
+        the trim in force added back), their inverse-variance mean with a normal 95 % interval."""
+        vt = data.table(VERIFY.name)
+        if "approach" not in vt or not np.any(vt["approach"] == 1):
+            return []
+        gaps, var = [], []
+        for sp in np.unique(vt["setpoint_c"]):
+            up = (vt["setpoint_c"] == sp) & (vt["approach"] == 0)
+            down = (vt["setpoint_c"] == sp) & (vt["approach"] == 1)
+            if np.any(up) and np.any(down):
+                gaps.append(np.mean(v["raw_bias_dph"][up]) - np.mean(v["raw_bias_dph"][down]))
+                var.append(np.mean(v["bias_se_dph"][up] ** 2) + np.mean(v["bias_se_dph"][down] ** 2))
+        if not gaps:
+            return []
+        w = 1.0 / np.asarray(var)
+        gap = float(np.sum(w * np.asarray(gaps)) / np.sum(w))
+        half = 1.959963984540054 / math.sqrt(float(np.sum(w)))
+        return [Result("verify_hysteresis_dph", gap, ci95=(gap - half, gap + half))]
+
+    def _hysteresis(self, p: dict[str, np.ndarray], order: int) -> list[Result]:
+        """Heating minus cooling at the same temperature, of the bias and (with the table turning) of
+        the scale factor, each beside its PLL-trail term (bench.analysis.thermal_ramp.branch_hysteresis)."""
+        heating = p["branch"] == 0
+        kw = dict(t_ref_c=REF_TEMPERATURE_C, guard_c=float(self.hyst_guard_degc))
+        try:
+            hb = branch_hysteresis(p["frequency_c"], p["bias_dph"], p["bias_se_dph"], heating, p["f_rate_hz_s"],
+                                   order=order, **kw)
+        except ValueError:  # too few points beyond the guard (a short cycle): recorded NOT_MEASURED
+            return []
+        out = [Result("bias_hysteresis_dph", hb.gap, ci95=hb.gap_ci95),
+               Result("bias_per_freq_rate_dph_s_per_hz", hb.rate_coeff, ci95=hb.rate_coeff_ci95)]
+        if "sf" in p and len(p["sf"]) == len(heating):
+            hs = branch_hysteresis(p["frequency_c"], p["sf"], p["sf_se"], heating, p["f_rate_hz_s"], order=1, **kw)
+            sf25 = float(np.mean(p["sf"]))
+            out.append(Result("sf_hysteresis_ppm", hs.gap / sf25 * 1e6,
+                              ci95=(hs.gap_ci95[0] / sf25 * 1e6, hs.gap_ci95[1] / sf25 * 1e6)))
+        return out
 
     def figures(self, data) -> list:
         """The temperatures, the frequency by branch, the bias against each thermometer and the verification."""

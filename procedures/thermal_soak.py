@@ -72,6 +72,9 @@ class ThermalChamber(CvgOutput):
                                    "at fused silica's 55 ppm/K)")
     settle_windows = Param(2, low=1, high=100, doc="consecutive windows below the drift threshold")
     settle_timeout_s = Param(6 * 3600.0, unit="s", low=60.0, high=1e6, doc="longest wait at one set point")
+    unlocked_windows = Param(4, low=1, high=1000,
+                             doc="settle windows in a row that may end with the FPGA's PLL unlocked before the "
+                                 "unit is given up (its loops have lost the wave: no drift judgement can settle)")
     batches = Param(10, low=2, high=1000, doc="batches of each record for its intervals")
     max_order = Param(3, low=0, high=6, doc="highest polynomial order the fits try")
     resolution_degc = Param(0.1, unit="degC", low=0.0, high=5.0,
@@ -141,12 +144,20 @@ class ThermalChamber(CvgOutput):
         judged from its own frequency: the slowest sets the pace)."""
         chamber = ctx.devices.chamber
         t_set = ctx.shared(lambda: (chamber.set_setpoint(setpoint_c), ctx.clock.now())[1], f"set point {setpoint_c:g}")
-        prev, quiet = None, 0
+        from drivers.fpga import protocol as fp
+
+        prev, quiet, unlocked = None, 0, 0
         while min(ctx.gather(quiet, f"settled at {setpoint_c:g}")) < self.settle_windows:
             if ctx.clock.now() - t_set > self.settle_timeout_s:
                 raise TimeoutError(f"set point {setpoint_c:g} degC: the frequency still drifts after "
                                    f"{self.settle_timeout_s:g} s (threshold {self.settle_ppm_per_min:g} ppm/min)")
             f = self._window_freq(ctx, self.settle_window_s)
+            # a unit whose loops lost the wave never settles: give it up (a batch goes on without it)
+            # rather than wait out settle_timeout_s
+            unlocked = 0 if int(ctx.devices.fpga.read_register("STATUS")) & fp.ST_PLL_LOCKED else unlocked + 1
+            if unlocked >= self.unlocked_windows:
+                raise RuntimeError(f"set point {setpoint_c:g} degC: the PLL was unlocked at the end of {unlocked} "
+                                   f"settle windows in a row: the unit's loops have lost the wave")
             if prev is not None:
                 drift = (f - prev) / (ref_hz + f) * 1e6 / (self.settle_window_s / 60.0)
                 quiet = quiet + 1 if abs(drift) < self.settle_ppm_per_min else 0

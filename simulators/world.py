@@ -88,6 +88,9 @@ class World:
         self.errors = errors if errors is not None and errors.active else None
         #: the unit's temperature (deg C): an input, constant unless a chamber (or a test) sets it
         self.temperature_c = float(temperature_c)
+        #: the package's stress state (deg C) behind the temperature's play (thermal hysteresis,
+        #: ErrorSources.stress_after); at the temperature to begin with: the unit starts on no branch
+        self.stress_c = self.temperature_c
         self._advance_listeners: list[Any] = []
         #: runs of steady blocks take the compiled path (simulators.fused; the same numbers either way)
         self.fused = True
@@ -212,7 +215,7 @@ class World:
             if errs.thermal_active:
                 c = self.resonator.coeffs
                 self.resonator.set_thermal(*errs.thermal(c.gamma, c.c_m, self.params.f0_hz, self.temperature_c))
-            rate_rad_s += math.radians(errs.thermal_bias_dps(self.temperature_c))  # 0 at the reference
+            rate_rad_s += math.radians(errs.thermal_bias_dps(self.temperature_c, self.stress_c))  # 0 at the reference
         env = self.environment
         gains = None
         if env is not None:
@@ -231,7 +234,7 @@ class World:
             gains=gains,
         )
         if errs is not None:  # what the pickoff chains make of the states
-            q_meas = errs.measure(q_meas, t0, self.temperature_c)
+            q_meas = errs.measure(q_meas, t0, self.temperature_c, self.stress_c)
         angle0 = self.case_angle_deg
         block = WorldBlock(i0 + 1, q_true, q_meas, rate, angle0, dt, self.ripple_angle_rad)
         self.sample_index = i0 + n
@@ -253,7 +256,7 @@ class World:
             # bias in force; else the next drive-on makes turn_on_bias_next_dph's)
             truth |= self.environment.truth() | {"drive_on": float(TURN_ON_SOURCE in self._forces)}
         if self.errors is not None:
-            truth |= self.errors.truth(self.t_s, self.temperature_c, truth)
+            truth |= self.errors.truth(self.t_s, self.temperature_c, truth, self.stress_c)
         return truth
 
     def set_temperature(self, temperature_c: float) -> None:
@@ -262,6 +265,8 @@ class World:
             raise ValueError(f"temperature_c={temperature_c!r} must be finite")
         with self.lock:
             self.temperature_c = float(temperature_c)
+            if self.errors is not None and self.errors.hysteretic:
+                self.stress_c = self.errors.stress_after(self.stress_c, self.temperature_c)
 
     def state(self) -> np.ndarray:
         with self.lock:

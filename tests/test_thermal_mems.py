@@ -25,6 +25,73 @@ def test_the_thermal_bias_follows_the_declared_coefficients():
     assert ERROR_PRESETS["hrg-realistic"].thermal_bias_dps(85.0) == 0.0  # the HRG's bias moves by its physics only
 
 
+def test_the_package_stress_plays_behind_the_temperature():
+    """Thermal hysteresis (docs/chamber.md, "Thermal hysteresis"): the stress state follows the
+    temperature through a play of +-hyst_halfwidth_k, so at one temperature the bias on a heating
+    branch and on a cooling one differ by bias_hyst_dps (and the scale factor by sf_hyst_ppm),
+    settled or not; a unit that never left its start temperature is on no branch."""
+    from simulators.physics.params import PRESETS
+    from simulators.world import World
+
+    mems = ERROR_PRESETS["mems-realistic"]
+    assert mems.hysteretic and mems.hyst_halfwidth_k == 0.5 and mems.bias_hyst_dps == -0.06
+    world = World(PRESETS["mems-realistic"], seed=1, errors=mems)
+    assert world.truth()["hysteresis_state"] == 0.0 and world.truth()["thermal_bias_dps"] == 0.0
+    for t_c in (26.0, 28.0, 30.0):  # heating
+        world.set_temperature(t_c)
+    heating = world.truth()
+    assert world.stress_c == 29.5 and heating["hysteresis_state"] == 1.0
+    world.set_temperature(29.8)  # within the play: the stress stays
+    assert world.stress_c == 29.5
+    for t_c in (35.0, 32.0, 30.0):  # over the top and back down to 30
+        world.set_temperature(t_c)
+    cooling = world.truth()
+    assert world.stress_c == 30.5 and cooling["hysteresis_state"] == -1.0
+    assert heating["thermal_bias_dps"] - cooling["thermal_bias_dps"] == pytest.approx(-0.06)
+    sf = {k: 1.0 / v["pickoff_gain_x"] for k, v in (("h", heating), ("c", cooling))}  # FTR's SF ~ 1 / gain
+    assert (sf["h"] - sf["c"]) / sf["c"] * 1e6 == pytest.approx(-200.0, rel=1e-3)
+    assert ErrorSources(bias_tc_dps_k=0.03).thermal_bias_dps(30.0, 29.0) == pytest.approx(0.15)  # no hysteresis
+    with pytest.raises(ValueError, match="hyst_halfwidth_k"):
+        ErrorSources(bias_hyst_dps=0.1)
+    hrg = World(PRESETS["hrg"], seed=1, errors=ERROR_PRESETS["hrg-realistic"])
+    hrg.set_temperature(40.0)
+    assert hrg.stress_c == 25.0 and "package_stress_c" not in hrg.truth()  # off outside the MEMS preset
+
+
+def test_the_ramp_measures_the_hysteresis_against_its_truth(tmp_path, capsys):
+    """thermal-ramp on the MEMS ring (seed 0, 25..29 degC at 4 degC/min, 5 s segments at rest, 60 s
+    tails): bias_hysteresis_dph, fitted beside the bias that the frequency's rate adds, holds the
+    unit's -0.06 deg/s (-216 deg/h) within its interval; so does verify_hysteresis_dph, the
+    verification point at 27 degC settled from below and from above (20 s records), in an interval
+    several times narrower (no rate term to separate)."""
+    from pathlib import Path
+
+    from bench.cli import main
+
+    station = tmp_path / "st.toml"
+    station.write_text(Path("bench/stations/sim-mems-thermal.toml").read_text()
+                       .replace('id = "sim-mems-thermal"', 'id = "mems-hyst-test"')
+                       .replace("case_tau_s = 60.0", "case_tau_s = 15.0"))
+    sets = {"t_low_degc": 25, "t_high_degc": 29, "cycle_degc_per_min": 4, "segment_s": 5, "rate_dps": 0,
+            "tail_s": 60, "settle_window_s": 5, "settle_ppm_per_min": 6, "verify_points": 1, "record_s": 20,
+            "verify_both_branches": "true", "stream_hz": 10}
+    args = ["run", "thermal-ramp", "--station", str(station), "--seed", "0", "--json",
+            "--runs-dir", str(tmp_path / "runs"), "--results", str(tmp_path / "r.sqlite")]
+    for k, v in sets.items():
+        args += ["--set", f"{k}={v}"]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    truth_dph = out["truth"]["err_bias_hyst_dps"] * 3600.0
+    assert truth_dph == pytest.approx(-216.0)
+    m = out["measurements"]["bias_hysteresis_dph"]
+    lo, hi = m["ci95"]
+    assert lo <= truth_dph <= hi, m
+    assert hi - lo < 3000.0  # a measurement, if a coarse one on 4 K of ramp
+    v = out["measurements"]["verify_hysteresis_dph"]
+    assert v["ci95"][0] <= truth_dph <= v["ci95"][1], v
+    assert v["ci95"][1] - v["ci95"][0] < 0.5 * (hi - lo)
+
+
 #: the shipped sequence's parameters made shorter for a test (the ring's nonlinear averaged model
 #: integrates each block with an adaptive solver: ~0.2 CPU s a simulated s, ten times the HRG's)
 SHORTER = {"t_high_degc = 35.0": "t_high_degc = 29.0", "cycle_degc_per_min = 5.0": "cycle_degc_per_min = 8.0",

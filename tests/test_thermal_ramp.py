@@ -148,3 +148,26 @@ def test_the_verification_measurements_are_expected_only_with_verification_point
         proc = ThermalRamp({"verify_points": points})
         applies = {m.name: m.applies(proc) for m in proc.measurements if m.name.startswith("verify_")}
         assert len(applies) == 3 and set(applies.values()) == {expected}, applies
+
+
+def test_branch_hysteresis_separates_the_gap_from_a_rate_term():
+    """A cycle 25 -> 35 -> 25 whose rate regressor ramps up and down within each branch (the ramp's
+    start and tail): y = 3 (T - 25) + 40 rate + gap s / 2 with gap -2; the fit finds the gap within its
+    interval, where a branch mean (branch_gap) takes the rate term for hysteresis."""
+    from bench.analysis.thermal_ramp import branch_hysteresis
+
+    rng = np.random.default_rng(5)
+    n = 30
+    up = 25.0 + 10.0 * np.linspace(0.0, 1.0, n) ** 1.5
+    t = np.concatenate([up, up[::-1]])
+    heating = np.arange(2 * n) < n
+    rate = np.concatenate([np.gradient(up), -np.gradient(up)[::-1]])
+    y = 3.0 * (t - 25.0) + 40.0 * rate + np.where(heating, -1.0, 1.0) + rng.normal(0.0, 0.05, 2 * n)
+    h = branch_hysteresis(t, y, np.full(2 * n, 0.05), heating, rate, order=1, guard_c=1.0)
+    assert h.gap_ci95[0] <= -2.0 <= h.gap_ci95[1] and h.gap_ci95[1] - h.gap_ci95[0] < 0.5
+    assert h.rate_coeff_ci95[0] <= 40.0 <= h.rate_coeff_ci95[1]
+    assert h.n_used < 2 * n  # the points within 1 degC of each turning point are left out
+    naive = fit_temperature_polynomial(t, y, np.full(2 * n, 0.05), max_order=1, min_order=1)
+    assert abs(branch_gap(naive, heating, 3.0).gap - -2.0) > 1.0  # the rate term taken for hysteresis
+    with pytest.raises(ValueError, match="guard"):
+        branch_hysteresis(t, y, np.full(2 * n, 0.05), heating, rate, guard_c=20.0)

@@ -41,3 +41,52 @@ def test_soak_finds_the_frequency_temperature_coefficient(run_procedure, sim_sta
     ch = data.table("chamber")
     assert len(ch["t_s"]) > 100 and abs(ch["part_degc"][-1] - 35.0) < 0.1
     assert min(ch["air_degc"]) == pytest.approx(15.0) and max(ch["air_degc"]) == pytest.approx(35.0)
+
+
+class _StubCtx:
+    """Just enough of a run context for ThermalChamber._settle_at: a clock that sleep advances, a
+    frequency that wanders (never settles), an FPGA whose STATUS says whether the PLL is locked."""
+
+    def __init__(self, proc, locked: bool):
+        import types
+
+        from drivers.fpga import protocol as fp
+
+        self.t = 0.0
+        self.proc = proc
+        self.clock = types.SimpleNamespace(now=lambda: self.t)
+        status = fp.ST_PLL_LOCKED if locked else 0
+        fpga = types.SimpleNamespace(sync=lambda: None, read_register=lambda name: status)
+        chamber = types.SimpleNamespace(set_setpoint=lambda c: None)
+        self.devices = types.SimpleNamespace(fpga=fpga, chamber=chamber)
+
+    def shared(self, fn, what=""):
+        return fn()
+
+    def gather(self, value, what=""):
+        return [value]
+
+    def sleep(self, seconds):
+        self.t += seconds
+        self.n = getattr(self, "n", 0) + 1
+        self.proc._f_sum, self.proc._f_n = 100.0 * (-1) ** self.n, 1  # +-100 Hz window to window: drifting
+
+
+def test_a_unit_whose_pll_lost_the_wave_is_given_up_not_waited_for():
+    """A ring whose loops lost the wave (one of sim-mems-thermal-4's draws at seed 0) never settles:
+    the settle judgement gives it up after unlocked_windows windows with its PLL unlocked (a batch
+    then goes on without it) instead of waiting settle_timeout_s (6 simulated hours)."""
+    import threading
+
+    from procedures.thermal_soak import ThermalSoak
+
+    proc = ThermalSoak({"settle_window_s": 10.0, "settle_timeout_s": 3600.0})
+    proc._lock = threading.Lock()
+    ctx = _StubCtx(proc, locked=False)
+    with pytest.raises(RuntimeError, match="unlocked at the end of 4 settle windows"):
+        proc._settle_at(ctx, 30.0, 13647.0)
+    assert ctx.t == 40.0
+    ctx = _StubCtx(proc, locked=True)  # locked but drifting: the timeout, as before
+    with pytest.raises(TimeoutError):
+        proc._settle_at(ctx, 30.0, 13647.0)
+    assert ctx.t > 3600.0

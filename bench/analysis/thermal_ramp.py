@@ -63,3 +63,74 @@ def branch_gap(fit: ThermalFit, heating, slope: float) -> BranchGap:
     half = float(stats.t.ppf(0.5 + LEVEL / 2, dof)) * se
     lags = sorted((-(gap - half) / (2 * slope), -(gap + half) / (2 * slope)))
     return BranchGap(gap, (gap - half, gap + half), -gap / (2 * slope), (lags[0], lags[1]))
+
+
+def record_slope(t_s, values) -> float:
+    """The straight-line slope of a record against time (units of values per s): a segment's
+    frequency rate on a ramp, which a PLL trails by a phase proportional to it."""
+    t = np.asarray(t_s, dtype=float)
+    v = np.asarray(values, dtype=float)
+    if len(t) < 2 or np.ptp(t) <= 0:
+        raise ValueError(f"{len(t)} samples: a slope needs 2 or more at distinct times")
+    return float(np.polyfit(t - t.mean(), v, 1)[0])
+
+
+@dataclass(frozen=True)
+class Hysteresis:
+    """Heating minus cooling of a quantity at the same temperature (gap), with the rate term
+    fitted beside it (per unit of the rate regressor) and the points used."""
+
+    gap: float
+    gap_ci95: tuple[float, float]
+    rate_coeff: float
+    rate_coeff_ci95: tuple[float, float]
+    n_used: int
+    dof: int
+
+
+def branch_hysteresis(temperature_c, y, sigma, heating, rate, *, order: int = 1, t_ref_c: float = 25.0,
+                      guard_c: float = 1.0) -> Hysteresis:
+    """The heating-cooling gap of y at the same temperature from a ramp cycle's points (docs/chamber.md,
+    "Thermal hysteresis"): weighted least squares of
+        y = sum_k a_k (T - t_ref)^k + c rate + gap s / 2,   s = +1 heating, -1 cooling,
+    where `rate` is each point's rate regressor (the resonator frequency's rate: a PLL trails a moving
+    frequency by a phase proportional to it, a bias of opposite sign on the two branches that would
+    otherwise be taken for hysteresis; the tails and the ramp's start, where the rate changes within a
+    branch, separate the two).  Each branch's points within guard_c of its turning point (heating: its
+    lowest temperature, cooling: its highest) are left out (a hysteresis loop's corner there is on
+    neither branch yet: the guard must exceed the loop's width).  Intervals: the weights' covariance
+    widened by the Birge ratio, Student's t on dof."""
+    t = np.asarray(temperature_c, dtype=float)
+    yv, s, r = (np.asarray(v, dtype=float) for v in (y, sigma, rate))
+    h = np.asarray(heating, dtype=bool)
+    if not (t.shape == yv.shape == s.shape == r.shape == h.shape):
+        raise ValueError("temperature, y, sigma, heating and rate must have one length")
+    keep = np.zeros(len(t), dtype=bool)
+    for branch in (True, False):
+        idx = np.flatnonzero(h == branch)
+        if len(idx):  # a branch starts at its turning point: heating at its lowest, cooling at its highest
+            start = t[idx].min() if branch else t[idx].max()
+            keep[idx] = np.abs(t[idx] - start) >= guard_c
+    n_up, n_down = int(np.sum(keep & h)), int(np.sum(keep & ~h))
+    n_par = order + 3
+    if n_up < 2 or n_down < 2 or n_up + n_down <= n_par:
+        raise ValueError(f"{n_up} heating and {n_down} cooling points beyond the {guard_c:g} degC guard: "
+                         f"2 or more of each and more than {n_par} in all are needed")
+    x = t[keep] - t_ref_c
+    a = np.column_stack([np.vander(x, order + 1, increasing=True), r[keep], np.where(h[keep], 0.5, -0.5)])
+    sw = 1.0 / s[keep]
+    aw, yw = a * sw[:, None], yv[keep] * sw
+    coeffs, *_ = np.linalg.lstsq(aw, yw, rcond=None)
+    cov = np.linalg.inv(aw.T @ aw)
+    dof = len(x) - n_par
+    chi2 = float(np.sum((yw - aw @ coeffs) ** 2))
+    birge = math.sqrt(chi2 / dof)
+    if birge > 1.0:
+        cov = cov * birge**2
+        q = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
+    else:
+        q = float(stats.norm.ppf(0.5 + LEVEL / 2))
+    half = q * np.sqrt(np.diag(cov))
+    gap, c = float(coeffs[-1]), float(coeffs[-2])
+    return Hysteresis(gap, (gap - float(half[-1]), gap + float(half[-1])), c,
+                      (c - float(half[-2]), c + float(half[-2])), len(x), dof)

@@ -215,13 +215,19 @@ class Resonator:
         a = linear_matrix(zg, lam)
         xi, kappa = self.coeffs.xi, self.coeffs.kappa
         half_u = 0.5 * u
+        half_xi = 0.5 * xi
 
         def rhs(_t: float, q: np.ndarray) -> np.ndarray:
             out = a @ q + half_u
-            if xi:
-                out = out + 0.5 * xi * k_cubic(q)
             if kappa:
-                out = out + 0.5 * kappa * k_quintic(q)
+                if xi:
+                    out = out + half_xi * k_cubic(q)
+                return out + 0.5 * kappa * k_quintic(q)
+            if xi:  # k_cubic on one state in scalar arithmetic: the same operations, a fraction of the time
+                q1, p1, q2, p2 = q.tolist()
+                e = 0.75 * (q1 * q1 + p1 * p1 + q2 * q2 + p2 * p2)
+                x = 0.5 * (p2 * q1 - p1 * q2)
+                out = out + half_xi * np.array((-p1 * e - q2 * x, q1 * e - p2 * x, -p2 * e + q1 * x, q2 * e + p1 * x))
             return out
 
         if not np.any(self._q) and not np.any(u):

@@ -45,6 +45,12 @@ class ErrorSources:
     bias_tc_dps_k, bias_tc2_dps_k2: a rate-equivalent bias following the unit's temperature,
         b(T) = bias_tc (T - 25) + bias_tc2 (T - 25)^2 deg/s at the sensitive axis (the datasheet
         figure of a MEMS gyro's zero-rate level against temperature, docs/chamber.md).
+    hyst_halfwidth_k, bias_hyst_dps, sf_hyst_ppm: thermal hysteresis (docs/chamber.md, "Thermal
+        hysteresis"): the package's stress state s follows the temperature T through a play
+        (backlash) of half-width hyst_halfwidth_k (it moves only when |T - s| would exceed it), and
+        h = (T - s) / hyst_halfwidth_k (+1 on a heating branch, -1 on a cooling one, 0 at the start)
+        adds h bias_hyst_dps / 2 to the bias and h sf_hyst_ppm / 2 to the scale factor: on saturated
+        branches, heating minus cooling at the same temperature is bias_hyst_dps and sf_hyst_ppm.
     """
 
     pickoff_gain_cm_ppm: float = 0.0
@@ -65,12 +71,17 @@ class ErrorSources:
     q_tc_per_k: float = 0.0
     bias_tc_dps_k: float = 0.0
     bias_tc2_dps_k2: float = 0.0
+    hyst_halfwidth_k: float = 0.0
+    bias_hyst_dps: float = 0.0
+    sf_hyst_ppm: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
             if not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ValueError(f"error source {f.name}={v!r} must be a finite number")
+        if (self.bias_hyst_dps or self.sf_hyst_ppm) and not self.hyst_halfwidth_k > 0:
+            raise ValueError("bias_hyst_dps / sf_hyst_ppm need hyst_halfwidth_k > 0 (the play's half-width, K)")
 
     @property
     def active(self) -> bool:
@@ -80,16 +91,39 @@ class ErrorSources:
     def with_(self, **changes: float) -> ErrorSources:
         return replace(self, **changes)
 
+    # --- thermal hysteresis --------------------------------------------------------------------
+    @property
+    def hysteretic(self) -> bool:
+        return bool(self.bias_hyst_dps or self.sf_hyst_ppm)
+
+    def stress_after(self, stress_c: float, temperature_c: float) -> float:
+        """The package's stress state after the temperature moved to temperature_c: the play
+        operator (it stays unless the temperature is more than the half-width away, then it is
+        dragged along at that distance).  Rate-independent: a settled point keeps its branch."""
+        w = self.hyst_halfwidth_k
+        return min(max(stress_c, temperature_c - w), temperature_c + w)
+
+    def hysteresis_state(self, temperature_c: float, stress_c: float | None) -> float:
+        """h = (T - s) / half-width in [-1, 1]: +1 on a heating branch, -1 on a cooling one."""
+        if stress_c is None or not self.hysteretic:
+            return 0.0
+        return (temperature_c - stress_c) / self.hyst_halfwidth_k
+
     # --- pickoffs ----------------------------------------------------------------------------
-    def pickoff_gains(self, t_s: float, temperature_c: float = REFERENCE_TEMPERATURE_C) -> tuple[float, float]:
-        """The X and Y pickoff chain gains at t_s and a temperature."""
+    def pickoff_gains(self, t_s: float, temperature_c: float = REFERENCE_TEMPERATURE_C,
+                      stress_c: float | None = None) -> tuple[float, float]:
+        """The X and Y pickoff chain gains at t_s and a temperature (and the package's stress state:
+        force-to-rebalance's scale factor goes as 1 / the gain, so the gain moves by -h sf_hyst / 2)."""
         h = t_s / 3600.0
         cm = self.pickoff_gain_cm_ppm + self.pickoff_gain_cm_drift_ppm_h * h
         cm += self.pickoff_gain_tc_ppm_k * (temperature_c - REFERENCE_TEMPERATURE_C)
+        if self.sf_hyst_ppm:
+            cm -= 0.5 * self.sf_hyst_ppm * self.hysteresis_state(temperature_c, stress_c)
         diff = self.pickoff_gain_diff_ppm + self.pickoff_gain_diff_drift_ppm_h * h
         return 1.0 + 1e-6 * (cm + diff), 1.0 + 1e-6 * (cm - diff)
 
-    def measure(self, q: np.ndarray, t_s: float, temperature_c: float = REFERENCE_TEMPERATURE_C) -> np.ndarray:
+    def measure(self, q: np.ndarray, t_s: float, temperature_c: float = REFERENCE_TEMPERATURE_C,
+                stress_c: float | None = None) -> np.ndarray:
         """The states (n, 4) as the pickoff chains read them (a new array): the electrodes'
         projection, their cubic nonlinearity, each chain's phase delay and gain."""
         q = np.asarray(q, dtype=float)
@@ -108,7 +142,7 @@ class ErrorSources:
             cx, sx = cx * math.cos(px) - sx * math.sin(px), cx * math.sin(px) + sx * math.cos(px)
         if py:
             cy, sy = cy * math.cos(py) - sy * math.sin(py), cy * math.sin(py) + sy * math.cos(py)
-        gx, gy = self.pickoff_gains(t_s, temperature_c)
+        gx, gy = self.pickoff_gains(t_s, temperature_c, stress_c)
         out = np.empty_like(q)
         out[:, 0], out[:, 1], out[:, 2], out[:, 3] = gx * cx, gx * sx, gy * cy, gy * sy
         return out
@@ -134,21 +168,26 @@ class ErrorSources:
         df_hz = f0_hz * 1e-6 * self.freq_tc_ppm_k * dt_k
         return gamma / (1.0 + self.q_tc_per_k * dt_k), c_m + 2.0 * TWO_PI * df_hz
 
-    def thermal_bias_dps(self, temperature_c: float) -> float:
-        """The rate-equivalent bias the temperature adds (deg/s at the sensitive axis)."""
+    def thermal_bias_dps(self, temperature_c: float, stress_c: float | None = None) -> float:
+        """The rate-equivalent bias the temperature adds (deg/s at the sensitive axis), with the
+        hysteresis's h bias_hyst / 2 for the package's stress state (None: none)."""
         dt_k = temperature_c - REFERENCE_TEMPERATURE_C
-        return self.bias_tc_dps_k * dt_k + self.bias_tc2_dps_k2 * dt_k * dt_k
+        b = self.bias_tc_dps_k * dt_k + self.bias_tc2_dps_k2 * dt_k * dt_k
+        if self.bias_hyst_dps:
+            b += 0.5 * self.bias_hyst_dps * self.hysteresis_state(temperature_c, stress_c)
+        return b
 
     @property
     def thermal_active(self) -> bool:
         return bool(self.freq_tc_ppm_k or self.q_tc_per_k)
 
-    def truth(self, t_s: float, temperature_c: float, resonator_truth: dict[str, float]) -> dict:
+    def truth(self, t_s: float, temperature_c: float, resonator_truth: dict[str, float],
+              stress_c: float | None = None) -> dict:
         """Each source under `err_<name>`, and what they make now: the pickoff gains, the
         temperature, the natural frequency and Q there; away from the reference temperature the
         resonator's damping and frequency keys (tau_s, q_factor, Q, gamma, freq_offset_hz, c_m)
         become the unit's at that temperature, their reference values kept as `<key>_ref`."""
-        gx, gy = self.pickoff_gains(t_s, temperature_c)
+        gx, gy = self.pickoff_gains(t_s, temperature_c, stress_c)
         dt_k = temperature_c - REFERENCE_TEMPERATURE_C
         r = resonator_truth
         f0_hz = r["f0_hz"]
@@ -161,8 +200,11 @@ class ErrorSources:
             "temperature_c": float(temperature_c),
             "f0_at_temperature_hz": f0_hz + r["freq_offset_hz"] + df_hz,
             "q_factor_at_temperature": r["q_factor"] * q_scale,
-            "thermal_bias_dps": self.thermal_bias_dps(temperature_c),
+            "thermal_bias_dps": self.thermal_bias_dps(temperature_c, stress_c),
         }
+        if self.hysteretic and stress_c is not None:
+            out |= {"package_stress_c": float(stress_c),
+                    "hysteresis_state": self.hysteresis_state(temperature_c, stress_c)}
         if dt_k and self.thermal_active:
             now = {"tau_s": r["tau_s"] * tau_scale, "q_factor": r["q_factor"] * q_scale, "Q": r["Q"] * q_scale,
                    "gamma": r["gamma"] / tau_scale, "freq_offset_hz": r["freq_offset_hz"] + df_hz,
@@ -221,5 +263,12 @@ ERROR_PRESETS: dict[str, ErrorSources] = {
         # docs/chamber.md): 0.03 deg/s/K, curved by 5e-5 deg/s/K^2 (+0.18 deg/s at -35 and +85 degC)
         bias_tc_dps_k=0.03,
         bias_tc2_dps_k2=5e-5,
+        # thermal hysteresis (docs/chamber.md, "Thermal hysteresis"): a play of +-0.5 K in the
+        # package's stress; on saturated branches heating minus cooling is -0.06 deg/s in bias (20 %
+        # of the 0.3 deg/s the bias moves over the 10 K of eol-mems-thermal; Analog Devices reports
+        # ~0.1 deg/s bias hysteresis on single ADIS16460 units) and -200 ppm in scale factor
+        hyst_halfwidth_k=0.5,
+        bias_hyst_dps=-0.06,
+        sf_hyst_ppm=-200.0,
     ),
 }
