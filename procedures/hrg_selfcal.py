@@ -99,8 +99,10 @@ def _gain_truth(kind: str):
 _RECORD_STAT = "a statistic of this record, not an estimate of a parameter: no interval"
 
 
-#: bins a cycle's amplitude fit needs: its 5 coefficients (bench.analysis.selfcal.fit_cycle) and one to spare
+#: bins a cycle's amplitude fit needs: its 5 coefficients (bench.analysis.selfcal.fit_cycle), 4 more with the
+#: 8 theta terms, and one to spare
 AMPLITUDE_FIT_POINTS = 6
+AMPLITUDE_FIT_POINTS_8THETA = 10
 
 
 class HrgSelfcal(HrgExcitation, Procedure):
@@ -129,6 +131,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
     bryan_factor = Param(0.0, unit="", low=0.0, high=1.0,
                          doc="K: the rate is the wave's rate / -K (0: the station's nominal K)")
     nominal_params = {"bryan_factor": "bryan_factor"}
+    drift_8theta = Param(1, unit="", low=0, high=1,
+                         doc="1: the drift model carries the 8 theta terms of the pickoffs' capacitive nonlinearity, "
+                             "identified from the amplitude channel (docs/selfcal.md section 8); 0: 4 theta only")
     trim_gains = Param(1, unit="", low=0, high=1, doc="1: trim the identified gain difference out after each cycle")
     phase_cal = Param(0, unit="", low=0, high=6,
                       doc="passes of the readout phase calibration before the cycles (docs/readout_phase.md): the "
@@ -238,10 +243,11 @@ class HrgSelfcal(HrgExcitation, Procedure):
 
         cycle_s = 180.0 / abs(self.precession_dps)
         bins = int(cycle_s / self.bin_s)
-        if bins < AMPLITUDE_FIT_POINTS:
+        need_bins = AMPLITUDE_FIT_POINTS_8THETA if self.drift_8theta else AMPLITUDE_FIT_POINTS
+        if bins < need_bins:
             raise ValueError(f"bin_s={self.bin_s:g}: a cycle of {cycle_s:g} s holds {bins} bins, and the "
-                             f"amplitude fit needs at least {AMPLITUDE_FIT_POINTS} (bin_s <= "
-                             f"{cycle_s / AMPLITUDE_FIT_POINTS:g}, or a slower precession_dps)")
+                             f"amplitude fit needs at least {need_bins} (bin_s <= "
+                             f"{cycle_s / need_bins:g}, or a slower precession_dps)")
 
     def demands(self) -> list:
         return []
@@ -350,7 +356,8 @@ class HrgSelfcal(HrgExcitation, Procedure):
             fit = sc.fit_cycle(t[e], th_fit[e], thdot[e], cols["amp_ctrl"][e], cols["freq_ctrl"][e],
                                amplitude=self.amplitude, f0_hz=self._f0_hz, bin_s=self.bin_s,
                                fm_rate_hz=self.fm_rate_hz if self.fm_amplitude_hz > 0 or self.fm_force_hz > 0 else 0.0,
-                               fm_force_hz=self.fm_force_hz, level=self.confidence)
+                               fm_force_hz=self.fm_force_hz, level=self.confidence,
+                               model_8theta=bool(self.drift_8theta))
             g = fit.gain_diff
             cyc_rows.append(self._cycle_row(t0, t1, fit, trim_dg))
             # rates of this cycle: the previous cycle's identification (gain trimmed out since);

@@ -128,5 +128,8 @@ def test_a_cycle_too_short_for_the_fm_fit_is_refused_before_the_run():
                                          r"\(precession_dps <= 1\.28571, fm_rate_hz >= 0\.0388889, or fm_force_hz=0\)"):
         cls({"precession_dps": 2.0, "cycles": 2})
     with pytest.raises(ValueError, match=r"bin_s=20: a cycle of 90 s holds 4 bins, and the amplitude fit needs at "
-                                         r"least 6 \(bin_s <= 15, or a slower precession_dps\)"):
+                                         r"least 10 \(bin_s <= 9, or a slower precession_dps\)"):
         cls({"precession_dps": 2.0, "cycles": 2, "fm_force_hz": 0.0})
+    with pytest.raises(ValueError, match=r"bin_s=20: a cycle of 90 s holds 4 bins, and the amplitude fit needs at "
+                                         r"least 6 \(bin_s <= 15, or a slower precession_dps\)"):
+        cls({"precession_dps": 2.0, "cycles": 2, "fm_force_hz": 0.0, "drift_8theta": 0})
