@@ -67,9 +67,12 @@ def main() -> None:
     ap.add_argument("--only", choices=("before", "after"), default=None)
     ap.add_argument("--phase-cal", type=int, default=0,
                     help="passes of the readout phase calibration before the cycles (docs/readout_phase.md)")
+    ap.add_argument("--rotation-cal", type=int, default=0,
+                    help="setpoint steps per angle of the forcers' rotation calibration (docs/readout_phase.md s. 5)")
     args = ap.parse_args()
-    base = {"cycles": args.cycles, "precession_dps": args.precession, "settle_s": 10.0, "phase_cal": args.phase_cal}
-    cases = {"before": {"fm_force_hz": 0.0, "phase_cal": 0}, "after": {}}
+    base = {"cycles": args.cycles, "precession_dps": args.precession, "settle_s": 10.0, "phase_cal": args.phase_cal,
+            "rotation_cal": args.rotation_cal}
+    cases = {"before": {"fm_force_hz": 0.0, "phase_cal": 0, "rotation_cal": 0}, "after": {}}
     for seed in args.seeds:
         for label, extra in cases.items():
             if args.only and label != args.only:
@@ -93,6 +96,12 @@ def main() -> None:
                     val, ci = v[f"readout_phase_{ax}_deg"]
                     print(f"    readout phase {ax} {val:.5f} [{ci[0]:.5f}, {ci[1]:.5f}] deg (truth "
                           f"{truth.get(f'err_pickoff_phase_{ax}_deg', 0.0):g})", flush=True)
+            if "forcer_rotation_deg" in v:
+                val, ci = v["forcer_rotation_deg"]
+                ang = {f"{k}_{ax}": truth.get(f"err_{k}_angle_{ax}_deg", 0.0) for k in ("forcer", "pickoff")
+                       for ax in "xy"}
+                rot = 0.5 * (ang["forcer_x"] + ang["forcer_y"] - ang["pickoff_x"] - ang["pickoff_y"])
+                print(f"    forcers' rotation {val:.5f} [{ci[0]:.5f}, {ci[1]:.5f}] deg (truth {rot:g})", flush=True)
             if "mean_bias_10h_dph" in v:
                 m10, ci = v["mean_bias_10h_dph"]
                 print(f"    mean bias since start after 10 h {m10:+.4f} [{ci[0]:+.4f}, {ci[1]:+.4f}] deg/h "
