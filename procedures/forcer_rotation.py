@@ -1,8 +1,9 @@
-"""The forcers' rotation against the pickoffs through the FPGA link (docs/readout_phase.md section 5):
+"""The forcers' rotation against the pickoffs through the FPGA link (docs/readout_phase.md section 6):
 with the wave held in whole-angle mode, step the AGC setpoint between a and ratio x a and read the
-wave's turn per unit of ln a (bench.analysis.forcer_rotation) at four wave angles 22.5 deg apart; the
-mean is delta_c, whose constant drift gamma delta_c / 2 the self-calibration cycles cannot see.  A
-step of hrg-selfcal before its cycles (after the readout phase calibration)."""
+wave's turn per unit of ln a (bench.analysis.forcer_rotation) at eight wave angles over 90 deg; the
+constant of its fit on the 4 and 8 theta shares is delta_c, whose constant drift gamma delta_c / 2
+the self-calibration cycles cannot see.  A step of hrg-selfcal before its cycles (after the readout
+phase calibration)."""
 
 from __future__ import annotations
 

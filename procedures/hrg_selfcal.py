@@ -140,11 +140,12 @@ class HrgSelfcal(HrgExcitation, Procedure):
                          doc="K: the rate is the wave's rate / -K (0: the station's nominal K)")
     nominal_params = {"bryan_factor": "bryan_factor"}
     rotation_cal = Param(0, unit="", low=0, high=1000,
-                         doc="setpoint steps at each of four wave angles of the forcers' rotation calibration "
+                         doc="setpoint steps at each of eight wave angles of the forcers' rotation calibration "
                              "before the cycles (docs/readout_phase.md section 5): the wave's turn under amplitude "
                              "steps gives the forcers' rotation against the pickoffs, whose constant drift "
                              "gamma delta_c / 2 the cycles cannot see and the rate then has removed; 0: off")
-    rotation_cal_hold_s = Param(20.0, unit="s", low=5.0, high=600.0, doc="each setpoint hold of that calibration")
+    rotation_cal_hold_s = Param(30.0, unit="s", low=5.0, high=600.0,
+                                doc="each setpoint hold of that calibration (20 s read 1.3 % low, 30 s 0.15 % high)")
     rotation_cal_ratio = Param(2.0, unit="", low=1.05, high=4.0,
                                doc="the stepped setpoint over the amplitude (the turn is delta_c ln ratio)")
     drift_8theta = Param(1, unit="", low=0, high=1,
@@ -413,6 +414,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
             bad = np.zeros(len(plain), bool)
             for i in switch:
                 bad[max(0, i - 2): i + 3] = True
+            # and the cycle's first and last 2: the command changed at its start too (the previous cycle's
+            # last command), inside the first frame's boxcar when the cycle does not start on a frame
+            bad[:2] = bad[-2:] = True
             plain[bad] = np.nan
             comp[bad] = np.nan
             rate_rows.append(np.column_stack([tm, np.degrees(thm), plain, drift, comp]))

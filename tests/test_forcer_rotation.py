@@ -10,7 +10,7 @@ import pytest
 
 from bench.analysis import forcer_rotation as fr
 
-HOLD_S = 20.0
+HOLD_S = 30.0
 
 
 def _record(rotation_rad: float, seed: int, walk_rad_rts: float, steps: int = 40, ratio: float = 2.0):
@@ -42,18 +42,22 @@ def test_its_interval_covers_the_truth_under_an_angle_random_walk():
     assert 0.91 <= hits / 200 <= 0.99, hits
 
 
-def test_four_angles_cancel_the_4_and_8_theta_shares():
-    """The skew's share (cos 4 theta) and the nonlinearity's (sin 8 theta) drop out of the mean over
-    the four angles 22.5 deg apart, wherever the first one is."""
+def test_the_4_and_8_theta_shares_are_fitted_out_at_the_angles_read():
+    """The skew's share (cos 4 theta) and the nonlinearity's (sin 8 theta) drop out of the constant
+    fitted beside them, at angles ANGLES_DEG apart from a first one anywhere and each moved by the
+    wave's drift while read (a plain mean would keep 1e-4 of the 2e-3 share here); 4 readings are refused."""
     rot = 7e-4
     readings = []
-    for ang in fr.ANGLES_DEG:
-        th = math.radians(ang + 13.0)
+    for i, ang in enumerate(fr.ANGLES_DEG):
+        th = math.radians(ang + 13.0 + 1.7 * i)
         readings.append(fr.StepReading(math.degrees(th), rot + 2e-3 * math.cos(4 * th) - 5e-4 * math.sin(8 * th),
                                        1e-5, 10))
     value, se = fr.rotation_from_readings(readings)
     assert value == pytest.approx(rot, rel=1e-9)
-    assert se == pytest.approx(5e-6)
+    assert 0 < se < 1e-5
+    assert abs(np.mean([r.turn_rad for r in readings]) - rot) > 5e-5
+    with pytest.raises(ValueError, match="4 readings"):
+        fr.rotation_from_readings(readings[:4])
 
 
 def test_too_few_holds_are_refused():
@@ -65,8 +69,9 @@ def test_too_few_holds_are_refused():
 def test_selfcal_reads_the_rotation_and_takes_its_constant_bias_out(monkeypatch):
     """hrg-realistic's electrode angles alone (pickoff 0.05 / -0.08, forcer 0.1 / -0.05 deg: the forcers
     0.04 deg turned against the pickoffs), noise-free, 2 cycles at 0.25 deg/s: the mean bias is -1.70
-    deg/h with the cycles alone (gamma delta_c / (2 K)); the rotation read from 4 steps at each angle
-    is 0.04 deg to 1 % (0.0399 read), and the rate with its drift removed has a mean under 0.06 deg/h (+0.019)."""
+    deg/h with the cycles alone (gamma delta_c / (2 K)); the rotation read from 4 steps at each of 8 angles
+    is 0.04 deg to 1 % (0.04006 read with 30 s holds), and the rate with its drift removed has a mean
+    under 0.06 deg/h (+0.011)."""
     from simulators.physics.errors import ErrorSources
     from tests.test_selfcal_gains import _selfcal_on
 

@@ -4,8 +4,9 @@ The AGC's force over the amplitude, F_a / a = gamma + 2 (da/dt) / a, applied thr
 by delta_c against the pickoffs that read the wave, turns the wave at (delta_c / 2) F_a / a.  At a
 steady amplitude that is gamma delta_c / 2 whatever the amplitude (a constant bias no cycle sees);
 while the amplitude moves it adds delta_c d(ln a)/dt, so a step of the setpoint from a1 to a2 turns
-the wave by delta_c ln(a2 / a1).  Reading that turn at four wave angles 22.5 deg apart takes out the
-shares that follow the wave's angle (the skew's 4 theta, the capacitive nonlinearity's 8 theta).
+the wave by delta_c ln(a2 / a1).  Reading that turn at eight wave angles over 90 deg and fitting the
+shares that follow the wave's angle (the skew's 4 theta, the capacitive nonlinearity's 8 theta) beside it
+leaves delta_c.
 Pure analysis: arrays in, results out."""
 
 from __future__ import annotations
@@ -15,8 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: wave angles the steps are read at, from the first (deg): the mean over them cancels 4 and 8 theta patterns
-ANGLES_DEG = (0.0, 22.5, 45.0, 67.5)
+#: wave angles the steps are read at, from the first (deg): 8 over 90 deg, so the 4 and 8 theta patterns the
+#: turn also carries are fitted beside it (the wave drifts while it is read: the angles are not exact)
+ANGLES_DEG = (0.0, 11.25, 22.5, 33.75, 45.0, 56.25, 67.5, 78.75)
 
 
 @dataclass(frozen=True)
@@ -64,10 +66,24 @@ def read_turn(t_s: np.ndarray, theta_rad: np.ndarray, ln_amp: np.ndarray, hold_s
 
 
 def rotation_from_readings(readings: list[StepReading]) -> tuple[float, float]:
-    """delta_c (rad) and its standard error: the mean of the readings' turns (taken at ANGLES_DEG)."""
+    """delta_c (rad) and its standard error: the constant of the readings' turns weighted by 1/se^2 on
+    (1, cos 4th, sin 4th, cos 8th, sin 8th) at the angles they were read at (the skew's and the
+    nonlinearity's shares; the wave drifts while read, so equal spacing alone does not cancel them);
+    its error widened by the scatter when that is larger than the readings' errors.  Needs 5 readings
+    at distinct angles (ANGLES_DEG gives 8)."""
     turns = np.array([r.turn_rad for r in readings])
     se = np.array([r.se_rad for r in readings])
-    return float(np.mean(turns)), float(math.sqrt(np.sum(se**2)) / len(se))
+    if len(turns) < 5:
+        raise ValueError(f"{len(turns)} readings: the rotation's fit on the 4 and 8 theta shares needs at least 5")
+    th = np.radians([r.theta_deg for r in readings])
+    x = np.column_stack([np.ones_like(th), np.cos(4 * th), np.sin(4 * th), np.cos(8 * th), np.sin(8 * th)])
+    w = 1.0 / se**2
+    cov = np.linalg.inv(x.T @ (w[:, None] * x))
+    coef = cov @ (x.T @ (w * turns))
+    dof = len(turns) - x.shape[1]
+    if dof > 0:
+        cov = cov * max(1.0, float(np.sum(w * (turns - x @ coef) ** 2)) / dof)
+    return float(coef[0]), float(math.sqrt(cov[0, 0]))
 
 
 def bias_drift_rad_s(amp_force_per_s: float | np.ndarray, rotation_rad: float) -> float | np.ndarray:
