@@ -15,7 +15,10 @@ floor), mean bias after 10 h +0.031 [-0.002, +0.064] deg/h (the paper: under 0.0
 On sim-hrg-realistic 138 -> 141 deg/h: its readout phase delay, which the method cannot see.
 With --phase-cal 3 (docs/readout_phase.md), seed 0: 0.80 deg/h (3 cycles at 0.25 deg/s); 12 cycles
 at 0.05 deg/s 0.599 deg/h (1.15 x floor), mean bias after 10 h -1.675 [-1.764, -1.586] deg/h;
-phases 1.99977 / 2.05014 deg (truth 2.0 / 2.05).
+phases 1.99977 / 2.05014 deg (truth 2.0 / 2.05).  With the 8 theta terms (docs/selfcal.md section 8)
+and --rotation-cal 40 (docs/readout_phase.md section 6), seeds 0 / 1 / 2: 0.503 / 0.514 / 0.512 deg/h
+(0.97-0.99 x floor), rotation 0.03985 / 0.03992 / 0.03996 deg (truth 0.04), mean bias after 10 h
++0.058 / +0.037 / +0.036 deg/h (was -1.68).
 """
 
 from __future__ import annotations
@@ -67,9 +70,12 @@ def main() -> None:
     ap.add_argument("--only", choices=("before", "after"), default=None)
     ap.add_argument("--phase-cal", type=int, default=0,
                     help="passes of the readout phase calibration before the cycles (docs/readout_phase.md)")
+    ap.add_argument("--rotation-cal", type=int, default=0,
+                    help="setpoint steps per angle of the forcers' rotation calibration (docs/readout_phase.md s. 5)")
     args = ap.parse_args()
-    base = {"cycles": args.cycles, "precession_dps": args.precession, "settle_s": 10.0, "phase_cal": args.phase_cal}
-    cases = {"before": {"fm_force_hz": 0.0, "phase_cal": 0}, "after": {}}
+    base = {"cycles": args.cycles, "precession_dps": args.precession, "settle_s": 10.0, "phase_cal": args.phase_cal,
+            "rotation_cal": args.rotation_cal}
+    cases = {"before": {"fm_force_hz": 0.0, "phase_cal": 0, "rotation_cal": 0}, "after": {}}
     for seed in args.seeds:
         for label, extra in cases.items():
             if args.only and label != args.only:
@@ -93,6 +99,12 @@ def main() -> None:
                     val, ci = v[f"readout_phase_{ax}_deg"]
                     print(f"    readout phase {ax} {val:.5f} [{ci[0]:.5f}, {ci[1]:.5f}] deg (truth "
                           f"{truth.get(f'err_pickoff_phase_{ax}_deg', 0.0):g})", flush=True)
+            if "forcer_rotation_deg" in v:
+                val, ci = v["forcer_rotation_deg"]
+                ang = {f"{k}_{ax}": truth.get(f"err_{k}_angle_{ax}_deg", 0.0) for k in ("forcer", "pickoff")
+                       for ax in "xy"}
+                rot = 0.5 * (ang["forcer_x"] + ang["forcer_y"] - ang["pickoff_x"] - ang["pickoff_y"])
+                print(f"    forcers' rotation {val:.5f} [{ci[0]:.5f}, {ci[1]:.5f}] deg (truth {rot:g})", flush=True)
             if "mean_bias_10h_dph" in v:
                 m10, ci = v["mean_bias_10h_dph"]
                 print(f"    mean bias since start after 10 h {m10:+.4f} [{ci[0]:+.4f}, {ci[1]:+.4f}] deg/h "

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.analysis import forcer_rotation
 from bench.analysis import selfcal as sc
 from bench.analysis.axes import AXIS_PERIOD_DEG
 from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
@@ -22,11 +23,12 @@ from bench.engine.recording import window_end
 from bench.streams import Column, StreamSchema, declare
 from drivers.fpga import protocol as fp
 
+from .forcer_rotation import ROTATION, ROTATION_COLUMNS, calibrate_forcer_rotation
 from .hrg_damping import _StreamTap
 from .hrg_excitation import HrgExcitation, refuse_above_precession_limit
 from .readout_phase import PHASE_COLUMNS, PHASES, calibrate_readout_phase, result_from_rows
 
-TAP_COLUMNS = ("t_s", "angle_out_deg", "amp_ctrl", "freq_ctrl", "prec_ctrl")
+TAP_COLUMNS = ("t_s", "angle_out_deg", "amp_ctrl", "freq_ctrl", "prec_ctrl", "cx", "sx", "cy", "sy")
 CYCLES = "hrg_selfcal_cycles"
 CYCLE_COLUMNS = declare(StreamSchema(CYCLES, "hrg-selfcal", (
     Column("t_start_s", "s", doc="start of the cycle"), Column("t_end_s", "s", doc="its end"),
@@ -81,6 +83,12 @@ def _floor_truth(truth: dict[str, float]) -> float:
     return math.hypot(n_dph, wander_dph)
 
 
+def _rotation_truth(truth: dict[str, float]) -> float:
+    """The forcers' common rotation against the pickoffs' (deg): (f_x + f_y) / 2 - (e_x + e_y) / 2."""
+    return 0.5 * (truth.get("err_forcer_angle_x_deg", 0.0) + truth.get("err_forcer_angle_y_deg", 0.0)
+                  - truth.get("err_pickoff_angle_x_deg", 0.0) - truth.get("err_pickoff_angle_y_deg", 0.0))
+
+
 def _gain_truth(kind: str):
     """The true X/Y loop gain difference at clock time 0 ("start") or its drift (ppm, ppm/h): the
     pickoff chains' g_x - g_y plus the forcers' (the amplitude channel's gain term sees both,
@@ -99,8 +107,10 @@ def _gain_truth(kind: str):
 _RECORD_STAT = "a statistic of this record, not an estimate of a parameter: no interval"
 
 
-#: bins a cycle's amplitude fit needs: its 5 coefficients (bench.analysis.selfcal.fit_cycle) and one to spare
+#: bins a cycle's amplitude fit needs: its 5 coefficients (bench.analysis.selfcal.fit_cycle), 4 more with the
+#: 8 theta terms, and one to spare
 AMPLITUDE_FIT_POINTS = 6
+AMPLITUDE_FIT_POINTS_8THETA = 10
 
 
 class HrgSelfcal(HrgExcitation, Procedure):
@@ -129,6 +139,18 @@ class HrgSelfcal(HrgExcitation, Procedure):
     bryan_factor = Param(0.0, unit="", low=0.0, high=1.0,
                          doc="K: the rate is the wave's rate / -K (0: the station's nominal K)")
     nominal_params = {"bryan_factor": "bryan_factor"}
+    rotation_cal = Param(0, unit="", low=0, high=1000,
+                         doc="setpoint steps at each of eight wave angles of the forcers' rotation calibration "
+                             "before the cycles (docs/readout_phase.md section 5): the wave's turn under amplitude "
+                             "steps gives the forcers' rotation against the pickoffs, whose constant drift "
+                             "gamma delta_c / 2 the cycles cannot see and the rate then has removed; 0: off")
+    rotation_cal_hold_s = Param(30.0, unit="s", low=5.0, high=600.0,
+                                doc="each setpoint hold of that calibration (20 s read 1.3 % low, 30 s 0.15 % high)")
+    rotation_cal_ratio = Param(2.0, unit="", low=1.05, high=4.0,
+                               doc="the stepped setpoint over the amplitude (the turn is delta_c ln ratio)")
+    drift_8theta = Param(1, unit="", low=0, high=1,
+                         doc="1: the drift model carries the 8 theta terms of the pickoffs' capacitive nonlinearity, "
+                             "identified from the amplitude channel (docs/selfcal.md section 8); 0: 4 theta only")
     trim_gains = Param(1, unit="", low=0, high=1, doc="1: trim the identified gain difference out after each cycle")
     phase_cal = Param(0, unit="", low=0, high=6,
                       doc="passes of the readout phase calibration before the cycles (docs/readout_phase.md): the "
@@ -170,6 +192,11 @@ class HrgSelfcal(HrgExcitation, Procedure):
         Measurement("readout_phase_y_deg", "deg", "y readout chain's phase delay at the carrier, as x",
                     truth=lambda t: t.get("err_pickoff_phase_y_deg", 0.0),
                     when=lambda p: p.phase_cal > 0, when_doc="the readout phase calibration on (phase_cal > 0)"),
+        Measurement("forcer_rotation_deg", "deg", "the forcers' rotation against the pickoffs from the wave's turn "
+                    "under amplitude steps (its drift gamma delta_c / 2 is removed from the rate)",
+                    truth=_rotation_truth,
+                    when=lambda p: p.rotation_cal > 0,
+                    when_doc="the forcers' rotation calibration on (rotation_cal > 0)"),
         Measurement("bias_stability_plain_dph", "deg/h", "plain whole-angle bias stability (smooth_s windows, "
                     "1 sigma), cycles after the first"),
         Measurement("bias_stability_selfcal_dph", "deg/h", "self-calibrated bias stability, same record; truth: the "
@@ -238,10 +265,11 @@ class HrgSelfcal(HrgExcitation, Procedure):
 
         cycle_s = 180.0 / abs(self.precession_dps)
         bins = int(cycle_s / self.bin_s)
-        if bins < AMPLITUDE_FIT_POINTS:
+        need_bins = AMPLITUDE_FIT_POINTS_8THETA if self.drift_8theta else AMPLITUDE_FIT_POINTS
+        if bins < need_bins:
             raise ValueError(f"bin_s={self.bin_s:g}: a cycle of {cycle_s:g} s holds {bins} bins, and the "
-                             f"amplitude fit needs at least {AMPLITUDE_FIT_POINTS} (bin_s <= "
-                             f"{cycle_s / AMPLITUDE_FIT_POINTS:g}, or a slower precession_dps)")
+                             f"amplitude fit needs at least {need_bins} (bin_s <= "
+                             f"{cycle_s / need_bins:g}, or a slower precession_dps)")
 
     def demands(self) -> list:
         return []
@@ -291,6 +319,26 @@ class HrgSelfcal(HrgExcitation, Procedure):
         self._tap.on = False
         self._trim_en |= fp.TRIM_PHASE
         ctx.record(PHASES, PHASE_COLUMNS, self._phase.rows)
+
+    @step("Forcers' rotation against the pickoffs: amplitude steps")
+    def rotation_calibration(self, ctx):
+        self._rotation_rad = 0.0
+        self._rotation_rows = None
+        if not self.rotation_cal:
+            ctx.log.info("forcers' rotation calibration off (rotation_cal=0): their constant drift stays in the rate")
+            return
+        fpga = ctx.devices.fpga
+        self._tap.take(-math.inf, math.inf)
+        self._tap.on = True
+        rot, se, rows = calibrate_forcer_rotation(
+            ctx, fpga, self._tap, TAP_COLUMNS, steps=int(self.rotation_cal), hold_s=self.rotation_cal_hold_s,
+            ratio=self.rotation_cal_ratio, amplitude=self.amplitude, move_dps=self.phase_cal_move_dps,
+            fm_amplitude_hz=self.fm_amplitude_hz, fm_rate_hz=self.fm_rate_hz)
+        self._tap.on = False
+        self._rotation_rad = rot
+        self._rotation_rows = rows
+        ctx.record(ROTATION, ROTATION_COLUMNS, rows)
+        ctx.log.info(f"forcers' rotation {math.degrees(rot):+.5f} +- {math.degrees(se):.5f} deg")
 
     def _restore(self, fpga) -> None:
         fpga.write_register("FM_AMPLITUDE_HZ", 0.0)
@@ -350,20 +398,25 @@ class HrgSelfcal(HrgExcitation, Procedure):
             fit = sc.fit_cycle(t[e], th_fit[e], thdot[e], cols["amp_ctrl"][e], cols["freq_ctrl"][e],
                                amplitude=self.amplitude, f0_hz=self._f0_hz, bin_s=self.bin_s,
                                fm_rate_hz=self.fm_rate_hz if self.fm_amplitude_hz > 0 or self.fm_force_hz > 0 else 0.0,
-                               fm_force_hz=self.fm_force_hz, level=self.confidence)
+                               fm_force_hz=self.fm_force_hz, level=self.confidence,
+                               model_8theta=bool(self.drift_8theta))
             g = fit.gain_diff
             cyc_rows.append(self._cycle_row(t0, t1, fit, trim_dg))
             # rates of this cycle: the previous cycle's identification (gain trimmed out since);
             # the first cycle learns and is compensated by nothing
             tm, thm, plain = sc.rate_dph(th, t, cmd, self.bryan_factor)
             drift = np.zeros_like(plain) if prev is None else (
-                -np.degrees(prev.drift_rad_s(thm, cmd[1:], gain_removed=bool(self.trim_gains))) * 3600.0
-                / self.bryan_factor)
+                -np.degrees(prev.drift_rad_s(thm, cmd[1:], gain_removed=bool(self.trim_gains))
+                            + forcer_rotation.bias_drift_rad_s(float(prev.amp_coef[0]), self._rotation_rad))
+                * 3600.0 / self.bryan_factor)
             comp = plain - drift if prev is not None else np.full_like(plain, np.nan)
             switch = np.flatnonzero(np.diff(np.sign(cols["prec_ctrl"])) != 0)  # command changed: drop +-2 samples
             bad = np.zeros(len(plain), bool)
             for i in switch:
                 bad[max(0, i - 2): i + 3] = True
+            # and the cycle's first and last 2: the command changed at its start too (the previous cycle's
+            # last command), inside the first frame's boxcar when the cycle does not start on a frame
+            bad[:2] = bad[-2:] = True
             plain[bad] = np.nan
             comp[bad] = np.nan
             rate_rows.append(np.column_stack([tm, np.degrees(thm), plain, drift, comp]))
@@ -398,6 +451,8 @@ class HrgSelfcal(HrgExcitation, Procedure):
         if self._phase is not None:
             for res in _phase_results(self._phase.rows, self.confidence):
                 ctx.report(res)
+        if self._rotation_rows is not None:
+            ctx.report(_rotation_result(self._rotation_rows, self.confidence))
 
     def analysis(self, data) -> list[Result]:
         """Re-compute the results of a recorded run from its cycle and rate streams."""
@@ -413,6 +468,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
         if PHASES in data:
             ph = data.table(PHASES)
             out += _phase_results(np.column_stack([ph[n] for n in PHASE_COLUMNS]), self.confidence)
+        if ROTATION in data:
+            ro = data.table(ROTATION)
+            out.append(_rotation_result(np.column_stack([ro[n] for n in ROTATION_COLUMNS]), self.confidence))
         return out
 
     def figures(self, data) -> list:
@@ -427,6 +485,15 @@ def _phase_results(rows: np.ndarray, level: float) -> list[Result]:
     cal = result_from_rows(rows)
     return [Result("readout_phase_x_deg", cal.phase_x_deg, ci95=_interval(cal.phase_x_deg, cal.se_x_deg, 0.0, level)),
             Result("readout_phase_y_deg", cal.phase_y_deg, ci95=_interval(cal.phase_y_deg, cal.se_y_deg, 0.0, level))]
+
+
+def _rotation_result(rows: np.ndarray, level: float) -> Result:
+    """The forcers' rotation: the mean of the readings' turns (bench.analysis.forcer_rotation)."""
+    readings = [forcer_rotation.StepReading(float(r[0]), math.radians(r[1]), math.radians(r[2]), int(r[3]))
+                for r in rows]
+    rot, se = forcer_rotation.rotation_from_readings(readings)
+    return Result("forcer_rotation_deg", math.degrees(rot), ci95=_interval(math.degrees(rot), math.degrees(se), 0.0,
+                                                                           level))
 
 
 def _interval(v: float, se: float, floor: float, level: float) -> tuple[float, float]:

@@ -15,6 +15,9 @@ from .axes import axis_deg
 
 #: amplitude-channel regressors (docs/selfcal.md): 1, cos 4th, sin 4th, thdot sin 4th, thdot cos 4th
 AMP_TERMS = ("gamma", "beta_c", "beta_s", "two_dg", "nuisance_c")
+#: with the 8 theta model (fit_cycle(model_8theta=True)) also cos 8th, sin 8th, thdot sin 8th, thdot cos 8th:
+#: the amplitude pattern of the pickoffs' capacitive nonlinearity (docs/selfcal.md section 8)
+AMP_TERMS_8 = ("beta8_c", "beta8_s", "k8_s", "k8_c")
 #: frequency-channel regressors: 1, cos 4th, sin 4th (the FM averages out over bins of whole FM periods)
 FREQ_TERMS = ("f_mean_hz", "h_c_hz", "h_s_hz")
 #: with the frequency-control force's square wave m = +-1 (FM_FORCE_HZ F): also m F, m F cos 4th, m F sin 4th,
@@ -62,6 +65,17 @@ class CycleFit:
         """The frequency channel carries the frequency-control force's response (FM_TERMS)."""
         return len(self.freq_coef) == len(FREQ_TERMS) + len(FM_TERMS)
 
+    @property
+    def has_8theta(self) -> bool:
+        """The amplitude channel carries the 8 theta terms (AMP_TERMS_8)."""
+        return len(self.amp_coef) == len(AMP_TERMS) + len(AMP_TERMS_8)
+
+    def _amp_grad(self, *values: float) -> np.ndarray:
+        """A gradient over the amplitude coefficients: values on the first terms, 0 on the rest."""
+        g = np.zeros(len(self.amp_coef))
+        g[: len(values)] = values
+        return g
+
     def _fm_grad(self, j: int) -> np.ndarray:
         g = np.zeros(len(self.freq_coef))
         g[len(FREQ_TERMS) + j] = 1.0
@@ -74,7 +88,7 @@ class CycleFit:
         no frequency-control force (not identified)."""
         if not self.has_fm_force:
             return Estimate(0.0, 0.0, (0.0, 0.0))
-        z = np.zeros(len(AMP_TERMS))
+        z = np.zeros(len(self.amp_coef))
         return self._est(self.freq_coef[len(FREQ_TERMS)] - 1.0, z, self.amp_cov, self._fm_grad(0))
 
     @property
@@ -83,7 +97,7 @@ class CycleFit:
         summed), the cos 4 theta term of the force's response; 0 with no frequency-control force."""
         if not self.has_fm_force:
             return Estimate(0.0, 0.0, (0.0, 0.0))
-        z = np.zeros(len(AMP_TERMS))
+        z = np.zeros(len(self.amp_coef))
         return self._est(self.freq_coef[len(FREQ_TERMS) + 1], z, self.amp_cov, self._fm_grad(1))
 
     @property
@@ -93,14 +107,14 @@ class CycleFit:
         force's response (docs/readout_phase.md); 0 with no frequency-control force."""
         if not self.has_fm_force:
             return Estimate(0.0, 0.0, (0.0, 0.0))
-        z = np.zeros(len(AMP_TERMS))
+        z = np.zeros(len(self.amp_coef))
         return self._est(self.freq_coef[len(FREQ_TERMS) + 2], z, self.amp_cov, self._fm_grad(2))
 
     def _gamma(self) -> tuple[float, np.ndarray, np.ndarray]:
         """The mean damping gamma (1/s): the amplitude channel reads gamma / (1 + s_m) (the AGC's
         force meets the loop gain), put back with the frequency-control force's s_m when there is one."""
         gam = float(self.amp_coef[0])
-        g = np.zeros(len(AMP_TERMS))
+        g = np.zeros(len(self.amp_coef))
         if not self.has_fm_force:
             g[0] = 1.0
             return gam, g, np.zeros(len(self.freq_coef))
@@ -111,7 +125,7 @@ class CycleFit:
     @property
     def gain_diff(self) -> Estimate:
         """Delta g = g_x - g_y, the X/Y pickoff gain difference (dimensionless)."""
-        g = np.zeros(len(AMP_TERMS))
+        g = np.zeros(len(self.amp_coef))
         g[3] = 0.5
         return self._est(0.5 * self.amp_coef[3], g, self.amp_cov)
 
@@ -130,14 +144,14 @@ class CycleFit:
         Returns b_c, b_s and their gradients over the amplitude and the frequency coefficients."""
         gam, bc_app, bs, two_dg = self.amp_coef[:4]
         nf = len(self.freq_coef)
-        g_bs, g_bs_f = np.array([0.0, 0.0, 1.0, 0.0, 0.0]), np.zeros(nf)
+        g_bs, g_bs_f = self._amp_grad(0.0, 0.0, 1.0), np.zeros(nf)
         if self.has_fm_force:  # the skew s_s tilts the amplitude force along sin 4 theta as s_d along cos
             sd, ss = float(self.freq_coef[len(FREQ_TERMS) + 1]), float(self.freq_coef[len(FREQ_TERMS) + 2])
             bc, bs_true = bc_app + gam * sd, bs + gam * ss
-            return (float(bc), float(bs_true), np.array([sd, 1.0, 0.0, 0.0, 0.0]), np.array([ss, 0.0, 1.0, 0.0, 0.0]),
+            return (float(bc), float(bs_true), self._amp_grad(sd, 1.0), self._amp_grad(ss, 0.0, 1.0),
                     gam * self._fm_grad(1), gam * self._fm_grad(2))
         bc = bc_app + gam * two_dg / 4.0
-        g_bc = np.array([two_dg / 4.0, 1.0, 0.0, gam / 4.0, 0.0])
+        g_bc = self._amp_grad(two_dg / 4.0, 1.0, 0.0, gam / 4.0)
         return float(bc), float(bs), g_bc, g_bs, np.zeros(nf), g_bs_f
 
     @property
@@ -194,7 +208,21 @@ class CycleFit:
             sm, sd, ss = 0.0, dg_half, 0.0
         if gain_removed:
             bc_app, sd = bc_app + gam * dg_half, sd - dg_half
-        return 0.25 * (bc_app * s4 - bs * c4) + cmd_rad_s * (sm - sd * c4 - ss * s4)
+        drift = 0.25 * (bc_app * s4 - bs * c4) + cmd_rad_s * (sm - sd * c4 - ss * s4)
+        return drift + self.drift_8theta_rad_s(theta_rad, cmd_rad_s)
+
+    def drift_8theta_rad_s(self, theta_rad: np.ndarray, cmd_rad_s: np.ndarray) -> np.ndarray:
+        """The 8 theta drift of a measured-amplitude pattern c8 cos 8(theta - phi) (the pickoffs'
+        capacitive nonlinearity; docs/selfcal.md section 8), the 4 theta law carried over: the AGC's
+        force, applied along the measured wave, turns it at (beta8_c sin 8th - beta8_s cos 8th) / 4, and
+        under the command the drift is -1/4 of the amplitude channel's thdot pattern times the command,
+        -(cmd / 4) (k8_s cos 8th - k8_c sin 8th) (at 4 theta: -(cmd / 4) 4 s_d cos 4th); k8 = 8 c8
+        (cos 8 phi, -sin 8 phi), the thdot sin / cos 8th terms.  0 without the 8 theta terms."""
+        if not self.has_8theta:
+            return np.zeros_like(np.asarray(theta_rad, dtype=float))
+        b8c, b8s, k8s, k8c = self.amp_coef[len(AMP_TERMS):]
+        s8, c8 = np.sin(8 * theta_rad), np.cos(8 * theta_rad)
+        return 0.25 * (b8c * s8 - b8s * c8) - 0.25 * cmd_rad_s * (k8s * c8 - k8c * s8)
 
 
 def _ols(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -246,20 +274,27 @@ def fit_fm_force(t_s: np.ndarray, theta_rad: np.ndarray, freq_ctrl_hz: np.ndarra
 
 def fit_cycle(t_s: np.ndarray, theta_rad: np.ndarray, thdot_rad_s: np.ndarray, amp_ctrl: np.ndarray,
               freq_ctrl_hz: np.ndarray, *, amplitude: float, f0_hz: float, bin_s: float = 20.0,
-              fm_rate_hz: float = 0.0, fm_force_hz: float = 0.0, level: float = 0.95) -> CycleFit:
+              fm_rate_hz: float = 0.0, fm_force_hz: float = 0.0, level: float = 0.95,
+              model_8theta: bool = False) -> CycleFit:
     """Identify one cycle: amp_ctrl / amplitude on (1, cos 4th, sin 4th, thdot sin 4th, thdot cos 4th),
     freq_ctrl on (1, cos 4th, sin 4th) over bins of whole FM periods (which average the FM out) or,
     with the frequency-control force (fm_force_hz > 0), also on its square wave (fit_fm_force);
-    theta the measured wave angle (rad), thdot its rate (rad/s).  Fits bin means of bin_s seconds."""
+    theta the measured wave angle (rad), thdot its rate (rad/s).  Fits bin means of bin_s seconds.
+    model_8theta: the amplitude channel also on (cos 8th, sin 8th, thdot sin 8th, thdot cos 8th)
+    (AMP_TERMS_8), which the drift model then uses (CycleFit.drift_8theta_rad_s)."""
     t_s = np.asarray(t_s, dtype=float)
     if len(t_s) < 8:
         raise ValueError(f"a cycle of {len(t_s)} samples is too short to identify")
     f = np.asarray(freq_ctrl_hz, dtype=float)
     s4, c4 = np.sin(4 * theta_rad), np.cos(4 * theta_rad)
-    tb, ab, c4b, s4b, tsb, tcb = bin_means(t_s, bin_s, np.asarray(amp_ctrl) / amplitude, c4, s4,
-                                           thdot_rad_s * s4, thdot_rad_s * c4)
+    extra = []
+    if model_8theta:
+        s8, c8 = np.sin(8 * theta_rad), np.cos(8 * theta_rad)
+        extra = [c8, s8, thdot_rad_s * s8, thdot_rad_s * c8]
+    tb, ab, c4b, s4b, tsb, tcb, *xb = bin_means(t_s, bin_s, np.asarray(amp_ctrl) / amplitude, c4, s4,
+                                                thdot_rad_s * s4, thdot_rad_s * c4, *extra)
     one = np.ones_like(tb)
-    amp_coef, amp_cov, dof = _ols(np.column_stack([one, c4b, s4b, tsb, tcb]), ab)
+    amp_coef, amp_cov, dof = _ols(np.column_stack([one, c4b, s4b, tsb, tcb, *xb]), ab)
     if fm_force_hz > 0 and fm_rate_hz > 0:
         freq_coef, freq_cov, _ = fit_fm_force(t_s, theta_rad, f, fm_force_hz=fm_force_hz, fm_rate_hz=fm_rate_hz)
     elif fm_rate_hz > 0:
