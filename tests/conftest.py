@@ -23,6 +23,27 @@ def pytest_configure(config):
         subprocess.run([sys.executable, "-m", "simulators.warm"], cwd=ROOT, env=env, check=True)
 
 
+#: `make test`'s serial pass collects only the test files holding this text (the Makefile's grep):
+#: collecting all of them again (~11 s of CPU) for 51 tests was the pass's largest single cost
+SERIAL_MARK_TEXT = "mark.serial"
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """A test marked `serial` in a file without SERIAL_MARK_TEXT (a mark added by a hook or a
+    helper) would be left out of both of `make test`'s passes: refuse the run instead."""
+    texts: dict[str, bool] = {}
+    for item in items:
+        if item.get_closest_marker("serial") is None:
+            continue
+        path = str(item.path)
+        if path not in texts:  # the grep reads tests/test_*.py, not subfolders
+            texts[path] = item.path.parent == ROOT / "tests" and SERIAL_MARK_TEXT in item.path.read_text()
+        if not texts[path]:
+            raise pytest.UsageError(f"{item.nodeid} is marked serial outside a tests/test_*.py file with "
+                                    f"'{SERIAL_MARK_TEXT}': `make test`'s serial pass (its grep) would not run it")
+
+
 PG_URL_ENV = "GYROBENCH_TEST_PG_URL"  # e.g. postgresql+psycopg://postgres@127.0.0.1:5432/gyrobench_test
 
 
