@@ -23,6 +23,33 @@ def pytest_configure(config):
         subprocess.run([sys.executable, "-m", "simulators.warm"], cwd=ROOT, env=env, check=True)
 
 
+#: GYROBENCH_TEST_CPU_LOG=FILE: each test's CPU seconds (this process, and the children it waited
+#: for: the CLI subprocesses) and wall seconds, setup to teardown, appended as tab-separated lines
+#: (every xdist worker appends to the same file) - the suite's cost on 2 cores is CPU, not wall
+CPU_LOG_ENV = "GYROBENCH_TEST_CPU_LOG"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """With $GYROBENCH_TEST_CPU_LOG set: one line per test, `nodeid  cpu_self_s  cpu_children_s  wall_s`."""
+    log = os.environ.get(CPU_LOG_ENV)
+    if not log:
+        yield
+        return
+    import resource
+    import time
+
+    def cpu() -> tuple[float, float]:
+        me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+        return me.ru_utime + me.ru_stime, kids.ru_utime + kids.ru_stime
+
+    (self0, kids0), wall0 = cpu(), time.monotonic()
+    yield
+    (self1, kids1), wall_s = cpu(), time.monotonic() - wall0
+    with open(log, "a", encoding="utf-8") as f:  # one short write per line: lines of workers do not mix
+        f.write(f"{item.nodeid}\t{self1 - self0:.2f}\t{kids1 - kids0:.2f}\t{wall_s:.2f}\n")
+
+
 #: `make test`'s serial pass collects only the test files holding this text (the Makefile's grep):
 #: collecting all of them again (~11 s of CPU) for 51 tests was the pass's largest single cost
 SERIAL_MARK_TEXT = "mark.serial"
