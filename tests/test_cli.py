@@ -101,12 +101,15 @@ def test_run_json_shape_then_runs_show_analyze_report(tmp_path):
     assert rep.returncode == 0 and "<svg" in html and "table_rate_dps" in html and "PASS" in html
 
 
-def test_procedure_from_a_file_that_fails_exits_nonzero(tmp_path):
+def test_procedure_from_a_file_that_fails_exits_nonzero(tmp_path, capsys, monkeypatch):
+    """In this process (a process cost ~1.5 s of CPU more; the exit code is main's return value, which
+    `gyrobench` exits with: the process tests of `run` are the others in this file)."""
     path = tmp_path / "always_high.py"
     path.write_text(FAILING)
-    r = _run(["run", str(path), "--json"], tmp_path)
-    out = json.loads(r.stdout)
-    assert r.returncode == 1 and out["outcome"] == "FAIL" and out["procedure"] == "always-high"
+    monkeypatch.chdir(tmp_path)
+    code = main(["run", str(path), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 1 and out["outcome"] == "FAIL" and out["procedure"] == "always-high"
     assert out["measurements"]["rest_rate_dps"]["outcome"] == "FAIL" and out["safe_state"] is True
 
 
@@ -372,8 +375,6 @@ def test_analyze_and_report_of_an_incomplete_run_say_so(tmp_path, capsys, monkey
     (its exit code and stderr as a user sees them); the run that makes the file, the text analysis
     and the reports run in this process (a process each cost ~0.7-1.5 s of CPU to import and warm
     again; `run` and `report` have their process tests in test_run_json_shape_then_runs_show_analyze_report)."""
-    from bench.cli import main
-
     def in_process(args):
         code = main(args)
         out, err = capsys.readouterr()
