@@ -32,10 +32,13 @@ run: $(STAMP)
 # wall-clock time or paced in real time) alone, so no other test's load can stretch their clocks
 # (with the bytecode written even under PYTHONDONTWRITEBYTECODE: the suite starts ~200 Python processes,
 # and without it each compiles every module of ours it imports, and pytest rewrites every test module, again)
+# (the serial pass collects only the files that mark a test serial: tests/conftest.py refuses a run
+# where a serial test sits in a file this grep would miss)
 TEST_WORKERS ?= 3
+SERIAL_FILES = $(shell grep -l 'mark\.serial' tests/test_*.py)
 test: $(STAMP)
 	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m "not serial"
-	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -m serial
+	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -m serial $(SERIAL_FILES)
 	$(BIN)/ruff check .
 
 lint: $(STAMP)

@@ -23,6 +23,54 @@ def pytest_configure(config):
         subprocess.run([sys.executable, "-m", "simulators.warm"], cwd=ROOT, env=env, check=True)
 
 
+#: GYROBENCH_TEST_CPU_LOG=FILE: each test's CPU seconds (this process, and the children it waited
+#: for: the CLI subprocesses) and wall seconds, setup to teardown, appended as tab-separated lines
+#: (every xdist worker appends to the same file) - the suite's cost on 2 cores is CPU, not wall
+CPU_LOG_ENV = "GYROBENCH_TEST_CPU_LOG"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """With $GYROBENCH_TEST_CPU_LOG set: one line per test, `nodeid  cpu_self_s  cpu_children_s  wall_s`."""
+    log = os.environ.get(CPU_LOG_ENV)
+    if not log:
+        yield
+        return
+    import resource
+    import time
+
+    def cpu() -> tuple[float, float]:
+        me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+        return me.ru_utime + me.ru_stime, kids.ru_utime + kids.ru_stime
+
+    (self0, kids0), wall0 = cpu(), time.monotonic()
+    yield
+    (self1, kids1), wall_s = cpu(), time.monotonic() - wall0
+    with open(log, "a", encoding="utf-8") as f:  # one short write per line: lines of workers do not mix
+        f.write(f"{item.nodeid}\t{self1 - self0:.2f}\t{kids1 - kids0:.2f}\t{wall_s:.2f}\n")
+
+
+#: `make test`'s serial pass collects only the test files holding this text (the Makefile's grep):
+#: collecting all of them again (~11 s of CPU) for 51 tests was the pass's largest single cost
+SERIAL_MARK_TEXT = "mark.serial"
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """A test marked `serial` in a file without SERIAL_MARK_TEXT (a mark added by a hook or a
+    helper) would be left out of both of `make test`'s passes: refuse the run instead."""
+    texts: dict[str, bool] = {}
+    for item in items:
+        if item.get_closest_marker("serial") is None:
+            continue
+        path = str(item.path)
+        if path not in texts:  # the grep reads tests/test_*.py, not subfolders
+            texts[path] = item.path.parent == ROOT / "tests" and SERIAL_MARK_TEXT in item.path.read_text()
+        if not texts[path]:
+            raise pytest.UsageError(f"{item.nodeid} is marked serial outside a tests/test_*.py file with "
+                                    f"'{SERIAL_MARK_TEXT}': `make test`'s serial pass (its grep) would not run it")
+
+
 PG_URL_ENV = "GYROBENCH_TEST_PG_URL"  # e.g. postgresql+psycopg://postgres@127.0.0.1:5432/gyrobench_test
 
 

@@ -101,12 +101,15 @@ def test_run_json_shape_then_runs_show_analyze_report(tmp_path):
     assert rep.returncode == 0 and "<svg" in html and "table_rate_dps" in html and "PASS" in html
 
 
-def test_procedure_from_a_file_that_fails_exits_nonzero(tmp_path):
+def test_procedure_from_a_file_that_fails_exits_nonzero(tmp_path, capsys, monkeypatch):
+    """In this process (a process cost ~1.5 s of CPU more; the exit code is main's return value, which
+    `gyrobench` exits with: the process tests of `run` are the others in this file)."""
     path = tmp_path / "always_high.py"
     path.write_text(FAILING)
-    r = _run(["run", str(path), "--json"], tmp_path)
-    out = json.loads(r.stdout)
-    assert r.returncode == 1 and out["outcome"] == "FAIL" and out["procedure"] == "always-high"
+    monkeypatch.chdir(tmp_path)
+    code = main(["run", str(path), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 1 and out["outcome"] == "FAIL" and out["procedure"] == "always-high"
     assert out["measurements"]["rest_rate_dps"]["outcome"] == "FAIL" and out["safe_state"] is True
 
 
@@ -365,14 +368,23 @@ def _cut_short(src: Path, dst: Path, *, drop_streams: tuple[str, ...]) -> Path:
     return dst
 
 
-def test_analyze_and_report_of_an_incomplete_run_say_so(tmp_path):
+def test_analyze_and_report_of_an_incomplete_run_say_so(tmp_path, capsys, monkeypatch):
     """Killed during the record: the decay recorded so far is fitted and marked as from an
     incomplete run; killed before any FPGA data: one message naming what the file lacks.  Both
-    used to end in a KeyError traceback."""
-    r = _run(["run", "hrg-damping", "--set", "record_s=30", "--set", "compensate=false", "--seed", "3", "--json"],
-             tmp_path)
-    assert r.returncode == 0, r.stderr
-    raw = Path(json.loads(r.stdout)["raw_file"])
+    used to end in a KeyError traceback.  `analyze` runs as a process for each file's first look
+    (its exit code and stderr as a user sees them); the run that makes the file, the text analysis
+    and the reports run in this process (a process each cost ~0.7-1.5 s of CPU to import and warm
+    again; `run` and `report` have their process tests in test_run_json_shape_then_runs_show_analyze_report)."""
+    def in_process(args):
+        code = main(args)
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    monkeypatch.chdir(tmp_path)
+    code, out, err = in_process(["run", "hrg-damping", "--set", "record_s=30", "--set", "compensate=false",
+                                 "--seed", "3", "--json"])
+    assert code == 0, err
+    raw = Path(json.loads(out)["raw_file"])
     killed = _cut_short(raw, tmp_path / "killed.h5", drop_streams=("damping_windows", "damping_reference"))
     ana = _run(["analyze", str(killed), "--json"], tmp_path)
     assert ana.returncode == 0 and "Traceback" not in ana.stderr, ana.stderr
@@ -381,19 +393,19 @@ def test_analyze_and_report_of_an_incomplete_run_say_so(tmp_path):
     assert any("no damping_windows stream" in n for n in out["notes"])
     tau = out["measurements"]["tau_s"]  # truth 300 s, from the whole record to the last sample
     assert tau["ci95"][0] < 300.0 < tau["ci95"][1] and "q_factor" not in out["measurements"]
-    text = _run(["analyze", str(killed)], tmp_path).stdout
-    assert "from an INCOMPLETE run: the run did not finish" in text
-    rep = _run(["report", str(killed), "-o", str(tmp_path / "killed.html")], tmp_path)
-    assert rep.returncode == 0 and "INCOMPLETE RUN" in (tmp_path / "killed.html").read_text(), rep.stderr
+    code, text, _ = in_process(["analyze", str(killed)])
+    assert code == 0 and "from an INCOMPLETE run: the run did not finish" in text
+    code, _, err = in_process(["report", str(killed), "-o", str(tmp_path / "killed.html")])
+    assert code == 0 and "INCOMPLETE RUN" in (tmp_path / "killed.html").read_text(), err
 
     early = _cut_short(raw, tmp_path / "early.h5", drop_streams=("damping_windows", "damping_reference", "fpga"))
     ana = _run(["analyze", str(early)], tmp_path)
     assert ana.returncode == 1 and "Traceback" not in ana.stderr and ana.stdout == ""
     assert ana.stderr.count("\n") == 1 and "early.h5 has no stream 'fpga' (it has: table)" in ana.stderr
     assert "the run did not finish" in ana.stderr
-    rep = _run(["report", str(early), "-o", str(tmp_path / "early.html")], tmp_path)
-    assert rep.returncode == 0 and "INCOMPLETE RUN" in (tmp_path / "early.html").read_text(), rep.stderr
+    code, _, err = in_process(["report", str(early), "-o", str(tmp_path / "early.html")])
+    assert code == 0 and "INCOMPLETE RUN" in (tmp_path / "early.html").read_text(), err
     bad = tmp_path / "not.h5"
     bad.write_text("not hdf5")
-    ana = _run(["analyze", str(bad)], tmp_path)
-    assert ana.returncode == 1 and "Traceback" not in ana.stderr and "not.h5" in ana.stderr
+    code, out, err = in_process(["analyze", str(bad)])
+    assert code == 1 and out == "" and err.count("\n") == 1 and "not.h5" in err

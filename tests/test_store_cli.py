@@ -55,8 +55,27 @@ def test_sigkilled_run_is_listed_interrupted_with_its_raw_file(tmp_path):
     assert "INTERRUPTED" in shown.stdout and shown.returncode == 0
 
 
-def test_read_only_store_exits_nonzero_and_the_next_run_or_sync_submits_the_record(tmp_path):
-    assert _run(["runs", "--results", "results.sqlite"], tmp_path).returncode == 0  # an existing store
+def _in_process(args, capsys):
+    """The same command through bench.cli.main in this process (cwd: the test's directory): the
+    commands after the first run, whose subject is the spool's hand-over, not the process."""
+    from bench.cli import main
+
+    code = main(args)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _rows(out):
+    return {row["run_id"]: row for row in json.loads(out or "[]")}
+
+
+def test_read_only_store_exits_nonzero_and_the_next_run_or_sync_submits_the_record(tmp_path, capsys, monkeypatch):
+    """The run against the read-only store is a real process (its exit code and its one line on
+    stderr); the listings, the next run and the sync run in this process: a subprocess each cost
+    ~0.5-2 s of CPU to import and open again and checked nothing more (`runs` keeps its own
+    subprocess tests above and below, `run` in the first command here and in test_cli.py)."""
+    monkeypatch.chdir(tmp_path)
+    assert _in_process(["runs", "--results", "results.sqlite"], capsys)[0] == 0  # an existing store
     read_only = f"sqlite:///file:{tmp_path / 'results.sqlite'}?mode=ro&uri=true"
     first = _run([*SHORT, "--results", read_only], tmp_path)
     js = json.loads(first.stdout)
@@ -64,18 +83,21 @@ def test_read_only_store_exits_nonzero_and_the_next_run_or_sync_submits_the_reco
     assert first.stderr.count("\n") == 1 and "Traceback" not in first.stderr
     assert "readonly database" in first.stderr and f"runs/spool/{js['run_id']}.json" in first.stderr
     assert "gyrobench runs --sync" in first.stderr
-    r, rows = _runs(tmp_path)
-    assert rows == {} and "1 run(s) wait in runs/spool" in r.stderr
+    code, out, err = _in_process(["runs", "--json", "--results", "results.sqlite"], capsys)
+    assert code == 0 and _rows(out) == {} and "1 run(s) wait in runs/spool" in err
     # the next run (store writable again) submits it at its start
-    second = _run([*SHORT, "--results", "results.sqlite"], tmp_path)
-    assert second.returncode == 0, second.stderr
-    _, rows = _runs(tmp_path)
+    code, _, err = _in_process([*SHORT, "--results", "results.sqlite"], capsys)
+    assert code == 0, err
+    rows = _rows(_in_process(["runs", "--json", "--results", "results.sqlite"], capsys)[1])
     assert rows[js["run_id"]]["outcome"] == "PASS" and len(rows) == 2
     assert list((tmp_path / "runs" / "spool").glob("*.json")) == []
     # read-only again; this time `runs --sync` submits it
-    third = json.loads(_run([*SHORT, "--results", read_only], tmp_path).stdout)
-    r, rows = _runs(tmp_path, "--sync")
-    assert r.returncode == 0 and "submitted 1 spooled run(s)" in r.stderr
+    code, out, err = _in_process([*SHORT, "--results", read_only], capsys)
+    third = json.loads(out)
+    assert code == 1 and "readonly database" in err and f"runs/spool/{third['run_id']}.json" in err
+    code, out, err = _in_process(["runs", "--json", "--results", "results.sqlite", "--sync"], capsys)
+    rows = _rows(out)
+    assert code == 0 and "submitted 1 spooled run(s)" in err
     assert rows[third["run_id"]]["outcome"] == "PASS" and len(rows) == 3
 
 
