@@ -53,6 +53,8 @@ class MeasuredLayout(LayoutEngine):
         height_in = h - m_top - m_bottom
         mean_w = (width_in - (ncols - 1) * wgap) / ncols
         mean_h = (height_in - (nrows - 1) * hgap) / nrows
+        if mean_w <= 0 or mean_h <= 0:  # decorations larger than the figure: leave the grid as it is
+            return
         gs.update(left=m_left / w, right=1 - m_right / w, bottom=m_bottom / h, top=1 - m_top / h,
                   wspace=wgap / mean_w if ncols > 1 else None, hspace=hgap / mean_h if nrows > 1 else None)
         for ax in axes:  # GridSpec.update moves the axes of pyplot's figures only

@@ -99,3 +99,13 @@ def test_every_text_is_inside_the_figure(build) -> None:
         assert box.contains(bb.x0, bb.y0) and box.contains(bb.x1, bb.y1)
         for ax in fig.axes:  # above the axes and their titles
             assert not bb.overlaps(ax.get_tightbbox(renderer))
+
+
+def test_a_figure_too_small_for_its_labels_is_left_as_it_is() -> None:
+    fig, ax = new_figure(3, 1, height_in=0.6, width_in=0.8, layout="measured")
+    for a in ax.flat:
+        a.set_ylabel("a long label\nover two lines (unit)")
+        a.set_title("a title")
+    before = np.array([a.get_position().extents for a in fig.axes])
+    _drawn(fig)  # no error, no negative sizes
+    assert np.array_equal(np.array([a.get_position().extents for a in fig.axes]), before)
