@@ -13,6 +13,21 @@ from typing import Any
 
 import matplotlib
 
+
+def _short_property_docs() -> None:
+    """matplotlib writes every Artist class's set() docstring, a table of all its properties, as
+    the class is made: ~0.1 s, a fifth of its import and of a report's serial start (issue 36,
+    benchmarks/report_speed.py).  Nothing here reads those docstrings, so before matplotlib's
+    artists are first made the table is one line; once they are (a window's pyplot), nothing changes."""
+    if "matplotlib.lines" in sys.modules:
+        return
+    import matplotlib.artist
+
+    if callable(getattr(matplotlib.artist, "kwdoc", None)):
+        matplotlib.artist.kwdoc = lambda _artist: "Properties: see matplotlib's documentation."
+
+
+_short_property_docs()
 if "matplotlib.pyplot" not in sys.modules:  # off screen; figures here never touch pyplot's state
     matplotlib.use("Agg")
 import numpy as np  # noqa: E402
