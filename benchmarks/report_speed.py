@@ -58,6 +58,10 @@ CPU of the critical path on two idle cores 1.43 -> 1.34 s.  Phases (CPU s, one p
 0.73 -> 0.63, reading, building and drawing in two processes 1.10 -> 0.84 s CPU here.  The 1 s
 target is not met: matplotlib's import (0.34-0.43 s, ~0.1 s of it docstrings matplotlib builds for
 every Artist's set()) and numpy + h5py (0.12-0.14 s) come before the figures can be shared out.
+With those docstrings left one line (bench.figures._short_property_docs; `import matplotlib.figure`
+0.53 -> 0.45 s CPU, medians of 5 interleaved), 12:03, load average 4-5, 5 rounds: report RUN CPU
+1.78 -> 1.52 s, wall 1.73 -> 1.87 s (least 1.63 -> 1.07); CPU of the critical path 1.41 -> 1.18 s
+(-16 %).  Scaled to the quiet 1.26 s: ~1.05 s, just over the 1 s target.
 """
 
 from __future__ import annotations

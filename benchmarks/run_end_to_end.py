@@ -42,7 +42,11 @@ thread while the station opens.  Phases of one command (CPU s at the end of each
 load_station returned 1.29 -> 0.69, station loaded and opened 1.94 -> 1.54, station closed (wall
 after Runner.run) 0.21 -> 0.01 s; the command's CPU outside Runner.run 1.95 -> 1.55 s.  Scaled to
 the quiet figures above (4.70 s wall, the run's 2.79 s: ratio 1.69) that is ~0.6 s less, about
-4.1 s: ratio ~1.47, an estimate until a quiet machine measures it.
+4.1 s: ratio ~1.47, an estimate until a quiet machine measures it.  Measured once more at 12:05
+(load 5-11), the main process's time outside Runner.run, 5 interleaved rounds of the phases run,
+medians: CPU 1.68 -> 1.43 s, wall 2.34 -> 2.59 s (least 1.66 -> 1.39; the wall follows the load);
+with the close's 0.2 s of waiting gone that is ~0.45 s off the quiet 4.70 s: ~4.25 s, ratio ~1.52,
+at the target's edge.
 """
 
 from __future__ import annotations
