@@ -13,6 +13,21 @@ from typing import Any
 
 import matplotlib
 
+
+def _short_property_docs() -> None:
+    """matplotlib writes every Artist class's set() docstring, a table of all its properties, as
+    the class is made: ~0.1 s, a fifth of its import and of a report's serial start (issue 36,
+    benchmarks/report_speed.py).  Nothing here reads those docstrings, so before matplotlib's
+    artists are first made the table is one line; once they are (a window's pyplot), nothing changes."""
+    if "matplotlib.lines" in sys.modules:
+        return
+    import matplotlib.artist
+
+    if callable(getattr(matplotlib.artist, "kwdoc", None)):
+        matplotlib.artist.kwdoc = lambda _artist: "Properties: see matplotlib's documentation."
+
+
+_short_property_docs()
 if "matplotlib.pyplot" not in sys.modules:  # off screen; figures here never touch pyplot's state
     matplotlib.use("Agg")
 import numpy as np  # noqa: E402
@@ -132,11 +147,18 @@ class ReportFigure:
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, *, height_in: float = 3.0, width_in: float = WIDTH_IN,
-               **kwargs: Any) -> tuple[Figure, Any]:
-    """A constrained-layout figure (labels never clipped) and its axes array."""
+               layout: str = "constrained", **kwargs: Any) -> tuple[Figure, Any]:
+    """A figure laid out so labels are never clipped, and its axes array.  layout "measured": one
+    grid of axes with titles and a legend above them, laid out in one pass (bench.figure_layout;
+    about a third less drawing time); "constrained": matplotlib's layout, for anything else."""
     from matplotlib.ticker import MaxNLocator
 
-    fig = Figure(figsize=(width_in, height_in), layout="constrained")
+    if layout == "measured":
+        from bench.figure_layout import MeasuredLayout
+
+        fig = Figure(figsize=(width_in, height_in), layout=MeasuredLayout())
+    else:
+        fig = Figure(figsize=(width_in, height_in), layout=layout)
     axes = fig.subplots(nrows, ncols, squeeze=False, **kwargs)
     if ncols > 1:  # narrow panels: fewer x ticks, so their labels do not run into each other
         for ax in axes.flat:
@@ -181,9 +203,10 @@ def plot_record(ax: Axes, x: np.ndarray, y: np.ndarray, *, color: str | None = N
 def fit_with_residuals(x: np.ndarray, y: np.ndarray, y_fit: np.ndarray, *, xlabel: str, ylabel: str,
                        data_label: str = "measured", fit_label: str = "fit",
                        residual: np.ndarray | None = None, residual_label: str | None = None,
-                       height_in: float = 3.6) -> Figure:
+                       height_in: float = 3.6, layout: str = "constrained") -> Figure:
     """Data with the fitted curve over them and the residual (data - fit) in a panel beneath."""
-    fig, ax = new_figure(2, 1, height_in=height_in, sharex=True, gridspec_kw={"height_ratios": [3, 1.3]})
+    fig, ax = new_figure(2, 1, height_in=height_in, sharex=True, gridspec_kw={"height_ratios": [3, 1.3]},
+                         layout=layout)
     top, bottom = ax[0, 0], ax[1, 0]
     if len(x) <= 2 * ENVELOPE_BINS:  # points under the curve, so the curve does not hide them
         top.plot(x, y, ".", color="C0", markersize=2.5, label=data_label)
@@ -217,7 +240,7 @@ def measurement(data: Any, name: str) -> dict[str, Any] | None:
     return found
 
 
-def table_figure(data: Any) -> list[ReportFigure]:
+def table_figure(data: Any, layout: str = "constrained") -> list[ReportFigure]:
     """The rate table's rate and angle on their own axes, from the `table` stream."""
     if "table" not in data:
         return []
@@ -226,7 +249,7 @@ def table_figure(data: Any) -> list[ReportFigure]:
     if t is None or len(t) < 2:
         return []
     cols = [c for c in ("rate_dps", "angle_deg") if c in tab]
-    fig, ax = new_figure(len(cols), 1, height_in=1.6 + 1.2 * len(cols), sharex=True)
+    fig, ax = new_figure(len(cols), 1, height_in=1.6 + 1.2 * len(cols), sharex=True, layout=layout)
     note = f"{len(t)} readings of the table's status."
     for i, c in enumerate(cols):
         if c == "angle_deg" and "rate_dps" in tab:  # reported in [0, 360): unwrapped with the rate readings
@@ -259,14 +282,14 @@ def unwrap_angle_deg(t_s: np.ndarray, angle_deg: np.ndarray, rate_dps: np.ndarra
 
 
 def stream_figure(data: Any, stream: str, columns: list[str] | None = None, *, title: str | None = None,
-                  key: str | None = None) -> ReportFigure | None:
+                  key: str | None = None, layout: str = "constrained") -> ReportFigure | None:
     """A stream's columns against time, each on its own axis (long records as envelopes)."""
     tab = data.table(stream)
     t = tab.get("t_s")
     cols = [c for c in (columns or tab) if c in tab and c not in ("t_s", "index")]
     if t is None or len(t) < 2 or not cols:
         return None
-    fig, ax = new_figure(len(cols), 1, height_in=0.9 + 1.05 * len(cols), sharex=True)
+    fig, ax = new_figure(len(cols), 1, height_in=0.9 + 1.05 * len(cols), sharex=True, layout=layout)
     for i, c in enumerate(cols):
         plot_record(ax[i, 0], t, tab[c], color=f"C{i % 10}")
         ax[i, 0].set_ylabel(axis_label(data, stream, c, short=len(cols) > 2))

@@ -44,6 +44,24 @@ interleaved, 5 rounds, medians:
   CPU of the critical path on two idle cores (3 rounds): HTML 2.79 -> 1.92 s (-31 %), HTML+PDF
   5.58 -> 4.56 s (-18 %).  Scaled to the quiet figures above (before 1.58 s / 4.16 s): about
   1.1-1.2 s and 3.4 s; the targets (1 s, 3 s) are still not met.
+
+Then (2026-11-28 11:53, load average 5.5-7), the hrg-damping figures laid out in one measured pass
+(bench/figure_layout.py) instead of the constrained layout.  Profile that chose it (cProfile of the
+five figures' SVG, one process): the constrained layout 2.2 of 3.3 s profiled, most of it
+_update_ticks and text extents, run twice per figure before the draw does them again; a fixed
+layout took the SVG from 0.94 to 0.64 s CPU, the measured one (ticks as the locator and formatter
+give them, labels, titles, offset texts, the legend above) 0.84-0.88 -> 0.64-0.75 s, with the axes
+within 0.03 in of the constrained layout's (tests/test_figure_layout.py; chromium screenshots of
+the page before and after the same).  189e106 (before) against this tree, interleaved, 5 rounds,
+fresh processes, medians: report RUN CPU 2.00 -> 1.72 s (wall 2.66 -> 2.58, least 2.18 -> 1.52);
+CPU of the critical path on two idle cores 1.43 -> 1.34 s.  Phases (CPU s, one process): the SVG
+0.73 -> 0.63, reading, building and drawing in two processes 1.10 -> 0.84 s CPU here.  The 1 s
+target is not met: matplotlib's import (0.34-0.43 s, ~0.1 s of it docstrings matplotlib builds for
+every Artist's set()) and numpy + h5py (0.12-0.14 s) come before the figures can be shared out.
+With those docstrings left one line (bench.figures._short_property_docs; `import matplotlib.figure`
+0.53 -> 0.45 s CPU, medians of 5 interleaved), 12:03, load average 4-5, 5 rounds: report RUN CPU
+1.78 -> 1.52 s, wall 1.73 -> 1.87 s (least 1.63 -> 1.07); CPU of the critical path 1.41 -> 1.18 s
+(-16 %).  Scaled to the quiet 1.26 s: ~1.05 s, just over the 1 s target.
 """
 
 from __future__ import annotations

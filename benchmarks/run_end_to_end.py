@@ -26,6 +26,27 @@ socket:// close without pyserial's 0.3 s sleep); then the interpreter's teardown
 before (numba's and LLVM's finalizers), skipped (`bench.cli.entry`).  What is left besides the run:
 ~1.4 s of imports (0.4), procedure and station loading (0.5) and opening the station (0.5: the
 simulators' servers, their compiled kernels, the links' connections and identities).
+
+Then (2026-11-28 11:50-11:57, load average 9-11 on the 2 cores: the wall times say little, the
+CPU and the phases do), 189e106 (/work/main, before) against wave3e/runfast, 5 rounds interleaved,
+twice, medians of the command's CPU: 4.52 -> 4.45 s and 4.09 -> 3.94 s.  Profile that chose each
+change (timestamps and -X importtime of one command, cProfile of station.open/close): the station's
+close waited 0.20 s on polls (the loopback servers' 50 ms serve_forever poll, the FPGA link
+reader's 50 ms select, the FPGA simulator's 0.1 s accept timeout) -> woken by stop()/close(),
+0.001 s; load_station imported the scipy stack for solve_ivp (scipy.integrate pulled in special,
+sparse, optimize: 0.3-0.5 s CPU quiet, 5.0 s at load 11) which a linear resonator never calls ->
+imported on a nonlinear block's first call (numba's linalg still imports scipy.linalg when the
+kernels load: ~0.1-0.2 s of it moved into the station's opening); the results store (alembic and
+SQLAlchemy 0.3 s CPU, a fresh SQLite file's migration with its fsyncs 0.07-0.18 s wall) opened in a
+thread while the station opens.  Phases of one command (CPU s at the end of each, before -> after):
+load_station returned 1.29 -> 0.69, station loaded and opened 1.94 -> 1.54, station closed (wall
+after Runner.run) 0.21 -> 0.01 s; the command's CPU outside Runner.run 1.95 -> 1.55 s.  Scaled to
+the quiet figures above (4.70 s wall, the run's 2.79 s: ratio 1.69) that is ~0.6 s less, about
+4.1 s: ratio ~1.47, an estimate until a quiet machine measures it.  Measured once more at 12:05
+(load 5-11), the main process's time outside Runner.run, 5 interleaved rounds of the phases run,
+medians: CPU 1.68 -> 1.43 s, wall 2.34 -> 2.59 s (least 1.66 -> 1.39; the wall follows the load);
+with the close's 0.2 s of waiting gone that is ~0.45 s off the quiet 4.70 s: ~4.25 s, ratio ~1.52,
+at the target's edge.
 """
 
 from __future__ import annotations

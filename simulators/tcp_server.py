@@ -7,6 +7,7 @@ Subclasses say how one connection is served (`serve_connection`): LF-terminated 
 
 from __future__ import annotations
 
+import selectors
 import socket
 import socketserver
 import threading
@@ -43,10 +44,21 @@ class LoopbackTcpServer:
         self._tcp.server_bind()
         self._tcp.server_activate()
         self.host, self.port = self._tcp.server_address[:2]
-        self._thread = threading.Thread(
-            target=self._tcp.serve_forever, kwargs={"poll_interval": 0.05}, name=name, daemon=True
-        )
+        # stop() wakes the accept loop through this pair at once (serve_forever's poll cost each
+        # station's close up to 50 ms a server; issue 36)
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._thread = threading.Thread(target=self._accept_loop, name=name, daemon=True)
         self._thread.start()
+
+    def _accept_loop(self) -> None:
+        """Accept connections (a thread each, as ThreadingTCPServer does) until stop() wakes it."""
+        with selectors.DefaultSelector() as sel:
+            sel.register(self._tcp, selectors.EVENT_READ)
+            sel.register(self._wake_r, selectors.EVENT_READ)
+            while not self._stop.is_set():
+                for key, _ in sel.select():
+                    if key.fileobj is self._tcp and not self._stop.is_set():
+                        self._tcp._handle_request_noblock()
 
     def serve_connection(self, conn: socket.socket, rfile: BinaryIO, wfile: BinaryIO) -> None:
         """Read requests (from `rfile`, or the socket `conn` itself) and write answers until the peer
@@ -68,9 +80,11 @@ class LoopbackTcpServer:
         if self._stop.is_set():
             return
         self._stop.set()
-        self._tcp.shutdown()
-        self._tcp.server_close()
+        self._wake_w.send(b"\0")
         self._thread.join(timeout=5.0)
+        self._tcp.server_close()
+        self._wake_r.close()
+        self._wake_w.close()
         for conn in self.connections():
             try:
                 conn.shutdown(socket.SHUT_RDWR)

@@ -18,7 +18,8 @@ PACKAGES = ("bench", "drivers", "procedures", "simulators")
 #: says what each layer holds and why.
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("contracts", ("bench.validation", "bench.devices", "bench.streams", "bench.fault_kinds", "bench.clock",
-                   "bench.numbers", "bench.figures", "bench.pdf", "bench.nominal", "bench.analysis",
+                   "bench.numbers", "bench.figures", "bench.figure_layout", "bench.pdf", "bench.nominal",
+                   "bench.analysis",
                    "bench.kernel_cache", "bench=")),
     ("devices", ("drivers", "simulators")),
     ("engine", ("bench.engine", "bench.station", "bench.station_config", "bench.slots", "bench.recorder",

@@ -45,6 +45,32 @@ def _store(url: str | None, **kw: Any):
         raise CliError(f"results store {where}: cannot be opened: {redact_text(_reason(exc))}", 1) from exc
 
 
+class StoreOpening:
+    """The results store opened (`_store`: its SQLAlchemy and alembic imports, the migration check,
+    a server's answer) in a thread while the station opens; `result()` waits for it and gives the
+    store, or raises what opening it raised (CliError: one line)."""
+
+    def __init__(self, url: str | None, **kw: Any) -> None:
+        import threading
+
+        self._store: Any = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._open, args=(url,), kwargs=kw, name="store-open", daemon=True)
+        self._thread.start()
+
+    def _open(self, url: str | None, **kw: Any) -> None:
+        try:
+            self._store = _store(url, **kw)
+        except BaseException as exc:  # noqa: BLE001 - raised again by result(), in the command's thread
+            self._error = exc
+
+    def result(self) -> Any:
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._store
+
+
 def _reason(exc: BaseException) -> str:
     """An exception as a short reason: OSError's text and file, SQLAlchemy's original error."""
     if isinstance(exc, OSError) and exc.strerror:

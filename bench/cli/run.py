@@ -13,10 +13,10 @@ from .common import (
     EXIT_BAD_OUTCOME,
     EXIT_OK,
     EXIT_USAGE,
+    StoreOpening,
     _check_runs_dir,
     _err,
     _speed,
-    _store,
     _write_report,
     exit_for_signal,
 )
@@ -113,10 +113,11 @@ def cmd(args: argparse.Namespace) -> int:
         _err(str(exc))
         return EXIT_USAGE
     _check_runs_dir(args.runs_dir or station.runs_dir)
-    # a store that is down now still takes the run's record later, through the spool
-    store = _store(args.results or station.results_url, offline_ok=True)
+    # a store that is down now still takes the run's record later, through the spool; opened while
+    # the station opens (issue 36), and waited for before the run begins
+    opening = StoreOpening(args.results or station.results_url, offline_ok=True)
     runner = Runner(  # the raw file is compressed after the command has said its result (below)
-        station, runs_dir=args.runs_dir or station.runs_dir, store=store, operator=args.operator, duts=args.dut,
+        station, runs_dir=args.runs_dir or station.runs_dir, store=None, operator=args.operator, duts=args.dut,
         compact_later=True,
     )
     previous = {}
@@ -141,6 +142,7 @@ def cmd(args: argparse.Namespace) -> int:
         except ValueError as exc:
             _err(str(exc))
             return EXIT_USAGE
+        runner.store = opening.result()  # a store that cannot be opened at all: one line, the station closed
         for kind, at_s in faults:
             station.schedule_fault(kind, at_s)
         if not args.json and sys.stdout.isatty():
@@ -158,7 +160,7 @@ def cmd(args: argparse.Namespace) -> int:
     apply_limits(js, lab_limits, {m.name for m in proc_cls.measurements})  # and the truths outside, flagged
     report = None
     if args.report and js.get("raw_file"):  # beside the raw file, same name with .html (and .pdf)
-        report = _write_report(js["raw_file"], store.get_run(js["run_id"]) if not rec.store_error else None,
+        report = _write_report(js["raw_file"], runner.store.get_run(js["run_id"]) if not rec.store_error else None,
                                pdf=args.pdf)
     if args.json:
         print(json.dumps(js))

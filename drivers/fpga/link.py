@@ -89,6 +89,7 @@ class FpgaLink:
         self._seq = itertools.count(1)
         self._reader: threading.Thread | None = None
         self._stop = threading.Event()
+        self._wake: tuple[int, int] | None = None  # close() wakes the reader's select through this pipe
         self._link_error: str | None = None
         self._subscribers: list[StreamCallback] = []
         self._parser = p.FrameParser()
@@ -119,6 +120,7 @@ class FpgaLink:
             raise LinkLostError(f"FPGA link {self.url}: cannot open ({exc})") from exc
         self._stop.clear()
         self._link_error = None
+        self._wake = os.pipe()
         self._reader = threading.Thread(target=self._read_loop, name="fpga-link-reader", daemon=True)
         self._reader.start()
         try:
@@ -139,9 +141,15 @@ class FpgaLink:
 
     def close(self) -> None:
         self._stop.set()
+        wake, self._wake = self._wake, None
+        if wake is not None:
+            os.write(wake[1], b"\0")  # the reader sees the stop now, not at its next 50 ms poll (issue 36)
         if self._reader is not None:
             self._reader.join(timeout=2.0)
             self._reader = None
+        if wake is not None:
+            for fd in wake:
+                os.close(fd)
         if self._ser is not None:
             try:
                 _close_port(self._ser)
@@ -448,11 +456,13 @@ class FpgaLink:
         except (AttributeError, NotImplementedError, serial.SerialException, OSError):
             fd = None
         cpu0 = time.thread_time()
+        wake = self._wake
+        watched = [fd] if wake is None else [fd, wake[0]]
         while not self._stop.is_set():
             try:
                 if fd is not None:
-                    ready, _, _ = select.select([fd], [], [], 0.05)
-                    if not ready:
+                    ready, _, _ = select.select(watched, [], [], 0.05)
+                    if fd not in ready:
                         continue
                     # one read of what is there (ser.read would select twice more around its recv)
                     try:

@@ -27,6 +27,8 @@ from bench.figures import (
 from bench.numbers import with_interval
 
 HARMONICS = (4, 8, 12)
+#: grids of axes with titles and a legend above: laid out in one pass (bench.figure_layout, issue 36)
+LAYOUT = "measured"
 _ENERGY, _RESIDUALS, _THETA, _QUAD = ("hrg-damping energy", "hrg-damping residuals", "hrg-damping theta",
                                       "hrg-damping quadrature")
 
@@ -70,7 +72,7 @@ def energy_figure(data: Any) -> list[ReportFigure]:
     e_unit = declared(data, _ENERGY, "energy")[1]
     fig = fit_with_residuals(t[ok], np.log(energy[ok]), np.log(efit[ok]), xlabel=axis_label(data, _ENERGY, "t_s"),
                              ylabel=log_label("E", e_unit), fit_label="free-decay fit", residual=res,
-                             residual_label=axis_label(data, _RESIDUALS, "residual_ln_e"))
+                             residual_label=axis_label(data, _RESIDUALS, "residual_ln_e"), layout=LAYOUT)
     tau = measurement(data, "tau_s")
     note = "Energy E = cx² + sx² + cy² + sy² of the decay record and the fitted free-decay model."
     if tau:
@@ -112,7 +114,7 @@ def theta_figure(proc: Any, data: Any) -> list[ReportFigure]:
         t, theta, k = full
         th, quad = {"t_s": t, "theta_deg": theta}, {"t_s": t, "quadrature_rel": k}
     rows = 2 if quad else 1
-    fig, ax = new_figure(rows, 1, height_in=1.4 + 1.3 * rows, sharex=True)
+    fig, ax = new_figure(rows, 1, height_in=1.4 + 1.3 * rows, sharex=True, layout=LAYOUT)
     plot_record(ax[0, 0], th["t_s"], th["theta_deg"], color="C0")
     ax[0, 0].set_ylabel(axis_label(data, _THETA, "theta_deg"))
     if quad:
@@ -142,7 +144,7 @@ def drift_figure(data: Any) -> list[ReportFigure]:
     if not curves:
         return []
     fig, ax = new_figure(2, len(curves), height_in=4.6, sharex=True, sharey="row",
-                         gridspec_kw={"height_ratios": [3, 1.3]})
+                         gridspec_kw={"height_ratios": [3, 1.3]}, layout=LAYOUT)
     rows, rest_text = [], []
     grid = np.linspace(-45.0, 45.0, 361)
     for j, (name, c) in enumerate(curves.items()):
@@ -206,14 +208,14 @@ def fpga_figure(data: Any) -> list[ReportFigure]:
     if "fpga" not in data:
         return []
     fig = stream_figure(data, "fpga", ["cx", "sx", "cy", "sy"], title="FPGA stream: slow variables",
-                        key="hrg-damping_fpga")
+                        key="hrg-damping_fpga", layout=LAYOUT)
     return [fig] if fig is not None else []
 
 
 def figure_parts(proc: Any) -> list[Callable[[Any], list[ReportFigure]]]:
     """The figures in the report's order as independent parts, each a function of the run's data:
     a report builds and draws them in parallel processes (bench.reporting.drawing)."""
-    return [energy_figure, partial(theta_figure, proc), drift_figure, table_figure, fpga_figure]
+    return [energy_figure, partial(theta_figure, proc), drift_figure, partial(table_figure, layout=LAYOUT), fpga_figure]
 
 
 def figures(proc: Any, data: Any) -> list[ReportFigure]:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.integrate import solve_ivp
 from threadpoolctl import threadpool_limits
 
 from bench.analysis.slow_model import k_cubic, k_quintic, linear_matrix
@@ -24,6 +23,7 @@ from .normals import NormalBuffer
 from .params import TWO_PI, ResonatorParams
 
 _blas_limiter: object | None = None
+_scipy_limiter: object | None = None
 _ZERO4 = np.zeros(4)
 _EMPTY = np.empty(0)
 _EMPTY_ROWS = np.empty((0, 4))
@@ -32,11 +32,23 @@ _EMPTY_ROWS = np.empty((0, 4))
 def use_single_thread_blas() -> None:
     """Run BLAS single-threaded in this process.  The simulator's matrices are 4x4 and 5x5, where
     threaded BLAS only adds hand-offs: one 5x5 expm took 850 us with two OpenBLAS threads on this
-    busy 2-core machine and 35-100 us with one.  Called when a World is built (after scipy has
-    loaded its own OpenBLAS, which threadpoolctl can only limit once loaded)."""
+    busy 2-core machine and 35-100 us with one.  Called when a World is built; a BLAS loaded later
+    (scipy's, by a nonlinear resonator's first block) is limited when it loads (_solve_ivp)."""
     global _blas_limiter
     if _blas_limiter is None:
         _blas_limiter = threadpool_limits(limits=1, user_api="blas")
+
+
+def _solve_ivp():
+    """scipy's solve_ivp, imported on the first nonlinear block (a linear resonator never needs
+    scipy: its import was ~0.3-0.5 s of every simulated run's start; issue 36), with the BLAS scipy
+    brings along limited to one thread as numpy's is (use_single_thread_blas)."""
+    global _scipy_limiter
+    from scipy.integrate import solve_ivp
+
+    if _scipy_limiter is None:
+        _scipy_limiter = threadpool_limits(limits=1, user_api="blas")
+    return solve_ivp
 
 
 def rotate_wave(q: np.ndarray, psi_rad: np.ndarray | float) -> np.ndarray:
@@ -235,7 +247,7 @@ class Resonator:
         t_eval = dt * np.arange(1, n + 1)
         # a given first step skips scipy's initial-step heuristic, which divides 0/0 on a state
         # that is exactly at rest and then never ends its loop on a NaN step
-        sol = solve_ivp(
+        sol = _solve_ivp()(
             rhs, (0.0, n * dt), self._q, t_eval=t_eval, method="DOP853", rtol=1e-9, atol=1e-12, first_step=dt
         )
         if not sol.success or not np.all(np.isfinite(sol.y)):  # pragma: no cover - the model is smooth
