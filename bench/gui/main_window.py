@@ -8,7 +8,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QAction
 from PySide6.QtWidgets import (
@@ -146,6 +145,7 @@ class MainWindow(QMainWindow):
         self.step_fraction = 0.0
         self.refresh_hz = refresh_hz
         self._labels_wall_s = 0.0  # when the time and progress labels were last set
+        self._progress: tuple[float, str] | None = None  # the step's progress not yet shown (fraction, message)
         from PySide6.QtCore import QTimer
 
         self._labels_timer = QTimer(self)  # a batch that skipped the labels: they follow within LABELS_EVERY_S
@@ -346,27 +346,28 @@ class MainWindow(QMainWindow):
         """GUI thread: apply a batch of engine events to the widgets.  Sample blocks are joined
         per stream (one numpy pass per stream per batch however fast the engine runs); they are
         flushed before a run starts or ends, where the plots' state changes."""
-        pending: dict[tuple[str, tuple[str, ...]], list[np.ndarray]] = {}
         for e in batch:
             self.t_sim_s = max(self.t_sim_s, e.t_sim_s)
             if isinstance(e, ev.SampleBlock):
-                pending.setdefault((e.stream, tuple(e.columns)), []).append(np.asarray(e.data))
+                self.plots.queue_samples(e.stream, tuple(e.columns), e.data)
                 continue
-            if isinstance(e, (ev.RunStarted, ev.RunFinished)) and pending:
-                self._add_blocks(pending)
-                pending = {}
+            if isinstance(e, (ev.RunStarted, ev.RunFinished)):
+                self.plots.flush_samples()
+                self._apply_progress()
             if isinstance(e, ev.FitUpdate):
                 self.plots.set_fit(e.name, e.curves)
             elif isinstance(e, ev.StreamDeclared):
                 self.plots.declare(e.schema)
             elif isinstance(e, ev.Progress):
-                self.steps.set_progress(e.fraction, e.message)
-                self.step_fraction = min(1.0, max(0.0, e.fraction))
+                self._progress = (e.fraction, e.message)  # the step's bar follows with the labels (a
+                self.step_fraction = min(1.0, max(0.0, e.fraction))  # bar's repaint each event costs)
             elif isinstance(e, ev.StepStarted):
+                self._apply_progress()
                 self.steps.set_status(e.name, "running")
                 if not self.paused and not self.aborting:
                     self.set_status_line(f"step {e.index + 1}/{e.total}: {e.title or e.name}", "neutral")
             elif isinstance(e, ev.StepFinished):
+                self._apply_progress()
                 self.steps.set_status(e.name, e.status)
                 self.steps_done += 1
                 self.step_fraction = 0.0
@@ -382,8 +383,6 @@ class MainWindow(QMainWindow):
                 self._on_run_started(e)
             elif isinstance(e, ev.RunFinished):
                 self._on_run_finished(e)
-        if pending:
-            self._add_blocks(pending)
         now = _wall_s()
         if now - self._labels_wall_s >= LABELS_EVERY_S or not self.run_active:  # a label a batch would cost
             self.flush_labels(now)  # more than the plots at "max" speed: ten times a second is enough
@@ -393,6 +392,7 @@ class MainWindow(QMainWindow):
     def flush_labels(self, now: float | None = None) -> None:
         """Show the bench time and the run's progress as of the last event (a screenshot calls it)."""
         self._labels_wall_s = _wall_s() if now is None else now
+        self._apply_progress()
         self.station.set_time(self.t_sim_s)
         if self.run_active:
             self._show_run_info()
@@ -406,9 +406,11 @@ class MainWindow(QMainWindow):
             self.set_status_line("aborted: safe state confirmed; closing the run's files..." if confirmed
                                  else "aborted: SAFE STATE NOT CONFIRMED", "amber" if confirmed else "red")
 
-    def _add_blocks(self, pending: dict[tuple[str, tuple[str, ...]], list[np.ndarray]]) -> None:
-        for (stream, columns), arrays in pending.items():
-            self.plots.add_samples(stream, columns, arrays[0] if len(arrays) == 1 else np.concatenate(arrays))
+    def _apply_progress(self) -> None:
+        """The step's last reported progress to its bar (with the labels, and before a step changes)."""
+        if self._progress is not None:
+            self.steps.set_progress(*self._progress)
+            self._progress = None
 
     def run_fraction(self) -> float:
         """The whole run's progress: finished steps plus the current one's fraction, over all

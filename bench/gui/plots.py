@@ -115,6 +115,7 @@ class LivePlots(QWidget):
         self.refresh_times: deque[float] = deque(maxlen=2000)  # wall monotonic of each redraw
         self.refresh_cost_s: deque[float] = deque(maxlen=2000)
         self._dirty = False
+        self._queued: dict[tuple[str, tuple[str, ...]], list[np.ndarray]] = {}  # FPGA blocks for the next frame
         self._theta_last_rad: float | None = None
         self._wave_phasor: tuple[complex | None, complex] = (None, 0j)  # _wave_present's carry
         self.cvg_breaks: list[float] = []  # times where the rate output's curve is broken (no held wave)
@@ -227,6 +228,7 @@ class LivePlots(QWidget):
 
     def clear(self) -> None:
         self.t0_s = 0.0
+        self._queued = {}
         self.fpga.clear()
         self.table.clear()
         self.recent.clear()
@@ -250,6 +252,23 @@ class LivePlots(QWidget):
                   self.c_allan_hi):
             c.setData([], [])
         self._dirty = True
+
+    def queue_samples(self, stream: str, columns: tuple[str, ...], data: np.ndarray) -> None:
+        """The window's path: a slow-variable (cx..sy) block waits for the next frame and is then
+        added with the others of its stream in one pass (`flush_samples`), so the per-block work
+        (orbit elements, the wave test, the unwrap) is paid once a frame, not once a block; other
+        streams (sparse: the table, a sweep's points, readings) are added at once."""
+        if self.t0_s is None or not {"t_s", "cx"} <= set(columns):  # a replay's origin comes from the first block
+            self.add_samples(stream, columns, data)
+            return
+        self._queued.setdefault((stream, tuple(columns)), []).append(np.asarray(data))
+        self._dirty = True
+
+    def flush_samples(self) -> None:
+        """Add the queued blocks, each stream's joined in order (before a redraw, a run's start or end)."""
+        queued, self._queued = self._queued, {}
+        for (stream, columns), arrays in queued.items():
+            self.add_samples(stream, columns, arrays[0] if len(arrays) == 1 else np.concatenate(arrays))
 
     def add_samples(self, stream: str, columns: tuple[str, ...], data: np.ndarray) -> None:
         """One SampleBlock's rows; streams and columns the plots do not show are ignored."""
@@ -413,6 +432,7 @@ class LivePlots(QWidget):
         if not (self._dirty or force):
             return
         t0 = time.perf_counter()
+        self.flush_samples()
         self._dirty = False
         self._update_x_range()
         if len(self.fpga):
