@@ -35,19 +35,40 @@ THETA_TITLE = "wave angle \u03b8"
 NO_WAVE_TITLE = "wave angle \u03b8: no standing wave"  # pickoff noise alone: no angle to draw
 TABLE_STREAM = "table"  # the table's own rate stream: the table-rate curve (a procedure's readings are markers)
 ALLAN_STREAM, ALLAN_COLS = "cvg_allan_curve", ("tau_s", "adev_dph")  # procedures/cvg_allan.py's curve
+#: the chamber's readings the chamber procedures record with each record or segment (t_start_s,
+#: t_end_s and some of these: procedures/thermal_soak.py, thermal_ramp.py); drawn at each's middle
+TEMP_COLS = ("setpoint_c", "air_c", "part_c")
+TEMP_PENS = {"setpoint_c": ("set point", "#7f7f7f"), "air_c": ("chamber air", "#1f77b4"),
+             "part_c": ("case thermocouple", "#d62728")}
 #: the plots each layout shows (attribute names of LivePlots' PlotItems)
 LAYOUTS = {"hrg": ("p_q", "p_e", "p_theta", "p_rate"), "sweep": ("p_amp", "p_phase"),
-           "cvg": ("p_cvg", "p_rate", "p_allan")}
+           "cvg": ("p_cvg", "p_rate", "p_allan"), "thermal": ("p_temp", "p_cvg", "p_q", "p_e")}
+#: LivePlots' PlotItems in the order of its views
+PLOT_ATTRS = ("p_q", "p_e", "p_theta", "p_rate", "p_amp", "p_phase", "p_cvg", "p_allan", "p_temp")
+RATE_OUTPUT_LAYOUTS = ("cvg", "thermal")  # the layouts with the live rate output (their procedures are CvgOutput)
 
 
 def layout_for(procedure: str) -> str:
-    """The plots a procedure's run shows: 'sweep' (a frequency sweep), 'cvg' (a rate sensor's
-    output), else 'hrg' (the resonator's slow variables, energy, angle and the table)."""
+    """The plots a procedure's run shows: 'sweep' (a frequency sweep), 'thermal' (a procedure that
+    drives the chamber: its temperatures and the rate output), 'cvg' (a rate sensor's output),
+    else 'hrg' (the resonator's slow variables, energy, angle and the table)."""
     if procedure.startswith("mems-sweep") or procedure.endswith("sweep"):
         return "sweep"
+    if _uses_chamber(procedure):
+        return "thermal"
     if procedure.startswith("cvg-"):
         return "cvg"
     return "hrg"
+
+
+def _uses_chamber(procedure: str) -> bool:
+    """The procedure needs a temperature chamber (its `requires`); an unknown name does not."""
+    from procedures import ProcedureNotFound, find_procedure
+
+    try:
+        return "chamber" in getattr(find_procedure(procedure), "requires", ())
+    except (ProcedureNotFound, OSError, ImportError):
+        return False
 E_FIT_KEYS = ("E_fit", "energy_fit", "E")  # model E(t) keys of a FitUpdate (not the measured "energy")
 PEN_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 FIT_COLOUR = "#d62728"
@@ -105,6 +126,7 @@ class LivePlots(QWidget):
         self.sweep = RingBuffer(100_000, SWEEP_COLS)
         self.table_marks = RingBuffer(100_000, ("t_s", "rate_dps"))  # a procedure's own rate readings
         self.cvg = MinMaxHistory(("rate_dph",), max_points, history_s)  # the rate output, deg/h
+        self.temps = RingBuffer(100_000, ("t_s", *TEMP_COLS))  # the chamber's readings (NaN: not in the stream)
         self._angle_last: tuple[float, float] | None = None  # (t_s, angle_out_deg) of the last FPGA row
         self._amp_max = 0.0  # the largest wave amplitude of the run so far
         self.allan = np.empty((0, 2))
@@ -121,6 +143,8 @@ class LivePlots(QWidget):
         self.cvg_breaks: list[float] = []  # times where the rate output's curve is broken (no held wave)
         self._cvg_last_held = True  # the last FPGA row's wave was held (force-to-rebalance output)
         self._cvg_t_drawn: float | None = None  # the time of the last whole-angle rate drawn
+        self._cvg_ftr = False  # the run's output is the force-to-rebalance rate (not the wave angle)
+        self._rate_bin_last = math.nan  # the RATE_SPAN_S bin of the last FPGA row (whole-angle rate)
         self.bryan_factor: float | None = None  # K: the whole-angle rate output is -dtheta/dt / K
         self.t0_s: float | None = 0.0  # the run's start on the bench clock: the time axes are time since then
 
@@ -178,17 +202,26 @@ class LivePlots(QWidget):
                                          symbolBrush="#1f77b4", name="Allan deviation")
         self.c_allan_lo = self.p_allan.plot(pen=pg.mkPen("#9ecae1", width=1), name="low")
         self.c_allan_hi = self.p_allan.plot(pen=pg.mkPen("#9ecae1", width=1), name="high")
+        self.p_temp = add_plot(2, 0, legend_title(*TEMP_PENS.values()), colspan=2)  # where a sweep's plots are
+        self.p_temp.setLabel("left", "temperature", units="degC")
+        self.c_temp = {}  # the set point as squares alone, the readings as lines through their points
+        for c, (name, colour) in TEMP_PENS.items():
+            marks_only = c == "setpoint_c"
+            self.c_temp[c] = self.p_temp.plot(pen=None if marks_only else pg.mkPen(colour, width=1),
+                                              symbol="s" if marks_only else "o", symbolSize=7 if marks_only else 4,
+                                              symbolBrush=colour, symbolPen=None, name=name)
         from .plot_cursor import CursorReadout
 
         self.cursor_label = QLabel("hover over a plot: x and y under the pointer")
         self.cursor_label.setObjectName("cursor_readout")
         grid.addWidget(self.cursor_label, 5, 0, 1, 2)
         self.cursor = CursorReadout(self.views, ("cx..sy", "E", "\u03b8", "table rate", "sweep amplitude",
-                                                 "sweep phase", "rate output", "Allan deviation"), self.cursor_label)
+                                                 "sweep phase", "rate output", "Allan deviation", "temperature"),
+                                     self.cursor_label)
         self.sweep_views = self.views[4:6]
         self.set_layout("hrg")
         # no grid: redrawing grid lines with the axes costs ~10 ms per plot per frame (raster)
-        self.time_plots = (self.p_q, self.p_e, self.p_theta, self.p_rate, self.p_cvg)
+        self.time_plots = (self.p_q, self.p_e, self.p_theta, self.p_rate, self.p_cvg, self.p_temp)
         for p in self.time_plots:
             p.setLabel("bottom", "t since the run started", units="s")
             p.enableAutoRange(x=False)
@@ -236,6 +269,7 @@ class LivePlots(QWidget):
         self.table_marks.clear()
         self.p_rate.setTitle(legend_title(("table rate", "#8c564b")))
         self.cvg.clear()
+        self.temps.clear()
         self._angle_last = None
         self._amp_max = 0.0
         self.allan = np.empty((0, 2))
@@ -245,11 +279,13 @@ class LivePlots(QWidget):
         self.cvg_breaks = []
         self._cvg_last_held = True
         self._cvg_t_drawn = None
+        self._cvg_ftr = False
+        self._rate_bin_last = math.nan
         self._x_range = None
         self.set_layout(self.layout_kind)
         for c in (*self.c_q, self.c_e, self.c_fit, self.c_theta, self.c_rate, self.c_rate_marks, self.c_amp,
                   self.c_phase, self.c_amp_fit, self.c_phase_fit, self.c_cvg, self.c_allan, self.c_allan_lo,
-                  self.c_allan_hi):
+                  self.c_allan_hi, *self.c_temp.values()):
             c.setData([], [])
         self._dirty = True
 
@@ -294,10 +330,8 @@ class LivePlots(QWidget):
             self.fpga.append(t[:, 0], values)
             self.recent.append(np.column_stack((t, values)))
             self._dirty = True
-            if self.layout_kind == "cvg":  # while the wave stands at its held amplitude (not while it starts)
-                self._amp_max = max(self._amp_max, float(np.max(el["a"])))
-                held = (el["a"] > 0.5 * self._amp_max) & (np.abs(el["k"]) < 0.3 * np.maximum(el["a"], 1e-300))
-                self._add_rate_output(columns, data, t[:, 0], held)
+            if self.layout_kind in RATE_OUTPUT_LAYOUTS:
+                self._add_rate_output(columns, data, t[:, 0], self._held_rows(columns, data, el))
         rate = _columns(columns, data, ("rate_dps",))
         if t is not None and rate is not None and stream == TABLE_STREAM:
             angle = _columns(columns, data, ("angle_deg",))
@@ -306,6 +340,12 @@ class LivePlots(QWidget):
             self._dirty = True
         elif t is not None and rate is not None:  # a procedure's readings (table-spin's "hold"): markers
             self.table_marks.append(np.column_stack((t, rate)))
+            self._dirty = True
+        span = _columns(columns, data, ("t_start_s", "t_end_s"))
+        if span is not None and any(c in columns for c in TEMP_COLS):  # a chamber procedure's record or segment
+            nan = np.full(len(data), np.nan)
+            readings = [data[:, columns.index(c)] if c in columns else nan for c in TEMP_COLS]
+            self.temps.append(np.column_stack([span.mean(axis=1) - (self.t0_s or 0.0), *readings]))
             self._dirty = True
         allan = _columns(columns, data, ALLAN_COLS + ("adev_low_dph", "adev_high_dph"))
         if stream == ALLAN_STREAM and allan is not None:
@@ -331,31 +371,56 @@ class LivePlots(QWidget):
                  else "wave rate \u2212d\u03b8/dt (K unknown: not divided by it)")
         self.p_cvg.setTitle(legend_title((title, "#2ca02c")))
 
+    def _held_rows(self, columns: tuple[str, ...], data: np.ndarray, el: dict[str, np.ndarray]) -> np.ndarray:
+        """Per row: do the loops hold the wave, so the output is a rate?  The amplitude near the
+        run's largest (not starting, not quenched away) with a small quadrature, the amplitude loop
+        on (its force exactly 0: off, at a turn-on's start or the run's end, where the whole-angle
+        output is reset) and not at its limit (a quench's first second, the wave still large)."""
+        self._amp_max = max(self._amp_max, float(np.max(el["a"])))
+        held = (el["a"] > 0.5 * self._amp_max) & (np.abs(el["k"]) < 0.3 * np.maximum(el["a"], 1e-300))
+        amp_ctrl = _columns(columns, data, ("amp_ctrl",))
+        if amp_ctrl is not None:
+            held &= amp_ctrl[:, 0] != 0.0
+        sat = _columns(columns, data, ("sat_flags",))
+        if sat is not None:
+            held &= sat[:, 0] == 0.0
+        return held
+
     def _add_rate_output(self, columns: tuple[str, ...], data: np.ndarray, t: np.ndarray, held: np.ndarray) -> None:
         """The rate sensor's output in deg/h where the wave is held (`held`, a row mask): the FPGA's
-        rate output in force-to-rebalance (non-zero there), else the whole-angle output's rate
-        -d(angle_out)/dt / K between consecutive held rows (K: set_bryan_factor)."""
+        rate output in force-to-rebalance (where the rebalance loop gives one: exactly 0 is its
+        loop off, a quench), else the whole-angle output's rate -d(angle_out)/dt / K between the
+        first rows of consecutive RATE_SPAN_S bins of bench time, over held rows only (K:
+        set_bryan_factor).  The bins are fixed in time, so the curve does not depend on how the
+        rows were cut into blocks (the window adds them once a frame)."""
         ftr = _columns(columns, data, ("rate_out_dps",))
         angle = _columns(columns, data, ("angle_out_deg",))
-        if ftr is not None and np.any(ftr[held, 0] != 0.0):
+        if ftr is not None and not self._cvg_ftr and np.any(ftr[held, 0] != 0.0):
+            self._cvg_ftr = True  # the mode holds for the run (a block inside a quench reads 0 throughout)
+        if ftr is not None and self._cvg_ftr:
+            held = held & (ftr[:, 0] != 0.0)
             was_held = np.concatenate(([self._cvg_last_held], held[:-1]))
             self.cvg_breaks.extend(t[held & ~was_held].tolist())  # the first held row after unheld ones
             self._cvg_last_held = bool(held[-1])
-            self.cvg.append(t[held], 3600.0 * ftr[held, :1])
-            self._angle_last = None
+            if np.any(held):
+                self.cvg.append(t[held], 3600.0 * ftr[held, :1])
             return
         if angle is None:
             return
-        prev = self._angle_last  # the last row of the block before, if it was held
-        t_all = np.concatenate(([prev[0]], t)) if prev else t
-        a_all = np.concatenate(([prev[1]], angle[:, 0])) if prev else angle[:, 0]
-        h_all = np.concatenate(([True], held)) if prev else held
-        # rows RATE_SPAN_S apart at least (a 1 kHz stream's sample-to-sample derivative is noise)
-        picks = np.unique(np.searchsorted(t_all, np.arange(t_all[0], t_all[-1] + 1e-12, RATE_SPAN_S)))
-        picks = picks[picks < len(t_all)]
-        last = len(t_all) - 1
-        self._angle_last = (float(t_all[picks[-1]]), float(a_all[picks[-1]])) if h_all[picks[-1]] else None
-        if picks[-1] != last and not h_all[last]:
+        bins = np.floor(t / RATE_SPAN_S)
+        starts = np.flatnonzero(bins != np.concatenate(([self._rate_bin_last], bins[:-1])))  # a bin's first row
+        self._rate_bin_last = float(bins[-1])
+        prev = self._angle_last  # the last bin start before this block, if every row since was held
+        if prev is not None:
+            t_all, a_all, h_all = (np.concatenate(([prev[0]], t)), np.concatenate(([prev[1]], angle[:, 0])),
+                                   np.concatenate(([True], held)))
+            picks = np.concatenate(([0], starts + 1))
+        else:
+            t_all, a_all, h_all, picks = t, angle[:, 0], held, starts
+        if len(picks):
+            last = int(picks[-1])
+            self._angle_last = (float(t_all[last]), float(a_all[last])) if bool(np.all(h_all[last:])) else None
+        elif not np.all(held):
             self._angle_last = None
         if len(picks) < 2:
             return
@@ -365,7 +430,7 @@ class LivePlots(QWidget):
         ok = (dt > 0) & (gaps == 0)  # never across a quench or a start: only over held rows
         # the curve breaks where rates are missing: a rate whose span does not start at the last
         # rate drawn (the span before it was not held, or the last block ended without a held wave)
-        joins_last = prev is not None and self._cvg_t_drawn == float(t_all[picks[0]])
+        joins_last = self._cvg_t_drawn == float(t_all[picks[0]])
         after_drawn = np.concatenate(([joins_last], ok[:-1]))
         self.cvg_breaks.extend(t_all[picks[1:]][ok & ~after_drawn].tolist())
         if np.any(ok):
@@ -455,6 +520,12 @@ class LivePlots(QWidget):
             t_cvg, r_cvg = self.cvg.curve("rate_dph")
             self.c_cvg.setData(t_cvg, r_cvg, connect=self._cvg_connect(t_cvg))
             self._robust_y_range(self.p_cvg, r_cvg)
+        if len(self.temps):
+            t_temp = self.temps.column("t_s")
+            for c, curve in self.c_temp.items():
+                y = self.temps.column(c)
+                ok = np.isfinite(y)
+                curve.setData(t_temp[ok], y[ok])
         if len(self.allan):
             ok = np.all(np.isfinite(self.allan) & (self.allan > 0), axis=1)
             tau, adev, lo, hi = self.allan[ok].T
@@ -541,7 +612,7 @@ class LivePlots(QWidget):
         shown = set(LAYOUTS[self.layout_kind])
         if self.layout_kind == "cvg" and not len(self.allan):
             shown.discard("p_allan")
-        for attr in ("p_q", "p_e", "p_theta", "p_rate", "p_amp", "p_phase", "p_cvg", "p_allan"):
+        for attr in PLOT_ATTRS:
             self.views[self._view_index(attr)].setVisible(attr in shown)
         self.sweep_shown = "p_amp" in shown
         # a CVG run: the table's rate under the rate output (beside the Allan curve once it is there)
@@ -552,7 +623,7 @@ class LivePlots(QWidget):
         grid.addWidget(rate_view, *cell)
 
     def _view_index(self, attr: str) -> int:
-        return ("p_q", "p_e", "p_theta", "p_rate", "p_amp", "p_phase", "p_cvg", "p_allan").index(attr)
+        return PLOT_ATTRS.index(attr)
 
     def _update_x_range(self) -> None:
         """The time axes move in round steps (not every frame): regenerating the ticks of four
