@@ -32,12 +32,16 @@ RATE_SPAN_S = 0.1  # the live rate output's differencing span (whole-angle outpu
 WAVE_COHERENCE_ALPHA = 0.03  # the weight of each row's 4 theta step in the wave test's running mean
 WAVE_COHERENCE_MIN = 0.5  # |mean step| above which a wave is there (noise alone: ~0.12)
 THETA_TITLE = "wave angle \u03b8"
+FTR_TITLE = "rate output (force-to-rebalance)"  # the FPGA's rate_out_dps, in deg/h
 NO_WAVE_TITLE = "wave angle \u03b8: no standing wave"  # pickoff noise alone: no angle to draw
 TABLE_STREAM = "table"  # the table's own rate stream: the table-rate curve (a procedure's readings are markers)
 ALLAN_STREAM, ALLAN_COLS = "cvg_allan_curve", ("tau_s", "adev_dph")  # procedures/cvg_allan.py's curve
 #: the chamber's readings the chamber procedures record with each record or segment (t_start_s,
 #: t_end_s and some of these: procedures/thermal_soak.py, thermal_ramp.py); drawn at each's middle
 TEMP_COLS = ("setpoint_c", "air_c", "part_c")
+#: the chamber's own stream (drivers/chamber/watlow_f4_spec.py: a row at every link check): the
+#: live air and case curves; the records' readings stand in for them where a chamber has none
+CHAMBER_STREAM, CHAMBER_COLS = "chamber", ("air_degc", "part_degc")
 TEMP_PENS = {"setpoint_c": ("set point", "#7f7f7f"), "air_c": ("chamber air", "#1f77b4"),
              "part_c": ("case thermocouple", "#d62728")}
 #: the plots each layout shows (attribute names of LivePlots' PlotItems)
@@ -126,7 +130,8 @@ class LivePlots(QWidget):
         self.sweep = RingBuffer(100_000, SWEEP_COLS)
         self.table_marks = RingBuffer(100_000, ("t_s", "rate_dps"))  # a procedure's own rate readings
         self.cvg = MinMaxHistory(("rate_dph",), max_points, history_s)  # the rate output, deg/h
-        self.temps = RingBuffer(100_000, ("t_s", *TEMP_COLS))  # the chamber's readings (NaN: not in the stream)
+        self.temps = RingBuffer(100_000, ("t_s", *TEMP_COLS))  # the records' chamber readings (NaN: not in the stream)
+        self.chamber = MinMaxHistory(("air_c", "part_c"), max_points, history_s)  # the chamber stream
         self._angle_last: tuple[float, float] | None = None  # (t_s, angle_out_deg) of the last FPGA row
         self._amp_max = 0.0  # the largest wave amplitude of the run so far
         self.allan = np.empty((0, 2))
@@ -208,7 +213,7 @@ class LivePlots(QWidget):
         for c, (name, colour) in TEMP_PENS.items():
             marks_only = c == "setpoint_c"
             self.c_temp[c] = self.p_temp.plot(pen=None if marks_only else pg.mkPen(colour, width=1),
-                                              symbol="s" if marks_only else "o", symbolSize=7 if marks_only else 4,
+                                              symbol="s" if marks_only else None, symbolSize=8,
                                               symbolBrush=colour, symbolPen=None, name=name)
         from .plot_cursor import CursorReadout
 
@@ -270,6 +275,7 @@ class LivePlots(QWidget):
         self.p_rate.setTitle(legend_title(("table rate", "#8c564b")))
         self.cvg.clear()
         self.temps.clear()
+        self.chamber.clear()
         self._angle_last = None
         self._amp_max = 0.0
         self.allan = np.empty((0, 2))
@@ -341,6 +347,10 @@ class LivePlots(QWidget):
         elif t is not None and rate is not None:  # a procedure's readings (table-spin's "hold"): markers
             self.table_marks.append(np.column_stack((t, rate)))
             self._dirty = True
+        chamber = _columns(columns, data, CHAMBER_COLS)
+        if t is not None and chamber is not None and stream == CHAMBER_STREAM:
+            self.chamber.append(t[:, 0], chamber)
+            self._dirty = True
         span = _columns(columns, data, ("t_start_s", "t_end_s"))
         if span is not None and any(c in columns for c in TEMP_COLS):  # a chamber procedure's record or segment
             nan = np.full(len(data), np.nan)
@@ -397,6 +407,7 @@ class LivePlots(QWidget):
         angle = _columns(columns, data, ("angle_out_deg",))
         if ftr is not None and not self._cvg_ftr and np.any(ftr[held, 0] != 0.0):
             self._cvg_ftr = True  # the mode holds for the run (a block inside a quench reads 0 throughout)
+            self.p_cvg.setTitle(legend_title((FTR_TITLE, "#2ca02c")))
         if ftr is not None and self._cvg_ftr:
             held = held & (ftr[:, 0] != 0.0)
             was_held = np.concatenate(([self._cvg_last_held], held[:-1]))
@@ -523,9 +534,13 @@ class LivePlots(QWidget):
         if len(self.temps):
             t_temp = self.temps.column("t_s")
             for c, curve in self.c_temp.items():
-                y = self.temps.column(c)
-                ok = np.isfinite(y)
-                curve.setData(t_temp[ok], y[ok])
+                if c == "setpoint_c" or not len(self.chamber):
+                    y = self.temps.column(c)
+                    ok = np.isfinite(y)
+                    curve.setData(t_temp[ok], y[ok])
+        if len(self.chamber):  # the live readings, as lines
+            for c in ("air_c", "part_c"):
+                self.c_temp[c].setData(*self.chamber.curve(c))
         if len(self.allan):
             ok = np.all(np.isfinite(self.allan) & (self.allan > 0), axis=1)
             tau, adev, lo, hi = self.allan[ok].T
@@ -628,8 +643,8 @@ class LivePlots(QWidget):
     def _update_x_range(self) -> None:
         """The time axes move in round steps (not every frame): regenerating the ticks of four
         axes each frame would cost more than drawing the curves."""
-        starts = [h.t_first for h in (self.fpga, self.table) if len(h)]
-        ends = [h.t_last for h in (self.fpga, self.table) if len(h)]
+        starts = [h.t_first for h in (self.fpga, self.table, self.chamber) if len(h)]
+        ends = [h.t_last for h in (self.fpga, self.table, self.chamber) if len(h)]
         if not ends:
             return
         t0, t1 = min(starts), max(ends)
