@@ -208,7 +208,7 @@ class LivePlots(QWidget):
         self.c_allan_lo = self.p_allan.plot(pen=pg.mkPen("#9ecae1", width=1), name="low")
         self.c_allan_hi = self.p_allan.plot(pen=pg.mkPen("#9ecae1", width=1), name="high")
         self.p_temp = add_plot(2, 0, legend_title(*TEMP_PENS.values()), colspan=2)  # where a sweep's plots are
-        self.p_temp.setLabel("left", "temperature", units="degC")
+        self.p_temp.setLabel("left", "T", units="degC")
         self.c_temp = {}  # the set point as squares alone, the readings as lines through their points
         for c, (name, colour) in TEMP_PENS.items():
             marks_only = c == "setpoint_c"
