@@ -76,6 +76,7 @@ def _uses_chamber(procedure: str) -> bool:
 E_FIT_KEYS = ("E_fit", "energy_fit", "E")  # model E(t) keys of a FitUpdate (not the measured "energy")
 PEN_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 FIT_COLOUR = "#d62728"
+Y_PAD, Y_FILL_MIN = 0.08, 0.5  # a y range's padding (of the data's span), and the fill below which it shrinks
 E_LOG_ABOVE, E_LINEAR_BELOW = 10.0, 5.0  # E's max/min ratio at which its axis turns log, and back to linear
 
 
@@ -102,6 +103,20 @@ def log_ticks(low: float, high: float) -> list[tuple[float, str]]:
             if low / 1.05 <= v <= high * 1.05:
                 ticks.append((math.log10(v), f"{v:g}"))
     return ticks
+
+
+def _y_bounds(curves) -> tuple[float, float]:
+    """The smallest and largest finite y drawn by `curves` (as drawn: log10 on a log axis); NaN if none."""
+    lows, highs = [], []
+    for curve in curves:
+        y = curve.getData()[1]
+        if y is not None and len(y):
+            y = np.asarray(y, dtype=float)
+            y = y[np.isfinite(y)]
+            if len(y):
+                lows.append(float(y.min()))
+                highs.append(float(y.max()))
+    return (min(lows), max(highs)) if lows else (math.nan, math.nan)
 
 
 def _columns(columns: tuple[str, ...], data: np.ndarray, wanted: tuple[str, ...]) -> np.ndarray | None:
@@ -231,6 +246,7 @@ class LivePlots(QWidget):
             p.setLabel("bottom", "t since the run started", units="s")
             p.enableAutoRange(x=False)
         self._x_range: tuple[float, float] | None = None
+        self._y_ranges: dict[int, tuple[float, float]] = {}  # id(plot): the y range last set (_hold_y_range)
         for p in (self.p_amp, self.p_phase):
             p.setLabel("bottom", "f", units="Hz")
         self.p_allan.getAxis("bottom").enableAutoSIPrefix(False)
@@ -288,6 +304,9 @@ class LivePlots(QWidget):
         self._cvg_ftr = False
         self._rate_bin_last = math.nan
         self._x_range = None
+        self._y_ranges.clear()
+        for p in self.time_plots:
+            p.enableAutoRange(y=True)  # until the first data: then _hold_y_range
         self.set_layout(self.layout_kind)
         for c in (*self.c_q, self.c_e, self.c_fit, self.c_theta, self.c_rate, self.c_rate_marks, self.c_amp,
                   self.c_phase, self.c_amp_fit, self.c_phase_fit, self.c_cvg, self.c_allan, self.c_allan_lo,
@@ -530,7 +549,7 @@ class LivePlots(QWidget):
         if len(self.cvg):
             t_cvg, r_cvg = self.cvg.curve("rate_dph")
             self.c_cvg.setData(t_cvg, r_cvg, connect=self._cvg_connect(t_cvg))
-            self._robust_y_range(self.p_cvg, r_cvg)
+            self._robust_y_range(r_cvg)
         if len(self.temps):
             t_temp = self.temps.column("t_s")
             for c, curve in self.c_temp.items():
@@ -566,6 +585,9 @@ class LivePlots(QWidget):
         phase_fit = self._pick_fit("freq_hz", ("phase_deg",), prefer="sweep_model")
         if phase_fit is not None:
             self.c_phase_fit.setData(*phase_fit)
+        for plot, curves in ((self.p_q, self.c_q), (self.p_e, (self.c_e, self.c_fit)), (self.p_theta, (self.c_theta,)),
+                             (self.p_rate, (self.c_rate, self.c_rate_marks)), (self.p_temp, self.c_temp.values())):
+            self._hold_y_range(plot, *_y_bounds(curves))
         self.refresh_count += 1
         now = time.perf_counter()
         self.refresh_times.append(now)
@@ -582,17 +604,34 @@ class LivePlots(QWidget):
         before = np.searchsorted(breaks, t, side="right")  # breaks at or before each point
         return np.concatenate((before[1:] == before[:-1], [False]))
 
-    @staticmethod
-    def _robust_y_range(plot: pg.PlotItem, y: np.ndarray) -> None:
-        """The y axis over the 1st..99th percentile (padded): a wave-angle output's reset at a
-        mode change (one sample of 1e7 deg/h) must not flatten the rate noise to a line."""
+    def _robust_y_range(self, y: np.ndarray) -> None:
+        """The rate output's y axis over the 1st..99th percentile (padded): a wave-angle output's
+        reset at a mode change (one sample of 1e7 deg/h) must not flatten the rate noise to a line."""
         y = y[np.isfinite(y)]
-        if len(y) < 20:
-            plot.enableAutoRange(y=True)
+        if not len(y):
             return
-        lo, hi = np.percentile(y, [1.0, 99.0])
-        pad = 0.15 * max(hi - lo, 1e-12)
-        plot.setYRange(lo - pad, hi + pad, padding=0.0)
+        lo, hi = np.percentile(y, [1.0, 99.0]) if len(y) >= 20 else (np.min(y), np.max(y))
+        self._hold_y_range(self.p_cvg, float(lo), float(hi), pad=0.15)
+
+    def _hold_y_range(self, plot: pg.PlotItem, lo: float, hi: float, pad: float = Y_PAD) -> None:
+        """The y axis over [lo, hi] (padded), moved only when the data leave it or fill less than
+        Y_FILL_MIN of it: pyqtgraph's auto-range moved it every frame, and each move regenerates
+        the axis's ticks (the largest part of a frame at "max").  A range the operator zoomed or
+        panned to is left alone (the plot's own auto-range button takes over again)."""
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            return
+        r0, r1 = plot.getViewBox().viewRange()[1]
+        mine = self._y_ranges.get(id(plot))
+        if mine is not None and not (math.isclose(r0, mine[0], rel_tol=1e-9, abs_tol=1e-12)
+                                     and math.isclose(r1, mine[1], rel_tol=1e-9, abs_tol=1e-12)):
+            return  # the operator's range
+        span = max(hi - lo, 1e-6 * max(abs(lo), abs(hi)), 1e-12)
+        if mine is not None and r0 <= lo and hi <= r1 and span >= Y_FILL_MIN * (r1 - r0):
+            return
+        mid = 0.5 * (lo + hi)
+        half = 0.5 * span * (1.0 + 2.0 * pad)
+        plot.setYRange(mid - half, mid + half, padding=0.0)
+        self._y_ranges[id(plot)] = tuple(plot.getViewBox().viewRange()[1])
 
     def _choose_e_scale(self, e: np.ndarray) -> None:
         """E on a log axis when, once excited, it spans more than a decade (a decay into the noise),
@@ -612,6 +651,7 @@ class LivePlots(QWidget):
         if log != self.e_log:
             self.e_log = log
             self.p_e.setLogMode(x=False, y=log)
+            self._y_ranges.pop(id(self.p_e), None)  # the axis's units changed: a new range
             self.p_e.setTitle(legend_title(("E (log)" if log else "E", "#1f77b4"), ("fit", FIT_COLOUR)))
 
     def _show_sweep(self, shown: bool) -> None:
