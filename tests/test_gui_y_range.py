@@ -62,3 +62,21 @@ def test_y_range_follows_a_shrinking_signal_and_keeps_the_operators_zoom(plots):
     plots.add_samples("table", ("t_s", "rate_dps", "angle_deg"), np.column_stack((t2, 5.0 * np.sin(t2), t2)))
     plots.refresh(force=True)
     assert _y_range(plots.p_rate) == pytest.approx((-0.2, 0.2))
+
+
+def test_a_growing_run_moves_its_time_axes_a_few_times_and_ends_tight(plots):
+    """A live run's time axis is extended a third ahead (fewer moves: each regenerates the ticks
+    of every time plot); the finished run's axis ends at its data (fit_time_axes, at RunFinished)."""
+    plots.clear()
+    moves = []
+    plots.p_q.getViewBox().sigXRangeChanged.connect(lambda *_: moves.append(plots.p_q.getViewBox().viewRange()[0]))
+    for k in range(100):  # 1000 s in 10 s blocks, a frame each
+        t = np.arange(10.0 * k, 10.0 * (k + 1), 0.01)
+        plots.add_samples("fpga", COLS, _rows(t, np.ones_like(t)))
+        plots.refresh(force=True)
+        lo, hi = plots.p_q.getViewBox().viewRange()[0]
+        assert lo == pytest.approx(0.0) and hi >= t[-1]  # every sample on the axis
+    assert len(moves) <= 20  # 27 when each move gave room for one round step only
+    assert plots.p_q.getViewBox().viewRange()[0][1] > 1000.0
+    plots.fit_time_axes()
+    assert plots.p_q.getViewBox().viewRange()[0] == pytest.approx([0.0, 1000.0])

@@ -354,6 +354,8 @@ class MainWindow(QMainWindow):
             if isinstance(e, (ev.RunStarted, ev.RunFinished)):
                 self.plots.flush_samples()
                 self._apply_progress()
+            if isinstance(e, ev.RunFinished):
+                self.plots.fit_time_axes()  # the run's whole record, edge to edge
             if isinstance(e, ev.FitUpdate):
                 self.plots.set_fit(e.name, e.curves)
             elif isinstance(e, ev.StreamDeclared):

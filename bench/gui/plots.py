@@ -76,7 +76,9 @@ def _uses_chamber(procedure: str) -> bool:
 E_FIT_KEYS = ("E_fit", "energy_fit", "E")  # model E(t) keys of a FitUpdate (not the measured "energy")
 PEN_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 FIT_COLOUR = "#d62728"
+X_AHEAD = 4.0 / 3.0  # a live time axis extended to this times the data's span (fewer moves, each regenerating ticks)
 Y_PAD, Y_FILL_MIN = 0.08, 0.5  # a y range's padding (of the data's span), and the fill below which it shrinks
+Y_AHEAD = 0.25  # data leaving a y range: the new one leaves this much of their span ahead on that side
 E_LOG_ABOVE, E_LINEAR_BELOW = 10.0, 5.0  # E's max/min ratio at which its axis turns log, and back to linear
 
 
@@ -626,8 +628,12 @@ class LivePlots(QWidget):
                                      and math.isclose(r1, mine[1], rel_tol=1e-9, abs_tol=1e-12)):
             return  # the operator's range
         span = max(hi - lo, 1e-6 * max(abs(lo), abs(hi)), 1e-12)
-        if mine is not None and r0 <= lo and hi <= r1 and span >= Y_FILL_MIN * (r1 - r0):
+        inside = mine is not None and r0 <= lo and hi <= r1
+        if inside and span >= Y_FILL_MIN * (r1 - r0):
             return
+        if mine is not None and not inside:  # growing (a precessing angle, a rising temperature): room ahead
+            lo, hi = (lo - Y_AHEAD * span if lo < r0 else lo), (hi + Y_AHEAD * span if hi > r1 else hi)
+            span = hi - lo
         mid = 0.5 * (lo + hi)
         half = 0.5 * span * (1.0 + 2.0 * pad)
         plot.setYRange(mid - half, mid + half, padding=0.0)
@@ -682,7 +688,9 @@ class LivePlots(QWidget):
 
     def _update_x_range(self) -> None:
         """The time axes move in round steps (not every frame): regenerating the ticks of four
-        axes each frame would cost more than drawing the curves."""
+        axes each frame would cost more than drawing the curves.  A growing run's axis is
+        extended a third ahead (a few moves a run, not one each step); `fit_time_axes` ends it
+        tight."""
         starts = [h.t_first for h in (self.fpga, self.table, self.chamber) if len(h)]
         ends = [h.t_last for h in (self.fpga, self.table, self.chamber) if len(h)]
         if not ends:
@@ -692,10 +700,17 @@ class LivePlots(QWidget):
             return
         span = max(t1 - t0, 1e-3)
         step = 0.5 * 10.0 ** math.floor(math.log10(span))
-        hi = t0 + max(1, math.ceil(span / step)) * step
+        ahead = X_AHEAD if self._x_range is not None else 1.0  # the first range is the data's
+        hi = t0 + max(1, math.ceil(ahead * span / step - 1e-9)) * step
         self._x_range = (t0, hi)
         for p in self.time_plots:
             p.setXRange(t0, hi, padding=0.0)
+
+    def fit_time_axes(self) -> None:
+        """The time axes over the data alone (a finished run: no room left ahead)."""
+        self.flush_samples()
+        self._x_range = None
+        self._update_x_range()
 
     def set_refresh_hz(self, hz: float) -> None:
         """Redraws per second from now on (the window draws less often at "max" speed, where each
