@@ -99,3 +99,12 @@ def test_force_to_rebalance_output_says_so(plots):
     plots.refresh(force=True)
     assert "force-to-rebalance" in plots.p_cvg.titleLabel.text and "K =" not in plots.p_cvg.titleLabel.text
     np.testing.assert_allclose(plots.c_cvg.getData()[1], 0.04 * 3600.0)
+
+
+def test_the_temperature_plot_is_offered_for_export_on_a_thermal_run(plots):
+    from bench.gui.export import offered_plots
+
+    plots.set_layout("thermal")
+    assert "temperature" in offered_plots(plots, None)  # the chamber stream behind it
+    plots.set_layout("hrg")
+    assert "temperature" not in offered_plots(plots, None)
