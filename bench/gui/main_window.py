@@ -61,6 +61,7 @@ def outcome_colour(outcome: str) -> str:
 
 LOCKSTEP_WAIT_S = 0.25  # longest the bridge holds a lockstep engine per event
 LABELS_EVERY_S = 0.1  # the time and progress labels' update period (wall)
+MAX_SPEED_LABELS_EVERY_S = 0.25  # ... at "max" (a progress bar repaints at once when set: ~2 ms each)
 MAX_SPEED_REFRESH_HZ = 5.0  # plot redraws a second at "max" speed (benchmarks/gui_max_speed.py)
 STATUS_LINES = 2  # the status box's height in lines: a longer status scrolls inside it
 STATION_TREE_PX = 260  # the station's device tree: every device's rows without scrolling
@@ -145,6 +146,7 @@ class MainWindow(QMainWindow):
         self.step_fraction = 0.0
         self.refresh_hz = refresh_hz
         self._labels_wall_s = 0.0  # when the time and progress labels were last set
+        self.labels_every_s = LABELS_EVERY_S  # their period now (MAX_SPEED_LABELS_EVERY_S at "max")
         self._progress: tuple[float, str] | None = None  # the step's progress not yet shown (fraction, message)
         from PySide6.QtCore import QTimer
 
@@ -291,6 +293,8 @@ class MainWindow(QMainWindow):
         self.bridge.max_wait_s = LOCKSTEP_WAIT_S if lockstep else 0.0
         # at "max" a frame's Python painting competes with the engine for the interpreter: fewer frames
         self.plots.set_refresh_hz(MAX_SPEED_REFRESH_HZ if lockstep else self.refresh_hz)
+        self.labels_every_s = MAX_SPEED_LABELS_EVERY_S if lockstep else LABELS_EVERY_S
+        self._labels_timer.setInterval(int(self.labels_every_s * 1000))
 
     def set_status_line(self, text: str, colour: str) -> None:
         """The line under the buttons (and the status bar): `colour` is one of STATUS_COLOURS."""
@@ -386,7 +390,7 @@ class MainWindow(QMainWindow):
             elif isinstance(e, ev.RunFinished):
                 self._on_run_finished(e)
         now = _wall_s()
-        if now - self._labels_wall_s >= LABELS_EVERY_S or not self.run_active:  # a label a batch would cost
+        if now - self._labels_wall_s >= self.labels_every_s or not self.run_active:  # a label a batch would cost
             self.flush_labels(now)  # more than the plots at "max" speed: ten times a second is enough
         elif not self._labels_timer.isActive():  # the last batch's time is shown within LABELS_EVERY_S
             self._labels_timer.start()
