@@ -60,6 +60,7 @@ def outcome_colour(outcome: str) -> str:
     return "amber"
 
 LOCKSTEP_WAIT_S = 0.25  # longest the bridge holds a lockstep engine per event
+LOCKSTEP_DRAIN_GAP_S = 0.025  # the bridge's drains at least this far apart in lockstep (its queue half full: at once)
 LABELS_EVERY_S = 0.1  # the time and progress labels' update period (wall)
 MAX_SPEED_LABELS_EVERY_S = 0.25  # ... at "max" (a progress bar repaints at once when set: ~2 ms each)
 MAX_SPEED_REFRESH_HZ = 5.0  # plot redraws a second at "max" speed (benchmarks/gui_max_speed.py)
@@ -291,6 +292,7 @@ class MainWindow(QMainWindow):
         lost there: the world waits); in real time or on a real bench, never."""
         lockstep = self.backend.simulated and math.isinf(speed)
         self.bridge.max_wait_s = LOCKSTEP_WAIT_S if lockstep else 0.0
+        self.bridge.min_gap_s = LOCKSTEP_DRAIN_GAP_S if lockstep else 0.0  # fewer, fuller drains at "max"
         # at "max" a frame's Python painting competes with the engine for the interpreter: fewer frames
         self.plots.set_refresh_hz(MAX_SPEED_REFRESH_HZ if lockstep else self.refresh_hz)
         self.labels_every_s = MAX_SPEED_LABELS_EVERY_S if lockstep else LABELS_EVERY_S
