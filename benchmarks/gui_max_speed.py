@@ -1,4 +1,4 @@
-"""The window's "max" speed against the CLI's on the same procedure (issue 31: within 1.5x).
+"""The window's "max" speed against the CLI's on the same procedure (issue 36: within 1.3x).
 
 Runs `hrg-damping` (short record) twice on the same simulated station and seed: once through the
 CLI's path (a Runner, no window: `gyrobench run` in lockstep) and once in the window (offscreen)
@@ -22,8 +22,8 @@ def _params(record_s: float, verify_s: float) -> dict[str, str]:
     return {"record_s": str(record_s), "verify_s": str(verify_s)}
 
 
-def cli_speed(station: str, params: dict[str, str], seed: int) -> tuple[float, float]:
-    """(bench s, wall s) of the run through the CLI's Runner (lockstep, no window)."""
+def cli_speed(station: str, params: dict[str, str], seed: int) -> tuple[float, float, float]:
+    """(bench s, wall s, process CPU s) of the run through the CLI's Runner (lockstep, no window)."""
     import sys
 
     from bench.composition import load_station
@@ -35,16 +35,17 @@ def cli_speed(station: str, params: dict[str, str], seed: int) -> tuple[float, f
     runner = Runner(st, runs_dir=tempfile.mkdtemp(prefix="gms_cli_"), store=None)
     st.open()
     try:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         rec = runner.run(find_procedure("hrg-damping")(params))
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     finally:
         st.close()
-    return rec.simulated_s, wall
+    return rec.simulated_s, wall, cpu
 
 
 def gui_speed(station: str, params: dict[str, str], seed: int, profile: bool) -> tuple[float, float, dict]:
-    """(bench s, wall s, window counters) of the run in the window at "max" (offscreen)."""
+    """(bench s, wall s, window counters) of the run in the window at "max" (offscreen); the
+    counters hold the process's CPU seconds and the GUI (main) thread's."""
     from PySide6.QtWidgets import QApplication
 
     from bench.gui.engine_backend import EngineBackend
@@ -64,12 +65,12 @@ def gui_speed(station: str, params: dict[str, str], seed: int, profile: bool) ->
 
         prof = cProfile.Profile()
         prof.enable()
-    t0 = time.perf_counter()
+    t0, c0, g0 = time.perf_counter(), time.process_time(), time.thread_time()
     win.start()
     while win.last_finished is None and time.perf_counter() - t0 < 600:
         app.processEvents()
         time.sleep(0.001)
-    wall = time.perf_counter() - t0
+    wall, cpu, gui_cpu = time.perf_counter() - t0, time.process_time() - c0, time.thread_time() - g0
     if prof is not None:
         import pstats
 
@@ -77,7 +78,8 @@ def gui_speed(station: str, params: dict[str, str], seed: int, profile: bool) ->
         pstats.Stats(prof).sort_stats("tottime").print_stats(18)
     fin = win.last_finished
     sim_s = float(fin.t_sim_s - win.run_t0_s) if fin is not None else float("nan")
-    counters = {"redraws": win.plots.refresh_count, "events": win.bridge.delivered, "held_s": win.bridge.held_s}
+    counters = {"redraws": win.plots.refresh_count, "events": win.bridge.delivered, "held_s": win.bridge.held_s,
+                "cpu_s": cpu, "gui_cpu_s": gui_cpu}
     win.close()
     backend.close()
     return sim_s, wall, counters
@@ -100,18 +102,21 @@ def main() -> None:
     warm_kernels()  # neither run pays the kernels' compilation
     c_wall = g_wall = float("inf")  # best of --repeat, alternating: the machine is shared
     for _ in range(args.repeat):
-        c_sim, wall = cli_speed(args.station, params, args.seed)
-        c_wall = min(c_wall, wall)
+        c_sim, wall, cpu = cli_speed(args.station, params, args.seed)
+        if wall < c_wall:
+            c_wall, c_cpu = wall, cpu
         g_sim, wall, run_counters = gui_speed(args.station, params, args.seed, args.profile)
         if wall < g_wall:
             g_wall, counters = wall, run_counters
     c_x, g_x = c_sim / c_wall, g_sim / g_wall
     print(f"best of {args.repeat}:")
-    print(f"CLI    (Runner, lockstep): {c_sim:8.1f} s bench in {c_wall:6.2f} s wall = {c_x:6.1f}x real time")
+    print(f"CLI    (Runner, lockstep): {c_sim:8.1f} s bench in {c_wall:6.2f} s wall = {c_x:6.1f}x real time"
+          f"  (process CPU {c_cpu:.2f} s)")
     print(f"window (offscreen, max)  : {g_sim:8.1f} s bench in {g_wall:6.2f} s wall = {g_x:6.1f}x real time"
           f"  ({counters['redraws']} redraws, {counters['events']} events, engine held by the window "
-          f"{counters['held_s']:.2f} s)")
-    print(f"CLI / window = {c_x / g_x:.2f} (issue 31 asks <= 1.5)")
+          f"{counters['held_s']:.2f} s; process CPU {counters['cpu_s']:.2f} s, of which the GUI thread "
+          f"{counters['gui_cpu_s']:.2f} s)")
+    print(f"CLI / window = {c_x / g_x:.2f} (issue 36 asks <= 1.3); load average {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -12,6 +12,11 @@ than `max_pending` events wait, the publisher is held (at most `max_wait_s` per 
 at "max" speed goes at the pace the window can draw instead of queueing without bound.  Never on
 real time or a real bench: there a held link reader would lose frames, so the queue just grows
 until the window catches up.
+
+Coalescing is opt-in too (`min_gap_s` > 0, the window at "max"): a wake-up within `min_gap_s` of
+the last drain is put off until then, so each drain carries more events and the engine's thread
+gives the interpreter to the GUI thread less often; a queue half way to `max_pending` is drained at
+once (the publisher is never held for the gap).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 
-from PySide6.QtCore import QObject, Qt, Signal
+from PySide6.QtCore import QObject, Qt, QTimer, Signal
 
 from bench.engine.events import Event, EventBus
 
@@ -33,7 +38,7 @@ class EventBridge(QObject):
     _wake = Signal()
 
     def __init__(self, bus: EventBus | None = None, parent: QObject | None = None, *, slice_s: float = 0.02,
-                 max_pending: int = 50, max_wait_s: float = 0.0) -> None:
+                 max_pending: int = 50, max_wait_s: float = 0.0, min_gap_s: float = 0.0) -> None:
         super().__init__(parent)
         self._queue: deque[Event] = deque()
         self._lock = threading.Lock()
@@ -47,7 +52,12 @@ class EventBridge(QObject):
         self.delivered = 0
         self.held_s = 0.0  # wall seconds the publisher was held by the backpressure (benchmarks/gui_max_speed.py)
         self.latency_s: deque[float] = deque(maxlen=10_000)  # publish -> GUI thread, wall seconds
-        self._wake.connect(self._drain, Qt.ConnectionType.QueuedConnection)
+        self.min_gap_s = min_gap_s
+        self._last_drain = -1e300  # perf_counter of the last drain's start
+        self._later = QTimer(self)  # a drain put off by min_gap_s
+        self._later.setSingleShot(True)
+        self._later.timeout.connect(self._drain)
+        self._wake.connect(self._on_wake, Qt.ConnectionType.QueuedConnection)
         if bus is not None:
             self.attach(bus)
 
@@ -74,7 +84,8 @@ class EventBridge(QObject):
                 self._drained.wait_for(lambda: len(self._queue) < self.max_pending, self.max_wait_s)
                 self.held_s += time.perf_counter() - t_held
             self._queue.append(event)
-            wake = not self._pending
+            # woken once per drain; with coalescing once more when the queue is half full (at once)
+            wake = not self._pending or (self.min_gap_s > 0 and len(self._queue) == max(1, self.max_pending // 2))
             self._pending = True
         if wake:
             self._wake.emit()
@@ -90,8 +101,22 @@ class EventBridge(QObject):
                     return
             self._drain()
 
+    def _on_wake(self) -> None:
+        """GUI thread: drain now, or (coalescing) when min_gap_s has passed since the last drain."""
+        if self.min_gap_s > 0:
+            wait_s = self._last_drain + self.min_gap_s - time.perf_counter()
+            with self._lock:
+                full = len(self._queue) >= max(1, self.max_pending // 2)
+            if wait_s > 0 and not full:
+                if not self._later.isActive():
+                    self._later.start(max(1, int(wait_s * 1000.0 + 0.5)))
+                return
+        self._later.stop()
+        self._drain()
+
     def _drain(self) -> None:
-        t_end = time.perf_counter() + self.slice_s
+        self._last_drain = time.perf_counter()
+        t_end = self._last_drain + self.slice_s
         while True:
             with self._lock:
                 batch = [self._queue.popleft() for _ in range(min(len(self._queue), 200))]

@@ -36,7 +36,7 @@ FORMATS = {"CSV (raw data)": "csv", "HDF5 (raw data)": "h5", "PNG (figure)": "pn
 PLOTS = (("cx sx cy sy", "p_q", "fpga"), ("E", "p_e", "fpga"), ("wave angle", "p_theta", "fpga"),
          ("table rate", "p_rate", "table"), ("sweep amplitude", "p_amp", "sweep"),
          ("sweep phase", "p_phase", "sweep"), ("rate output", "p_cvg", "fpga"),
-         ("Allan deviation", "p_allan", "cvg_allan_curve"))
+         ("Allan deviation", "p_allan", "cvg_allan_curve"), ("temperature", "p_temp", "chamber"))
 E_FIT_KEYS = ("energy_fit", "E_fit")  # a stored fit's model E(t) (fits/<name>/<key>, over its t_s)
 
 

@@ -8,7 +8,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QAction
 from PySide6.QtWidgets import (
@@ -61,7 +60,9 @@ def outcome_colour(outcome: str) -> str:
     return "amber"
 
 LOCKSTEP_WAIT_S = 0.25  # longest the bridge holds a lockstep engine per event
+LOCKSTEP_DRAIN_GAP_S = 0.025  # the bridge's drains at least this far apart in lockstep (its queue half full: at once)
 LABELS_EVERY_S = 0.1  # the time and progress labels' update period (wall)
+MAX_SPEED_LABELS_EVERY_S = 0.25  # ... at "max" (a progress bar repaints at once when set: ~2 ms each)
 MAX_SPEED_REFRESH_HZ = 5.0  # plot redraws a second at "max" speed (benchmarks/gui_max_speed.py)
 STATUS_LINES = 2  # the status box's height in lines: a longer status scrolls inside it
 STATION_TREE_PX = 260  # the station's device tree: every device's rows without scrolling
@@ -146,6 +147,8 @@ class MainWindow(QMainWindow):
         self.step_fraction = 0.0
         self.refresh_hz = refresh_hz
         self._labels_wall_s = 0.0  # when the time and progress labels were last set
+        self.labels_every_s = LABELS_EVERY_S  # their period now (MAX_SPEED_LABELS_EVERY_S at "max")
+        self._progress: tuple[float, str] | None = None  # the step's progress not yet shown (fraction, message)
         from PySide6.QtCore import QTimer
 
         self._labels_timer = QTimer(self)  # a batch that skipped the labels: they follow within LABELS_EVERY_S
@@ -289,8 +292,11 @@ class MainWindow(QMainWindow):
         lost there: the world waits); in real time or on a real bench, never."""
         lockstep = self.backend.simulated and math.isinf(speed)
         self.bridge.max_wait_s = LOCKSTEP_WAIT_S if lockstep else 0.0
+        self.bridge.min_gap_s = LOCKSTEP_DRAIN_GAP_S if lockstep else 0.0  # fewer, fuller drains at "max"
         # at "max" a frame's Python painting competes with the engine for the interpreter: fewer frames
         self.plots.set_refresh_hz(MAX_SPEED_REFRESH_HZ if lockstep else self.refresh_hz)
+        self.labels_every_s = MAX_SPEED_LABELS_EVERY_S if lockstep else LABELS_EVERY_S
+        self._labels_timer.setInterval(int(self.labels_every_s * 1000))
 
     def set_status_line(self, text: str, colour: str) -> None:
         """The line under the buttons (and the status bar): `colour` is one of STATUS_COLOURS."""
@@ -346,27 +352,30 @@ class MainWindow(QMainWindow):
         """GUI thread: apply a batch of engine events to the widgets.  Sample blocks are joined
         per stream (one numpy pass per stream per batch however fast the engine runs); they are
         flushed before a run starts or ends, where the plots' state changes."""
-        pending: dict[tuple[str, tuple[str, ...]], list[np.ndarray]] = {}
         for e in batch:
             self.t_sim_s = max(self.t_sim_s, e.t_sim_s)
             if isinstance(e, ev.SampleBlock):
-                pending.setdefault((e.stream, tuple(e.columns)), []).append(np.asarray(e.data))
+                self.plots.queue_samples(e.stream, tuple(e.columns), e.data)
                 continue
-            if isinstance(e, (ev.RunStarted, ev.RunFinished)) and pending:
-                self._add_blocks(pending)
-                pending = {}
+            if isinstance(e, (ev.RunStarted, ev.RunFinished)):
+                self.plots.flush_samples()
+                self._apply_progress()
+            if isinstance(e, ev.RunFinished):
+                self.plots.fit_time_axes()  # the run's whole record, edge to edge
             if isinstance(e, ev.FitUpdate):
                 self.plots.set_fit(e.name, e.curves)
             elif isinstance(e, ev.StreamDeclared):
                 self.plots.declare(e.schema)
             elif isinstance(e, ev.Progress):
-                self.steps.set_progress(e.fraction, e.message)
-                self.step_fraction = min(1.0, max(0.0, e.fraction))
+                self._progress = (e.fraction, e.message)  # the step's bar follows with the labels (a
+                self.step_fraction = min(1.0, max(0.0, e.fraction))  # bar's repaint each event costs)
             elif isinstance(e, ev.StepStarted):
+                self._apply_progress()
                 self.steps.set_status(e.name, "running")
                 if not self.paused and not self.aborting:
                     self.set_status_line(f"step {e.index + 1}/{e.total}: {e.title or e.name}", "neutral")
             elif isinstance(e, ev.StepFinished):
+                self._apply_progress()
                 self.steps.set_status(e.name, e.status)
                 self.steps_done += 1
                 self.step_fraction = 0.0
@@ -382,10 +391,8 @@ class MainWindow(QMainWindow):
                 self._on_run_started(e)
             elif isinstance(e, ev.RunFinished):
                 self._on_run_finished(e)
-        if pending:
-            self._add_blocks(pending)
         now = _wall_s()
-        if now - self._labels_wall_s >= LABELS_EVERY_S or not self.run_active:  # a label a batch would cost
+        if now - self._labels_wall_s >= self.labels_every_s or not self.run_active:  # a label a batch would cost
             self.flush_labels(now)  # more than the plots at "max" speed: ten times a second is enough
         elif not self._labels_timer.isActive():  # the last batch's time is shown within LABELS_EVERY_S
             self._labels_timer.start()
@@ -393,6 +400,7 @@ class MainWindow(QMainWindow):
     def flush_labels(self, now: float | None = None) -> None:
         """Show the bench time and the run's progress as of the last event (a screenshot calls it)."""
         self._labels_wall_s = _wall_s() if now is None else now
+        self._apply_progress()
         self.station.set_time(self.t_sim_s)
         if self.run_active:
             self._show_run_info()
@@ -406,9 +414,11 @@ class MainWindow(QMainWindow):
             self.set_status_line("aborted: safe state confirmed; closing the run's files..." if confirmed
                                  else "aborted: SAFE STATE NOT CONFIRMED", "amber" if confirmed else "red")
 
-    def _add_blocks(self, pending: dict[tuple[str, tuple[str, ...]], list[np.ndarray]]) -> None:
-        for (stream, columns), arrays in pending.items():
-            self.plots.add_samples(stream, columns, arrays[0] if len(arrays) == 1 else np.concatenate(arrays))
+    def _apply_progress(self) -> None:
+        """The step's last reported progress to its bar (with the labels, and before a step changes)."""
+        if self._progress is not None:
+            self.steps.set_progress(*self._progress)
+            self._progress = None
 
     def run_fraction(self) -> float:
         """The whole run's progress: finished steps plus the current one's fraction, over all

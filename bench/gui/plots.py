@@ -32,25 +32,53 @@ RATE_SPAN_S = 0.1  # the live rate output's differencing span (whole-angle outpu
 WAVE_COHERENCE_ALPHA = 0.03  # the weight of each row's 4 theta step in the wave test's running mean
 WAVE_COHERENCE_MIN = 0.5  # |mean step| above which a wave is there (noise alone: ~0.12)
 THETA_TITLE = "wave angle \u03b8"
+FTR_TITLE = "rate output (force-to-rebalance)"  # the FPGA's rate_out_dps, in deg/h
 NO_WAVE_TITLE = "wave angle \u03b8: no standing wave"  # pickoff noise alone: no angle to draw
 TABLE_STREAM = "table"  # the table's own rate stream: the table-rate curve (a procedure's readings are markers)
 ALLAN_STREAM, ALLAN_COLS = "cvg_allan_curve", ("tau_s", "adev_dph")  # procedures/cvg_allan.py's curve
+#: the chamber's readings the chamber procedures record with each record or segment (t_start_s,
+#: t_end_s and some of these: procedures/thermal_soak.py, thermal_ramp.py); drawn at each's middle
+TEMP_COLS = ("setpoint_c", "air_c", "part_c")
+#: the chamber's own stream (drivers/chamber/watlow_f4_spec.py: a row at every link check): the
+#: live air and case curves; the records' readings stand in for them where a chamber has none
+CHAMBER_STREAM, CHAMBER_COLS = "chamber", ("air_degc", "part_degc")
+TEMP_PENS = {"setpoint_c": ("set point", "#7f7f7f"), "air_c": ("chamber air", "#1f77b4"),
+             "part_c": ("case thermocouple", "#d62728")}
 #: the plots each layout shows (attribute names of LivePlots' PlotItems)
 LAYOUTS = {"hrg": ("p_q", "p_e", "p_theta", "p_rate"), "sweep": ("p_amp", "p_phase"),
-           "cvg": ("p_cvg", "p_rate", "p_allan")}
+           "cvg": ("p_cvg", "p_rate", "p_allan"), "thermal": ("p_temp", "p_cvg", "p_q", "p_e")}
+#: LivePlots' PlotItems in the order of its views
+PLOT_ATTRS = ("p_q", "p_e", "p_theta", "p_rate", "p_amp", "p_phase", "p_cvg", "p_allan", "p_temp")
+RATE_OUTPUT_LAYOUTS = ("cvg", "thermal")  # the layouts with the live rate output (their procedures are CvgOutput)
 
 
 def layout_for(procedure: str) -> str:
-    """The plots a procedure's run shows: 'sweep' (a frequency sweep), 'cvg' (a rate sensor's
-    output), else 'hrg' (the resonator's slow variables, energy, angle and the table)."""
+    """The plots a procedure's run shows: 'sweep' (a frequency sweep), 'thermal' (a procedure that
+    drives the chamber: its temperatures and the rate output), 'cvg' (a rate sensor's output),
+    else 'hrg' (the resonator's slow variables, energy, angle and the table)."""
     if procedure.startswith("mems-sweep") or procedure.endswith("sweep"):
         return "sweep"
+    if _uses_chamber(procedure):
+        return "thermal"
     if procedure.startswith("cvg-"):
         return "cvg"
     return "hrg"
+
+
+def _uses_chamber(procedure: str) -> bool:
+    """The procedure needs a temperature chamber (its `requires`); an unknown name does not."""
+    from procedures import ProcedureNotFound, find_procedure
+
+    try:
+        return "chamber" in getattr(find_procedure(procedure), "requires", ())
+    except (ProcedureNotFound, OSError, ImportError):
+        return False
 E_FIT_KEYS = ("E_fit", "energy_fit", "E")  # model E(t) keys of a FitUpdate (not the measured "energy")
 PEN_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 FIT_COLOUR = "#d62728"
+X_AHEAD = 4.0 / 3.0  # a live time axis extended to this times the data's span (fewer moves, each regenerating ticks)
+Y_PAD, Y_FILL_MIN = 0.08, 0.5  # a y range's padding (of the data's span), and the fill below which it shrinks
+Y_AHEAD = 0.25  # data leaving a y range: the new one leaves this much of their span ahead on that side
 E_LOG_ABOVE, E_LINEAR_BELOW = 10.0, 5.0  # E's max/min ratio at which its axis turns log, and back to linear
 
 
@@ -79,6 +107,20 @@ def log_ticks(low: float, high: float) -> list[tuple[float, str]]:
     return ticks
 
 
+def _y_bounds(curves) -> tuple[float, float]:
+    """The smallest and largest finite y drawn by `curves` (as drawn: log10 on a log axis); NaN if none."""
+    lows, highs = [], []
+    for curve in curves:
+        y = curve.getData()[1]
+        if y is not None and len(y):
+            y = np.asarray(y, dtype=float)
+            y = y[np.isfinite(y)]
+            if len(y):
+                lows.append(float(y.min()))
+                highs.append(float(y.max()))
+    return (min(lows), max(highs)) if lows else (math.nan, math.nan)
+
+
 def _columns(columns: tuple[str, ...], data: np.ndarray, wanted: tuple[str, ...]) -> np.ndarray | None:
     """data's columns named `wanted`, in that order, or None if one is missing."""
     try:
@@ -105,6 +147,8 @@ class LivePlots(QWidget):
         self.sweep = RingBuffer(100_000, SWEEP_COLS)
         self.table_marks = RingBuffer(100_000, ("t_s", "rate_dps"))  # a procedure's own rate readings
         self.cvg = MinMaxHistory(("rate_dph",), max_points, history_s)  # the rate output, deg/h
+        self.temps = RingBuffer(100_000, ("t_s", *TEMP_COLS))  # the records' chamber readings (NaN: not in the stream)
+        self.chamber = MinMaxHistory(("air_c", "part_c"), max_points, history_s)  # the chamber stream
         self._angle_last: tuple[float, float] | None = None  # (t_s, angle_out_deg) of the last FPGA row
         self._amp_max = 0.0  # the largest wave amplitude of the run so far
         self.allan = np.empty((0, 2))
@@ -115,11 +159,14 @@ class LivePlots(QWidget):
         self.refresh_times: deque[float] = deque(maxlen=2000)  # wall monotonic of each redraw
         self.refresh_cost_s: deque[float] = deque(maxlen=2000)
         self._dirty = False
+        self._queued: dict[tuple[str, tuple[str, ...]], list[np.ndarray]] = {}  # FPGA blocks for the next frame
         self._theta_last_rad: float | None = None
         self._wave_phasor: tuple[complex | None, complex] = (None, 0j)  # _wave_present's carry
         self.cvg_breaks: list[float] = []  # times where the rate output's curve is broken (no held wave)
         self._cvg_last_held = True  # the last FPGA row's wave was held (force-to-rebalance output)
         self._cvg_t_drawn: float | None = None  # the time of the last whole-angle rate drawn
+        self._cvg_ftr = False  # the run's output is the force-to-rebalance rate (not the wave angle)
+        self._rate_bin_last = math.nan  # the RATE_SPAN_S bin of the last FPGA row (whole-angle rate)
         self.bryan_factor: float | None = None  # K: the whole-angle rate output is -dtheta/dt / K
         self.t0_s: float | None = 0.0  # the run's start on the bench clock: the time axes are time since then
 
@@ -177,21 +224,31 @@ class LivePlots(QWidget):
                                          symbolBrush="#1f77b4", name="Allan deviation")
         self.c_allan_lo = self.p_allan.plot(pen=pg.mkPen("#9ecae1", width=1), name="low")
         self.c_allan_hi = self.p_allan.plot(pen=pg.mkPen("#9ecae1", width=1), name="high")
+        self.p_temp = add_plot(2, 0, legend_title(*TEMP_PENS.values()), colspan=2)  # where a sweep's plots are
+        self.p_temp.setLabel("left", "T", units="degC")
+        self.c_temp = {}  # the set point as squares alone, the readings as lines through their points
+        for c, (name, colour) in TEMP_PENS.items():
+            marks_only = c == "setpoint_c"
+            self.c_temp[c] = self.p_temp.plot(pen=None if marks_only else pg.mkPen(colour, width=1),
+                                              symbol="s" if marks_only else None, symbolSize=8,
+                                              symbolBrush=colour, symbolPen=None, name=name)
         from .plot_cursor import CursorReadout
 
         self.cursor_label = QLabel("hover over a plot: x and y under the pointer")
         self.cursor_label.setObjectName("cursor_readout")
         grid.addWidget(self.cursor_label, 5, 0, 1, 2)
         self.cursor = CursorReadout(self.views, ("cx..sy", "E", "\u03b8", "table rate", "sweep amplitude",
-                                                 "sweep phase", "rate output", "Allan deviation"), self.cursor_label)
+                                                 "sweep phase", "rate output", "Allan deviation", "temperature"),
+                                     self.cursor_label)
         self.sweep_views = self.views[4:6]
         self.set_layout("hrg")
         # no grid: redrawing grid lines with the axes costs ~10 ms per plot per frame (raster)
-        self.time_plots = (self.p_q, self.p_e, self.p_theta, self.p_rate, self.p_cvg)
+        self.time_plots = (self.p_q, self.p_e, self.p_theta, self.p_rate, self.p_cvg, self.p_temp)
         for p in self.time_plots:
             p.setLabel("bottom", "t since the run started", units="s")
             p.enableAutoRange(x=False)
         self._x_range: tuple[float, float] | None = None
+        self._y_ranges: dict[int, tuple[float, float]] = {}  # id(plot): the y range last set (_hold_y_range)
         for p in (self.p_amp, self.p_phase):
             p.setLabel("bottom", "f", units="Hz")
         self.p_allan.getAxis("bottom").enableAutoSIPrefix(False)
@@ -227,6 +284,7 @@ class LivePlots(QWidget):
 
     def clear(self) -> None:
         self.t0_s = 0.0
+        self._queued = {}
         self.fpga.clear()
         self.table.clear()
         self.recent.clear()
@@ -234,6 +292,8 @@ class LivePlots(QWidget):
         self.table_marks.clear()
         self.p_rate.setTitle(legend_title(("table rate", "#8c564b")))
         self.cvg.clear()
+        self.temps.clear()
+        self.chamber.clear()
         self._angle_last = None
         self._amp_max = 0.0
         self.allan = np.empty((0, 2))
@@ -243,13 +303,35 @@ class LivePlots(QWidget):
         self.cvg_breaks = []
         self._cvg_last_held = True
         self._cvg_t_drawn = None
+        self._cvg_ftr = False
+        self._rate_bin_last = math.nan
         self._x_range = None
+        self._y_ranges.clear()
+        for p in self.time_plots:
+            p.enableAutoRange(y=True)  # until the first data: then _hold_y_range
         self.set_layout(self.layout_kind)
         for c in (*self.c_q, self.c_e, self.c_fit, self.c_theta, self.c_rate, self.c_rate_marks, self.c_amp,
                   self.c_phase, self.c_amp_fit, self.c_phase_fit, self.c_cvg, self.c_allan, self.c_allan_lo,
-                  self.c_allan_hi):
+                  self.c_allan_hi, *self.c_temp.values()):
             c.setData([], [])
         self._dirty = True
+
+    def queue_samples(self, stream: str, columns: tuple[str, ...], data: np.ndarray) -> None:
+        """The window's path: a slow-variable (cx..sy) block waits for the next frame and is then
+        added with the others of its stream in one pass (`flush_samples`), so the per-block work
+        (orbit elements, the wave test, the unwrap) is paid once a frame, not once a block; other
+        streams (sparse: the table, a sweep's points, readings) are added at once."""
+        if self.t0_s is None or not {"t_s", "cx"} <= set(columns):  # a replay's origin comes from the first block
+            self.add_samples(stream, columns, data)
+            return
+        self._queued.setdefault((stream, tuple(columns)), []).append(np.asarray(data))
+        self._dirty = True
+
+    def flush_samples(self) -> None:
+        """Add the queued blocks, each stream's joined in order (before a redraw, a run's start or end)."""
+        queued, self._queued = self._queued, {}
+        for (stream, columns), arrays in queued.items():
+            self.add_samples(stream, columns, arrays[0] if len(arrays) == 1 else np.concatenate(arrays))
 
     def add_samples(self, stream: str, columns: tuple[str, ...], data: np.ndarray) -> None:
         """One SampleBlock's rows; streams and columns the plots do not show are ignored."""
@@ -275,10 +357,8 @@ class LivePlots(QWidget):
             self.fpga.append(t[:, 0], values)
             self.recent.append(np.column_stack((t, values)))
             self._dirty = True
-            if self.layout_kind == "cvg":  # while the wave stands at its held amplitude (not while it starts)
-                self._amp_max = max(self._amp_max, float(np.max(el["a"])))
-                held = (el["a"] > 0.5 * self._amp_max) & (np.abs(el["k"]) < 0.3 * np.maximum(el["a"], 1e-300))
-                self._add_rate_output(columns, data, t[:, 0], held)
+            if self.layout_kind in RATE_OUTPUT_LAYOUTS:
+                self._add_rate_output(columns, data, t[:, 0], self._held_rows(columns, data, el))
         rate = _columns(columns, data, ("rate_dps",))
         if t is not None and rate is not None and stream == TABLE_STREAM:
             angle = _columns(columns, data, ("angle_deg",))
@@ -287,6 +367,16 @@ class LivePlots(QWidget):
             self._dirty = True
         elif t is not None and rate is not None:  # a procedure's readings (table-spin's "hold"): markers
             self.table_marks.append(np.column_stack((t, rate)))
+            self._dirty = True
+        chamber = _columns(columns, data, CHAMBER_COLS)
+        if t is not None and chamber is not None and stream == CHAMBER_STREAM:
+            self.chamber.append(t[:, 0], chamber)
+            self._dirty = True
+        span = _columns(columns, data, ("t_start_s", "t_end_s"))
+        if span is not None and any(c in columns for c in TEMP_COLS):  # a chamber procedure's record or segment
+            nan = np.full(len(data), np.nan)
+            readings = [data[:, columns.index(c)] if c in columns else nan for c in TEMP_COLS]
+            self.temps.append(np.column_stack([span.mean(axis=1) - (self.t0_s or 0.0), *readings]))
             self._dirty = True
         allan = _columns(columns, data, ALLAN_COLS + ("adev_low_dph", "adev_high_dph"))
         if stream == ALLAN_STREAM and allan is not None:
@@ -312,31 +402,57 @@ class LivePlots(QWidget):
                  else "wave rate \u2212d\u03b8/dt (K unknown: not divided by it)")
         self.p_cvg.setTitle(legend_title((title, "#2ca02c")))
 
+    def _held_rows(self, columns: tuple[str, ...], data: np.ndarray, el: dict[str, np.ndarray]) -> np.ndarray:
+        """Per row: do the loops hold the wave, so the output is a rate?  The amplitude near the
+        run's largest (not starting, not quenched away) with a small quadrature, the amplitude loop
+        on (its force exactly 0: off, at a turn-on's start or the run's end, where the whole-angle
+        output is reset) and not at its limit (a quench's first second, the wave still large)."""
+        self._amp_max = max(self._amp_max, float(np.max(el["a"])))
+        held = (el["a"] > 0.5 * self._amp_max) & (np.abs(el["k"]) < 0.3 * np.maximum(el["a"], 1e-300))
+        amp_ctrl = _columns(columns, data, ("amp_ctrl",))
+        if amp_ctrl is not None:
+            held &= amp_ctrl[:, 0] != 0.0
+        sat = _columns(columns, data, ("sat_flags",))
+        if sat is not None:
+            held &= sat[:, 0] == 0.0
+        return held
+
     def _add_rate_output(self, columns: tuple[str, ...], data: np.ndarray, t: np.ndarray, held: np.ndarray) -> None:
         """The rate sensor's output in deg/h where the wave is held (`held`, a row mask): the FPGA's
-        rate output in force-to-rebalance (non-zero there), else the whole-angle output's rate
-        -d(angle_out)/dt / K between consecutive held rows (K: set_bryan_factor)."""
+        rate output in force-to-rebalance (where the rebalance loop gives one: exactly 0 is its
+        loop off, a quench), else the whole-angle output's rate -d(angle_out)/dt / K between the
+        first rows of consecutive RATE_SPAN_S bins of bench time, over held rows only (K:
+        set_bryan_factor).  The bins are fixed in time, so the curve does not depend on how the
+        rows were cut into blocks (the window adds them once a frame)."""
         ftr = _columns(columns, data, ("rate_out_dps",))
         angle = _columns(columns, data, ("angle_out_deg",))
-        if ftr is not None and np.any(ftr[held, 0] != 0.0):
+        if ftr is not None and not self._cvg_ftr and np.any(ftr[held, 0] != 0.0):
+            self._cvg_ftr = True  # the mode holds for the run (a block inside a quench reads 0 throughout)
+            self.p_cvg.setTitle(legend_title((FTR_TITLE, "#2ca02c")))
+        if ftr is not None and self._cvg_ftr:
+            held = held & (ftr[:, 0] != 0.0)
             was_held = np.concatenate(([self._cvg_last_held], held[:-1]))
             self.cvg_breaks.extend(t[held & ~was_held].tolist())  # the first held row after unheld ones
             self._cvg_last_held = bool(held[-1])
-            self.cvg.append(t[held], 3600.0 * ftr[held, :1])
-            self._angle_last = None
+            if np.any(held):
+                self.cvg.append(t[held], 3600.0 * ftr[held, :1])
             return
         if angle is None:
             return
-        prev = self._angle_last  # the last row of the block before, if it was held
-        t_all = np.concatenate(([prev[0]], t)) if prev else t
-        a_all = np.concatenate(([prev[1]], angle[:, 0])) if prev else angle[:, 0]
-        h_all = np.concatenate(([True], held)) if prev else held
-        # rows RATE_SPAN_S apart at least (a 1 kHz stream's sample-to-sample derivative is noise)
-        picks = np.unique(np.searchsorted(t_all, np.arange(t_all[0], t_all[-1] + 1e-12, RATE_SPAN_S)))
-        picks = picks[picks < len(t_all)]
-        last = len(t_all) - 1
-        self._angle_last = (float(t_all[picks[-1]]), float(a_all[picks[-1]])) if h_all[picks[-1]] else None
-        if picks[-1] != last and not h_all[last]:
+        bins = np.floor(t / RATE_SPAN_S)
+        starts = np.flatnonzero(bins != np.concatenate(([self._rate_bin_last], bins[:-1])))  # a bin's first row
+        self._rate_bin_last = float(bins[-1])
+        prev = self._angle_last  # the last bin start before this block, if every row since was held
+        if prev is not None:
+            t_all, a_all, h_all = (np.concatenate(([prev[0]], t)), np.concatenate(([prev[1]], angle[:, 0])),
+                                   np.concatenate(([True], held)))
+            picks = np.concatenate(([0], starts + 1))
+        else:
+            t_all, a_all, h_all, picks = t, angle[:, 0], held, starts
+        if len(picks):
+            last = int(picks[-1])
+            self._angle_last = (float(t_all[last]), float(a_all[last])) if bool(np.all(h_all[last:])) else None
+        elif not np.all(held):
             self._angle_last = None
         if len(picks) < 2:
             return
@@ -346,7 +462,7 @@ class LivePlots(QWidget):
         ok = (dt > 0) & (gaps == 0)  # never across a quench or a start: only over held rows
         # the curve breaks where rates are missing: a rate whose span does not start at the last
         # rate drawn (the span before it was not held, or the last block ended without a held wave)
-        joins_last = prev is not None and self._cvg_t_drawn == float(t_all[picks[0]])
+        joins_last = self._cvg_t_drawn == float(t_all[picks[0]])
         after_drawn = np.concatenate(([joins_last], ok[:-1]))
         self.cvg_breaks.extend(t_all[picks[1:]][ok & ~after_drawn].tolist())
         if np.any(ok):
@@ -413,6 +529,7 @@ class LivePlots(QWidget):
         if not (self._dirty or force):
             return
         t0 = time.perf_counter()
+        self.flush_samples()
         self._dirty = False
         self._update_x_range()
         if len(self.fpga):
@@ -434,7 +551,17 @@ class LivePlots(QWidget):
         if len(self.cvg):
             t_cvg, r_cvg = self.cvg.curve("rate_dph")
             self.c_cvg.setData(t_cvg, r_cvg, connect=self._cvg_connect(t_cvg))
-            self._robust_y_range(self.p_cvg, r_cvg)
+            self._robust_y_range(r_cvg)
+        if len(self.temps):
+            t_temp = self.temps.column("t_s")
+            for c, curve in self.c_temp.items():
+                if c == "setpoint_c" or not len(self.chamber):
+                    y = self.temps.column(c)
+                    ok = np.isfinite(y)
+                    curve.setData(t_temp[ok], y[ok])
+        if len(self.chamber):  # the live readings, as lines
+            for c in ("air_c", "part_c"):
+                self.c_temp[c].setData(*self.chamber.curve(c))
         if len(self.allan):
             ok = np.all(np.isfinite(self.allan) & (self.allan > 0), axis=1)
             tau, adev, lo, hi = self.allan[ok].T
@@ -460,6 +587,9 @@ class LivePlots(QWidget):
         phase_fit = self._pick_fit("freq_hz", ("phase_deg",), prefer="sweep_model")
         if phase_fit is not None:
             self.c_phase_fit.setData(*phase_fit)
+        for plot, curves in ((self.p_q, self.c_q), (self.p_e, (self.c_e, self.c_fit)), (self.p_theta, (self.c_theta,)),
+                             (self.p_rate, (self.c_rate, self.c_rate_marks)), (self.p_temp, self.c_temp.values())):
+            self._hold_y_range(plot, *_y_bounds(curves))
         self.refresh_count += 1
         now = time.perf_counter()
         self.refresh_times.append(now)
@@ -476,17 +606,38 @@ class LivePlots(QWidget):
         before = np.searchsorted(breaks, t, side="right")  # breaks at or before each point
         return np.concatenate((before[1:] == before[:-1], [False]))
 
-    @staticmethod
-    def _robust_y_range(plot: pg.PlotItem, y: np.ndarray) -> None:
-        """The y axis over the 1st..99th percentile (padded): a wave-angle output's reset at a
-        mode change (one sample of 1e7 deg/h) must not flatten the rate noise to a line."""
+    def _robust_y_range(self, y: np.ndarray) -> None:
+        """The rate output's y axis over the 1st..99th percentile (padded): a wave-angle output's
+        reset at a mode change (one sample of 1e7 deg/h) must not flatten the rate noise to a line."""
         y = y[np.isfinite(y)]
-        if len(y) < 20:
-            plot.enableAutoRange(y=True)
+        if not len(y):
             return
-        lo, hi = np.percentile(y, [1.0, 99.0])
-        pad = 0.15 * max(hi - lo, 1e-12)
-        plot.setYRange(lo - pad, hi + pad, padding=0.0)
+        lo, hi = np.percentile(y, [1.0, 99.0]) if len(y) >= 20 else (np.min(y), np.max(y))
+        self._hold_y_range(self.p_cvg, float(lo), float(hi), pad=0.15)
+
+    def _hold_y_range(self, plot: pg.PlotItem, lo: float, hi: float, pad: float = Y_PAD) -> None:
+        """The y axis over [lo, hi] (padded), moved only when the data leave it or fill less than
+        Y_FILL_MIN of it: pyqtgraph's auto-range moved it every frame, and each move regenerates
+        the axis's ticks (the largest part of a frame at "max").  A range the operator zoomed or
+        panned to is left alone (the plot's own auto-range button takes over again)."""
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            return
+        r0, r1 = plot.getViewBox().viewRange()[1]
+        mine = self._y_ranges.get(id(plot))
+        if mine is not None and not (math.isclose(r0, mine[0], rel_tol=1e-9, abs_tol=1e-12)
+                                     and math.isclose(r1, mine[1], rel_tol=1e-9, abs_tol=1e-12)):
+            return  # the operator's range
+        span = max(hi - lo, 1e-6 * max(abs(lo), abs(hi)), 1e-12)
+        inside = mine is not None and r0 <= lo and hi <= r1
+        if inside and span >= Y_FILL_MIN * (r1 - r0):
+            return
+        if mine is not None and not inside:  # growing (a precessing angle, a rising temperature): room ahead
+            lo, hi = (lo - Y_AHEAD * span if lo < r0 else lo), (hi + Y_AHEAD * span if hi > r1 else hi)
+            span = hi - lo
+        mid = 0.5 * (lo + hi)
+        half = 0.5 * span * (1.0 + 2.0 * pad)
+        plot.setYRange(mid - half, mid + half, padding=0.0)
+        self._y_ranges[id(plot)] = tuple(plot.getViewBox().viewRange()[1])
 
     def _choose_e_scale(self, e: np.ndarray) -> None:
         """E on a log axis when, once excited, it spans more than a decade (a decay into the noise),
@@ -506,6 +657,7 @@ class LivePlots(QWidget):
         if log != self.e_log:
             self.e_log = log
             self.p_e.setLogMode(x=False, y=log)
+            self._y_ranges.pop(id(self.p_e), None)  # the axis's units changed: a new range
             self.p_e.setTitle(legend_title(("E (log)" if log else "E", "#1f77b4"), ("fit", FIT_COLOUR)))
 
     def _show_sweep(self, shown: bool) -> None:
@@ -521,7 +673,7 @@ class LivePlots(QWidget):
         shown = set(LAYOUTS[self.layout_kind])
         if self.layout_kind == "cvg" and not len(self.allan):
             shown.discard("p_allan")
-        for attr in ("p_q", "p_e", "p_theta", "p_rate", "p_amp", "p_phase", "p_cvg", "p_allan"):
+        for attr in PLOT_ATTRS:
             self.views[self._view_index(attr)].setVisible(attr in shown)
         self.sweep_shown = "p_amp" in shown
         # a CVG run: the table's rate under the rate output (beside the Allan curve once it is there)
@@ -532,13 +684,15 @@ class LivePlots(QWidget):
         grid.addWidget(rate_view, *cell)
 
     def _view_index(self, attr: str) -> int:
-        return ("p_q", "p_e", "p_theta", "p_rate", "p_amp", "p_phase", "p_cvg", "p_allan").index(attr)
+        return PLOT_ATTRS.index(attr)
 
     def _update_x_range(self) -> None:
         """The time axes move in round steps (not every frame): regenerating the ticks of four
-        axes each frame would cost more than drawing the curves."""
-        starts = [h.t_first for h in (self.fpga, self.table) if len(h)]
-        ends = [h.t_last for h in (self.fpga, self.table) if len(h)]
+        axes each frame would cost more than drawing the curves.  A growing run's axis is
+        extended a third ahead (a few moves a run, not one each step); `fit_time_axes` ends it
+        tight."""
+        starts = [h.t_first for h in (self.fpga, self.table, self.chamber) if len(h)]
+        ends = [h.t_last for h in (self.fpga, self.table, self.chamber) if len(h)]
         if not ends:
             return
         t0, t1 = min(starts), max(ends)
@@ -546,10 +700,17 @@ class LivePlots(QWidget):
             return
         span = max(t1 - t0, 1e-3)
         step = 0.5 * 10.0 ** math.floor(math.log10(span))
-        hi = t0 + max(1, math.ceil(span / step)) * step
+        ahead = X_AHEAD if self._x_range is not None else 1.0  # the first range is the data's
+        hi = t0 + max(1, math.ceil(ahead * span / step - 1e-9)) * step
         self._x_range = (t0, hi)
         for p in self.time_plots:
             p.setXRange(t0, hi, padding=0.0)
+
+    def fit_time_axes(self) -> None:
+        """The time axes over the data alone (a finished run: no room left ahead)."""
+        self.flush_samples()
+        self._x_range = None
+        self._update_x_range()
 
     def set_refresh_hz(self, hz: float) -> None:
         """Redraws per second from now on (the window draws less often at "max" speed, where each
