@@ -216,8 +216,34 @@ def test_stalled_stream_wait_raises(bench):
     link.start_stream(1)
     server.inject("stall")
     clock.sleep(0.2)
-    with pytest.raises(LinkLostError, match="stream reached sample"):
+    with pytest.raises(LinkLostError, match="stream stopped at sample .*no frame for 0.3 s"):
         link.wait_for_sample(clock.now(), timeout_wall_s=0.3)
+
+
+def test_a_slow_stream_is_waited_for_while_its_frames_arrive():
+    """A starved host delivers frames slowly: the wait lasts longer than its timeout in all but
+    never goes timeout_wall_s without a frame, so it is not a lost link (a lockstep run under
+    load ended ERROR "stream reached sample 304400, not 304800, within 2 s" before)."""
+    import threading
+
+    link = FpgaLink("socket://127.0.0.1:1")
+    link._streaming = True
+    link._last_index = 0
+    steps, period_s, timeout_s = 30, 0.1, 2.0  # 3 s in all, a frame every 0.1 s
+
+    def deliver() -> None:
+        for i in range(1, steps + 1):
+            time.sleep(period_s)
+            with link._cond:
+                link._last_index = i
+                link._cond.notify_all()
+
+    feeder = threading.Thread(target=deliver, daemon=True)
+    t0 = time.monotonic()
+    feeder.start()
+    link.wait_for_sample(steps, timeout_wall_s=timeout_s)
+    assert time.monotonic() - t0 > timeout_s and link.last_index == steps
+    feeder.join()
 
 
 def test_open_fails_cleanly():
