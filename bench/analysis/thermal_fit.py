@@ -51,6 +51,18 @@ def _wls(x: np.ndarray, y: np.ndarray, w: np.ndarray, order: int) -> tuple[np.nd
     return coeffs, cov, chi2
 
 
+def birge_half_widths(cov: np.ndarray, chi2: float, dof: int) -> tuple[np.ndarray, float]:
+    """95 % half-widths of a weighted fit's coefficients and its Birge ratio sqrt(chi2/dof): when the
+    scatter exceeds the stated errors (ratio > 1) the covariance is scaled up and Student's t taken."""
+    birge = math.sqrt(chi2 / dof) if dof > 0 else 1.0
+    if birge > 1.0:
+        cov = cov * birge**2
+        q = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
+    else:
+        q = float(stats.norm.ppf(0.5 + LEVEL / 2))
+    return q * np.sqrt(np.diag(cov)), birge
+
+
 def fit_temperature_polynomial(
     temperature_c, y, sigma, *, max_order: int = 3, t_ref_c: float = 25.0, min_order: int = 0,
     sigma_t_c: float = 0.0,
@@ -89,13 +101,7 @@ def fit_temperature_polynomial(
     order = min(bic, key=bic.get)
     coeffs, cov, chi2 = fits[order]
     dof = n - order - 1
-    birge = math.sqrt(chi2 / dof) if dof > 0 else 1.0
-    if birge > 1.0:
-        cov = cov * birge**2
-        q = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
-    else:
-        q = float(stats.norm.ppf(0.5 + LEVEL / 2))
-    half = q * np.sqrt(np.diag(cov))
+    half, birge = birge_half_widths(cov, chi2, dof)
     ci = np.column_stack([coeffs - half, coeffs + half])
     resid = yv - np.polynomial.polynomial.polyval(x, coeffs)
     return ThermalFit(order, coeffs, ci, float(t_ref_c), bic, birge, dof, resid)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from .thermal_fit import LEVEL, ThermalFit, fit_temperature_polynomial
+from .thermal_fit import LEVEL, ThermalFit, birge_half_widths, fit_temperature_polynomial
 
 
 def trend_mean(values, n_batches: int = 10) -> tuple[float, float]:
@@ -124,13 +124,7 @@ def branch_hysteresis(temperature_c, y, sigma, heating, rate, *, order: int = 1,
     cov = np.linalg.inv(aw.T @ aw)
     dof = len(x) - n_par
     chi2 = float(np.sum((yw - aw @ coeffs) ** 2))
-    birge = math.sqrt(chi2 / dof)
-    if birge > 1.0:
-        cov = cov * birge**2
-        q = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
-    else:
-        q = float(stats.norm.ppf(0.5 + LEVEL / 2))
-    half = q * np.sqrt(np.diag(cov))
+    half, _ = birge_half_widths(cov, chi2, dof)
     gap, c = float(coeffs[-1]), float(coeffs[-2])
     return Hysteresis(gap, (gap - float(half[-1]), gap + float(half[-1])), c,
                       (c - float(half[-2]), c + float(half[-2])), len(x), dof)
