@@ -143,7 +143,8 @@ class ThermalRamp(ThermalChamber, Procedure):
     measurements = (
         Measurement("f0_tc_ppm_k", "ppm/K", "resonator frequency's temperature coefficient at 25 degC against the "
                     "part thermocouple, both branches", truth=_f0_tc_truth),
-        Measurement("f0_at_25c_hz", "Hz", "resonator frequency at 25 degC from the fit", truth=_f0_at_25c_truth),
+        Measurement("f0_at_25c_hz", "Hz", "resonator frequency at 25 degC from the fit (the PLL's: the held wave's "
+                    "at the AGC's amplitude)", truth=_f0_at_25c_truth),
         Measurement("bias_tc_dph_k", "deg/h/K",
                     "bias's temperature slope at 25 degC against the frequency thermometer"),
         Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC against the frequency thermometer",

@@ -50,9 +50,13 @@ def _f0_tc_truth(truth: dict[str, float]) -> float:
 
 
 def _f0_at_25c_truth(truth: dict[str, float]) -> float:
-    """The natural frequency at the reference temperature (the World's truth keeps the reference
-    values under `<key>_ref` when the unit is elsewhere, simulators/physics/errors.py)."""
-    return truth["f0_hz"] + truth.get("freq_offset_hz_ref", truth["freq_offset_hz"])
+    """The frequency the FPGA's PLL runs the unit at, at the reference temperature: the natural
+    frequency (the World's truth keeps the reference values under `<key>_ref` when the unit is
+    elsewhere, simulators/physics/errors.py) plus, with the wave held in force-to-rebalance, the
+    held wave's split, cubic stiffness and readout-phase detuning (`drive_freq_offset_hz`,
+    simulators/physics/drive_frequency.py; docs/chamber.md, "The frequency the loops run at")."""
+    return (truth["f0_hz"] + truth.get("freq_offset_hz_ref", truth["freq_offset_hz"])
+            + truth.get("drive_freq_offset_hz", 0.0))
 
 
 class ThermalChamber(CvgOutput):
@@ -178,8 +182,8 @@ class ThermalSoak(ThermalChamber, Procedure):
     measurements = (
         Measurement("f0_tc_ppm_k", "ppm/K", "resonator frequency's temperature coefficient at 25 degC "
                     "(fit slope over the fitted frequency there)", truth=_f0_tc_truth),
-        Measurement("f0_at_25c_hz", "Hz", "resonator frequency at 25 degC from the fit",
-                    truth=_f0_at_25c_truth),
+        Measurement("f0_at_25c_hz", "Hz", "resonator frequency at 25 degC from the fit (the PLL's: the held "
+                    "wave's at the AGC's amplitude)", truth=_f0_at_25c_truth),
         Measurement("bias_tc_dph_k", "deg/h/K", "bias's temperature slope at 25 degC from the fit"),
         Measurement("bias_at_25c_dph", "deg/h", "bias at 25 degC from the fit (the wave's angle held in "
                     "force-to-rebalance; in whole-angle it precesses through the soak)", truth=static_bias_truth,

@@ -359,7 +359,7 @@ def test_a_protocol_version_mismatch_is_one_clear_message():
 
 
 def test_output_mode_values_are_checked_before_anything_is_written(bench):
-    _, _, server, link = bench
+    world, _, server, link = bench
     with pytest.raises(LimitError, match="output_mode='rate' is not one of whole-angle, force-to-rebalance"):
         link.set_output_mode("rate")
     with pytest.raises(LimitError, match="FTR_ANGLE_DEG"):
@@ -367,7 +367,13 @@ def test_output_mode_values_are_checked_before_anything_is_written(bench):
     assert server.firmware.regs["FTR_GAIN"] == 1.0 and server.firmware.regs["OUTPUT_MODE"] == 0
     link.set_output_mode("force-to-rebalance", ftr_angle_deg=10.0, ftr_gain=2.0)
     assert link.output_mode() == "force-to-rebalance"
-    assert server.truth() == {"cvg_output_mode": 1.0, "ftr_angle_deg": 10.0, "ftr_gain": 2.0}
+    # and the frequency the PLL runs the wave held at 10 deg at (the hrg's 5 mHz split along it)
+    from simulators.physics.drive_frequency import drive_frequency_offset_hz
+
+    offset_hz = drive_frequency_offset_hz(world.params, None, setpoint=1.0, angle_deg=10.0)
+    assert offset_hz == pytest.approx(0.005 / 2.0 * math.cos(math.radians(4.0 * (10.0 - 10.0))), rel=1e-9)
+    assert server.truth() == {"cvg_output_mode": 1.0, "ftr_angle_deg": 10.0, "ftr_gain": 2.0,
+                              "drive_freq_offset_hz": pytest.approx(offset_hz, rel=1e-12)}
 
 
 def test_an_advance_streams_in_one_write_and_a_reply_comes_after_its_frames(bench):

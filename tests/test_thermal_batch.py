@@ -88,7 +88,8 @@ def test_every_unit_passes_with_its_own_numbers_against_its_own_truth(thermal_ba
         assert rec["serial"] == SERIALS[n] and rec["outcome"] == "PASS", rec["summary"]
         m = _measured(rec)
         truth = thermal_batch["truths"][n]
-        f25 = truth["f0_hz"] + truth.get("freq_offset_hz_ref", truth["freq_offset_hz"])
+        # the PLL's frequency: the natural one and the held wave's split (docs/chamber.md)
+        f25 = truth["f0_hz"] + truth.get("freq_offset_hz_ref", truth["freq_offset_hz"]) + truth["drive_freq_offset_hz"]
         lo, hi = m["f0_at_25c_hz"]["interval"]
         assert m["f0_at_25c_hz"]["truth"] == pytest.approx(f25, abs=1e-9)
         assert lo <= f25 <= hi, (n, m["f0_at_25c_hz"]["value"], f25)
@@ -161,7 +162,7 @@ def test_a_soak_batch_settles_on_every_units_frequency(tmp_path):
         assert rec.outcome == "COMPLETE", (n, rec.end_reason)
         got = {m.name: m for m in rec.measurements}
         truth = truths[n]
-        f25 = truth["f0_hz"] + truth.get("freq_offset_hz_ref", truth["freq_offset_hz"])
+        f25 = truth["f0_hz"] + truth.get("freq_offset_hz_ref", truth["freq_offset_hz"]) + truth["drive_freq_offset_hz"]
         lo, hi = got["f0_at_25c_hz"].ci95
         assert lo <= f25 <= hi, (n, got["f0_at_25c_hz"].value, f25)
         lo, hi = got["f0_tc_ppm_k"].ci95

@@ -124,6 +124,8 @@ def test_line_run_eol_mems_thermal_leaves_the_thermal_trim_in_nvm(tmp_path, caps
     m = {x["name"]: x for x in rec["measurements"]}
     tc = m["f0_tc_ppm_k"]
     assert tc["interval"][0] <= tc["truth"] == -30.0 <= tc["interval"][1]  # silicon's coefficient
+    f25 = m["f0_at_25c_hz"]  # the PLL's frequency, 2.41 Hz under f0 + freq_offset (docs/chamber.md)
+    assert f25["interval"][0] <= f25["truth"] <= f25["interval"][1], f25
     # the trim's slope against the ring's frequency, as a bias coefficient per kelvin: the unit's
     # own physics (about -0.07 deg/s/K through its damping) and the declared +0.03 deg/s/K together
     df_dt_hz_k = tc["value"] * 1e-6 * 13647.0

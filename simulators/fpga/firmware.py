@@ -32,6 +32,7 @@ import numpy as np
 
 from drivers.fpga import protocol as p
 
+from ..physics.drive_frequency import drive_frequency_offset_hz
 from . import kernels as k
 from .nvm import Nvm, decode_block, encode_block
 
@@ -67,7 +68,9 @@ class FpgaFirmware:
         in force-to-rebalance its mode, hold angle and gain; nothing in whole-angle, whose scale
         factor (-K) and bias follow from the resonator alone (so a whole-angle station's truth is
         the resonator's); and the readout phase trims while TRIM_PHASE is on (trim_phase_x_deg,
-        trim_phase_y_deg: against the chains' delays err_pickoff_phase_x_deg, _y_deg)."""
+        trim_phase_y_deg: against the chains' delays err_pickoff_phase_x_deg, _y_deg); with the wave
+        held and its amplitude set, drive_freq_offset_hz: the frequency the PLL runs the held wave at
+        minus f0_hz + freq_offset_hz, at 25 degC (simulators.physics.drive_frequency)."""
         with self.lock:
             out: dict[str, float] = {}
             if int(self.regs["TRIM_EN"]) & p.TRIM_PHASE:  # the readout phase trims in place (docs/readout_phase.md)
@@ -75,11 +78,18 @@ class FpgaFirmware:
                 out["trim_phase_y_deg"] = float(self.regs["TRIM_PHASE_Y_DEG"])
             if int(self.regs["OUTPUT_MODE"]) != p.MODE_FORCE_TO_REBALANCE:
                 return out
-            return out | {
+            out |= {
                 "cvg_output_mode": float(p.MODE_FORCE_TO_REBALANCE),
                 "ftr_angle_deg": float(self.regs["FTR_ANGLE_DEG"]),
                 "ftr_gain": float(self.regs["FTR_GAIN"]),
             }
+            params = getattr(self.world, "params", None)
+            if params is not None and self.regs["AGC_SETPOINT"] > 0:
+                out["drive_freq_offset_hz"] = drive_frequency_offset_hz(
+                    params, getattr(self.world, "errors", None), setpoint=float(self.regs["AGC_SETPOINT"]),
+                    angle_deg=out["ftr_angle_deg"], trim_phase_x_deg=out.get("trim_phase_x_deg", 0.0),
+                    trim_phase_y_deg=out.get("trim_phase_y_deg", 0.0))
+            return out
 
     # --- registers (called by the server's command thread) ----------------------------------------
     def read(self, reg: p.Register) -> float:
