@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from bench.analysis.cvg_rate import fit_scale_factor
-from bench.engine import Demand, Measurement, Param, Procedure, Result, step
+from bench.engine import Demand, Measurement, Param, Procedure, Result, StationMismatch, step
 from bench.streams import Column, StreamSchema, declare
 
 from .cvg_output import MODES, UNSTATED_BIAS_NO_TRUTH, CvgOutput, mean_bias_truth, scale_factor_truth, window_outputs
@@ -34,6 +34,10 @@ WINDOWS = declare(StreamSchema("cvg_sf_windows", "cvg-scale-factor", (
     Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
     Column("box_s", "s", doc="whole-angle: the boxes at the window's ends whose mean angles give its rate (0: slope)"),
 )))
+
+
+#: whole-angle fit: bias, scale factor, the drift's and the distortion's cos / sin 4 theta terms
+WHOLE_ANGLE_UNKNOWNS = 6
 
 
 def rate_series(max_rate_dps: float, steps: int) -> np.ndarray:
@@ -96,6 +100,19 @@ class CvgScaleFactor(CvgOutput, Procedure):
             Demand("table", "max_rate_dps", "max_rate_dps", self.max_rate_dps, "deg/s"),
             Demand("table", "max_accel_dps2", "accel_dps2", self.accel_dps2, "deg/s^2"),
         ]
+
+    def preflight(self, devices) -> None:
+        """Whole-angle fits six unknowns (bias, scale factor, the damping drift's and the read-out
+        distortion's cos/sin 4 theta terms) and needs a window more to see their scatter (read-only)."""
+        fpga = devices.get("fpga") if hasattr(devices, "get") else None
+        if fpga is None or fpga.output_mode() != "whole-angle":
+            return
+        windows = len(rate_series(self.max_rate_dps, self.steps))
+        if windows <= WHOLE_ANGLE_UNKNOWNS:
+            raise StationMismatch(
+                f"{self.name}: steps={self.steps} gives {windows} rate windows; in whole-angle mode the fit has "
+                f"{WHOLE_ANGLE_UNKNOWNS} unknowns and needs at least {WHOLE_ANGLE_UNKNOWNS + 1} windows "
+                f"(steps >= 2); nothing was moved")
 
     @step("Excite and hold the amplitude")
     def excite(self, ctx):

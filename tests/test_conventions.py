@@ -31,6 +31,7 @@ from procedures import all_procedures
 
 #: name suffix -> the unit a value so named carries (longest suffix first)
 SUFFIX_UNITS = {
+    "_dph_s_per_hz": "deg/h/(Hz/s)",
     "_dph_per_hz": "deg/h/Hz",
     "_degc_per_min": "degC/min",
     "_ppm_per_min": "ppm/min",

@@ -173,3 +173,21 @@ def test_whole_angle_scale_factor_fits_the_pickoff_gains_angle_distortion(noisy_
     assert record.station_id == "sim-hrg-wa" and fit.distortion_terms is not None
     assert fit.distortion_terms[0] == pytest.approx(math.degrees(-600e-6 / 4), rel=0.4)
     assert abs(fit.scale_factor / truth["scale_factor"] - 1.0) < 10e-6
+
+
+def test_a_whole_angle_series_too_short_for_its_fit_is_refused_before_anything_moves():
+    """steps=1 gives 6 windows for the whole-angle fit's 6 unknowns: it ended ERROR in the fit
+    ("6 points for 6 unknowns") after the whole series; now refused up front, naming the limit."""
+    from bench.composition.sim_station import SimStation
+    from bench.engine import Runner, StationMismatch
+
+    station = SimStation("sim-hrg", seed=0).open()
+    try:
+        assert station.devices["fpga"].output_mode() == "whole-angle"
+        with pytest.raises(StationMismatch) as err:
+            Runner(station).run(CvgScaleFactor, SF_PARAMS | {"steps": 1})
+        text = str(err.value)
+        assert "steps=1 gives 6 rate windows" in text and "at least 7" in text and "nothing was moved" in text
+        CvgScaleFactor(SF_PARAMS).preflight(station.devices)  # steps=2: 10 windows
+    finally:
+        station.close()

@@ -25,7 +25,7 @@ SHORT = {
     "mems-sweep": ("sim-mems", {"n_points": 5}),
     "table-spin": ("sim-hrg", {"hold_s": 0.5}),
     "cvg-allan": ("sim-hrg-wa", {"record_s": 60.0, "settle_s": 1.0}),
-    "cvg-scale-factor": ("sim-hrg", {"max_rate_dps": 10.0, "steps": 1, "average_s": 0.5, "settle_s": 0.2,
+    "cvg-scale-factor": ("sim-hrg", {"max_rate_dps": 10.0, "steps": 2, "average_s": 0.5, "settle_s": 0.2,
                                      "whole_turns": False}),
     "hrg-selfcal": ("sim-hrg-selfcal", {"cycles": 2, "precession_dps": 2.0, "settle_s": 1.0, "bin_s": 1.0,
                                         "fm_force_hz": 0.0,
