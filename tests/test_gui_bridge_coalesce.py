@@ -14,6 +14,24 @@ from bench.engine import events as ev  # noqa: E402
 from bench.gui.bridge import EventBridge  # noqa: E402
 
 
+@pytest.fixture
+def make_bridge(qtbot):
+    """EventBridges that are detached and deleted in the GUI thread when the test ends: left to the
+    garbage collector, a bridge with its put-off drain's timer running was deleted from whatever
+    thread collected it (a later test's), and the GUI thread crashed in its event loop."""
+    made: list[EventBridge] = []
+
+    def make(*args, **kwargs) -> EventBridge:
+        made.append(EventBridge(*args, **kwargs))
+        return made[-1]
+
+    yield make
+    for bridge in made:
+        bridge.detach()
+        bridge.deleteLater()
+    qtbot.wait(1)  # the deferred deletes run here, in this thread
+
+
 def _collect(bridge: EventBridge) -> tuple[list[float], list[int]]:
     got: list[float] = []
     sizes: list[int] = []
@@ -26,9 +44,9 @@ def _collect(bridge: EventBridge) -> tuple[list[float], list[int]]:
     return got, sizes
 
 
-def test_a_put_off_drain_delivers_everything_in_order_in_one_batch(qtbot):
+def test_a_put_off_drain_delivers_everything_in_order_in_one_batch(qtbot, make_bridge):
     bus = ev.EventBus()
-    bridge = EventBridge(bus, min_gap_s=0.3, max_pending=50)
+    bridge = make_bridge(bus, min_gap_s=0.3, max_pending=50)
     got, sizes = _collect(bridge)
     bus.publish(ev.Log("r", 0.0, message="first"))  # the first wake-up drains at once
     qtbot.waitUntil(lambda: len(got) == 1, timeout=5000)
@@ -42,11 +60,11 @@ def test_a_put_off_drain_delivers_everything_in_order_in_one_batch(qtbot):
     assert not bus.errors
 
 
-def test_a_half_full_queue_is_drained_at_once(qtbot):
+def test_a_half_full_queue_is_drained_at_once(qtbot, make_bridge):
     """With a gap far longer than the test (60 s) and backpressure on, 40 events still arrive:
     each time the queue is half way to max_pending (5) the GUI drains at once."""
     bus = ev.EventBus()
-    bridge = EventBridge(bus, min_gap_s=60.0, max_pending=10, max_wait_s=60.0)
+    bridge = make_bridge(bus, min_gap_s=60.0, max_pending=10, max_wait_s=60.0)
     got, sizes = _collect(bridge)
     bus.publish(ev.Log("r", 0.0, message="first"))
     qtbot.waitUntil(lambda: len(got) == 1, timeout=5000)

@@ -66,6 +66,8 @@ class EventBridge(QObject):
         self._unsubscribe = bus.subscribe(self.post)
 
     def detach(self) -> None:
+        """Stop taking events and drop a put-off drain (GUI thread: the timer is this thread's)."""
+        self._later.stop()
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
