@@ -36,7 +36,10 @@ def _rect_in(widget, ancestor) -> QRect:
 
 def test_the_form_shows_its_fields_at_full_height(win, qtbot):
     win.procedure.setCurrentText("hrg-damping")
-    qtbot.wait(50)
+    # the new form's layout runs in the event loop: wait for it (a loaded CI machine caught a field
+    # still at 12 px after a fixed 50 ms), then check it
+    qtbot.waitUntil(lambda: all(f.height() >= f.minimumSizeHint().height() for f in win.form.fields.values()),
+                    timeout=10_000)
     assert not any(a.widget() is win.form for a in win.findChildren(QScrollArea))  # no box of its own
     for name, field in win.form.fields.items():  # every field laid out at its full height, none clipped
         assert win.form.rect().contains(_rect_in(field, win.form)), name
