@@ -38,8 +38,11 @@ def test_the_form_shows_its_fields_at_full_height(win, qtbot):
     win.procedure.setCurrentText("hrg-damping")
     # the new form's layout runs in the event loop: wait for it (a loaded CI machine caught a field
     # still at 12 px after a fixed 50 ms), then check it
-    qtbot.waitUntil(lambda: all(f.height() >= f.minimumSizeHint().height() for f in win.form.fields.values()),
-                    timeout=10_000)
+    def laid_out() -> bool:
+        return all(f.isVisible() and win.form.rect().contains(_rect_in(f, win.form))
+                   and f.height() >= f.minimumSizeHint().height() for f in win.form.fields.values())
+
+    qtbot.waitUntil(laid_out, timeout=10_000)
     assert not any(a.widget() is win.form for a in win.findChildren(QScrollArea))  # no box of its own
     for name, field in win.form.fields.items():  # every field laid out at its full height, none clipped
         assert win.form.rect().contains(_rect_in(field, win.form)), name
