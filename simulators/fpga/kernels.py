@@ -82,7 +82,7 @@ MODE_FTR = 1  # OUTPUT_MODE's force-to-rebalance (drivers.fpga.protocol.MODE_FOR
 OBS_MEMORY_S = 100.0  # the observer forgets data older than this (exponential weight)
 AGC_SETTLED_REL = 0.01  # the amplitude's band around the setpoint in which the split observer learns
 OBS_RIDGE = 0.05**3  # damping of the solve: one 50 ms block's weight (weights are span^3: 1/variance)
-CHI_ACC_TAU_S = 2.0  # smoothing of the phase acceleration: its noise ~ (chi rate's noise) / tau, its lag tau
+CHI_ACC_TAU_S = 0.5  # smoothing of the phase acceleration (its lag; 2 s left 1700 deg/h per Hz/s on a ramp)
 
 # control bits (drivers.fpga.protocol), repeated here as compile-time constants
 _DRIVE_EN, _AGC_EN, _PLL_EN, _QUAD_EN, _WHOLE_ANGLE, _DRIFT_COMP_EN = 0x01, 0x02, 0x04, 0x08, 0x10, 0x40
