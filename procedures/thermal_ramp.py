@@ -182,7 +182,7 @@ class ThermalRamp(ThermalChamber, Procedure):
                     "the same temperature (frequency thermometer), fitted beside the PLL's trail on the moving "
                     "frequency (bench.analysis.thermal_ramp.branch_hysteresis)", truth=_bias_hyst_truth),
         Measurement("bias_per_freq_rate_dph_s_per_hz", "deg/h/(Hz/s)", "the bias the frequency's rate of change "
-                    "adds (the PLL trailing a moving frequency), fitted with the hysteresis"),
+                    "adds (forces trailing a moving frequency's phase), fitted with the hysteresis"),
         Measurement("verify_hysteresis_dph", "deg/h", "thermal hysteresis from settled records: the bias "
                     "settled from below minus settled from above at each verification point (no rate term, no lag), "
                     "their weighted mean", truth=_bias_hyst_truth, when=_verifying_both,

@@ -67,7 +67,7 @@ def branch_gap(fit: ThermalFit, heating, slope: float) -> BranchGap:
 
 def record_slope(t_s, values) -> float:
     """The straight-line slope of a record against time (units of values per s): a segment's
-    frequency rate on a ramp, which a PLL trails by a phase proportional to it."""
+    frequency rate on a ramp, which a drive loop trails by a phase proportional to it."""
     t = np.asarray(t_s, dtype=float)
     v = np.asarray(values, dtype=float)
     if len(t) < 2 or np.ptp(t) <= 0:
@@ -93,8 +93,8 @@ def branch_hysteresis(temperature_c, y, sigma, heating, rate, *, order: int = 1,
     """The heating-cooling gap of y at the same temperature from a ramp cycle's points (docs/chamber.md,
     "Thermal hysteresis"): weighted least squares of
         y = sum_k a_k (T - t_ref)^k + c rate + gap s / 2,   s = +1 heating, -1 cooling,
-    where `rate` is each point's rate regressor (the resonator frequency's rate: a PLL trails a moving
-    frequency by a phase proportional to it, a bias of opposite sign on the two branches that would
+    where `rate` is each point's rate regressor (the resonator frequency's rate: forces that trail a
+    moving frequency's phase by a part proportional to it make a bias of opposite sign on the two branches that would
     otherwise be taken for hysteresis; the tails and the ramp's start, where the rate changes within a
     branch, separate the two).  Each branch's points within guard_c of its turning point (heating: its
     lowest temperature, cooling: its highest) are left out (a hysteresis loop's corner there is on

@@ -74,11 +74,15 @@ S_SPAN = 41  # the span between the last two wave estimates (the rates' baseline
 S_SAT_NEXT, S_SAT = 42, 43
 S_A_RATE = 44  # the amplitude's rate between the last two wave estimates (1/s x amplitude)
 S_FW, S_FW_PREV = 45, 46  # the frequency-control force held over the last block and the one before
-N_STATE = 47
+# the wave's phase acceleration (rad/s^2: 2 pi times its frequency's rate, e.g. on a temperature
+# ramp) less the split pattern's, smoothed over CHI_ACC_TAU_S (wave_force's phase prediction)
+S_CHI_ACC = 47
+N_STATE = 48
 MODE_FTR = 1  # OUTPUT_MODE's force-to-rebalance (drivers.fpga.protocol.MODE_FORCE_TO_REBALANCE)
 OBS_MEMORY_S = 100.0  # the observer forgets data older than this (exponential weight)
 AGC_SETTLED_REL = 0.01  # the amplitude's band around the setpoint in which the split observer learns
 OBS_RIDGE = 0.05**3  # damping of the solve: one 50 ms block's weight (weights are span^3: 1/variance)
+CHI_ACC_TAU_S = 0.5  # smoothing of the phase acceleration (its lag; 2 s left 1700 deg/h per Hz/s on a ramp)
 
 # control bits (drivers.fpga.protocol), repeated here as compile-time constants
 _DRIVE_EN, _AGC_EN, _PLL_EN, _QUAD_EN, _WHOLE_ANGLE, _DRIFT_COMP_EN = 0x01, 0x02, 0x04, 0x08, 0x10, 0x40
@@ -138,6 +142,36 @@ def solve_split(m_cc: float, m_cs: float, m_ss: float, v_c: float, v_s: float) -
 
 
 @njit(cache=True)
+def _split_freq(st: np.ndarray, theta: float) -> float:
+    """The split's part of the wave's frequency (rad/s of chi) at angle theta: p'(theta) / 4 of the
+    observer's pumping pattern p (split_phase)."""
+    return st[S_H_S] * math.cos(4.0 * theta) - st[S_H_C] * math.sin(4.0 * theta)
+
+
+@njit(cache=True)
+def _update_chi_acc(
+    st: np.ndarray, theta: float, chi_rate: float, span: float, ref_hz: float, ctrl: int, prm: np.ndarray
+) -> None:
+    """Smooth the wave's phase acceleration from the change of chi's rate between the last two
+    spans (each relative to its block's reference: the reference's step added back), less the
+    split pattern's change as the wave turned (split_phase predicts that part).  A moving
+    frequency (a temperature ramp: 2 pi df/dt) otherwise leaves the predicted phase behind by
+    2 pi (df/dt) T^2 at T-long blocks, and the quadrature force, applied at that phase, leaks into
+    the rebalance force: 21 000 deg/h per Hz/s on sim-mems-thermal (docs/chamber.md).  None while
+    the frequency-control force moves chi (its own term in wave_force)."""
+    if st[S_EST] < 2 or (prm[P_FM_FORCE_HZ] > 0.0 and prm[P_FM_RATE_HZ] > 0.0):
+        st[S_CHI_ACC] = 0.0
+        return
+    d_rate = chi_rate - st[S_CHI_RATE] + 2.0 * math.pi * (ref_hz - st[S_REF_HZ])
+    if ctrl & _QUAD_EN:  # the pattern at this span's midpoint angle and at the last one's
+        th_now = st[S_THETA] + 0.5 * _wrap(theta - st[S_THETA], 0.5 * math.pi)
+        th_last = st[S_THETA] - 0.5 * st[S_THETA_RATE] * st[S_SPAN]
+        d_rate -= _split_freq(st, th_now) - _split_freq(st, th_last)
+    acc = d_rate / (0.5 * (span + st[S_SPAN]))
+    st[S_CHI_ACC] += min(span / CHI_ACC_TAU_S, 1.0) * (acc - st[S_CHI_ACC])
+
+
+@njit(cache=True)
 def update_loops(
     q_meas: np.ndarray, t_end_s: float, dt_s: float, ref_hz: float, ctrl: int, prm: np.ndarray, st: np.ndarray
 ) -> None:
@@ -177,7 +211,7 @@ def update_loops(
     t_start = t_end_s - t_block_s
     quad_on = ctrl & _QUAD_EN and ctrl & _DRIVE_EN and not weak
     if weak:
-        st[S_EST] = 0.0
+        st[S_EST] = st[S_CHI_ACC] = 0.0
     else:
         if st[S_EST] > 0 and abs(st[S_T_END] - t_start) < 0.5 * dt_s and t_est > st[S_T_EST]:
             span = t_est - st[S_T_EST]
@@ -186,15 +220,16 @@ def update_loops(
             settled = not ctrl & _AGC_EN or abs(a - setpoint) <= AGC_SETTLED_REL * setpoint
             if quad_on and st[S_OBS_OK] > 0 and settled:
                 _observe_split(st, k / a, a, theta, span, n, dt_s, a / max(setpoint, 1e-12))
-            st[S_THETA_RATE] = _wrap(theta - st[S_THETA], 0.5 * math.pi) / span
             # chi is relative to the reference: add back the reference's change since the last estimate
             d_chi = _wrap(chi - st[S_CHI], math.pi) + 2.0 * math.pi * (st[S_REF_HZ] - ref_hz) * (t_start - st[S_T_EST])
+            _update_chi_acc(st, theta, d_chi / span, span, ref_hz, ctrl, prm)  # before the rates move on
+            st[S_THETA_RATE] = _wrap(theta - st[S_THETA], 0.5 * math.pi) / span
             st[S_CHI_RATE] = d_chi / span
             st[S_A_RATE] = (a - a_prev) / span
             st[S_SPAN] = span
             st[S_EST] = 2.0
         else:
-            st[S_THETA_RATE] = st[S_CHI_RATE] = st[S_A_RATE] = 0.0
+            st[S_THETA_RATE] = st[S_CHI_RATE] = st[S_A_RATE] = st[S_CHI_ACC] = 0.0
             st[S_EST] = 1.0
         st[S_THETA] = theta
         st[S_CHI] = chi
@@ -299,6 +334,11 @@ def wave_force(
         )
         if ctrl & _QUAD_EN and st[S_EST] > 1:  # the split's frequency pattern turning with the wave
             chi += split_phase(st, t_mid)
+        if st[S_EST] > 1:
+            # a moving frequency: chi's measured rate is its rate at the middle of the last span, half
+            # a span before the estimate; from there to t_mid the phase gains acc x dt (span + dt) / 2
+            dt_pred = t_mid - st[S_T_EST]
+            chi += 0.5 * st[S_CHI_ACC] * dt_pred * (st[S_SPAN] + dt_pred)
         # the wave turns at F_p / (4 a) with a its amplitude while the force is held: F_p is the
         # command times the amplitude predicted at the block's middle, not the one estimated there
         a_mid = st[S_A] + st[S_A_RATE] * (t_mid - st[S_T_EST])
