@@ -12,8 +12,8 @@ from sqlalchemy import inspect
 
 from bench.engine import Limits, Result, RunRecord
 from bench.results import ResultsStore, to_url
-from bench.results.store import head_revision
 from bench.results.schema import metadata
+from bench.results.store import head_revision
 
 
 def _record(run_id: str, started: str, outcome: str = "PASS", duts=(), seed: int = 7) -> RunRecord:

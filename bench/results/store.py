@@ -153,6 +153,15 @@ def _alembic_config() -> Config:
     return cfg
 
 
+def _import_alembic() -> None:
+    """alembic's modules, imported before a store call that may migrate: their ~0.3 s (seconds on a
+    loaded machine) must not count as the store's wait (a bounded call, a 'no answer' notice)."""
+    import alembic.command  # noqa: F401
+    import alembic.config  # noqa: F401
+    import alembic.runtime.migration  # noqa: F401
+    import alembic.script  # noqa: F401
+
+
 def head_revision(versions: Path = MIGRATIONS / "versions") -> str | None:
     """The newest migration's revision, read from the migration files' `revision` and
     `down_revision` lines without importing alembic (tests check it against alembic's head)."""
@@ -237,7 +246,8 @@ class ResultsStore:
         if upgrade:
             try:
                 then = "then the run goes on and its record goes to the spool" if offline_ok else "then it gives up"
-                self._call(self._ensure_ready, then)
+                self._ready = self._call(self._at_head, then, opening=True)  # one query: no alembic needed
+                self._call(self._ensure_ready, then)  # a migration: alembic imported first, outside the wait
             except StoreError as exc:
                 if not offline_ok:
                     raise
@@ -275,9 +285,13 @@ class ResultsStore:
         return StoreError(f"results store {self.display_url}{doing}: {describe_error(exc)}")
 
     def _call(self, fn: Callable[[], T], then: str = "then the record goes to the spool", *,
-              retry: bool = True, tell: bool = True) -> T:
+              retry: bool = True, tell: bool = True, opening: bool = False) -> T:
         """fn() against the store within the wait: one retry of a lost connection, StoreError
-        naming the store when it did not answer or failed (what fn raised when it refused)."""
+        naming the store when it did not answer or failed (what fn raised when it refused).
+        While the schema is not known to be at the head (fn may migrate it), alembic is imported
+        first, outside the wait; `opening`: fn is the first look, which needs no alembic."""
+        if not self._ready and not opening:
+            _import_alembic()
         local = self.engine.dialect.name != "postgresql"  # a local file: SQLite's busy_timeout bounds the wait
         budget = DOWN_WAIT_S if self._down else self.wait_s
         t0 = time.monotonic()

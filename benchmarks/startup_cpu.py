@@ -1,0 +1,98 @@
+"""Benchmark: the CPU a `gyrobench` process pays, command by command, this tree against another
+(issue 36: the suite starts ~200 such processes; `run hrg-damping` <= 1.5x the run's own wall).
+
+Each round runs, in fresh processes, `gyrobench --help`, `run table-spin --set hold_s=0.1`,
+`run hrg-damping` (seed 0, record_s default), `runs` and `report RUN` (HTML of that hrg-damping
+run) once per tree, the trees alternating (interleaved, so a busy machine weighs on both alike),
+and prints per command the median CPU (user + system of the process and the children it waited
+for: what a shared 2-core machine pays) and wall.  Both trees use this checkout's compiled-kernel
+cache (NUMBA_CACHE_DIR) and a bytecode cache of their own (PYTHONPYCACHEPREFIX, as `make test`
+writes bytecode), so neither compiles.  The `run`s write into a results store made by a first
+run (the stores users have), so the store's opening is the everyday one.
+
+Run: .venv/bin/python benchmarks/startup_cpu.py --against TREE [--rounds 5]
+
+Measured 2026-11-28 12:3x, load average ~6 on 2 cores (shared): /work/main (before) against
+wave3e/startup, 5 rounds interleaved, medians of CPU s (wall s):
+  see the note in the branch's commit / report for the figures of that day.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _env(tree: Path, tmp: str) -> dict[str, str]:
+    cache = os.environ.get("NUMBA_CACHE_DIR") or str(ROOT / ".kernel_cache")
+    env = dict(os.environ, PYTHONPATH=str(tree), NUMBA_CACHE_DIR=cache,
+               PYTHONPYCACHEPREFIX=f"{tmp}/pycache-{tree.name}")
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
+
+
+def timed(args: list[str], tree: Path, cwd: str, tmp: str) -> tuple[float, float, str]:
+    """(CPU s, wall s, stdout) of `gyrobench ARGS` in a fresh process."""
+    t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
+    out = subprocess.run([sys.executable, "-m", "bench.cli", *args], check=True, capture_output=True, text=True,
+                         env=_env(tree, tmp), cwd=cwd).stdout
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime, wall, out
+
+
+def one_round(tree: Path, tmp: str, work: str) -> dict[str, tuple[float, float]]:
+    """Each command once in `work` (its runs directory and results store kept from round to round)."""
+    store = ["--runs-dir", f"{work}/runs", "--results", f"{work}/results.sqlite"]
+    got: dict[str, tuple[float, float]] = {}
+    cpu, wall, _ = timed(["--help"], tree, work, tmp)
+    got["--help"] = (cpu, wall)
+    cpu, wall, _ = timed(["run", "table-spin", "--set", "hold_s=0.1", *store], tree, work, tmp)
+    got["run table-spin hold_s=0.1"] = (cpu, wall)
+    cpu, wall, out = timed(["run", "hrg-damping", "--seed", "0", "--json", *store], tree, work, tmp)
+    got["run hrg-damping"] = (cpu, wall)
+    got["  (its run's own wall)"] = (float("nan"), float(re.search(r'"wall_s": ([0-9.]+)', out).group(1)))
+    run_id = re.search(r'"run_id": "([^"]+)"', out).group(1)
+    cpu, wall, _ = timed(["runs", "--results", f"{work}/results.sqlite"], tree, work, tmp)
+    got["runs"] = (cpu, wall)
+    cpu, wall, _ = timed(["report", run_id, "--results", f"{work}/results.sqlite"], tree, work, tmp)
+    got["report RUN (HTML)"] = (cpu, wall)
+    return got
+
+
+def main() -> None:
+    args = sys.argv[1:]
+    before = Path(args[args.index("--against") + 1]).resolve()
+    rounds = int(args[args.index("--rounds") + 1]) if "--rounds" in args else 5
+    trees = [("before", before), ("after", ROOT)]
+    tmp = tempfile.mkdtemp(prefix="gyrobench-startup-")
+    works = {label: tempfile.mkdtemp(dir=tmp) for label, _ in trees}
+    for label, tree in trees:  # untimed: bytecode written, the results store made
+        timed(["run", "table-spin", "--set", "hold_s=0.1", "--runs-dir", f"{works[label]}/runs",
+               "--results", f"{works[label]}/results.sqlite"], tree, works[label], tmp)
+    rows: dict[str, list[dict[str, tuple[float, float]]]] = {label: [] for label, _ in trees}
+    for _ in range(rounds):
+        for label, tree in trees:
+            rows[label].append(one_round(tree, tmp, works[label]))
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; {rounds} rounds, interleaved; "
+          "medians: CPU s (wall s), before -> after")
+    for what in rows["before"][0]:
+        med = {label: [statistics.median(r[what][i] for r in rows[label]) for i in (0, 1)] for label, _ in trees}
+        b, a = med["before"], med["after"]
+        print(f"  {what:28s} {b[0]:5.2f} ({b[1]:5.2f}) -> {a[0]:5.2f} ({a[1]:5.2f})")
+    for label, _ in trees:
+        ratios = [r["run hrg-damping"][1] / r["  (its run's own wall)"][1] for r in rows[label]]
+        print(f"  {label}: hrg-damping command wall / run's wall, median {statistics.median(ratios):.2f}")
+
+
+if __name__ == "__main__":
+    main()
