@@ -12,9 +12,26 @@ run (the stores users have), so the store's opening is the everyday one.
 
 Run: .venv/bin/python benchmarks/startup_cpu.py --against TREE [--rounds 5]
 
-Measured 2026-11-28 12:3x, load average ~6 on 2 cores (shared): /work/main (before) against
-wave3e/startup, 5 rounds interleaved, medians of CPU s (wall s):
-  see the note in the branch's commit / report for the figures of that day.
+Measured 2026-11-28 12:25-12:29 (load average 4.5-6 on the 2 shared cores), /work/main at 0caed6a
+(before) against wave3e/startup, 5 rounds interleaved, medians, CPU s (wall s):
+  --help                        0.08 (0.09) -> 0.08 (0.09)
+  run table-spin hold_s=0.1     2.21 (2.59) -> 1.40 (1.39)   (no scipy.stats; no alembic)
+  run hrg-damping               4.14 (6.80) -> 3.44 (4.12)   (no alembic)
+  runs                          0.44 (0.90) -> 0.27 (0.54)   (no alembic)
+  report RUN (HTML)             2.19 (1.88) -> 2.14 (2.77)   (untouched: matplotlib's figures)
+  hrg-damping command wall / the run's own wall: 1.74 -> 1.49 (the run's wall follows the load)
+Profile that chose each change (-X importtime, cProfile of `main`, the phases of
+benchmarks/run_end_to_end.py), a table-spin run: table-spin's analysis imported scipy.stats for one
+t quantile (~1.0 s wall under load, ~0.4-0.8 s CPU) -> scipy.special.stdtrit, what stats.t.ppf
+calls (bit for bit: tests/test_table_spin_analysis.py); the results store imported alembic
+(~0.3 s CPU) and loaded its migration scripts on every opening -> one query of alembic's version
+table against the head read from the migration files; alembic only when a migration is due.
+Left as they are: numba's import (~0.3 s CPU) and its first cached-kernel load (~0.4-0.5 s CPU:
+numba's typing and lowering registries, numba.np.arraymath importing scipy.linalg for BLAS), a
+fixed cost of any process that runs a kernel; loading all the simulators' cached kernels and
+driving the warm-up worlds after that costs ~0.09 s CPU (simulators/warm.py), so loading only a
+run's kernels, lazily, would gain <0.1 s and give up the guarantee that a run loads no kernel
+under the world lock (tests/test_warm_kernels.py).
 """
 
 from __future__ import annotations
