@@ -20,6 +20,8 @@ Measured 2026-11-28 12:25-12:29 (load average 4.5-6 on the 2 shared cores), /wor
   runs                          0.44 (0.90) -> 0.27 (0.54)   (no alembic)
   report RUN (HTML)             2.19 (1.88) -> 2.14 (2.77)   (untouched: matplotlib's figures)
   hrg-damping command wall / the run's own wall: 1.74 -> 1.49 (the run's wall follows the load)
+Then with the fpga subcommand's modules imported when it runs (12:37, 7 rounds, CPU medians):
+`--help` 0.07 -> 0.05 s, `runs` 0.38 -> 0.24 s.
 Profile that chose each change (-X importtime, cProfile of `main`, the phases of
 benchmarks/run_end_to_end.py), a table-spin run: table-spin's analysis imported scipy.stats for one
 t quantile (~1.0 s wall under load, ~0.4-0.8 s CPU) -> scipy.special.stdtrit, what stats.t.ppf
