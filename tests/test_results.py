@@ -3,12 +3,17 @@ truth and re-analyses round-trip; run ids resolve by prefix."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 from sqlalchemy import inspect
 
 from bench.engine import Limits, Result, RunRecord
 from bench.results import ResultsStore, to_url
 from bench.results.schema import metadata
+from bench.results.store import head_revision
 
 
 def _record(run_id: str, started: str, outcome: str = "PASS", duts=(), seed: int = 7) -> RunRecord:
@@ -46,6 +51,34 @@ def test_migrated_schema_matches_declared_tables(store_url):
         idx = {i["name"] for i in insp.get_indexes(table.name)}
         assert idx == {i.name for i in table.indexes}, table.name
     ResultsStore(store_url)  # re-opening an up-to-date store is a no-op
+
+
+def test_head_read_from_the_migration_files_is_alembics_head(tmp_path):
+    assert head_revision() == ResultsStore.head()
+    (tmp_path / "0001_a.py").write_text('revision = "0001"\ndown_revision = None\n')
+    (tmp_path / "0002_b.py").write_text("revision = '0002'\ndown_revision = '0001'\n")
+    assert head_revision(tmp_path) == "0002"
+    (tmp_path / "0003_c.py").write_text('revision = "0003"\ndown_revision = "0001"\n')
+    assert head_revision(tmp_path) is None  # two heads: the store then asks alembic
+
+
+_OPEN_TWICE = """
+import sys
+from bench.results import ResultsStore
+ResultsStore(sys.argv[1]).close()
+print("alembic" in sys.modules)
+"""
+
+
+def test_an_up_to_date_store_opens_without_alembic(tmp_path):
+    """Every command that opens the store paid alembic's ~0.3 s of imports (issue 36): only a
+    store that needs a migration imports it now; the first opening migrates a fresh store."""
+    db = str(tmp_path / "results.sqlite")
+    root = Path(__file__).resolve().parents[1]
+    opened = [subprocess.run([sys.executable, "-c", _OPEN_TWICE, db], cwd=root, capture_output=True, text=True,
+                             check=True).stdout.split() for _ in range(2)]
+    assert opened == [["True"], ["False"]]
+    assert ResultsStore(db).revision() == ResultsStore.head()
 
 
 def test_sqlite_path_becomes_url(tmp_path):

@@ -21,16 +21,13 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
+import re
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
-from alembic import command
-from alembic.config import Config
-from alembic.runtime.migration import MigrationContext
-from alembic.script import ScriptDirectory
 from sqlalchemy import create_engine, delete, event, insert, literal_column, select, text, update
 from sqlalchemy.engine import Connection, Engine, make_url
 from sqlalchemy.exc import (
@@ -61,6 +58,9 @@ from .locks import migrating_connection, sqlite_file
 from .redact import redact_text
 from .schema import measurements, run_duts, runs, truth
 from .spool import Spool
+
+if TYPE_CHECKING:
+    from alembic.config import Config
 
 T = TypeVar("T")
 
@@ -146,9 +146,37 @@ def _f(x: Any) -> float | None:
 
 
 def _alembic_config() -> Config:
+    from alembic.config import Config  # alembic (~0.3 s of imports) only when a schema is migrated
+
     cfg = Config()
     cfg.set_main_option("script_location", str(MIGRATIONS))
     return cfg
+
+
+def _import_alembic() -> None:
+    """alembic's modules, imported before a store call that may migrate: their ~0.3 s (seconds on a
+    loaded machine) must not count as the store's wait (a bounded call, a 'no answer' notice)."""
+    import alembic.command  # noqa: F401
+    import alembic.config  # noqa: F401
+    import alembic.runtime.migration  # noqa: F401
+    import alembic.script  # noqa: F401
+
+
+def head_revision(versions: Path = MIGRATIONS / "versions") -> str | None:
+    """The newest migration's revision, read from the migration files' `revision` and
+    `down_revision` lines without importing alembic (tests check it against alembic's head)."""
+    revisions, parents = set(), set()
+    for path in versions.glob("*.py"):
+        source = path.read_text(encoding="utf-8")
+        rev = re.search(r'^revision\s*=\s*["\']([^"\']+)["\']', source, re.M)
+        if rev is None:
+            continue
+        revisions.add(rev.group(1))
+        down = re.search(r'^down_revision\s*=\s*["\']([^"\']+)["\']', source, re.M)
+        if down is not None:
+            parents.add(down.group(1))
+    heads = revisions - parents
+    return heads.pop() if len(heads) == 1 else None
 
 
 def _interrupted(row: dict[str, Any]) -> dict[str, Any]:
@@ -218,7 +246,8 @@ class ResultsStore:
         if upgrade:
             try:
                 then = "then the run goes on and its record goes to the spool" if offline_ok else "then it gives up"
-                self._call(self._ensure_ready, then)
+                self._ready = self._call(self._at_head, then, opening=True)  # one query: no alembic needed
+                self._call(self._ensure_ready, then)  # a migration: alembic imported first, outside the wait
             except StoreError as exc:
                 if not offline_ok:
                     raise
@@ -256,9 +285,13 @@ class ResultsStore:
         return StoreError(f"results store {self.display_url}{doing}: {describe_error(exc)}")
 
     def _call(self, fn: Callable[[], T], then: str = "then the record goes to the spool", *,
-              retry: bool = True, tell: bool = True) -> T:
+              retry: bool = True, tell: bool = True, opening: bool = False) -> T:
         """fn() against the store within the wait: one retry of a lost connection, StoreError
-        naming the store when it did not answer or failed (what fn raised when it refused)."""
+        naming the store when it did not answer or failed (what fn raised when it refused).
+        While the schema is not known to be at the head (fn may migrate it), alembic is imported
+        first, outside the wait; `opening`: fn is the first look, which needs no alembic."""
+        if not self._ready and not opening:
+            _import_alembic()
         local = self.engine.dialect.name != "postgresql"  # a local file: SQLite's busy_timeout bounds the wait
         budget = DOWN_WAIT_S if self._down else self.wait_s
         t0 = time.monotonic()
@@ -324,18 +357,38 @@ class ResultsStore:
             return conn.execute(text(PG_NOW_ISO)).scalar_one()
 
     def upgrade(self, revision: str = "head") -> None:
-        """Bring the schema to `revision` under the store's migration lock."""
+        """Bring the schema to `revision` under the store's migration lock; a store already at the
+        head is seen by one query, without alembic (every command that opens the store paid ~0.3 s
+        of alembic's imports and its migration scripts' loading for nothing: issue 36)."""
+        if revision == "head" and self._at_head():
+            return
+        from alembic import command
+
         cfg = _alembic_config()
         with migrating_connection(self.engine) as conn:
             cfg.attributes["connection"] = conn
             command.upgrade(cfg, revision)
 
+    def _at_head(self) -> bool:
+        """Whether the store's schema is at the newest migration (alembic's version table)."""
+        head = head_revision()
+        if head is None:
+            return False
+        with self.engine.connect() as conn:
+            if not self.engine.dialect.has_table(conn, "alembic_version"):
+                return False
+            return conn.execute(text("SELECT version_num FROM alembic_version")).scalars().all() == [head]
+
     def revision(self) -> str | None:
+        from alembic.runtime.migration import MigrationContext
+
         with self.engine.connect() as conn:
             return MigrationContext.configure(conn).get_current_revision()
 
     @staticmethod
     def head() -> str | None:
+        from alembic.script import ScriptDirectory
+
         return ScriptDirectory.from_config(_alembic_config()).get_current_head()
 
     def close(self) -> None:

@@ -50,9 +50,9 @@ class TableSpin(Procedure):
         mean = float(rate.mean())
         if len(rate) < 2:
             return [Result("table_rate_dps", mean)]  # unit and limits: the declaration
-        from scipy import stats
+        from scipy import special  # stdtrit is what stats.t.ppf calls, without importing scipy.stats (~0.4 s)
 
-        half = float(stats.t.ppf(0.975, len(rate) - 1) * rate.std(ddof=1) / len(rate) ** 0.5)
+        half = float(special.stdtrit(len(rate) - 1, 0.975) * rate.std(ddof=1) / len(rate) ** 0.5)
         return [Result("table_rate_dps", mean, ci95=(mean - half, mean + half))]  # of the mean of the readings
 
     def figures(self, data) -> list:
