@@ -9,7 +9,10 @@ the mean over the turn-ons (Student's t on their scatter, so a turn-on spread wi
 narrower than the records' own noise allows), the
 repeatability their spread with each record's own noise removed.  The scale factor that refers
 the output to the input is the `scale_factor` parameter (from a cvg-scale-factor run), or the
-mode's nominal one (1 in force-to-rebalance, -bryan_factor in whole-angle).
+mode's nominal one: G K in force-to-rebalance (the FPGA's FTR_GAIN register times the nominal
+bryan_factor; 1 only where a lab trimmed G to 1/K), -bryan_factor in whole-angle.  A nominal 1 with
+an untrimmed G left every bias (1 - G K) of itself low: -0.082 deg/h of 29.33 on sim-hrg-ftr
+(G K = 0.9972), 3 sd over 20 seeds (benchmarks/truth_flags.py, issue 31 item 8).
 """
 
 from __future__ import annotations
@@ -42,6 +45,15 @@ FIRST_TURN_ON_NO_TRUTH = ("no truth when the unit's turn-on bias varies from one
                           + UNSTATED_BIAS_NO_TRUTH.removeprefix("no truth "))
 
 
+def nominal_scale_factor(mode: str, bryan_factor: float, ftr_gain: float, given: float = 0.0) -> float:
+    """The scale factor that refers the output to the input: the one given (non-zero), else the
+    mode's nominal one, G K in force-to-rebalance (the FPGA's gain G, the nominal Bryan factor K),
+    -K in whole-angle."""
+    if given:
+        return float(given)
+    return ftr_gain * bryan_factor if mode == "force-to-rebalance" else -bryan_factor
+
+
 def first_turn_on_bias_truth(truth: dict[str, float]) -> float | None:
     """The first turn-on's bias: the static bias where every turn-on has the same one; None where
     it varies (its record's own interval cannot hold the turn-on's spread: 20 of 20 seeds outside)."""
@@ -65,7 +77,8 @@ class CvgBias(CvgOutput, Procedure):
                      doc="time the AGC pulls the amplitude to zero before a turn-on")
     batches = Param(10, low=2, high=1000, doc="batches of each record for its bias interval")
     scale_factor = Param(0.0, low=-1e6, high=1e6,
-                         doc="output per input rate (from cvg-scale-factor); 0: the mode's nominal one")
+                         doc="output per input rate (from cvg-scale-factor); 0: the mode's nominal one "
+                             "(force-to-rebalance: the FPGA's FTR_GAIN x bryan_factor; whole-angle: -bryan_factor)")
     settle_s = Param(30.0, unit="s", low=0.0, high=3600.0,
                      doc="warm-up after a turn-on holds the amplitude (the quadrature settles over tens of s)")
     bryan_factor = Param(0.0, low=0.0, high=1.0,
@@ -97,7 +110,7 @@ class CvgBias(CvgOutput, Procedure):
     @step("Turn-ons and static records")
     def records(self, ctx):
         code = MODES.index(self._mode)
-        sf = self._scale_factor()
+        sf = self._scale_factor(float(ctx.devices.fpga.read_register("FTR_GAIN")))
         for i in range(self.turn_ons):
             self._turn_on(ctx, self.quench_s)
             ctx.sleep(self.settle_s)
@@ -111,10 +124,10 @@ class CvgBias(CvgOutput, Procedure):
             ctx.report(res)
 
     # --- analysis --------------------------------------------------------------------------
-    def _scale_factor(self) -> float:
-        if self.scale_factor:
-            return float(self.scale_factor)
-        return 1.0 if self._mode == "force-to-rebalance" else -float(self.bryan_factor)
+    def _scale_factor(self, ftr_gain: float) -> float:
+        """The scale factor given, else the mode's nominal one: G K in force-to-rebalance (the rate
+        output is G K Omega / g, g = 1 nominally, docs/fpga_link.md), -K in whole-angle."""
+        return nominal_scale_factor(self._mode, float(self.bryan_factor), ftr_gain, float(self.scale_factor))
 
     def _estimates(self, data):
         win = data.table(WINDOWS.name)

@@ -191,3 +191,21 @@ def test_a_whole_angle_series_too_short_for_its_fit_is_refused_before_anything_m
         CvgScaleFactor(SF_PARAMS).preflight(station.devices)  # steps=2: 10 windows
     finally:
         station.close()
+
+
+def test_force_to_rebalance_bias_with_no_scale_factor_given_is_referred_with_g_times_k(tmp_path):
+    """With no `scale_factor`, force-to-rebalance refers the output with its nominal G K (the FPGA's
+    FTR_GAIN 3.6 times the nominal K 0.277 = 0.9972), not 1: with 1 every bias read (1 - G K) of
+    itself low, -0.082 deg/h of 29.33, 3 sd over 20 seeds (benchmarks/truth_flags.py, issue 31)."""
+    from bench.recorder import RunData
+    from procedures.cvg_output import scale_factor_truth
+
+    record, truth = _run("sim-hrg-ftr", CvgBias, BIAS_PARAMS | {"turn_ons": 1}, tmp_path)
+    with RunData(record.raw_file) as data:
+        sf = data.table(CvgBias.windows_schema.name)["scale_factor"]
+    assert list(sf) == [pytest.approx(0.9972, rel=1e-9)]
+    assert "scale_factor" in record.params and not record.params["scale_factor"]
+    assert truth["bias_first_dph"] == pytest.approx(29.333, abs=1e-3)
+    _check_truths(record, truth, ("bias_dph", "bias_first_dph"))
+    assert scale_factor_truth({"cvg_output_mode": 1.0, "ftr_angle_deg": 0.0, "ftr_gain": 3.6,
+                               "bryan_factor": 0.277}) == pytest.approx(sf[0], rel=1e-12)
