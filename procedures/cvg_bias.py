@@ -45,15 +45,6 @@ FIRST_TURN_ON_NO_TRUTH = ("no truth when the unit's turn-on bias varies from one
                           + UNSTATED_BIAS_NO_TRUTH.removeprefix("no truth "))
 
 
-def nominal_scale_factor(mode: str, bryan_factor: float, ftr_gain: float, given: float = 0.0) -> float:
-    """The scale factor that refers the output to the input: the one given (non-zero), else the
-    mode's nominal one, G K in force-to-rebalance (the FPGA's gain G, the nominal Bryan factor K),
-    -K in whole-angle."""
-    if given:
-        return float(given)
-    return ftr_gain * bryan_factor if mode == "force-to-rebalance" else -bryan_factor
-
-
 def first_turn_on_bias_truth(truth: dict[str, float]) -> float | None:
     """The first turn-on's bias: the static bias where every turn-on has the same one; None where
     it varies (its record's own interval cannot hold the turn-on's spread: 20 of 20 seeds outside)."""
@@ -110,7 +101,7 @@ class CvgBias(CvgOutput, Procedure):
     @step("Turn-ons and static records")
     def records(self, ctx):
         code = MODES.index(self._mode)
-        sf = self._scale_factor(float(ctx.devices.fpga.read_register("FTR_GAIN")))
+        sf = self._scale_factor(ctx)
         for i in range(self.turn_ons):
             self._turn_on(ctx, self.quench_s)
             ctx.sleep(self.settle_s)
@@ -124,11 +115,6 @@ class CvgBias(CvgOutput, Procedure):
             ctx.report(res)
 
     # --- analysis --------------------------------------------------------------------------
-    def _scale_factor(self, ftr_gain: float) -> float:
-        """The scale factor given, else the mode's nominal one: G K in force-to-rebalance (the rate
-        output is G K Omega / g, g = 1 nominally, docs/fpga_link.md), -K in whole-angle."""
-        return nominal_scale_factor(self._mode, float(self.bryan_factor), ftr_gain, float(self.scale_factor))
-
     def _estimates(self, data):
         win = data.table(WINDOWS.name)
         fpga = data.table("fpga")

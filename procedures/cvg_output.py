@@ -26,6 +26,16 @@ def _ftr(truth: dict[str, float]) -> bool:
     return truth.get("cvg_output_mode", 0.0) == 1.0
 
 
+def nominal_scale_factor(mode: str, bryan_factor: float, ftr_gain: float, given: float = 0.0) -> float:
+    """The scale factor that refers the output to the input: the one given (non-zero), else the
+    mode's nominal one, G K in force-to-rebalance (the FPGA's gain G, the nominal Bryan factor K;
+    1 only where a lab trimmed G to 1/K: a nominal 1 with sim-hrg-ftr's G K = 0.9972 left every
+    bias 0.28 % low, issue 31 item 8), -K in whole-angle."""
+    if given:
+        return float(given)
+    return ftr_gain * bryan_factor if mode == "force-to-rebalance" else -bryan_factor
+
+
 def scale_factor_truth(truth: dict[str, float]) -> float:
     """The output mode's true scale factor (docs/fpga_link.md, "Output modes"): G K / g in
     force-to-rebalance (the rate output G degrees(F_p / (4 a_set)), F_p = 4 a K Omega, and the AGC
@@ -134,6 +144,15 @@ class CvgOutput(HrgExcitation):
         return earth_rate_projection_dph(st["latitude_deg"], azimuth_deg=st.get("axis_azimuth_deg", 0.0),
                                          elevation_deg=st.get("axis_elevation_deg", 90.0))
     _ki_restore: bool = False
+
+    def _scale_factor(self, ctx) -> float:
+        """The procedure's `scale_factor` parameter, else the mode's nominal one (`nominal_scale_factor`,
+        the FPGA's FTR_GAIN read back); the procedure declares scale_factor and bryan_factor."""
+        gain = float(ctx.devices.fpga.read_register("FTR_GAIN")) if self._mode == "force-to-rebalance" else 0.0
+        sf = nominal_scale_factor(self._mode, float(self.bryan_factor), gain, float(self.scale_factor))
+        if sf == 0.0:
+            raise RuntimeError(f"{self._mode}: scale factor 0 (FTR_GAIN {gain:g}, bryan_factor {self.bryan_factor:g})")
+        return sf
 
     def _start_output(self, ctx) -> str:
         """Read the FPGA's output mode (the station's `output_mode`) and stream at stream_hz for the

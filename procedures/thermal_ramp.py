@@ -205,7 +205,7 @@ class ThermalRamp(ThermalChamber, Procedure):
         chamber = ctx.devices.chamber
         ref_hz = float(ctx.devices.fpga.read_register("REF_FREQ_HZ"))
         code = MODES.index(self._mode)
-        sf = self._scale_factor()
+        sf = self._scale_factor(ctx)
         settle_s = self._settle_at(ctx, float(self.t_low_degc), ref_hz)
         ctx.log.info(f"settled at {self.t_low_degc:g} degC after {settle_s:.0f} s")
         table = None
@@ -275,7 +275,7 @@ class ThermalRamp(ThermalChamber, Procedure):
         fpga = ctx.devices.fpga
         ref_hz = float(fpga.read_register("REF_FREQ_HZ"))
         ctx.shared(lambda: chamber.set_ramp_rate(self.ramp_degc_per_min), "verification ramp rate")
-        code, sf = MODES.index(self._mode), self._scale_factor()
+        code, sf = MODES.index(self._mode), self._scale_factor(ctx)
         trim = (0.0, 0.0)
         if self.compensate:
             line = self.trim_line(self.points_table(ctx.data()))

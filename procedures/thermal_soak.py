@@ -86,7 +86,8 @@ class ThermalChamber(CvgOutput):
                                 "as an effective variance (bench.analysis.thermal_fit)")
     stream_hz = Param(10.0, unit="Hz", low=0.01, high=1e6, doc="FPGA stream rate during the run (boxcar-decimated)")
     scale_factor = Param(0.0, low=-1e6, high=1e6,
-                         doc="output per input rate (from cvg-scale-factor); 0: the mode's nominal one")
+                         doc="output per input rate (from cvg-scale-factor); 0: the mode's nominal one "
+                             "(force-to-rebalance: the FPGA's FTR_GAIN x bryan_factor; whole-angle: -bryan_factor)")
     bryan_factor = Param(0.0, low=0.0, high=1.0,
                          doc="nominal K: whole-angle's nominal scale factor is -K (0: the station's nominal K)")
     nominal_params = {"bryan_factor": "bryan_factor"}
@@ -131,11 +132,6 @@ class ThermalChamber(CvgOutput):
         if not ctx.in_batch:  # a batch's chamber goes to ambient once, when the batch ends (bench.slots)
             ctx.defer(lambda: chamber.set_setpoint(REF_TEMPERATURE_C) if chamber.connected else None,
                       "chamber set point back to 25 degC")
-
-    def _scale_factor(self) -> float:
-        if self.scale_factor:
-            return float(self.scale_factor)
-        return 1.0 if self._mode == "force-to-rebalance" else -float(self.bryan_factor)
 
     def _chamber_status(self, ctx) -> Any:
         """The chamber's air and part readings, read once for a batch (every slot gets the same)."""
@@ -206,7 +202,7 @@ class ThermalSoak(ThermalChamber, Procedure):
         fpga = ctx.devices.fpga
         ref_hz = float(fpga.read_register("REF_FREQ_HZ"))
         code = MODES.index(self._mode)
-        sf = self._scale_factor()
+        sf = self._scale_factor(ctx)
         sps = self.setpoints_c()
         for i, sp in enumerate(sps):
             settle_s = self._settle_at(ctx, float(sp), ref_hz)
