@@ -142,9 +142,10 @@ def main() -> None:
         rows = got[label]
         wall, cpu, run_s = (statistics.median(x) for x in zip(*rows, strict=True))
         ratio = statistics.median(w / r for w, _, r in rows)
+        besides = statistics.median(w - r for w, _, r in rows)  # the command's wall besides the run's own
         print(f"{label} ({tree}): command wall median {wall:.2f} s, CPU {cpu:.2f} s, the run's own wall "
               f"{run_s:.2f} s: ratio {ratio:.2f} ({'OK' if ratio <= TARGET_RATIO else 'over'} the target "
-              f"{TARGET_RATIO:g}); rounds (wall/CPU/run): "
+              f"{TARGET_RATIO:g}); besides the run {besides:.2f} s; rounds (wall/CPU/run): "
               + ", ".join(f"{w:.2f}/{c:.2f}/{r:.2f}" for w, c, r in rows))
         if "--phases" in args:
             print(phases(tree, tmp))

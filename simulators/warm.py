@@ -46,7 +46,8 @@ def warm_kernels(*, verbose: bool | None = None, on_compile: Callable[[str], Non
                   f"cached in {kernel_cache.cache_dir()}) ...", file=sys.stderr, flush=True)
         with _named_compiles(verbose if verbose is not None else cold, on_compile):
             _warm_devices()
-            warm_analysis()  # the run's analysis process then loads it from the same cache
+            if cold:  # compiled once, for the run's analysis process to load from the same cache; a filled
+                warm_analysis()  # cache holds it already, and this process never calls it (~0.03 s, issue 36)
         if cold:
             kernel_cache.mark_filled()
         _done = True

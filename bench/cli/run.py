@@ -77,7 +77,7 @@ def cmd(args: argparse.Namespace) -> int:
     from bench.engine import ParamError, Runner, check_station
     from bench.fault_kinds import parse_fault
     from bench.line import LineError
-    from bench.results.limits import check_inputs
+    from bench.results.lengths import check_inputs  # no SQLAlchemy: the store opens on its thread
     from procedures import ProcedureNotFound, find_procedure
 
     from .record_table import apply_limits, load_lab_limits, print_record

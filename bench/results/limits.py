@@ -8,6 +8,7 @@ from typing import Any
 
 from sqlalchemy import String, Table
 
+from .lengths import check_inputs  # typed values: checked without SQLAlchemy (bench.results.lengths)
 from .schema import measurements, run_duts, runs, truth
 
 
@@ -23,17 +24,7 @@ def max_chars(table: Table, column: str) -> int | None:
 
 OPERATOR_MAX = max_chars(runs, "operator")
 SERIAL_MAX = max_chars(run_duts, "serial")
-
-
-def check_inputs(operator: str = "", duts: list[str] | tuple[str, ...] = ()) -> None:
-    """ValueError naming the option and the limit when the operator or a DUT serial is too long."""
-    if OPERATOR_MAX is not None and len(operator or "") > OPERATOR_MAX:
-        raise ValueError(f"--operator is {len(operator)} characters long; the results store keeps at most "
-                         f"{OPERATOR_MAX}")
-    for serial in duts:
-        if SERIAL_MAX is not None and len(serial) > SERIAL_MAX:
-            raise ValueError(f"--dut {serial[:20]!r}... is {len(serial)} characters long; the results store keeps at "
-                             f"most {SERIAL_MAX}")
+__all__ = ["OPERATOR_MAX", "SERIAL_MAX", "RecordRefused", "check_doc", "check_inputs", "max_chars"]
 
 
 def _check_row(table: Table, row: dict[str, Any], where: str) -> None:

@@ -21,6 +21,8 @@ from sqlalchemy import (
     Text,
 )
 
+from .lengths import OPERATOR_MAX, SERIAL_MAX
+
 metadata = MetaData()
 
 runs = Table(
@@ -40,7 +42,7 @@ runs = Table(
     Column("wall_s", Float),
     Column("raw_file", Text),
     Column("software_version", String(64), nullable=False, default=""),
-    Column("operator", String(128), nullable=False, default=""),
+    Column("operator", String(OPERATOR_MAX), nullable=False, default=""),
     Column("seed", BigInteger),  # a station's seed is 63-bit (migration 0002)
     Column("params", JSON, nullable=False),
     Column("safe_detail", JSON),
@@ -59,7 +61,7 @@ run_duts = Table(
     metadata,
     Column("run_id", String(64), ForeignKey("runs.run_id", ondelete="CASCADE"), primary_key=True),
     Column("slot", Integer, primary_key=True),
-    Column("serial", String(128), nullable=False),
+    Column("serial", String(SERIAL_MAX), nullable=False),
     Index("ix_run_duts_serial", "serial"),
 )
 
