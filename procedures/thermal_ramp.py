@@ -54,6 +54,8 @@ VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", (
     Column("trim_bias_dph_per_hz", "deg/h/Hz", doc="TRIM_BIAS_DPH_PER_HZ in force during the record"),
     Column("approach", "1", "i8", legend={0: "from below (heating)", 1: "from above (cooling)"},
            doc="the side the set point was settled from (verify_both_branches: each point from both)"),
+    Column("trim_sf_ppm", "ppm", doc="TRIM_SF_PPM in force during the record (0: no scale factor trim)"),
+    Column("trim_sf_ppm_per_hz", "ppm/Hz", doc="TRIM_SF_PPM_PER_HZ in force during the record"),
 )))
 
 VERIFY_SF = declare(StreamSchema("thermal_ramp_verify_sf", "thermal-ramp", (
@@ -328,7 +330,7 @@ class ThermalRamp(ThermalChamber, Procedure):
             t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record ({side})")
             s1 = self._chamber_status(ctx)
             row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf,
-                   *trim, approach]
+                   *trim, approach, *sf_trim]
             ctx.record(VERIFY, VERIFY.names, np.array([row]))
             if table is not None and approach == 0:  # the scale factor there: a +-rate pair, from below
                 for rate in (self.rate_dps, -self.rate_dps):
@@ -406,7 +408,11 @@ class ThermalRamp(ThermalChamber, Procedure):
         before any trim, what the record shows plus the trim in force during it."""
         v = self.points_table(data, VERIFY)
         vt = data.table(VERIFY.name)
-        v["raw_bias_dph"] = v["bias_dph"] + vt["trim_bias_dph"] + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"]
+        n = len(v["bias_dph"])  # the firmware took the bias trim off, then divided by 1 + the scale factor trim
+        sf_ppm = (np.asarray(vt.get("trim_sf_ppm", np.zeros(n))) + np.asarray(vt.get("trim_sf_ppm_per_hz", np.zeros(n)))
+                  * v["f_offset_hz"])
+        v["raw_bias_dph"] = (v["bias_dph"] * (1.0 + 1e-6 * sf_ppm) + vt["trim_bias_dph"]
+                             + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"])
         return v
 
     def trim_line(self, p: dict[str, np.ndarray]) -> ThermalFit:
