@@ -142,6 +142,9 @@ def test_line_run_eol_hrg_thermal_leaves_the_thermal_trim_in_nvm(tmp_path, capsy
     m = {x["name"]: x["value"] for x in rec["measurements"]}
     assert back["TRIM_BIAS_DPH"] == pytest.approx(m["thermal_bias_dph"], rel=1e-12)
     assert back["TRIM_BIAS_DPH_PER_HZ"] == pytest.approx(m["thermal_bias_dph_per_hz"], rel=1e-12)
+    assert back["TRIM_SF_PPM"] == pytest.approx(m["thermal_sf_ppm"], rel=1e-12)  # the scale factor trim (+-10 deg/s)
+    assert back["TRIM_SF_PPM_PER_HZ"] == pytest.approx(m["thermal_sf_ppm_per_hz"], rel=1e-12)
+    assert m["verify_sf_error_ppm"] < 3.0 * m["verify_sf_noise_ppm"]  # judged: <= 100 ppm
 
 
 def test_a_turning_ramp_asks_the_table_for_its_rate():
