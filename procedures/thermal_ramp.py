@@ -54,6 +54,20 @@ VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", (
     Column("trim_bias_dph_per_hz", "deg/h/Hz", doc="TRIM_BIAS_DPH_PER_HZ in force during the record"),
     Column("approach", "1", "i8", legend={0: "from below (heating)", 1: "from above (cooling)"},
            doc="the side the set point was settled from (verify_both_branches: each point from both)"),
+    Column("trim_sf_ppm", "ppm", doc="TRIM_SF_PPM in force during the record (0: no scale factor trim)"),
+    Column("trim_sf_ppm_per_hz", "ppm/Hz", doc="TRIM_SF_PPM_PER_HZ in force during the record"),
+)))
+
+VERIFY_SF = declare(StreamSchema("thermal_ramp_verify_sf", "thermal-ramp", (
+    Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
+    Column("rate_dps", "deg/s", doc="the table's rate during the record (+-rate_dps pairs)"),
+    Column("air_c", "degC", doc="chamber air at the record's start and end (mean)"),
+    Column("part_c", "degC", doc="the part thermocouple on the unit's case (mean of start and end)"),
+    Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
+    Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
+    Column("scale_factor", "1"),
+    Column("trim_sf_ppm", "ppm", doc="TRIM_SF_PPM in force during the record (0: no scale factor trim)"),
+    Column("trim_sf_ppm_per_hz", "ppm/Hz", doc="TRIM_SF_PPM_PER_HZ in force during the record"),
 )))
 
 
@@ -74,6 +88,7 @@ def _pairs(p: dict[str, np.ndarray], rate_dps: np.ndarray, sf: np.ndarray) -> di
     out["sf"] = scale * (p["bias_dph"][i] - p["bias_dph"][j])
     out["sf_se"] = scale * np.hypot(p["bias_se_dph"][i], p["bias_se_dph"][j])
     out["branch"] = p["branch"][i]
+    out["sf_nominal"] = sf[i]  # the nominal scale factor the run used (the trim's target)
     return out
 
 
@@ -95,6 +110,10 @@ def _sf_hyst_truth(truth: dict[str, float]) -> float:
 
 def _verifying(proc) -> bool:
     return proc.verify_points > 0
+
+
+def _verifying_sf(proc) -> bool:
+    return proc.verify_points > 0 and proc.rate_dps > 0
 
 
 def _verifying_both(proc) -> bool:
@@ -183,6 +202,19 @@ class ThermalRamp(ThermalChamber, Procedure):
                     "frequency (bench.analysis.thermal_ramp.branch_hysteresis)", truth=_bias_hyst_truth),
         Measurement("bias_per_freq_rate_dph_s_per_hz", "deg/h/(Hz/s)", "the bias the frequency's rate of change "
                     "adds (forces trailing a moving frequency's phase), fitted with the hysteresis"),
+        Measurement("thermal_sf_ppm", "ppm", "thermal trim TRIM_SF_PPM: the scale factor's error (against the "
+                    "nominal scale factor) at the FPGA's REF_FREQ_HZ, from the +-rate_dps pairs", when=_rotating,
+                    when_doc="rate_dps > 0"),
+        Measurement("thermal_sf_ppm_per_hz", "ppm/Hz", "thermal trim TRIM_SF_PPM_PER_HZ: that error's slope against "
+                    "the PLL frequency's offset", when=_rotating, when_doc="rate_dps > 0"),
+        Measurement("verify_sf_error_ppm", "ppm", "rms scale factor error left at the verification points (+-rate_dps "
+                    "pairs of the FPGA's output, the scale factor trim in force with `compensate`)",
+                    no_interval="a residual", when=_verifying_sf, when_doc="verify_points > 0 and rate_dps > 0"),
+        Measurement("verify_sf_error_raw_ppm", "ppm", "the same without the scale factor trim (the records' pairs "
+                    "with the trim in force taken back out)", no_interval="a residual", when=_verifying_sf,
+                    when_doc="verify_points > 0 and rate_dps > 0"),
+        Measurement("verify_sf_noise_ppm", "ppm", "rms of the verification pairs' own scale factor standard errors",
+                    no_interval="a noise level", when=_verifying_sf, when_doc="verify_points > 0 and rate_dps > 0"),
         Measurement("verify_hysteresis_dph", "deg/h", "thermal hysteresis from settled records: the bias "
                     "settled from below minus settled from above at each verification point (no rate term, no lag), "
                     "their weighted mean", truth=_bias_hyst_truth, when=_verifying_both,
@@ -267,7 +299,7 @@ class ThermalRamp(ThermalChamber, Procedure):
         n = int(self.verify_points)
         return self.t_low_degc + (np.arange(n) + 0.5) * (self.t_high_degc - self.t_low_degc) / max(n, 1)
 
-    @step("Verification at temperatures between", uses=("fpga",), shares=("chamber",))
+    @step("Verification at temperatures between", uses=("fpga",), shares=("chamber", "table"))
     def verify(self, ctx):
         if not self.verify_points:
             return
@@ -276,11 +308,16 @@ class ThermalRamp(ThermalChamber, Procedure):
         ref_hz = float(fpga.read_register("REF_FREQ_HZ"))
         ctx.shared(lambda: chamber.set_ramp_rate(self.ramp_degc_per_min), "verification ramp rate")
         code, sf = MODES.index(self._mode), self._scale_factor(ctx)
-        trim = (0.0, 0.0)
+        trim, sf_trim = (0.0, 0.0), (0.0, 0.0)
+        table = ctx.devices.table if self.rate_dps > 0 else None
         if self.compensate:
-            line = self.trim_line(self.points_table(ctx.data()))
+            p = self.points_table(ctx.data())
+            line = self.trim_line(p)
             trim = (float(line.coeffs[0]), float(line.coeffs[1]))
-            self._write_trim(ctx, trim)
+            if "sf" in p:
+                sf_line = self.sf_trim_line(p)
+                sf_trim = (float(sf_line.coeffs[0]), float(sf_line.coeffs[1]))
+            self._write_trim(ctx, trim, sf_trim)
         sps = list(self.verify_setpoints_c())
         visits = [(float(sp), 0) for sp in sps]  # the cycle ended at t_low: each point from below
         if self.verify_both_branches:  # then each from above, highest first, after settling over it
@@ -294,16 +331,28 @@ class ThermalRamp(ThermalChamber, Procedure):
             t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record ({side})")
             s1 = self._chamber_status(ctx)
             row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf,
-                   *trim, approach]
+                   *trim, approach, *sf_trim]
             ctx.record(VERIFY, VERIFY.names, np.array([row]))
+            if table is not None and approach == 0:  # the scale factor there: a +-rate pair, from below
+                for rate in (self.rate_dps, -self.rate_dps):
+                    self._table_at(ctx, table, rate)
+                    ctx.sleep(self._settle_s(ctx))
+                    s0 = self._chamber_status(ctx)
+                    t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC at {rate:+g} deg/s")
+                    s1 = self._chamber_status(ctx)
+                    row = [t0, t1, sp, rate, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), ref_hz,
+                           code, sf, *sf_trim]
+                    ctx.record(VERIFY_SF, VERIFY_SF.names, np.array([row]))
+                self._table_at(ctx, table, 0.0)
 
-    def _write_trim(self, ctx, trim: tuple[float, float]) -> None:
-        """The thermal trim into the FPGA's registers and TRIM_EN's TRIM_THERMAL bit (RAM only: the
-        line commits trims to NVM for PASS units); the registers before are restored at the end."""
+    def _write_trim(self, ctx, trim: tuple[float, float], sf_trim: tuple[float, float] = (0.0, 0.0)) -> None:
+        """The thermal trim (bias and scale factor) into the FPGA's registers and TRIM_EN's TRIM_THERMAL
+        bit (RAM only: the line commits trims to NVM for PASS units); the registers before are restored
+        at the end."""
         from drivers.fpga import protocol as fp
 
         fpga = ctx.devices.fpga
-        names = ("TRIM_EN", "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ")
+        names = ("TRIM_EN", "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ", "TRIM_SF_PPM", "TRIM_SF_PPM_PER_HZ")
         before = {n: fpga.read_register(n) for n in names}
 
         def restore() -> None:
@@ -314,8 +363,11 @@ class ThermalRamp(ThermalChamber, Procedure):
         ctx.defer(restore, "restore the thermal trim registers")
         fpga.write_register("TRIM_BIAS_DPH", trim[0])
         fpga.write_register("TRIM_BIAS_DPH_PER_HZ", trim[1])
+        fpga.write_register("TRIM_SF_PPM", sf_trim[0])
+        fpga.write_register("TRIM_SF_PPM_PER_HZ", sf_trim[1])
         fpga.write_register("TRIM_EN", int(before["TRIM_EN"]) | fp.TRIM_THERMAL)
-        ctx.log.info(f"thermal trim on: {trim[0]:.4g} deg/h at REF_FREQ_HZ, {trim[1]:.4g} deg/h/Hz")
+        ctx.log.info(f"thermal trim on: {trim[0]:.4g} deg/h at REF_FREQ_HZ, {trim[1]:.4g} deg/h/Hz; scale factor "
+                     f"{sf_trim[0]:.4g} ppm, {sf_trim[1]:.4g} ppm/Hz")
 
     @step("Fits against temperature", uses=())
     def estimate(self, ctx):
@@ -357,7 +409,11 @@ class ThermalRamp(ThermalChamber, Procedure):
         before any trim, what the record shows plus the trim in force during it."""
         v = self.points_table(data, VERIFY)
         vt = data.table(VERIFY.name)
-        v["raw_bias_dph"] = v["bias_dph"] + vt["trim_bias_dph"] + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"]
+        n = len(v["bias_dph"])  # the firmware took the bias trim off, then divided by 1 + the scale factor trim
+        sf_ppm = (np.asarray(vt.get("trim_sf_ppm", np.zeros(n))) + np.asarray(vt.get("trim_sf_ppm_per_hz", np.zeros(n)))
+                  * v["f_offset_hz"])
+        v["raw_bias_dph"] = (v["bias_dph"] * (1.0 + 1e-6 * sf_ppm) + vt["trim_bias_dph"]
+                             + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"])
         return v
 
     def trim_line(self, p: dict[str, np.ndarray]) -> ThermalFit:
@@ -368,6 +424,29 @@ class ThermalRamp(ThermalChamber, Procedure):
             raise RuntimeError("REF_FREQ_HZ changed during the cycle: one thermal trim cannot hold it")
         return fit_temperature_polynomial(p["f_offset_hz"], p["bias_dph"], p["bias_se_dph"], max_order=1, min_order=1,
                                           t_ref_c=0.0, sigma_t_c=float(np.median(p["f0_se_hz"])))
+
+    def sf_trim_line(self, p: dict[str, np.ndarray]) -> ThermalFit:
+        """The scale factor trim: a straight line of the pairs' scale factor error against the nominal
+        (ppm: 1e6 (sf / nominal - 1)) against their frequency's offset from REF_FREQ_HZ, as trim_line."""
+        nominal = float(np.median(p["sf_nominal"]))  # as recorded: the mode's nominal (G K) or the one given
+        err_ppm = 1e6 * (p["sf"] / nominal - 1.0)
+        return fit_temperature_polynomial(p["f_offset_hz"], err_ppm, 1e6 * p["sf_se"] / abs(nominal), max_order=1,
+                                          min_order=1, t_ref_c=0.0, sigma_t_c=float(np.median(p["f0_se_hz"])))
+
+    def verification_sf(self, data) -> dict[str, np.ndarray]:
+        """The verification's +-rate pairs (points_table of VERIFY_SF) with err_ppm, the scale factor error
+        of the FPGA's output (the trim in force), err_raw_ppm the unit's own (the trim taken back out:
+        the firmware divides the output by 1 + its error) and err_se_ppm."""
+        v = self.points_table(data, VERIFY_SF)
+        vt = data.table(VERIFY_SF.name)
+        plus = np.flatnonzero(np.asarray(vt["rate_dps"]) > 0)
+        plus = plus[plus + 1 < len(vt["rate_dps"])]
+        trim_ppm = np.asarray(vt["trim_sf_ppm"])[plus] + np.asarray(vt["trim_sf_ppm_per_hz"])[plus] * v["f_offset_hz"]
+        nominal = float(np.median(v["sf_nominal"]))
+        v["err_ppm"] = 1e6 * (v["sf"] / nominal - 1.0)
+        v["err_raw_ppm"] = 1e6 * (v["sf"] * (1.0 + 1e-6 * trim_ppm) / nominal - 1.0)
+        v["err_se_ppm"] = 1e6 * v["sf_se"] / abs(nominal)
+        return v
 
     def fits(self, data) -> tuple[dict[str, np.ndarray], dict[str, ThermalFit], ThermalFit, ThermalFit]:
         """The points, the bias fit against each thermometer, the frequency fit against the part
@@ -416,6 +495,9 @@ class ThermalRamp(ThermalChamber, Procedure):
             out += [Result("sf_at_25c", sf25, ci95=_pair(sf_line.ci95[0])),
                     Result("sf_tc_ppm_k", float(sf_line.coeffs[1] / sf25 * 1e6),
                            ci95=(float(sf_lo / sf25 * 1e6), float(sf_hi / sf25 * 1e6)))]
+            sf_trim = self.sf_trim_line(p)
+            out += [Result("thermal_sf_ppm", float(sf_trim.coeffs[0]), ci95=_pair(sf_trim.ci95[0])),
+                    Result("thermal_sf_ppm_per_hz", float(sf_trim.coeffs[1]), ci95=_pair(sf_trim.ci95[1]))]
         out += [Result("thermal_bias_dph", float(trim.coeffs[0]), ci95=_pair(trim.ci95[0])),
                Result("thermal_bias_dph_per_hz", float(trim.coeffs[1]), ci95=_pair(trim.ci95[1]))]
         out += self._hysteresis(p, min(max(fb.order, 1), 2))
@@ -428,6 +510,11 @@ class ThermalRamp(ThermalChamber, Procedure):
                 Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2)))),
             ]
             out += self._verify_hysteresis(data, v)
+            if VERIFY_SF.name in data and len(data.table(VERIFY_SF.name)["t_start_s"]) >= 2:
+                vs = self.verification_sf(data)
+                out += [Result("verify_sf_error_ppm", float(np.sqrt(np.mean(vs["err_ppm"] ** 2)))),
+                        Result("verify_sf_error_raw_ppm", float(np.sqrt(np.mean(vs["err_raw_ppm"] ** 2)))),
+                        Result("verify_sf_noise_ppm", float(np.sqrt(np.mean(vs["err_se_ppm"] ** 2))))]
         return out + [
             Result("f0_tc_ppm_k", float(f0_s.coeffs[1] / f25 * 1e6),
                    ci95=(float(lo / f25 * 1e6), float(hi / f25 * 1e6))),

@@ -340,3 +340,18 @@ def test_split_trim_removes_the_observers_learning_drift():
     trim it starts from it: ~1.1 deg/h."""
     without, with_trim = _learning_drift_rms_dph(False), _learning_drift_rms_dph(True)
     assert without > 5.0 and with_trim < 0.25 * without, (without, with_trim)
+
+
+def test_the_scale_factor_coefficients_load_the_thermal_trim():
+    """thermal_sf_ppm and thermal_sf_ppm_per_hz go to TRIM_SF_PPM, TRIM_SF_PPM_PER_HZ and switch
+    TRIM_THERMAL on, alone or with the bias pair; out of the register's range is one message."""
+    sf = {"thermal_sf_ppm": Coefficient("thermal_sf_ppm", -13000.0, "ppm"),
+          "thermal_sf_ppm_per_hz": Coefficient("thermal_sf_ppm_per_hz", -107.0, "ppm/Hz")}
+    trims = Compensation("U1", dict(sf)).trims()
+    assert trims["TRIM_EN"] == p.TRIM_THERMAL
+    assert trims["TRIM_SF_PPM"] == -13000.0 and trims["TRIM_SF_PPM_PER_HZ"] == -107.0
+    bias = {"thermal_bias_dph": Coefficient("thermal_bias_dph", 150.0, "deg/h"),
+            "thermal_bias_dph_per_hz": Coefficient("thermal_bias_dph_per_hz", -0.5, "deg/h/Hz")}
+    assert Compensation("U1", {**sf, **bias}).trims()["TRIM_EN"] == p.TRIM_THERMAL
+    with pytest.raises(CompensationError, match="above the limit 100000 of TRIM_SF_PPM"):
+        Compensation("U1", {**sf, "thermal_sf_ppm": Coefficient("thermal_sf_ppm", 2e5, "ppm")}).trims()

@@ -136,6 +136,11 @@ def test_line_run_eol_mems_thermal_leaves_the_thermal_trim_in_nvm(tmp_path, caps
     assert rec["trims"]["written"] and int(back["TRIM_EN"]) == 0x08
     assert back["TRIM_BIAS_DPH"] == pytest.approx(m["thermal_bias_dph"]["value"], rel=1e-6)  # tens of deg/s
     assert back["TRIM_BIAS_DPH_PER_HZ"] == pytest.approx(m["thermal_bias_dph_per_hz"]["value"], rel=1e-6)
+    assert back["TRIM_SF_PPM"] == pytest.approx(m["thermal_sf_ppm"]["value"], rel=1e-6)  # the scale factor trim too
+    assert back["TRIM_SF_PPM_PER_HZ"] == pytest.approx(m["thermal_sf_ppm_per_hz"]["value"], rel=1e-6)
+    # the verification's +-10 deg/s pair through the trimmed output: ~0.35 % left (noise ~0.22 %), 2.2 % untrimmed
+    assert m["verify_sf_error_ppm"]["value"] < 3.0 * m["verify_sf_noise_ppm"]["value"]
+    assert m["verify_sf_error_raw_ppm"]["value"] > 3.0 * m["verify_sf_error_ppm"]["value"]
     assert m["sf_at_25c"]["value"] == pytest.approx(1.0, abs=0.05)  # the rotate-and-static pairs' scale factor
 
 

@@ -62,6 +62,13 @@ def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station
     # shows the bias (153 deg/h untrimmed) within 3 of its record's noise (the trim's interval adds to it)
     assert got["thermal_bias_dph"].ci95[0] < 160.0 < got["thermal_bias_dph"].ci95[1] + 10.0
     assert got["verify_residual_dph"].value < 3.0 * got["verify_noise_dph"].value + 0.5
+    # the scale factor trim from the pairs (-1.0 % against the nominal G K = 3.6 x 0.277 = 0.9972 the run
+    # records, 0.987 / 0.9972 - 1, at REF_FREQ_HZ, -107 ppm/Hz:
+    # the gains' -30 ppm/K over the frequency's +0.29 Hz/K): the verification's +-10 deg/s pair at 30 degC
+    # through the FPGA's trimmed output is within 3 of its noise (~15 ppm); untrimmed it is off by ~1.0 %
+    assert got["thermal_sf_ppm"].value == pytest.approx(1e6 * (0.987 / 0.9972 - 1.0), abs=500.0)
+    assert got["verify_sf_error_ppm"].value < 3.0 * got["verify_sf_noise_ppm"].value
+    assert got["verify_sf_error_raw_ppm"].value == pytest.approx(abs(got["thermal_sf_ppm"].value), rel=0.05)
     from bench.recorder import open_run
 
     data = open_run(record.raw_file)
@@ -71,6 +78,10 @@ def test_ramp_cycle_finds_the_coefficient_and_the_lag(run_procedure, sim_station
     assert vt["trim_bias_dph"][0] == pytest.approx(got["thermal_bias_dph"].value, rel=1e-9)
     fpga = sim_station.devices["fpga"]
     assert fpga.read_register("TRIM_EN") == 0 and fpga.read_register("TRIM_BIAS_DPH") == 0.0  # restored
+    assert fpga.read_register("TRIM_SF_PPM") == fpga.read_register("TRIM_SF_PPM_PER_HZ") == 0.0
+    vs = data.table("thermal_ramp_verify_sf")
+    assert list(vs["rate_dps"]) == [10.0, -10.0]
+    assert vs["trim_sf_ppm"][0] == pytest.approx(got["thermal_sf_ppm"].value, rel=1e-9)
     assert sim_station.devices["chamber"].setpoint_c() == 25.0
     # the branches ran as ramp-rate profiles on the controller, each deleted after its branch
     assert any("on the chamber's controller" in r["msg"] for r in data.log())
@@ -132,6 +143,9 @@ def test_line_run_eol_hrg_thermal_leaves_the_thermal_trim_in_nvm(tmp_path, capsy
     m = {x["name"]: x["value"] for x in rec["measurements"]}
     assert back["TRIM_BIAS_DPH"] == pytest.approx(m["thermal_bias_dph"], rel=1e-12)
     assert back["TRIM_BIAS_DPH_PER_HZ"] == pytest.approx(m["thermal_bias_dph_per_hz"], rel=1e-12)
+    assert back["TRIM_SF_PPM"] == pytest.approx(m["thermal_sf_ppm"], rel=1e-12)  # the scale factor trim (+-10 deg/s)
+    assert back["TRIM_SF_PPM_PER_HZ"] == pytest.approx(m["thermal_sf_ppm_per_hz"], rel=1e-12)
+    assert m["verify_sf_error_ppm"] < 3.0 * m["verify_sf_noise_ppm"]  # judged: <= 100 ppm
 
 
 def test_a_turning_ramp_asks_the_table_for_its_rate():

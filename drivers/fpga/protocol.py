@@ -157,7 +157,7 @@ REGISTERS: tuple[Register, ...] = (
              "rate output gain G: rate_out_dps = G degrees(F_p / (4 AGC_SETPOINT))"),
 )
 
-# --- trims held in non-volatile memory (0x40-0x4F, 0x50-0x51; docs/fpga_link.md "Trims in NVM") -
+# --- trims held in non-volatile memory (0x40-0x4F, 0x50-0x53; docs/fpga_link.md "Trims in NVM") -
 NVM_COMMIT, NVM_RELOAD, NVM_ERASE = 1, 2, 3  # NVM_CMD values
 NVM_VALID, NVM_MATCH, NVM_CRC_BAD = 0x01, 0x02, 0x04  # NVM_STATUS bits
 TRIM_DRIFT, TRIM_SPLIT, TRIM_GAIN, TRIM_THERMAL = 0x01, 0x02, 0x04, 0x08  # TRIM_EN bits: the trims applied
@@ -169,7 +169,8 @@ TRIM_REGISTERS: tuple[Register, ...] = (
     Register("NVM_CRC", 0x42, "u", "ro", doc="CRC-16 of the trim block stored in NVM (0: empty)"),
     Register("NVM_COMMITS", 0x43, "u", "ro", doc="commits since manufacture (NVM wear)"),
     Register("TRIM_EN", 0x44, "u", "rw", 0, TRIM_EN_MASK,
-             doc="trims applied: 0x01 drift, 0x02 split, 0x04 gains, 0x08 thermal bias, 0x10 readout phase"),
+             doc="trims applied: 0x01 drift, 0x02 split, 0x04 gains, 0x08 thermal (bias and scale factor), "
+                 "0x10 readout phase"),
     Register("TRIM_DRIFT_D_PER_S", 0x45, "f", "rw", 0.0, 1e3, "1/s", 0.0, "drift trim: damping anisotropy D"),
     Register("TRIM_DRIFT_THETA_TAU_DEG", 0x46, "f", "rw", -360.0, 360.0, "deg", 0.0, "drift trim: damping axis"),
     Register("TRIM_SPLIT_HZ", 0x47, "f", "rw", 0.0, 10.0, "Hz", 0.0, "split trim: frequency split"),
@@ -190,7 +191,13 @@ TRIM_REGISTERS: tuple[Register, ...] = (
              "a chain delay of this phase at the carrier: cx, sx rotated back by it)"),
     Register("TRIM_PHASE_Y_DEG", 0x51, "f", "rw", -45.0, 45.0, "deg", 0.0,
              "readout phase trim of the y chain (cy, sy), as TRIM_PHASE_X_DEG"),
+    Register("TRIM_SF_PPM", 0x52, "f", "rw", -1e5, 1e5, "ppm", 0.0,
+             "thermal trim: the scale factor's error at REF_FREQ_HZ, the force-to-rebalance rate output (less "
+             "the bias trim) divided by 1 + it"),
+    Register("TRIM_SF_PPM_PER_HZ", 0x53, "f", "rw", -1e5, 1e5, "ppm/Hz", 0.0,
+             "thermal trim: the scale factor error's slope against the PLL frequency's offset from REF_FREQ_HZ"),
 )
+TRIM_BLOCK_SIZES = (96, 112, 128)  # the block's bytes as the layouts grew (phase trims, scale factor trim): older load
 TRIM_BLOCK = tuple(r.name for r in TRIM_REGISTERS if r.access == "rw")  # what NVM holds, in address order
 REGISTERS = REGISTERS + TRIM_REGISTERS
 

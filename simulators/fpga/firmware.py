@@ -176,7 +176,8 @@ class FpgaFirmware:
             return 0
         if not nvm.valid:
             return p.NVM_CRC_BAD
-        return p.NVM_VALID | (p.NVM_MATCH if nvm.block() == encode_block(self.regs) else 0)
+        held = encode_block(decode_block(nvm.block()))  # an older layout as it loads (defaults appended)
+        return p.NVM_VALID | (p.NVM_MATCH if held == encode_block(self.regs) else 0)
 
     def _ctrl(self) -> int:
         """CTRL as the loops see it: the drift trim switches the compensation on when the bench's own is off."""
@@ -250,6 +251,7 @@ class FpgaFirmware:
                 prm[k.P_DRIFT_THETA_TAU_DEG] = float(self.regs["TRIM_DRIFT_THETA_TAU_DEG"])
             if not int(self.regs["TRIM_EN"]) & p.TRIM_THERMAL:
                 prm[k.P_TRIM_BIAS_DPH] = prm[k.P_TRIM_BIAS_DPH_PER_HZ] = 0.0
+                prm[k.P_TRIM_SF_PPM] = prm[k.P_TRIM_SF_PPM_PER_HZ] = 0.0
             self._hot = self._hot_values()
         return prm
 

@@ -47,11 +47,12 @@ P_QUAD_KP, P_QUAD_KI, P_PRECESSION_RATE_DPS, P_DRIFT_D_PER_S, P_DRIFT_THETA_TAU_
 P_OUTPUT_MODE, P_FTR_ANGLE_DEG, P_FTR_KP, P_FTR_KI, P_FTR_GAIN = range(12, 17)
 P_FM_FORCE_HZ, P_FM_RATE_HZ = range(17, 19)
 P_TRIM_BIAS_DPH, P_TRIM_BIAS_DPH_PER_HZ = 19, 20  # the thermal trim (0, 0 unless TRIM_EN has TRIM_THERMAL)
+P_TRIM_SF_PPM, P_TRIM_SF_PPM_PER_HZ = 21, 22  # its scale factor part (0, 0 likewise)
 PARAM_REGS = (
     "AGC_SETPOINT", "PLL_KI", "PLL_KP", "FORCE_LIMIT", "AGC_KP", "AGC_KI", "DRIVE_FORCE",
     "QUAD_KP", "QUAD_KI", "PRECESSION_RATE_DPS", "DRIFT_D_PER_S", "DRIFT_THETA_TAU_DEG",
     "OUTPUT_MODE", "FTR_ANGLE_DEG", "FTR_KP", "FTR_KI", "FTR_GAIN", "FM_FORCE_HZ", "FM_RATE_HZ",
-    "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ",
+    "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ", "TRIM_SF_PPM", "TRIM_SF_PPM_PER_HZ",
 )  # fmt: skip
 # loop state
 S_AGC_INT, S_QUAD_INT, S_PLL_INT_HZ, S_A, S_PHASE_ERR, S_PLL_FREQ_HZ = range(6)
@@ -396,9 +397,14 @@ def wave_force(
     st[S_OUT + 2] = f_q
     st[S_OUT + 3] = f_p
     if ftr and prm[P_AGC_SETPOINT] > 0:  # the rate output: G degrees(F_p / (4 a_set)), ratiometric,
-        # less the thermal trim's bias at the PLL frequency (st[S_OUT + 1]: its offset from REF_FREQ_HZ)
+        # less the thermal trim's bias at the PLL frequency (st[S_OUT + 1]: its offset from REF_FREQ_HZ),
+        # over 1 + the thermal trim's scale factor error there (ppm; 0 off: the same numbers)
         trim_dph = prm[P_TRIM_BIAS_DPH] + prm[P_TRIM_BIAS_DPH_PER_HZ] * st[S_OUT + 1]
-        st[S_RATE_OUT] = prm[P_FTR_GAIN] * math.degrees(f_p / (4.0 * prm[P_AGC_SETPOINT])) - trim_dph / 3600.0
+        rate = prm[P_FTR_GAIN] * math.degrees(f_p / (4.0 * prm[P_AGC_SETPOINT])) - trim_dph / 3600.0
+        sf_ppm = prm[P_TRIM_SF_PPM] + prm[P_TRIM_SF_PPM_PER_HZ] * st[S_OUT + 1]
+        if sf_ppm != 0.0:
+            rate = rate / (1.0 + 1e-6 * sf_ppm)
+        st[S_RATE_OUT] = rate
 
 
 @njit(cache=True)

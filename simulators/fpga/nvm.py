@@ -19,13 +19,17 @@ def encode_block(regs: dict[str, float]) -> bytes:
 
 
 def decode_block(block: bytes) -> dict[str, float]:
-    return {name: p.decode_value(p.BY_NAME[name], block[8 * i : 8 * i + 8]) for i, name in enumerate(p.TRIM_BLOCK)}
+    """The trim registers of a block; an older, shorter layout (p.TRIM_BLOCK_SIZES: registers were only
+    ever appended) gives the registers it lacks their defaults (a trim it never had stays off)."""
+    n = len(block) // 8
+    return {name: p.decode_value(p.BY_NAME[name], block[8 * i : 8 * i + 8]) if i < n else p.BY_NAME[name].default
+            for i, name in enumerate(p.TRIM_BLOCK)}
 
 
 class Nvm:
     """Committed trim block + CRC-16 (CCITT-FALSE, as the link's frames) and a commit counter."""
 
-    SIZE = 8 * len(p.TRIM_BLOCK)
+    SIZE = 8 * len(p.TRIM_BLOCK)  # what a commit writes; blocks of the older p.TRIM_BLOCK_SIZES still load
 
     def __init__(self, path: str | Path | None = None) -> None:
         self.path = Path(path) if path else None
@@ -40,7 +44,8 @@ class Nvm:
     @property
     def valid(self) -> bool:
         d = self.data
-        return d is not None and len(d) == self.SIZE + 2 and p.crc16(d[:-2]) == struct.unpack("<H", d[-2:])[0]
+        return (d is not None and len(d) - 2 in p.TRIM_BLOCK_SIZES
+                and p.crc16(d[:-2]) == struct.unpack("<H", d[-2:])[0])
 
     @property
     def crc(self) -> int:
