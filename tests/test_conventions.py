@@ -33,6 +33,7 @@ from procedures import all_procedures
 SUFFIX_UNITS = {
     "_dph_s_per_hz": "deg/h/(Hz/s)",
     "_dph_per_hz": "deg/h/Hz",
+    "_ppm_per_hz": "ppm/Hz",
     "_degc_per_min": "degC/min",
     "_ppm_per_min": "ppm/min",
     "_per_s": "1/s",
