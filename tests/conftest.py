@@ -142,3 +142,15 @@ def plots(qtbot):
     w.show()
     yield w
     w.shutdown()
+
+
+@pytest.fixture(autouse=True)
+def _qt_garbage_collected_in_the_gui_thread(request):
+    """After a test that used Qt, its cyclic garbage is collected here, in the GUI thread: left to the
+    collector, Qt objects were freed from whatever thread allocated next (a station's server threads
+    in the next test), and pytest-qt's event processing then crashed the worker (CI, twice)."""
+    yield
+    if {"qtbot", "qapp"} & set(request.fixturenames):
+        import gc
+
+        gc.collect()

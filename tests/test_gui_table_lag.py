@@ -26,6 +26,9 @@ class _Recorded:
 
 
 def test_table_rows_reach_the_run_within_a_bounded_bench_time(monkeypatch):
+    import gc
+
+    gc.collect()  # earlier tests' Qt garbage freed here, in the GUI thread, not by the station's threads
     monkeypatch.setattr(Station, "HEALTH_BLOCK_WALL_S", float("inf"))  # as at "max": the wall never flushes
     station = SimStation("sim-hrg", seed=0).open()
     try:
