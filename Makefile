@@ -34,10 +34,12 @@ run: $(STAMP)
 # and without it each compiles every module of ours it imports, and pytest rewrites every test module, again)
 # (the serial pass collects only the files that mark a test serial: tests/conftest.py refuses a run
 # where a serial test sits in a file this grep would miss)
+# (--dist loadfile: each test file on one worker, so its module fixtures are set up once, the files
+# costliest first from tests/costs_s.tsv - see tests/xdist_units.py)
 TEST_WORKERS ?= 3
 SERIAL_FILES = $(shell grep -l 'mark\.serial' tests/test_*.py)
 test: $(STAMP)
-	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m "not serial"
+	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial"
 	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -m serial $(SERIAL_FILES)
 	$(BIN)/ruff check .
 

@@ -71,6 +71,16 @@ def pytest_collection_modifyitems(config, items):
                                     f"'{SERIAL_MARK_TEXT}': `make test`'s serial pass (its grep) would not run it")
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_xdist_make_scheduler(config, log):
+    """`--dist loadfile`: whole test files, handed out costliest first (tests/xdist_units.py)."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from tests.xdist_units import make_scheduler
+
+    return make_scheduler(config, log)
+
+
 PG_URL_ENV = "GYROBENCH_TEST_PG_URL"  # e.g. postgresql+psycopg://postgres@127.0.0.1:5432/gyrobench_test
 
 
