@@ -25,13 +25,14 @@ def pytest_configure(config):
 
 #: GYROBENCH_TEST_CPU_LOG=FILE: each test's CPU seconds (this process, and the children it waited
 #: for: the CLI subprocesses) and wall seconds, setup to teardown, appended as tab-separated lines
-#: (every xdist worker appends to the same file) - the suite's cost on 2 cores is CPU, not wall
+#: (every xdist worker appends to the same file) - the suite's cost on 2 cores is CPU, not wall;
+#: then the xdist worker and the end's Unix time, to see how the workers' last tests end
 CPU_LOG_ENV = "GYROBENCH_TEST_CPU_LOG"
 
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item, nextitem):
-    """With $GYROBENCH_TEST_CPU_LOG set: one line per test, `nodeid  cpu_self_s  cpu_children_s  wall_s`."""
+    """With $GYROBENCH_TEST_CPU_LOG set: one line per test, `nodeid cpu_self_s cpu_children_s wall_s worker end_s`."""
     log = os.environ.get(CPU_LOG_ENV)
     if not log:
         yield
@@ -47,7 +48,8 @@ def pytest_runtest_protocol(item, nextitem):
     yield
     (self1, kids1), wall_s = cpu(), time.monotonic() - wall0
     with open(log, "a", encoding="utf-8") as f:  # one short write per line: lines of workers do not mix
-        f.write(f"{item.nodeid}\t{self1 - self0:.2f}\t{kids1 - kids0:.2f}\t{wall_s:.2f}\n")
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "-")
+        f.write(f"{item.nodeid}\t{self1 - self0:.2f}\t{kids1 - kids0:.2f}\t{wall_s:.2f}\t{worker}\t{time.time():.2f}\n")
 
 
 #: `make test`'s serial pass collects only the test files holding this text (the Makefile's grep):

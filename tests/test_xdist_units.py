@@ -25,7 +25,7 @@ def test_files_go_out_costliest_first_an_unlisted_one_at_the_default_per_test():
 
 def test_costs_written_from_a_cpu_log_are_read_back_summed_per_file(tmp_path):
     log = tmp_path / "cpu.log"
-    log.write_text("t.py::a\t1.00\t0.00\t12.34\nt.py::b[x::y]\t0.10\t2.00\t0.50\nu.py::c\t0\t0\t20\n",
+    log.write_text("t.py::a\t1.00\t0.00\t12.34\tgw0\t1.0\nt.py::b[x::y]\t0.10\t2.00\t0.50\tgw1\t2.0\nu.py::c\t0\t0\t20\n",
                    encoding="utf-8")
     write_costs(log, tmp_path / "costs.tsv")
     assert list(load_costs(tmp_path / "costs.tsv").items()) == [("u.py", 20.0), ("t.py", 12.8)]

@@ -58,10 +58,10 @@ def make_scheduler(config: pytest.Config, log):
 
 
 def file_costs(cpu_log: Path) -> dict[str, float]:
-    """Each test file's summed wall seconds, from a CPU log's `nodeid cpu_self cpu_children wall` lines."""
+    """Each test file's summed wall seconds, from a CPU log's `nodeid cpu_self cpu_children wall ...` lines."""
     costs: dict[str, float] = {}
     for line in cpu_log.read_text(encoding="utf-8").splitlines():
-        nodeid, _, _, wall_s = line.split("\t")
+        nodeid, _, _, wall_s = line.split("\t")[:4]
         name = nodeid.split("::", 1)[0]
         costs[name] = costs.get(name, 0.0) + float(wall_s)
     return costs
