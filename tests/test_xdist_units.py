@@ -23,12 +23,16 @@ def test_files_go_out_costliest_first_an_unlisted_one_at_the_default_per_test():
     assert order["b.py"] == units["b.py"]  # a file's tests stay together, in their order
 
 
-def test_costs_written_from_a_cpu_log_are_read_back_summed_per_file(tmp_path):
+def test_costs_written_from_cpu_logs_are_read_back_summed_per_file_and_averaged(tmp_path):
     log = tmp_path / "cpu.log"
     log.write_text("t.py::a\t1.00\t0.00\t12.34\tgw0\t1.0\nt.py::b[x::y]\t0.10\t2.00\t0.50\tgw1\t2.0\nu.py::c\t0\t0\t20\n",
                    encoding="utf-8")
-    write_costs(log, tmp_path / "costs.tsv")
+    write_costs([log], tmp_path / "costs.tsv")
     assert list(load_costs(tmp_path / "costs.tsv").items()) == [("u.py", 20.0), ("t.py", 12.8)]
+    other = tmp_path / "cpu2.log"
+    other.write_text("t.py::a\t1.00\t0.00\t7.2\n", encoding="utf-8")  # u.py not in this run: 0 s there
+    write_costs([log, other], tmp_path / "costs.tsv")
+    assert list(load_costs(tmp_path / "costs.tsv").items()) == [("t.py", 10.0), ("u.py", 10.0)]
     assert load_costs(tmp_path / "missing.tsv") == {}
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 #: `test_file<TAB>seconds`: each test file's wall in a parallel pass (its tests' setup to teardown),
-#: written by `python tests/xdist_units.py CPU_LOG` from a $GYROBENCH_TEST_CPU_LOG (tests/conftest.py);
+#: written by `python tests/xdist_units.py CPU_LOG...` from $GYROBENCH_TEST_CPU_LOG files (tests/conftest.py);
 #: only the order of the pass depends on it, never which tests run
 COSTS_FILE = Path(__file__).with_name("costs_s.tsv")
 
@@ -67,12 +67,15 @@ def file_costs(cpu_log: Path) -> dict[str, float]:
     return costs
 
 
-def write_costs(cpu_log: Path, path: Path = COSTS_FILE) -> None:
-    """COSTS_FILE from a $GYROBENCH_TEST_CPU_LOG, costliest first."""
-    lines = ["# each test file's wall (s) in a parallel pass: `python tests/xdist_units.py CPU_LOG` writes it"]
-    lines += [f"{n}\t{s:.1f}" for n, s in sorted(file_costs(cpu_log).items(), key=lambda kv: (-kv[1], kv[0]))]
+def write_costs(cpu_logs: list[Path], path: Path = COSTS_FILE) -> None:
+    """COSTS_FILE from one or more $GYROBENCH_TEST_CPU_LOG files (a file's mean over them), costliest first."""
+    runs = [file_costs(log) for log in cpu_logs]
+    names = sorted({n for run in runs for n in run})
+    mean = {n: sum(run.get(n, 0.0) for run in runs) / len(runs) for n in names}
+    lines = ["# each test file's wall (s) in a parallel pass: `python tests/xdist_units.py CPU_LOG...` writes it"]
+    lines += [f"{n}\t{s:.1f}" for n, s in sorted(mean.items(), key=lambda kv: (-kv[1], kv[0]))]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
 if __name__ == "__main__":
-    write_costs(Path(sys.argv[1]))
+    write_costs([Path(a) for a in sys.argv[1:]])
