@@ -35,8 +35,9 @@ run: $(STAMP)
 # (the serial pass collects only the files that mark a test serial: tests/conftest.py refuses a run
 # where a serial test sits in a file this grep would miss)
 # (--dist loadfile: each test file on one worker, so its module fixtures are set up once, the files
-# costliest first from tests/costs_s.tsv - see tests/xdist_units.py)
-TEST_WORKERS ?= 3
+# costliest first from tests/costs_s.tsv - see tests/xdist_units.py; 4 workers on 2 cores: a test
+# waiting on a subprocess, a socket or a poll leaves its core to another - benchmarks/suite_pass.py)
+TEST_WORKERS ?= 4
 SERIAL_FILES = $(shell grep -l 'mark\.serial' tests/test_*.py)
 test: $(STAMP)
 	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial"
