@@ -73,7 +73,7 @@ def pytest_collection_modifyitems(config, items):
                                     f"'{SERIAL_MARK_TEXT}': `make test`'s serial pass (its grep) would not run it")
 
 
-@pytest.hookimpl(tryfirst=True)
+@pytest.hookimpl(tryfirst=True, optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """`--dist loadfile`: whole test files, handed out costliest first (tests/xdist_units.py)."""
     if config.getvalue("dist") != "loadfile":
