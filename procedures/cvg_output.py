@@ -97,8 +97,9 @@ def scale_factor_truth(truth: dict[str, float], at_reference: bool = False) -> f
     * trim: the thermal scale factor trim while on, TRIM_SF_PPM + TRIM_SF_PPM_PER_HZ x the PLL's
       offset from REF_FREQ_HZ (the held wave's frequency: f0 at the temperature, or at 25 degC).
     The electrodes' angle errors move it by their squares (under 2 ppm on the realistic HRG); a
-    phase delay with a frequency split also leaves a term odd in phi, -1e-5 to -2.3e-5 at 2 deg
-    and 5 mHz, not derived and left out (docs/chamber.md).  at_reference: at 25 degC
+    phase delay with a frequency split left a term odd in phi (-1e-5 to -2.3e-5 at 2 deg, 5 mHz)
+    while the FPGA's split observer learnt in force-to-rebalance; it no longer does (docs/chamber.md,
+    docs/fpga_link.md).  at_reference: at 25 degC
     mid-hysteresis (the thermal fits' value at 25 degC); else at the truth's own time,
     temperature and package stress."""
     k = truth["bryan_factor"]
