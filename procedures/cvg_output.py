@@ -36,21 +36,97 @@ def nominal_scale_factor(mode: str, bryan_factor: float, ftr_gain: float, given:
     return ftr_gain * bryan_factor if mode == "force-to-rebalance" else -bryan_factor
 
 
-def scale_factor_truth(truth: dict[str, float]) -> float:
-    """The output mode's true scale factor (docs/fpga_link.md, "Output modes"): G K / g in
-    force-to-rebalance (the rate output G degrees(F_p / (4 a_set)), F_p = 4 a K Omega, and the AGC
-    holds the measured amplitude g a at a_set, g the pickoff gain along the held wave:
-    |((1 + g_x) cos 2 theta, (1 + g_y) sin 2 theta)|, the noise model's gains at the start), -K in
-    whole-angle (the wave angle turns at -K Omega; unequal gains distort the angle within a turn only)."""
-    import math
+#: the temperature the thermal procedures refer their fits to (simulators.physics.errors' reference)
+REFERENCE_TEMPERATURE_C = 25.0
 
+
+def _pickoff_gains(truth: dict[str, float], at_reference: bool) -> tuple[float, float]:
+    """The X and Y pickoff chains' gains as the FPGA reads them: the noise model's electrode gains
+    (at the start), the error sources' chain gains (`pickoff_gain_x`, `_y`: at the truth's time,
+    temperature and package stress) and the FPGA's gain trims while on.  at_reference: the chains'
+    gains at 25 degC off the hysteresis loop (h = 0: the middle of the heating and cooling branches),
+    their temperature coefficient and the h sf_hyst / 2 taken back out (ErrorSources.pickoff_gains)."""
+    shift = 0.0
+    if at_reference:
+        dt_k = truth.get("temperature_c", REFERENCE_TEMPERATURE_C) - REFERENCE_TEMPERATURE_C
+        shift = 1e-6 * (truth.get("err_pickoff_gain_tc_ppm_k", 0.0) * dt_k
+                        - 0.5 * truth.get("err_sf_hyst_ppm", 0.0) * truth.get("hysteresis_state", 0.0))
+    gains = []
+    for ax in ("x", "y"):
+        noise = 1.0 + 1e-6 * truth.get(f"noise_gain_{ax}_ppm", 0.0)
+        chain = truth.get(f"pickoff_gain_{ax}", 1.0) - shift
+        gains.append((noise, chain * truth.get(f"trim_gain_{ax}", 1.0)))
+    return gains[0], gains[1]
+
+
+def _amplitude_ratio(truth: dict[str, float], c: float, s: float, at_reference: bool) -> float:
+    """a / a_set: the wave's true amplitude over the AGC's setpoint, the setpoint being the
+    pickoffs' reading of the amplitude, |(X, Y)| with X = g_x a c (1 + (3/4) e3 (n_x a c)^2) and Y
+    likewise (n the noise model's electrode gain, g all the chain's gain, e3 the chains' cubic
+    acting on what the electrodes give: ErrorSources.measure), solved for a by fixed point."""
+    (nx, gx), (ny, gy) = _pickoff_gains(truth, at_reference)
+    e3 = truth.get("err_pickoff_cubic", 0.0)
+    setpoint = truth.get("agc_setpoint", 1.0)  # the register's default where a truth predates the key
+
+    def reading(a: float) -> float:
+        return math.hypot(nx * gx * a * c * (1.0 + 0.75 * e3 * (nx * a * c) ** 2),
+                          ny * gy * a * s * (1.0 + 0.75 * e3 * (ny * a * s) ** 2))
+
+    a = setpoint
+    for _ in range(30):
+        a = setpoint * a / reading(a)
+    return a / setpoint
+
+
+def scale_factor_truth(truth: dict[str, float], at_reference: bool = False) -> float:
+    """The output mode's true scale factor, -K in whole-angle (the wave angle turns at -K Omega;
+    unequal gains distort the angle within a turn only).  In force-to-rebalance (docs/fpga_link.md,
+    "Output modes"; docs/chamber.md, "The scale factor's truth") the rate output is
+    G degrees(F_p / (4 a_set)) and the rebalance force that holds the wave at theta against the
+    input rate is F_c = 4 a K Omega on the node, so
+        SF = G K (a / a_set) cos(phi) / g_f / (1 + trim)
+    * a / a_set: the AGC holds the pickoffs' reading of the amplitude at a_set, so the true amplitude
+      is a_set over the chains' gain along the wave and their cubic's (3/4) e3 a^2 (`_amplitude_ratio`:
+      on the realistic HRG 1 / 1.00025 and 1 / 1.00075 at 25 degC, -250 and -749 ppm);
+    * cos(phi): the readout's phase delay phi (less its trim; x's on the wave at 0, weighted by
+      cos^2 2 theta and sin^2 2 theta as drive_frequency does) turns the frame the FPGA lays its
+      forces in by phi off the wave's; the quadrature loop supplies the lean's other part, and F_p
+      is F_c cos phi plus a quadrature force's sin phi (a bias): -609 ppm at 2 deg;
+    * g_f: the forcers' gain along the node, g_fx sin^2 2 theta + g_fy cos^2 2 theta (+400 ppm for
+      g_fy - 1 = -400 ppm at theta = 0);
+    * trim: the thermal scale factor trim while on, TRIM_SF_PPM + TRIM_SF_PPM_PER_HZ x the PLL's
+      offset from REF_FREQ_HZ (the held wave's frequency: f0 at the temperature, or at 25 degC).
+    The electrodes' angle errors move it by their squares (under 2 ppm on the realistic HRG); a
+    phase delay with a frequency split left a term odd in phi (-1e-5 to -2.3e-5 at 2 deg, 5 mHz)
+    while the FPGA's split observer learnt in force-to-rebalance; it no longer does (docs/chamber.md,
+    docs/fpga_link.md).  at_reference: at 25 degC
+    mid-hysteresis (the thermal fits' value at 25 degC); else at the truth's own time,
+    temperature and package stress."""
     k = truth["bryan_factor"]
     if not _ftr(truth):
         return -k
     two_th = 2.0 * math.radians(truth["ftr_angle_deg"])
-    g = math.hypot((1.0 + 1e-6 * truth.get("noise_gain_x_ppm", 0.0)) * math.cos(two_th),
-                   (1.0 + 1e-6 * truth.get("noise_gain_y_ppm", 0.0)) * math.sin(two_th))
-    return truth["ftr_gain"] * k / g
+    c, s = math.cos(two_th), math.sin(two_th)
+    w_x = c * c
+    phi_deg = (w_x * (truth.get("err_pickoff_phase_x_deg", 0.0) - truth.get("trim_phase_x_deg", 0.0))
+               + (1.0 - w_x) * (truth.get("err_pickoff_phase_y_deg", 0.0) - truth.get("trim_phase_y_deg", 0.0)))
+    g_f = ((1.0 - w_x) * (1.0 + 1e-6 * truth.get("err_forcer_gain_x_ppm", 0.0))
+           + w_x * (1.0 + 1e-6 * truth.get("err_forcer_gain_y_ppm", 0.0)))
+    sf = truth["ftr_gain"] * k * _amplitude_ratio(truth, c, s, at_reference) * math.cos(math.radians(phi_deg)) / g_f
+    if "trim_sf_ppm" in truth:
+        if at_reference or "f0_at_temperature_hz" not in truth:
+            f_hz = truth["f0_hz"] + truth.get("freq_offset_hz_ref", truth.get("freq_offset_hz", 0.0))
+        else:
+            f_hz = truth["f0_at_temperature_hz"]
+        f_hz += truth.get("drive_freq_offset_hz", 0.0)
+        sf /= 1.0 + 1e-6 * (truth["trim_sf_ppm"] + truth.get("trim_sf_ppm_per_hz", 0.0) * (f_hz - truth["ref_freq_hz"]))
+    return sf
+
+
+def scale_factor_at_25c_truth(truth: dict[str, float]) -> float:
+    """The true scale factor at 25 degC off the hysteresis loop: what a fit over a heating and a
+    cooling branch gives there (scale_factor_truth at the reference)."""
+    return scale_factor_truth(truth, at_reference=True)
 
 
 def bias_at_dph(truth: dict[str, float], theta_deg: float) -> float:

@@ -26,7 +26,7 @@ from bench.analysis.thermal_ramp import branch_gap, branch_hysteresis, frequency
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 
-from .cvg_output import MODES, UNSTATED_BIAS_NO_TRUTH, scale_factor_truth, static_bias_truth
+from .cvg_output import MODES, UNSTATED_BIAS_NO_TRUTH, scale_factor_at_25c_truth, static_bias_truth
 from .thermal_soak import REF_TEMPERATURE_C, ThermalChamber, _f0_at_25c_truth, _f0_tc_truth, _pair
 
 BRANCHES = ("heating", "cooling")
@@ -193,7 +193,7 @@ class ThermalRamp(ThermalChamber, Procedure):
                     "(what the unit's noise allows a residual)", no_interval="a noise level", when=_verifying,
                     when_doc="verify_points > 0"),
         Measurement("sf_at_25c", "", "scale factor (output per input rate) at 25 degC against the frequency "
-                    "thermometer, from the +-rate_dps pairs", truth=scale_factor_truth, when=_rotating,
+                    "thermometer, from the +-rate_dps pairs", truth=scale_factor_at_25c_truth, when=_rotating,
                     when_doc="rate_dps > 0"),
         Measurement("sf_tc_ppm_k", "ppm/K", "scale factor's temperature coefficient at 25 degC (straight line "
                     "against the frequency thermometer)", truth=_sf_tc_truth, when=_rotating, when_doc="rate_dps > 0"),

@@ -372,7 +372,7 @@ def test_output_mode_values_are_checked_before_anything_is_written(bench):
 
     offset_hz = drive_frequency_offset_hz(world.params, None, setpoint=1.0, angle_deg=10.0)
     assert offset_hz == pytest.approx(0.005 / 2.0 * math.cos(math.radians(4.0 * (10.0 - 10.0))), rel=1e-9)
-    assert server.truth() == {"cvg_output_mode": 1.0, "ftr_angle_deg": 10.0, "ftr_gain": 2.0,
+    assert server.truth() == {"cvg_output_mode": 1.0, "ftr_angle_deg": 10.0, "ftr_gain": 2.0, "agc_setpoint": 1.0,
                               "drive_freq_offset_hz": pytest.approx(offset_hz, rel=1e-12)}
 
 

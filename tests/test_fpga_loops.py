@@ -194,7 +194,10 @@ def test_force_to_rebalance_holds_the_wave_and_its_rate_output_is_g_k_omega():
     (within 0.01 deg, noise ~1e-3 deg), and the rate output averages G K (Omega - (D/4K) sin
     4 (theta_h - theta_tau)) (docs/fpga_link.md "Output modes"): G = 3.6, K = 0.277, the drift term
     29.33 deg/h at theta_h = 0.  Tolerance 2e-4 deg/s: the 8 s mean's noise is ~2e-5 deg/s and the
-    split's residual quadrature drift a few 1e-5."""
+    split's residual quadrature drift a few 1e-5.  Each step's first 17 s are left out: from this
+    cold start the quadrature PI alone takes the split's pumping at the held angle (time constant
+    2 s; the split observer does not learn in force-to-rebalance, docs/fpga_link.md), 7 s left
+    2.7e-4 deg/s."""
     params = preset("hrg")
     world, clock, server, link, blocks = _bench(params, state=state_from_elements(1.0, 0.0, 0.0))
     try:
@@ -210,8 +213,8 @@ def test_force_to_rebalance_holds_the_wave_and_its_rate_output_is_g_k_omega():
         for rate in (0.0, 10.0, -10.0):
             world.case_rate_dps = rate
             t0 = clock.now()
-            clock.sleep(15.0)
-            rows = _rows(link, clock, blocks, t0_s=t0 + 7.0)
+            clock.sleep(25.0)
+            rows = _rows(link, clock, blocks, t0_s=t0 + 17.0)
             assert abs(np.mean(rows[:, 10]) % 90.0 - 0.0) < 0.01 or abs(np.mean(rows[:, 10]) % 90.0 - 90.0) < 0.01
             want = 3.6 * k * (rate - math.degrees(d_term))
             assert np.mean(rows[:, 11]) == pytest.approx(want, abs=2e-4)

@@ -70,7 +70,12 @@ class FpgaFirmware:
         the resonator's); and the readout phase trims while TRIM_PHASE is on (trim_phase_x_deg,
         trim_phase_y_deg: against the chains' delays err_pickoff_phase_x_deg, _y_deg); with the wave
         held and its amplitude set, drive_freq_offset_hz: the frequency the PLL runs the held wave at
-        minus f0_hz + freq_offset_hz, at 25 degC (simulators.physics.drive_frequency)."""
+        minus f0_hz + freq_offset_hz, at 25 degC (simulators.physics.drive_frequency); and what the
+        rate output's scale factor depends on beyond those (procedures.cvg_output.scale_factor_truth,
+        docs/chamber.md "The scale factor's truth"): agc_setpoint (the pickoffs' cubic acts at the
+        true amplitude), the pickoff gain trims trim_gain_x, trim_gain_y while TRIM_GAIN is on, and
+        while TRIM_THERMAL is on the scale factor trim trim_sf_ppm, trim_sf_ppm_per_hz and
+        ref_freq_hz (the firmware divides the output by 1 + its error at the PLL's offset from it)."""
         with self.lock:
             out: dict[str, float] = {}
             if int(self.regs["TRIM_EN"]) & p.TRIM_PHASE:  # the readout phase trims in place (docs/readout_phase.md)
@@ -82,7 +87,16 @@ class FpgaFirmware:
                 "cvg_output_mode": float(p.MODE_FORCE_TO_REBALANCE),
                 "ftr_angle_deg": float(self.regs["FTR_ANGLE_DEG"]),
                 "ftr_gain": float(self.regs["FTR_GAIN"]),
+                "agc_setpoint": float(self.regs["AGC_SETPOINT"]),
             }
+            trims = int(self.regs["TRIM_EN"])
+            if trims & p.TRIM_GAIN:
+                out["trim_gain_x"] = float(self.regs["TRIM_GAIN_X"])
+                out["trim_gain_y"] = float(self.regs["TRIM_GAIN_Y"])
+            if trims & p.TRIM_THERMAL:
+                out["trim_sf_ppm"] = float(self.regs["TRIM_SF_PPM"])
+                out["trim_sf_ppm_per_hz"] = float(self.regs["TRIM_SF_PPM_PER_HZ"])
+                out["ref_freq_hz"] = float(self.regs["REF_FREQ_HZ"])
             params = getattr(self.world, "params", None)
             if params is not None and self.regs["AGC_SETPOINT"] > 0:
                 out["drive_freq_offset_hz"] = drive_frequency_offset_hz(

@@ -29,7 +29,8 @@ wave turns (about 10 s at 2 deg/s).  The observer keeps its estimate over a driv
 split is the resonator's) and starts afresh when the quadrature loop is switched on.  It learns
 only while the amplitude is held (AGC_SETTLED_REL): while the AGC pushes the amplitude up its force
 leaks into dk/dt, which read as pumping biased h by ~1 % and left -0.04 deg/h of mean drift in
-hrg-damping's verification (docs/damping_drift.md).
+hrg-damping's verification (docs/damping_drift.md).  It does not learn in force-to-rebalance
+(the wave held at one angle: the PI's integrator takes the pumping there; docs/fpga_link.md).
 """
 
 from __future__ import annotations
@@ -219,7 +220,11 @@ def update_loops(
             # the observer learns while the amplitude is held (AGC within AGC_SETTLED_REL of its
             # setpoint, or the AGC off): an AGC pushing the amplitude up leaks into dk/dt
             settled = not ctrl & _AGC_EN or abs(a - setpoint) <= AGC_SETTLED_REL * setpoint
-            if quad_on and st[S_OBS_OK] > 0 and settled:
+            # nor in force-to-rebalance: the held wave shows one combination only, and with it the
+            # rebalance force's leak into quadrature through the readout phase delay, which follows
+            # the input rate; learnt over the observer's memory it left k = 2 (dh/dt) / QUAD_KI after
+            # each rate change, which the split turned into a scale error (docs/fpga_link.md)
+            if quad_on and st[S_OBS_OK] > 0 and settled and prm[P_OUTPUT_MODE] != MODE_FTR:
                 _observe_split(st, k / a, a, theta, span, n, dt_s, a / max(setpoint, 1e-12))
             # chi is relative to the reference: add back the reference's change since the last estimate
             d_chi = _wrap(chi - st[S_CHI], math.pi) + 2.0 * math.pi * (st[S_REF_HZ] - ref_hz) * (t_start - st[S_T_EST])
