@@ -90,3 +90,42 @@ def test_the_ring_the_old_gains_lost_is_held_at_the_rules():
     assert a_dev < 0.005 and phase < 0.01  # held: the AGC's amplitude, the PLL locked (0.05 rad)
     a_dev, phase = _ring_after({"FTR_KP": 40.0, "FTR_KI": 400.0}, 30.0)
     assert a_dev > 0.2 and phase > 0.05  # lost: the amplitude swings, the PLL unlocked
+
+
+def test_the_lost_ring_soaks_to_its_truth_at_the_rules_gains(tmp_path):
+    """thermal-soak on that ring alone (sim-mems-thermal with slot 3's draw and seed, the
+    sim-mems-thermal-4 rebalance gains, a 15 s package; 25 / 27 / 29 degC, 20 s records): every
+    record settled with the PLL locked, and the frequency fit holds the truth: the temperature
+    coefficient and the frequency the loops run the held wave at."""
+    from bench.composition import load_station
+    from bench.composition.sim_batch_station import slot_params
+    from bench.engine import Runner
+    from bench.results import ResultsStore
+    from bench.station_config import load_config
+    from procedures.thermal_soak import ThermalSoak
+
+    gains = load_config("sim-mems-thermal-4").slots[3]["fpga"]
+    text = open("bench/stations/sim-mems-thermal.toml", encoding="utf-8").read()
+    for old, new in (('id = "sim-mems-thermal"', 'id = "mems-lost-ring"'), ("case_tau_s = 60.0", "case_tau_s = 15.0"),
+                     ("ftr_kp = 40.0", f"ftr_kp = {gains['ftr_kp']}"),
+                     ("ftr_ki = 400.0", f"ftr_ki = {gains['ftr_ki']}")):
+        assert old in text
+        text = text.replace(old, new)
+    (tmp_path / "st.toml").write_text(text)
+    station = load_station(tmp_path / "st.toml", seed=3, resonator=slot_params("mems-realistic", 3)).open()
+    store = ResultsStore(tmp_path / "r.sqlite")
+    try:
+        params = {"t_low_degc": 25.0, "t_high_degc": 29.0, "points": 3, "ramp_degc_per_min": 30.0,
+                  "settle_window_s": 5.0, "settle_ppm_per_min": 6.0, "record_s": 20.0, "max_order": 1,
+                  "stream_hz": 10.0}
+        record = Runner(station, runs_dir=tmp_path / "runs", store=store).run(ThermalSoak, params)
+        truth = station.truth()
+    finally:
+        store.close()
+        station.close()
+    assert record.outcome == "COMPLETE", (record.end_reason, record.traceback)
+    got = {m.name: m for m in record.measurements}
+    want = ThermalSoak.truth_for(truth)
+    for name in ("f0_tc_ppm_k", "f0_at_25c_hz"):
+        lo, hi = got[name].ci95
+        assert lo <= want[name] <= hi, (name, got[name].value, got[name].ci95, want[name])
