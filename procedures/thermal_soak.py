@@ -9,7 +9,9 @@ unit's own thermometer, judged from its readings, not a fixed time), then a stat
 `record_s` with the chamber's part (case) temperature read at its start and end.  The analysis
 takes each record's bias (bench.analysis.cvg_rate.static_bias) and mean frequency (batch means)
 and fits each against the case temperature (bench.analysis.thermal_fit: weighted least squares,
-the order by BIC, 95 % intervals)."""
+the order by BIC, 95 % intervals).  With `compensate` the thermal trim (bias against the frequency's
+offset from REF_FREQ_HZ) goes into the FPGA, and `verify_points` records between the set points
+read what it leaves (docs/chamber.md, "The soak's trims")."""
 
 from __future__ import annotations
 
