@@ -9,7 +9,9 @@ unit's own thermometer, judged from its readings, not a fixed time), then a stat
 `record_s` with the chamber's part (case) temperature read at its start and end.  The analysis
 takes each record's bias (bench.analysis.cvg_rate.static_bias) and mean frequency (batch means)
 and fits each against the case temperature (bench.analysis.thermal_fit: weighted least squares,
-the order by BIC, 95 % intervals)."""
+the order by BIC, 95 % intervals).  With `compensate` the thermal trim (bias against the frequency's
+offset from REF_FREQ_HZ) goes into the FPGA, and `verify_points` records between the set points
+read what it leaves (docs/chamber.md, "The soak's trims")."""
 
 from __future__ import annotations
 
@@ -37,7 +39,27 @@ WINDOWS = declare(StreamSchema("thermal_soak_windows", "thermal-soak", (
     Column("scale_factor", "1"),
 )))
 
+VERIFY = declare(StreamSchema("thermal_soak_verify", "thermal-soak", (
+    Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
+    Column("air_c", "degC", doc="chamber air at the record's start and end (mean)"),
+    Column("part_c", "degC", doc="the part thermocouple on the unit's case (mean of start and end)"),
+    Column("settle_s", "s", doc="time from the set point to the record's start"),
+    Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
+    Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
+    Column("scale_factor", "1"),
+    Column("trim_bias_dph", "deg/h", doc="TRIM_BIAS_DPH in force during the record (0: no thermal trim)"),
+    Column("trim_bias_dph_per_hz", "deg/h/Hz", doc="TRIM_BIAS_DPH_PER_HZ in force during the record"),
+)))
+
 REF_TEMPERATURE_C = 25.0
+
+
+def _verifying(proc) -> bool:
+    return proc.verify_points > 0
+
+
+def _trimming(proc) -> bool:
+    return proc.verify_points > 0 or bool(proc.compensate)
 
 
 def _pair(interval) -> tuple[float, float]:
@@ -174,6 +196,13 @@ class ThermalSoak(ThermalChamber, Procedure):
     points = Param(6, low=3, high=50, doc="set points from t_low_degc to t_high_degc, equally spaced (3 or more: "
                                          "a line with a degree of freedom left for its interval)")
     record_s = Param(300.0, unit="s", low=1.0, high=1e5, doc="static record once settled")
+    compensate = Param(False, doc="the thermal trim (bias against the resonator frequency's offset from "
+                                  "REF_FREQ_HZ, a straight line through the settled records) into the FPGA's "
+                                  "registers before the verification (RAM; the line's gated trims take it to NVM)")
+    verify_points = Param(0, low=0, high=49,
+                          doc="settled verification records after the soak, at the middles between consecutive "
+                              "set points (highest first, each reached from above), with the trim in force when "
+                              "`compensate`: the compensated residual bias between the calibration points")
 
     measurements = (
         Measurement("f0_tc_ppm_k", "ppm/K", "resonator frequency's temperature coefficient at 25 degC "
@@ -192,6 +221,17 @@ class ThermalSoak(ThermalChamber, Procedure):
                     no_interval="a residual"),
         Measurement("settle_mean_s", "s", "mean time from a set point to its settled record",
                     no_interval="a time the run took"),
+        Measurement("thermal_bias_dph", "deg/h", "thermal trim TRIM_BIAS_DPH: the bias at the FPGA's REF_FREQ_HZ "
+                    "(a straight line of the settled records' bias against their frequency's offset from it)",
+                    when=_trimming, when_doc="compensate or verify_points > 0"),
+        Measurement("thermal_bias_dph_per_hz", "deg/h/Hz", "thermal trim TRIM_BIAS_DPH_PER_HZ: that line's slope",
+                    when=_trimming, when_doc="compensate or verify_points > 0"),
+        Measurement("verify_residual_dph", "deg/h", "rms bias left at the verification points by the thermal trim "
+                    "(the FPGA's compensated output with `compensate`, else the trim applied in the analysis)",
+                    no_interval="a residual", when=_verifying, when_doc="verify_points > 0"),
+        Measurement("verify_noise_dph", "deg/h", "rms of the verification records' own bias standard errors "
+                    "(what the unit's noise allows a residual)", no_interval="a noise level", when=_verifying,
+                    when_doc="verify_points > 0"),
     )
 
     def setpoints_c(self) -> np.ndarray:
@@ -214,14 +254,85 @@ class ThermalSoak(ThermalChamber, Procedure):
             ctx.log.info(f"set point {sp:g} degC: settled after {settle_s:.0f} s, case {row[4]:.1f} degC")
             ctx.progress((i + 1) / len(sps), f"set point {i + 1} / {len(sps)}")
 
+    def verify_setpoints_c(self) -> np.ndarray:
+        """verify_points of the middles between consecutive set points, evenly picked, highest first."""
+        sps = self.setpoints_c()
+        mids = 0.5 * (sps[:-1] + sps[1:])
+        n = min(int(self.verify_points), len(mids))
+        if n == 0:
+            return mids[:0]
+        return mids[np.round(np.linspace(0, len(mids) - 1, n)).astype(int)][::-1]
+
+    @step("Thermal trim and verification between the set points", uses=("fpga",), shares=("chamber",))
+    def verify(self, ctx):
+        if not self.verify_points:
+            if self.compensate:
+                ctx.log.info("compensate without verify_points: the trim is reported for the line, not tried")
+            return
+        fpga = ctx.devices.fpga
+        ref_hz = float(fpga.read_register("REF_FREQ_HZ"))
+        code, sf = MODES.index(self._mode), self._scale_factor(ctx)
+        trim = (0.0, 0.0)
+        if self.compensate:
+            line = self.trim_line(self.points_table(ctx.data()))
+            trim = (float(line.coeffs[0]), float(line.coeffs[1]))
+            self._write_trim(ctx, trim)
+        for sp in self.verify_setpoints_c():  # the soak ended at t_high: each point from above
+            settle_s = self._settle_at(ctx, float(sp), ref_hz)
+            s0 = self._chamber_status(ctx)
+            t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record")
+            s1 = self._chamber_status(ctx)
+            row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf,
+                   *trim]
+            ctx.record(VERIFY, VERIFY.names, np.array([row]))
+
+    def _write_trim(self, ctx, trim: tuple[float, float]) -> None:
+        """The bias trim into the FPGA's registers and TRIM_EN's TRIM_THERMAL bit (RAM only: the line
+        commits trims to NVM for PASS units); the registers before are restored at the end."""
+        from drivers.fpga import protocol as fp
+
+        fpga = ctx.devices.fpga
+        names = ("TRIM_EN", "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ", "TRIM_SF_PPM", "TRIM_SF_PPM_PER_HZ")
+        before = {n: fpga.read_register(n) for n in names}
+
+        def restore() -> None:
+            if fpga.connected:
+                for n in names[::-1]:
+                    fpga.write_register(n, before[n])
+
+        ctx.defer(restore, "restore the thermal trim registers")
+        fpga.write_register("TRIM_BIAS_DPH", trim[0])
+        fpga.write_register("TRIM_BIAS_DPH_PER_HZ", trim[1])
+        fpga.write_register("TRIM_SF_PPM", 0.0)  # the soak measures no scale factor: no trim of it
+        fpga.write_register("TRIM_SF_PPM_PER_HZ", 0.0)
+        fpga.write_register("TRIM_EN", int(before["TRIM_EN"]) | fp.TRIM_THERMAL)
+        ctx.log.info(f"thermal trim on: {trim[0]:.4g} deg/h at REF_FREQ_HZ, {trim[1]:.4g} deg/h/Hz")
+
+    def trim_line(self, p: dict[str, np.ndarray]) -> ThermalFit:
+        """The thermal trim: a straight line of the records' bias against their frequency's offset from
+        REF_FREQ_HZ (the FPGA's trim is that line), the frequencies' own errors carried."""
+        if not np.allclose(p["ref_hz"], p["ref_hz"][0], rtol=0.0, atol=1e-6):
+            raise RuntimeError("REF_FREQ_HZ changed during the soak: one thermal trim cannot hold it")
+        return fit_temperature_polynomial(p["f_offset_hz"], p["bias_dph"], p["bias_se_dph"], max_order=1, min_order=1,
+                                          t_ref_c=0.0, sigma_t_c=float(np.median(p["f0_se_hz"])))
+
+    def verification(self, data) -> dict[str, np.ndarray]:
+        """The verification records' points (points_table of VERIFY) and raw_bias_dph: the unit's bias
+        before any trim (the record's plus the trim in force during it)."""
+        v = self.points_table(data, VERIFY)
+        vt = data.table(VERIFY.name)
+        v["raw_bias_dph"] = v["bias_dph"] + vt["trim_bias_dph"] + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"]
+        return v
+
     @step("Fits against temperature", uses=())
     def estimate(self, ctx):
         for res in self.analysis(ctx.data()):
             ctx.report(res)
 
-    def points_table(self, data) -> dict[str, np.ndarray]:
-        """Each record's case temperature, bias (deg/h) and frequency (Hz) with standard errors."""
-        win = data.table(WINDOWS.name)
+    def points_table(self, data, schema: StreamSchema = WINDOWS) -> dict[str, np.ndarray]:
+        """Each record's case temperature, bias (deg/h) and frequency (Hz) with standard errors, the
+        REF_FREQ_HZ it was taken at and the frequency's offset from it (schema: WINDOWS or VERIFY)."""
+        win = data.table(schema.name)
         fpga = data.table("fpga")
         t = fpga["t_s"]
         earth_dph = self.earth_rate_on_axis_dph(data)
@@ -234,9 +345,10 @@ class ThermalSoak(ThermalChamber, Procedure):
             b = static_bias(t[sel], y, mode=name, scale_factor=float(sf), earth_rate_dph=earth_dph,
                             n_batches=self.batches)
             f, f_se = batch_mean(fpga["freq_ctrl"][sel], self.batches)
-            rows.append((part, b.bias_dph, b.sigma_dph, ref + f, f_se))
-        a = np.array(rows, dtype=float).reshape(-1, 5)
-        return {"part_c": a[:, 0], "bias_dph": a[:, 1], "bias_se_dph": a[:, 2], "f0_hz": a[:, 3], "f0_se_hz": a[:, 4]}
+            rows.append((part, b.bias_dph, b.sigma_dph, ref + f, f_se, ref, f))
+        a = np.array(rows, dtype=float).reshape(-1, 7)
+        return {"part_c": a[:, 0], "bias_dph": a[:, 1], "bias_se_dph": a[:, 2], "f0_hz": a[:, 3], "f0_se_hz": a[:, 4],
+                "ref_hz": a[:, 5], "f_offset_hz": a[:, 6]}
 
     def fits(self, data) -> tuple[dict[str, np.ndarray], ThermalFit, ThermalFit]:
         """The points, the bias fit and the frequency fit."""
@@ -274,6 +386,15 @@ class ThermalSoak(ThermalChamber, Procedure):
         out.append(Result("bias_tc_dph_k", float(bias_s.coeffs[1]), ci95=_pair(bias_s.ci95[1])))
         win = data.table(WINDOWS.name)
         out.append(Result("settle_mean_s", float(np.mean(win["settle_s"]))))
+        if _trimming(self):
+            trim = self.trim_line(self.points_table(data))
+            out += [Result("thermal_bias_dph", float(trim.coeffs[0]), ci95=_pair(trim.ci95[0])),
+                    Result("thermal_bias_dph_per_hz", float(trim.coeffs[1]), ci95=_pair(trim.ci95[1]))]
+            if self.verify_points:
+                v = self.verification(data)
+                out += [Result("verify_residual_dph",
+                               float(np.sqrt(np.mean((v["raw_bias_dph"] - trim(v["f_offset_hz"])) ** 2)))),
+                        Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2))))]
         return out
 
     def figures(self, data) -> list:

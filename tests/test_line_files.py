@@ -8,7 +8,8 @@ from bench.line.limits import load_limits
 from bench.line.sequence import load_sequence
 
 
-@pytest.mark.parametrize("name", ["eol-hrg", "eol-mems", "ci-mems", "ci-spin", "eol-hrg-thermal"])
+@pytest.mark.parametrize("name", ["eol-hrg", "eol-mems", "ci-mems", "ci-spin", "eol-hrg-thermal",
+                                  "eol-hrg-thermal-soak"])
 def test_shipped_sequences_load(name):
     seq = load_sequence(name)
     assert seq.name == name and seq.steps
@@ -74,5 +75,6 @@ def test_bad_limits_is_one_clear_message(tmp_path, text, words):
 
 
 def test_missing_file_names_the_shipped_ones():
-    with pytest.raises(LineError, match="shipped: ci-mems, ci-spin, eol-hrg-thermal, eol-hrg, eol-mems"):
+    shipped = "ci-mems, ci-spin, eol-hrg-thermal-soak, eol-hrg-thermal, eol-hrg, eol-mems"
+    with pytest.raises(LineError, match=f"shipped: {shipped}"):
         load_sequence("no-such-sequence")

@@ -5,6 +5,8 @@ ambient."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from bench.recorder import open_run
@@ -90,3 +92,29 @@ def test_a_unit_whose_pll_lost_the_wave_is_given_up_not_waited_for():
     with pytest.raises(TimeoutError):
         proc._settle_at(ctx, 30.0, 13647.0)
     assert ctx.t > 3600.0
+
+
+def test_line_run_eol_hrg_thermal_soak_leaves_the_soaks_trim_in_nvm(tmp_path, capsys):
+    """The shipped eol-hrg-thermal-soak on sim-hrg-thermal-quick (seed 0): the soak's settled records
+    (15, 25, 35 degC) give the thermal trim (bias against the resonator frequency's offset), the
+    trim goes into the FPGA and the verification at 20 degC (between two set points, reached from
+    35 degC) reads the compensated output; then (PASS) the line's gated trims write it into NVM and
+    read it back: the same coefficients the soak reported."""
+    from bench.cli import main
+
+    code = main(["line", "run", "eol-hrg-thermal-soak", "--operator", "ada", "--dut", "HRG-000123", "--yes",
+                 "--seed", "0", "--lot", "L1", "--runs-dir", str(tmp_path / "runs"), "--json"])
+    (rec,) = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert code == 0 and rec["outcome"] == "PASS", rec["summary"]
+    m = {x["name"]: x for x in rec["measurements"]}
+    tc = m["f0_tc_ppm_k"]
+    assert tc["interval"][0] <= tc["truth"] <= tc["interval"][1], tc
+    # the trim held the verification's bias to the record's noise (untrimmed it is the bias itself)
+    assert m["verify_residual_dph"]["value"] < 4.0 * m["verify_noise_dph"]["value"], m["verify_residual_dph"]
+    back = rec["trims"]["read_back"]
+    assert rec["trims"]["written"] and int(back["TRIM_EN"]) == 0x08
+    assert back["TRIM_BIAS_DPH"] == pytest.approx(m["thermal_bias_dph"]["value"], rel=1e-6)
+    assert back["TRIM_BIAS_DPH_PER_HZ"] == pytest.approx(m["thermal_bias_dph_per_hz"]["value"], rel=1e-6)
+    assert back["TRIM_SF_PPM"] == 0.0 and back["TRIM_SF_PPM_PER_HZ"] == 0.0  # the soak measures no scale factor
+    chosen = rec["trims"]["chosen"]
+    assert chosen["thermal_bias_dph"]["procedure"] == "thermal-soak"
