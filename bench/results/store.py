@@ -43,6 +43,7 @@ from sqlalchemy.exc import (
 from bench.engine.measurement import INTERRUPTED, RUNNING
 
 from .deadline import NoAnswer, call_bounded
+from .fresh import build_fresh, is_fresh
 from .limits import RecordRefused, check_doc
 from .liveness import (
     HEARTBEAT_S,
@@ -257,11 +258,12 @@ class ResultsStore:
         self._tokens: dict[str, str] = {}
         self.heartbeat_s = HEARTBEAT_S
         self._ready = not upgrade
+        self._fresh = False  # the first look found no tables: built at once (fresh.py), no alembic
         self.open_error: str | None = None
         if upgrade:
             try:
                 then = "then the run goes on and its record goes to the spool" if offline_ok else "then it gives up"
-                self._ready = self._call(self._at_head, then, opening=True)  # one query: no alembic needed
+                self._ready = self._call(self._first_look, then, opening=True)  # no alembic needed
                 self._call(self._ensure_ready, then)  # a migration: alembic imported first, outside the wait
             except StoreError as exc:
                 if not offline_ok:
@@ -305,7 +307,7 @@ class ResultsStore:
         naming the store when it did not answer or failed (what fn raised when it refused).
         While the schema is not known to be at the head (fn may migrate it), alembic is imported
         first, outside the wait; `opening`: fn is the first look, which needs no alembic."""
-        if not self._ready and not opening:
+        if not self._ready and not opening and not self._fresh:  # a fresh store is built without alembic
             _import_alembic()
         local = self.engine.dialect.name != "postgresql"  # a local file: SQLite's busy_timeout bounds the wait
         budget = min(DOWN_WAIT_S, self.wait_s) if self._down else self.wait_s
@@ -378,12 +380,28 @@ class ResultsStore:
         of alembic's imports and its migration scripts' loading for nothing: issue 36)."""
         if revision == "head" and self._at_head():
             return
+        head = head_revision()
+        if revision == "head" and head is not None:
+            with migrating_connection(self.engine) as conn:  # the lock: one process builds, the others see it
+                if is_fresh(conn):
+                    build_fresh(conn, head)  # the newest schema at once (fresh.py; the same as migrated)
+                    return
+            if self._at_head():  # another process built it while this one waited for the lock
+                return
         from alembic import command
 
         cfg = _alembic_config()
         with migrating_connection(self.engine) as conn:
             cfg.attributes["connection"] = conn
             command.upgrade(cfg, revision)
+
+    def _first_look(self) -> bool:
+        """Whether the schema is at the head; notes a store with no tables yet (built without alembic)."""
+        if self._at_head():
+            return True
+        with self.engine.connect() as conn:
+            self._fresh = is_fresh(conn)
+        return False
 
     def _at_head(self) -> bool:
         """Whether the store's schema is at the newest migration (alembic's version table)."""
