@@ -233,8 +233,7 @@ def test_signal_aborts_into_confirmed_safe_state(tmp_path, sig):
 
 @pytest.mark.serial  # a 100x real-time run with its link watchdogs: run alone
 def test_sigkilled_run_leaves_a_readable_hdf5_file(tmp_path):
-    proc, path = _start_long_run(tmp_path)
-    time.sleep(1.0)
+    proc, path = _start_long_run(tmp_path)  # returns once over 2000 rows are in the file: killed mid-record
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait(timeout=30)
     with h5py.File(path, "r") as f:

@@ -43,7 +43,8 @@ runs = Table(
     Column("raw_file", Text),
     Column("software_version", String(64), nullable=False, default=""),
     Column("operator", String(OPERATOR_MAX), nullable=False, default=""),
-    Column("seed", BigInteger),  # a station's seed is 63-bit (migration 0002)
+    # a station's seed is 63-bit (migration 0002; SQLite's INTEGER already is, and 0002 leaves it)
+    Column("seed", BigInteger().with_variant(Integer(), "sqlite")),
     Column("params", JSON, nullable=False),
     Column("safe_detail", JSON),
     # the run's liveness while RUNNING (migration 0003): where it runs and its heartbeat (wall time)

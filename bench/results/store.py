@@ -43,6 +43,7 @@ from sqlalchemy.exc import (
 from bench.engine.measurement import INTERRUPTED, RUNNING
 
 from .deadline import NoAnswer, call_bounded
+from .fresh import build_fresh, is_fresh
 from .limits import RecordRefused, check_doc
 from .liveness import (
     HEARTBEAT_S,
@@ -75,12 +76,27 @@ RUN_LOCK_SPACE = 0x67796231
 CONNECT_TIMEOUT_S = 5  # a server that accepts and never answers the start-up: given up after this
 WAIT_S = 10.0  # the longest one write of a run waits for the store (both tries), then it spools
 DOWN_WAIT_S = 3.0  # once the store has not answered in this process: one short try, then the spool
-SLOW_NOTICE_S = 2.0  # a user waiting this long on the store is told why
+SLOW_NOTICE_S = 2.0  # a user waiting this long on the store is told why (at most half the wait)
+WAIT_ENV = "GYROBENCH_STORE_WAIT_S"  # overrides WAIT_S (e.g. a short bound for a test of the outage rules)
 RETRY_PAUSE_S = 0.5  # before the one retry of a lost connection (a server restarting)
 
 
 class StoreError(Exception):
     """The results store cannot be opened, reached or written; the message is one line for a user."""
+
+
+def default_wait_s() -> float:
+    """The bound of one write: $GYROBENCH_STORE_WAIT_S if set (a positive number of seconds), else WAIT_S."""
+    text = os.environ.get(WAIT_ENV, "").strip()
+    if not text:
+        return WAIT_S
+    try:
+        value = float(text)
+    except ValueError:
+        raise StoreError(f"{WAIT_ENV}={text!r} is not a number of seconds") from None
+    if not 1.0 <= value <= 3600.0:
+        raise StoreError(f"{WAIT_ENV}={text!r} is not between 1 and 3600 s")
+    return value
 
 
 # what a store that cannot be reached or written raises (OSError: e.g. a full disk for a lock file)
@@ -210,12 +226,12 @@ class ResultsStore:
         upgrade: bool = True,
         offline_ok: bool = False,
         spool_dir: str | Path | None = None,
-        wait_s: float = WAIT_S,
+        wait_s: float | None = None,
         connect_timeout_s: float = CONNECT_TIMEOUT_S,
         notify: Callable[[str], None] | None = _stderr,
     ) -> None:
         self.url = to_url(url)
-        self.wait_s = wait_s
+        self.wait_s = wait_s = default_wait_s() if wait_s is None else wait_s
         self.notify = notify
         self._down = False  # the store did not answer in this process (cleared by an answer)
         self._told = False  # the waiting user was told (once while the store stays down)
@@ -242,11 +258,12 @@ class ResultsStore:
         self._tokens: dict[str, str] = {}
         self.heartbeat_s = HEARTBEAT_S
         self._ready = not upgrade
+        self._fresh = False  # the first look found no tables: built at once (fresh.py), no alembic
         self.open_error: str | None = None
         if upgrade:
             try:
                 then = "then the run goes on and its record goes to the spool" if offline_ok else "then it gives up"
-                self._ready = self._call(self._at_head, then, opening=True)  # one query: no alembic needed
+                self._ready = self._call(self._first_look, then, opening=True)  # no alembic needed
                 self._call(self._ensure_ready, then)  # a migration: alembic imported first, outside the wait
             except StoreError as exc:
                 if not offline_ok:
@@ -290,10 +307,11 @@ class ResultsStore:
         naming the store when it did not answer or failed (what fn raised when it refused).
         While the schema is not known to be at the head (fn may migrate it), alembic is imported
         first, outside the wait; `opening`: fn is the first look, which needs no alembic."""
-        if not self._ready and not opening:
+        if not self._ready and not opening and not self._fresh:  # a fresh store is built without alembic
             _import_alembic()
         local = self.engine.dialect.name != "postgresql"  # a local file: SQLite's busy_timeout bounds the wait
-        budget = DOWN_WAIT_S if self._down else self.wait_s
+        budget = min(DOWN_WAIT_S, self.wait_s) if self._down else self.wait_s
+        notice_s = min(SLOW_NOTICE_S, self.wait_s / 2.0)
         t0 = time.monotonic()
 
         def tries() -> T:
@@ -317,7 +335,7 @@ class ResultsStore:
             if local:
                 out = fn()
             else:
-                out = call_bounded(tries, budget, slow_after_s=SLOW_NOTICE_S if tell else None, on_slow=slow)
+                out = call_bounded(tries, budget, slow_after_s=notice_s if tell else None, on_slow=slow)
         except NoAnswer as exc:
             self._down = True
             raise StoreError(f"results store {self.display_url}: {exc}") from None
@@ -362,12 +380,28 @@ class ResultsStore:
         of alembic's imports and its migration scripts' loading for nothing: issue 36)."""
         if revision == "head" and self._at_head():
             return
+        head = head_revision()
+        if revision == "head" and head is not None:
+            with migrating_connection(self.engine) as conn:  # the lock: one process builds, the others see it
+                if is_fresh(conn):
+                    build_fresh(conn, head)  # the newest schema at once (fresh.py; the same as migrated)
+                    return
+            if self._at_head():  # another process built it while this one waited for the lock
+                return
         from alembic import command
 
         cfg = _alembic_config()
         with migrating_connection(self.engine) as conn:
             cfg.attributes["connection"] = conn
             command.upgrade(cfg, revision)
+
+    def _first_look(self) -> bool:
+        """Whether the schema is at the head; notes a store with no tables yet (built without alembic)."""
+        if self._at_head():
+            return True
+        with self.engine.connect() as conn:
+            self._fresh = is_fresh(conn)
+        return False
 
     def _at_head(self) -> bool:
         """Whether the store's schema is at the newest migration (alembic's version table)."""
