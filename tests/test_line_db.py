@@ -27,7 +27,7 @@ def _stations(url, runs_dir):
     station = runs_dir / "sim-hrg-slow-watchdog.toml"
     station.write_text(STATION_TOML)
     procs = [subprocess.Popen([sys.executable, "-m", "bench.line.stations", url, str(runs_dir), str(i), str(UNITS),
-                               "--station-file", str(station)],
+                               "--station-file", str(station), "--no-pdf"],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
              for i in range(STATIONS)]
     outs = []

@@ -22,9 +22,23 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import allantools
 import numpy as np
-from scipy import stats
+
+
+def _stats():
+    """scipy.stats, imported on first use: a process that only loads the procedures (the line's
+    limits, `gyrobench list`) never pays its ~0.4 s (issue 36)."""
+    from scipy import stats
+
+    return stats
+
+
+def _allantools():
+    """allantools, imported on first use (it imports scipy.stats, ~0.5 s more; issue 36)."""
+    import allantools
+
+    return allantools
+
 
 #: sigma(tau) of a flicker floor in units of B: sqrt(2 ln 2 / pi)
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
@@ -57,8 +71,8 @@ class AllanCurve:
     def edf(self, alpha: int) -> np.ndarray:
         """Equivalent degrees of freedom of each point for noise type alpha (Greenhall)."""
         if alpha == 2:  # white angle noise: Greenhall's algorithm has no case for it; the simple formula
-            return np.array([allantools.edf_simple(self.n_samples + 1, int(m), alpha) for m in self.m])
-        return np.array([allantools.edf_greenhall(alpha=alpha, d=2, m=int(m), N=self.n_samples + 1,
+            return np.array([_allantools().edf_simple(self.n_samples + 1, int(m), alpha) for m in self.m])
+        return np.array([_allantools().edf_greenhall(alpha=alpha, d=2, m=int(m), N=self.n_samples + 1,
                                                   overlapping=True) for m in self.m])
 
 
@@ -98,7 +112,7 @@ def allan_deviation(rate: np.ndarray, rate_hz: float) -> AllanCurve:
     rate = np.asarray(rate, dtype=float)
     if len(rate) < 8:
         raise ValueError(f"an Allan deviation needs at least 8 samples; the record has {len(rate)}")
-    taus, adev, _err, ns = allantools.oadev(rate, rate=rate_hz, data_type="freq", taus="octave")
+    taus, adev, _err, ns = _allantools().oadev(rate, rate=rate_hz, data_type="freq", taus="octave")
     return AllanCurve(np.asarray(taus), np.asarray(adev), np.asarray(ns), len(rate), float(rate_hz))
 
 
@@ -208,11 +222,11 @@ def read_noise_terms(curve: AllanCurve, level: float = 0.95, iterations: int = 4
             chosen[k] = i
     model = sum(coef[k] * _basis(k, tau) for k in TERMS)
     edf_mix = mixture_edf()
-    z = stats.norm.ppf((1 + level) / 2)
+    z = _stats().norm.ppf((1 + level) / 2)
     out = {}
     for k, i in chosen.items():
         edf = float(edf_mix[i])
-        lo_q, hi_q = stats.chi2.ppf([(1 + level) / 2, (1 - level) / 2], edf)
+        lo_q, hi_q = _stats().chi2.ppf([(1 + level) / 2, (1 - level) / 2], edf)
         others, oth_var = others_at(k, i)
         b = _basis(k, tau[i])
         c = coef[k]
@@ -237,6 +251,6 @@ def adev_band(curve: AllanCurve, terms: NoiseTerms) -> tuple[np.ndarray, np.ndar
     alphas = [TERMS[k][1] for k in TERMS]
     edfs = {a: curve.edf(a) for a in set(alphas)}
     edf = np.array([edfs[alphas[j]][i] for i, j in enumerate(dominant)])
-    lo_q = stats.chi2.ppf((1 + terms.level) / 2, edf)
-    hi_q = stats.chi2.ppf((1 - terms.level) / 2, edf)
+    lo_q = _stats().chi2.ppf((1 + terms.level) / 2, edf)
+    hi_q = _stats().chi2.ppf((1 - terms.level) / 2, edf)
     return curve.adev * np.sqrt(edf / lo_q), curve.adev * np.sqrt(edf / hi_q)

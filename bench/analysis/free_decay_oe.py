@@ -18,7 +18,6 @@ import math
 from collections.abc import Mapping
 
 import numpy as np
-from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 from bench.analysis.free_decay_rk import rk4_sensitivities, substeps_for
@@ -193,6 +192,8 @@ def nonlinear_sensitivities(z: np.ndarray, q0: np.ndarray, t_s: np.ndarray, mode
     else:
         y0 = np.asarray(q0, dtype=float)
         fun = rhs_q
+    from scipy.integrate import solve_ivp  # on first use: loading the procedures skips it (issue 36)
+
     sol = solve_ivp(fun, (t[0], t[-1]), y0, t_eval=t, method="DOP853", rtol=rtol, atol=1e-13 * scale,
                     first_step=float(t[1] - t[0]) if t.size > 1 else None)
     if not sol.success or sol.y.shape[1] != t.size or not np.all(np.isfinite(sol.y)):

@@ -17,8 +17,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import solve_ivp
-from scipy.optimize import root
 
 from bench.analysis.maslov_result import (
     TWO_PI,
@@ -122,6 +120,9 @@ def steady_states(
     """Solve 2 dq/dt = 0 of the forced model at each drive frequency, continuing from the previous
     point (the first starts from q_start or the linear solution).  A point where Newton fails is
     settled by integrating the slow dynamics for 30 time constants first, as a real sweep would."""
+    from scipy.integrate import solve_ivp  # on first use: loading the procedures skips them (issue 36)
+    from scipy.optimize import root
+
     check_model(model)
     z = np.asarray(z, dtype=float)
     freqs = np.atleast_1d(np.asarray(freq_hz, dtype=float))

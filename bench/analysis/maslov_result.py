@@ -7,7 +7,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import special  # t and normal quantiles without importing scipy.stats (~1 s)
 
 TWO_PI = 2.0 * math.pi
 
@@ -45,6 +44,8 @@ class Identification:
 
 def t_quantile(dof: int, level: float = 0.95) -> float:
     """Student's t quantile of order (1 + level)/2 (the paper's s_p)."""
+    from scipy import special  # t quantiles without scipy.stats, on first use (issue 36)
+
     return float(special.stdtrit(max(int(dof), 1), 0.5 * (1.0 + level)))
 
 
@@ -119,6 +120,8 @@ def derived_ci95(ident: Identification, *, natural_freq_hz: float | None = None,
             vals.append(np.array([d[k] for k in keys]))
         grad[:, j] = (vals[0] - vals[1]) / (2.0 * step)
     var = np.einsum("kj,jl,kl->k", grad, ident.covariance, grad)
+    from scipy import special  # normal quantiles without scipy.stats, on first use (issue 36)
+
     q = float(special.ndtri(0.5 * (1.0 + level)))
     return {k: (base[k] - q * math.sqrt(max(v, 0.0)), base[k] + q * math.sqrt(max(v, 0.0)))
             for k, v in zip(keys, var, strict=True)}

@@ -9,9 +9,17 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from .axes import axis_deg
+
+
+def _stats():
+    """scipy.stats, imported on first use: a process that only loads the procedures (the line's
+    limits, `gyrobench list`) never pays its ~0.4 s (issue 36)."""
+    from scipy import stats
+
+    return stats
+
 
 #: amplitude-channel regressors (docs/selfcal.md): 1, cos 4th, sin 4th, thdot sin 4th, thdot cos 4th
 AMP_TERMS = ("gamma", "beta_c", "beta_s", "two_dg", "nuisance_c")
@@ -57,7 +65,7 @@ class CycleFit:
         if grad_f is not None:
             var += grad_f @ self.freq_cov @ grad_f
         se = float(math.sqrt(max(0.0, var)))
-        t = float(stats.t.ppf(0.5 + self.level / 2.0, self.dof))
+        t = float(_stats().t.ppf(0.5 + self.level / 2.0, self.dof))
         return Estimate(float(value), se, (float(value - t * se), float(value + t * se)))
 
     @property
@@ -342,8 +350,8 @@ def bias_stability_dph(rate_dph_: np.ndarray, sample_s: float, smooth_s: float =
 def bias_stability_interval(value: float, n_windows: int, level: float = 0.95) -> tuple[float, float]:
     """Chi-squared interval of a standard deviation from n_windows independent means."""
     k = n_windows - 1
-    lo = value * math.sqrt(k / stats.chi2.ppf(0.5 + level / 2, k))
-    hi = value * math.sqrt(k / stats.chi2.ppf(0.5 - level / 2, k))
+    lo = value * math.sqrt(k / _stats().chi2.ppf(0.5 + level / 2, k))
+    hi = value * math.sqrt(k / _stats().chi2.ppf(0.5 - level / 2, k))
     return lo, hi
 
 
@@ -367,7 +375,7 @@ def gain_trend(t_h: np.ndarray, values: np.ndarray, se: np.ndarray, level: float
     dof = max(1, len(values) - 2)
     chi2 = float(np.sum(w * (values - x @ coef) ** 2) / dof)
     cov = cov * max(1.0, chi2)  # the scatter, if larger than the stated errors
-    t = float(stats.t.ppf(0.5 + level / 2, dof))
+    t = float(_stats().t.ppf(0.5 + level / 2, dof))
     out = []
     for j in range(2):
         se_j = math.sqrt(cov[j, j])
@@ -456,4 +464,4 @@ def arw2_upper_bound(d_deg2: np.ndarray, lags_s: np.ndarray, t_rec_s: float, lev
     split over the n lags (Bonferroni), holds at `level` or more."""
     alpha = (1.0 - level) / len(lags_s)
     dof = np.maximum(1.0, np.floor(t_rec_s / lags_s))
-    return float(np.min(d_deg2 * dof / stats.chi2.ppf(alpha, dof) / lags_s))
+    return float(np.min(d_deg2 * dof / _stats().chi2.ppf(alpha, dof) / lags_s))

@@ -8,7 +8,15 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+
+
+def _stats():
+    """scipy.stats, imported on first use: a process that only loads the procedures (the line's
+    limits, `gyrobench list`) never pays its ~0.4 s (issue 36)."""
+    from scipy import stats
+
+    return stats
+
 
 LEVEL = 0.95
 
@@ -57,9 +65,9 @@ def birge_half_widths(cov: np.ndarray, chi2: float, dof: int) -> tuple[np.ndarra
     birge = math.sqrt(chi2 / dof) if dof > 0 else 1.0
     if birge > 1.0:
         cov = cov * birge**2
-        q = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
+        q = float(_stats().t.ppf(0.5 + LEVEL / 2, dof))
     else:
-        q = float(stats.norm.ppf(0.5 + LEVEL / 2))
+        q = float(_stats().norm.ppf(0.5 + LEVEL / 2))
     return q * np.sqrt(np.diag(cov)), birge
 
 

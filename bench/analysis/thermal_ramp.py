@@ -9,9 +9,16 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from .thermal_fit import LEVEL, ThermalFit, birge_half_widths, fit_temperature_polynomial
+
+
+def _stats():
+    """scipy.stats, imported on first use: a process that only loads the procedures (the line's
+    limits, `gyrobench list`) never pays its ~0.4 s (issue 36)."""
+    from scipy import stats
+
+    return stats
 
 
 def trend_mean(values, n_batches: int = 10) -> tuple[float, float]:
@@ -60,7 +67,7 @@ def branch_gap(fit: ThermalFit, heating, slope: float) -> BranchGap:
     va, vb = up.var(ddof=1) / len(up), down.var(ddof=1) / len(down)
     se = math.sqrt(va + vb)
     dof = (va + vb) ** 2 / (va**2 / (len(up) - 1) + vb**2 / (len(down) - 1)) if se > 0 else 1.0
-    half = float(stats.t.ppf(0.5 + LEVEL / 2, dof)) * se
+    half = float(_stats().t.ppf(0.5 + LEVEL / 2, dof)) * se
     lags = sorted((-(gap - half) / (2 * slope), -(gap + half) / (2 * slope)))
     return BranchGap(gap, (gap - half, gap + half), -gap / (2 * slope), (lags[0], lags[1]))
 

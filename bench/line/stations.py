@@ -1,12 +1,14 @@
 """A line station as its own process, for the concurrency test and the benchmarks:
 
     python -m bench.line.stations URL RUNS_DIR STATION_NO UNITS [--synthetic RECORD.json] [--station-file FILE]
+                                  [--no-pdf]
 
 runs UNITS units of the `ci-spin` sequence on a simulated station writing to the line database at
 URL (or, with --synthetic, saves UNITS copies of a record as fast as it can); prints one JSON line
 with the serials it recorded and the time it took.  `--station-file` replaces the sequence's station (the
 concurrency test gives its eight stations a table watchdog that a starved heartbeat on a loaded
-2-core machine does not trip: the test is of the database, not of the watchdog)."""
+2-core machine does not trip: the test is of the database, not of the watchdog); `--no-pdf` writes each
+unit's certificate as HTML only (no WeasyPrint: ~1 s of CPU a station the database test does not need)."""
 
 from __future__ import annotations
 
@@ -39,6 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--synthetic", default=None)
     p.add_argument("--sequence", default="ci-spin")
     p.add_argument("--station-file", default=None, help="station file instead of the sequence's station")
+    p.add_argument("--no-pdf", action="store_true", help="certificates as HTML only (no WeasyPrint)")
     args = p.parse_args(argv)
     from .db import LineDB
 
@@ -65,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
         runs_dir = Path(args.runs_dir) / f"st{args.station}"
         store = ResultsStore(args.url, offline_ok=True, spool_dir=runs_dir / "spool")
         ctx = LineContext(seq, load_limits(seq.limits), f"st{args.station}", "op", runs_dir, store=store, db=db,
-                          lot="concurrent")
+                          lot="concurrent", pdf=not args.no_pdf)
         for k in range(args.units):
             serial = f"S{args.station}-{k}"
             for rec in run_unit(ctx, lambda: load_station(station, seed=args.station), serial, _Yes(),
