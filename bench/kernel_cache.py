@@ -75,7 +75,44 @@ def mark_filled() -> None:
     (path / _FILLED).write_text("every kernel compiled by simulators.warm\n", encoding="utf-8")
 
 
+def load_blas_bindings_alone() -> None:
+    """Load scipy's `cython_blas` extension without the rest of scipy.linalg, so numba's BLAS check
+    finds it loaded (issue 36: ~0.18 s CPU of every process that loads a kernel).
+
+    Why: the first cached kernel a process loads makes numba import `numba.np.arraymath`, which
+    checks that BLAS exists by `import scipy.linalg.cython_blas`; that import runs scipy.linalg's
+    package `__init__` (decompositions, matrix functions, ~200 modules) that no kernel of ours calls.
+    An import finds a module already in `sys.modules` without importing its parent, so the check
+    (and numba's LP64/ILP64 width check after it) passes as before, with the same extension module
+    numba's BLAS wrappers would bind.  Nothing is done if scipy.linalg is already imported or the
+    extension is not where scipy keeps it (numba then imports it its own way)."""
+    import importlib.machinery
+    import importlib.util
+    import sys
+
+    name = "scipy.linalg.cython_blas"
+    if name in sys.modules or "scipy.linalg" in sys.modules:
+        return
+    try:
+        import scipy
+    except ImportError:
+        return
+    folder = Path(scipy.__path__[0]) / "linalg"
+    finder = importlib.machinery.FileFinder(
+        str(folder), (importlib.machinery.ExtensionFileLoader, importlib.machinery.EXTENSION_SUFFIXES))
+    spec = finder.find_spec(name)
+    if spec is None or spec.loader is None:
+        return
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except Exception:
+        del sys.modules[name]  # numba's own import then reports what is wrong
+
+
 cache_dir()
+load_blas_bindings_alone()
 from numba import njit  # noqa: E402  (after NUMBA_CACHE_DIR is set: what the kernel modules import)
 
 __all__ = ["KERNEL_SOURCES", "cache_dir", "is_filled", "mark_filled", "njit", "source_hash"]

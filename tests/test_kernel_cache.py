@@ -53,3 +53,17 @@ def test_numba_caches_under_the_keyed_directory_and_a_child_keeps_it(tmp_path: P
     env["NUMBA_CACHE_DIR"] = keyed  # what a child process inherits: not keyed twice
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.split() == [keyed, keyed]
+
+
+def test_numba_finds_blas_without_scipy_linalg_and_scipy_linalg_still_imports_whole(tmp_path: Path):
+    # numba's BLAS check (numba.np.arraymath, loaded with the first kernel) would import all of
+    # scipy.linalg; with the extension loaded alone it passes and scipy.linalg stays unimported,
+    # and a later `import scipy.linalg` is the complete package with the same extension
+    code = ("import sys\nfrom bench import kernel_cache\nimport numba.np.arraymath as a\n"
+            "print(a._HAVE_BLAS, 'scipy.linalg' in sys.modules)\n"
+            "blas = sys.modules['scipy.linalg.cython_blas']\n"
+            "import numpy as np, scipy.linalg, scipy.linalg.cython_blas as again\n"
+            "print(again is blas, scipy.linalg.solve(np.diag([2.0, 4.0]), np.array([1.0, 1.0])).tolist())")
+    env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split("\n")[:2] == ["True False", "True [0.5, 0.25]"]
