@@ -180,6 +180,10 @@ class ThermalRamp(ThermalChamber, Procedure):
                                     "(TRIM_HYST_HZ = it times the frequency's df/dT): not fitted by the cycle (a "
                                     "short ramp's segments span more than the loop's corner), taken from the part "
                                     "type's characterisation (a slow cycle's loop corners); 0: no hysteresis trim")
+    hyst_rate_term = Param(True, doc="the hysteresis fit carries a term in the frequency's rate (a bias that "
+                                     "trails a moving frequency, opposite on the two branches); off: the gap alone, "
+                                     "for a drive known not to trail (the firmware predicts the phase with its "
+                                     "acceleration: docs/chamber.md), a several times narrower interval")
     hyst_guard_degc = Param(1.0, unit="degC", low=0.0, high=100.0,
                             doc="the hysteresis fit leaves out each branch's points within this of its turning "
                                 "point (the loop's corner, on neither branch yet): more than the loop's width")
@@ -239,7 +243,8 @@ class ThermalRamp(ThermalChamber, Procedure):
                     "the same temperature (frequency thermometer), fitted beside the PLL's trail on the moving "
                     "frequency (bench.analysis.thermal_ramp.branch_hysteresis)", truth=_bias_hyst_truth),
         Measurement("bias_per_freq_rate_dph_s_per_hz", "deg/h/(Hz/s)", "the bias the frequency's rate of change "
-                    "adds (forces trailing a moving frequency's phase), fitted with the hysteresis"),
+                    "adds (forces trailing a moving frequency's phase), fitted with the hysteresis",
+                    when=lambda p: bool(p.hyst_rate_term), when_doc="hyst_rate_term"),
         Measurement("thermal_sf_ppm", "ppm", "thermal trim TRIM_SF_PPM: the scale factor's error (against the "
                     "nominal scale factor) at the FPGA's REF_FREQ_HZ, from the +-rate_dps pairs", when=_rotating,
                     when_doc="rate_dps > 0"),
@@ -640,14 +645,14 @@ class ThermalRamp(ThermalChamber, Procedure):
         (the bias's Hysteresis, (sf gap ppm, its interval) or None), or None when the cycle is too short."""
         heating = p["branch"] == 0
         kw = dict(t_ref_c=REF_TEMPERATURE_C, guard_c=float(self.hyst_guard_degc))
+        rate = p["f_rate_hz_s"] if self.hyst_rate_term else None
         try:
-            hb = branch_hysteresis(p["frequency_c"], p["bias_dph"], p["bias_se_dph"], heating, p["f_rate_hz_s"],
-                                   order=order, **kw)
+            hb = branch_hysteresis(p["frequency_c"], p["bias_dph"], p["bias_se_dph"], heating, rate, order=order, **kw)
         except ValueError:  # too few points beyond the guard (a short cycle): recorded NOT_MEASURED
             return None
         sf_gap = None
         if "sf" in p and len(p["sf"]) == len(heating):
-            hs = branch_hysteresis(p["frequency_c"], p["sf"], p["sf_se"], heating, p["f_rate_hz_s"], order=1, **kw)
+            hs = branch_hysteresis(p["frequency_c"], p["sf"], p["sf_se"], heating, rate, order=1, **kw)
             sf25 = float(np.mean(p["sf"]))
             sf_gap = (hs.gap / sf25 * 1e6, (hs.gap_ci95[0] / sf25 * 1e6, hs.gap_ci95[1] / sf25 * 1e6))
         return hb, sf_gap
@@ -657,8 +662,9 @@ class ThermalRamp(ThermalChamber, Procedure):
         if fits is None:
             return []
         hb, sf_gap = fits
-        out = [Result("bias_hysteresis_dph", hb.gap, ci95=hb.gap_ci95),
-               Result("bias_per_freq_rate_dph_s_per_hz", hb.rate_coeff, ci95=hb.rate_coeff_ci95)]
+        out = [Result("bias_hysteresis_dph", hb.gap, ci95=hb.gap_ci95)]
+        if self.hyst_rate_term:
+            out.append(Result("bias_per_freq_rate_dph_s_per_hz", hb.rate_coeff, ci95=hb.rate_coeff_ci95))
         if sf_gap is not None:
             out.append(Result("sf_hysteresis_ppm", float(sf_gap[0]), ci95=(float(sf_gap[1][0]), float(sf_gap[1][1]))))
         return out
