@@ -137,7 +137,7 @@ def _hyst_trimming(proc) -> bool:
 
 
 def _hyst_trimming_sf(proc) -> bool:
-    return proc.hyst_halfwidth_degc > 0 and proc.rate_dps > 0
+    return proc.hyst_halfwidth_degc > 0 and proc.rate_dps > 0 and bool(proc.hyst_sf_trim)
 
 
 def _rotating(proc) -> bool:
@@ -180,6 +180,9 @@ class ThermalRamp(ThermalChamber, Procedure):
                                     "(TRIM_HYST_HZ = it times the frequency's df/dT): not fitted by the cycle (a "
                                     "short ramp's segments span more than the loop's corner), taken from the part "
                                     "type's characterisation (a slow cycle's loop corners); 0: no hysteresis trim")
+    hyst_sf_trim = Param(False, doc="the scale factor's heating-minus-cooling gap into TRIM_SF_HYST_PPM too (with "
+                                    "rate_dps > 0); off: 0 there (a short ramp's +-rate pairs leave that gap's "
+                                    "interval +-15 000 ppm wide on the MEMS ring, 75 times its size: a trim of noise)")
     hyst_rate_term = Param(True, doc="the hysteresis fit carries a term in the frequency's rate (a bias that "
                                      "trails a moving frequency, opposite on the two branches); off: the gap alone, "
                                      "for a drive known not to trail (the firmware predicts the phase with its "
@@ -230,7 +233,7 @@ class ThermalRamp(ThermalChamber, Procedure):
                     "bias_hysteresis_dph (heating minus cooling), the play's state times half of it comes off",
                     when=_hyst_trimming, when_doc="hyst_halfwidth_degc > 0"),
         Measurement("thermal_sf_hyst_ppm", "ppm", "thermal hysteresis trim TRIM_SF_HYST_PPM: sf_hysteresis_ppm",
-                    when=_hyst_trimming_sf, when_doc="hyst_halfwidth_degc > 0 and rate_dps > 0"),
+                    when=_hyst_trimming_sf, when_doc="hyst_halfwidth_degc > 0, rate_dps > 0 and hyst_sf_trim"),
         Measurement("verify_noise_dph", "deg/h", "rms of the verification records' own bias standard errors "
                     "(what the unit's noise allows a residual)", no_interval="a noise level", when=_verifying,
                     when_doc="verify_points > 0"),
@@ -434,7 +437,7 @@ class ThermalRamp(ThermalChamber, Procedure):
             return (0.0, 0.0, 0.0)
         hb, sf_gap_ppm = fits
         h_hz = float(self.hyst_halfwidth_degc) * float(f_line.coeffs[1])
-        return (h_hz, float(hb.gap), 0.0 if sf_gap_ppm is None else float(sf_gap_ppm[0]))
+        return (h_hz, float(hb.gap), float(sf_gap_ppm[0]) if sf_gap_ppm is not None and self.hyst_sf_trim else 0.0)
 
     @step("Fits against temperature", uses=())
     def estimate(self, ctx):
@@ -583,7 +586,7 @@ class ThermalRamp(ThermalChamber, Procedure):
             h_lo, h_hi = sorted(float(self.hyst_halfwidth_degc) * np.asarray(line.ci95[1], dtype=float))
             out.append(Result("thermal_hyst_hz", float(self.hyst_halfwidth_degc * line.coeffs[1]), ci95=(h_lo, h_hi)))
             out.append(Result("thermal_bias_hyst_dph", hyst[0].gap, ci95=hyst[0].gap_ci95))
-            if hyst[1] is not None:
+            if hyst[1] is not None and self.hyst_sf_trim:
                 out.append(Result("thermal_sf_hyst_ppm", float(hyst[1][0]),
                                   ci95=(float(hyst[1][1][0]), float(hyst[1][1][1]))))
         if self.verify_points:
