@@ -357,13 +357,16 @@ class ThermalRamp(ThermalChamber, Procedure):
         trim, sf_trim, hyst = (0.0, 0.0), (0.0, 0.0), (0.0, 0.0, 0.0)
         table = ctx.devices.table if self.rate_dps > 0 else None
         if self.compensate:
-            p, bias, _, f_line = self.fits(ctx.data())
+            if self.hyst_halfwidth_degc > 0:  # the hysteresis fit wants the frequency thermometer's points
+                p, bias, _, f_line = self.fits(ctx.data())
+                hyst = self.hyst_trim(p, bias["frequency"].order, f_line)
+            else:
+                p = self.points_table(ctx.data())
             line = self.trim_line(p)
             trim = (float(line.coeffs[0]), float(line.coeffs[1]))
             if "sf" in p:
                 sf_line = self.sf_trim_line(p)
                 sf_trim = (float(sf_line.coeffs[0]), float(sf_line.coeffs[1]))
-            hyst = self.hyst_trim(p, bias["frequency"].order, f_line)
             self._write_trim(ctx, trim, sf_trim, hyst)
         sps = list(self.verify_setpoints_c())
         visits = [(float(sp), 0) for sp in sps]  # the cycle ended at t_low: each point from below
