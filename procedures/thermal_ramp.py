@@ -56,6 +56,12 @@ VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", (
            doc="the side the set point was settled from (verify_both_branches: each point from both)"),
     Column("trim_sf_ppm", "ppm", doc="TRIM_SF_PPM in force during the record (0: no scale factor trim)"),
     Column("trim_sf_ppm_per_hz", "ppm/Hz", doc="TRIM_SF_PPM_PER_HZ in force during the record"),
+    Column("trim_hyst_hz", "Hz", doc="TRIM_HYST_HZ in force during the record (the hysteresis play's signed "
+           "half-width; 0: no play)"),
+    Column("trim_bias_hyst_dph", "deg/h", doc="TRIM_BIAS_HYST_DPH in force during the record"),
+    Column("trim_sf_hyst_ppm", "ppm", doc="TRIM_SF_HYST_PPM in force during the record"),
+    Column("hyst_state", "1", doc="the FPGA's HYST_STATE (the play's state, +1 after heating), mean of the "
+           "record's start and end reads (0 without a play)"),
 )))
 
 VERIFY_SF = declare(StreamSchema("thermal_ramp_verify_sf", "thermal-ramp", (
@@ -68,6 +74,12 @@ VERIFY_SF = declare(StreamSchema("thermal_ramp_verify_sf", "thermal-ramp", (
     Column("scale_factor", "1"),
     Column("trim_sf_ppm", "ppm", doc="TRIM_SF_PPM in force during the record (0: no scale factor trim)"),
     Column("trim_sf_ppm_per_hz", "ppm/Hz", doc="TRIM_SF_PPM_PER_HZ in force during the record"),
+    Column("trim_hyst_hz", "Hz", doc="TRIM_HYST_HZ in force during the record (the hysteresis play's signed "
+           "half-width; 0: no play)"),
+    Column("trim_bias_hyst_dph", "deg/h", doc="TRIM_BIAS_HYST_DPH in force during the record"),
+    Column("trim_sf_hyst_ppm", "ppm", doc="TRIM_SF_HYST_PPM in force during the record"),
+    Column("hyst_state", "1", doc="the FPGA's HYST_STATE (the play's state, +1 after heating), mean of the "
+           "record's start and end reads (0 without a play)"),
 )))
 
 
@@ -120,6 +132,14 @@ def _verifying_both(proc) -> bool:
     return proc.verify_points > 0 and bool(proc.verify_both_branches)
 
 
+def _hyst_trimming(proc) -> bool:
+    return proc.hyst_halfwidth_degc > 0
+
+
+def _hyst_trimming_sf(proc) -> bool:
+    return proc.hyst_halfwidth_degc > 0 and proc.rate_dps > 0 and bool(proc.hyst_sf_trim)
+
+
 def _rotating(proc) -> bool:
     return proc.rate_dps > 0
 
@@ -155,6 +175,18 @@ class ThermalRamp(ThermalChamber, Procedure):
     verify_both_branches = Param(False, doc="also settle each verification point from above (after settling "
                                             "hyst_guard_degc over it) and record it again: the settled bias on "
                                             "the two branches at one temperature (verify_hysteresis_dph)")
+    hyst_halfwidth_degc = Param(0.0, unit="degC", low=0.0, high=10.0,
+                                doc="the half-width of the package's hysteresis play the branch-aware trim assumes "
+                                    "(TRIM_HYST_HZ = it times the frequency's df/dT): not fitted by the cycle (a "
+                                    "short ramp's segments span more than the loop's corner), taken from the part "
+                                    "type's characterisation (a slow cycle's loop corners); 0: no hysteresis trim")
+    hyst_sf_trim = Param(False, doc="the scale factor's heating-minus-cooling gap into TRIM_SF_HYST_PPM too (with "
+                                    "rate_dps > 0); off: 0 there (a short ramp's +-rate pairs leave that gap's "
+                                    "interval +-15 000 ppm wide on the MEMS ring, 75 times its size: a trim of noise)")
+    hyst_rate_term = Param(True, doc="the hysteresis fit carries a term in the frequency's rate (a bias that "
+                                     "trails a moving frequency, opposite on the two branches); off: the gap alone, "
+                                     "for a drive known not to trail (the firmware predicts the phase with its "
+                                     "acceleration: docs/chamber.md), a several times narrower interval")
     hyst_guard_degc = Param(1.0, unit="degC", low=0.0, high=100.0,
                             doc="the hysteresis fit leaves out each branch's points within this of its turning "
                                 "point (the loop's corner, on neither branch yet): more than the loop's width")
@@ -189,6 +221,19 @@ class ThermalRamp(ThermalChamber, Procedure):
                     no_interval="a residual", when=_verifying, when_doc="verify_points > 0"),
         Measurement("verify_residual_part_dph", "deg/h", "the same with the compensation against the part "
                     "thermocouple", no_interval="a residual", when=_verifying, when_doc="verify_points > 0"),
+        Measurement("verify_residual_hyst_dph", "deg/h", "rms bias left at the verification points by the "
+                    "branch-aware trim: the thermal trim and the hysteresis trim (bias_hysteresis_dph times the play's "
+                    "state over 2: the FPGA's HYST_STATE where the play ran, else +1 from below, -1 from above)",
+                    no_interval="a residual", when=lambda p: _verifying(p) and _hyst_trimming(p),
+                    when_doc="verify_points > 0 and hyst_halfwidth_degc > 0"),
+        Measurement("thermal_hyst_hz", "Hz", "thermal hysteresis trim TRIM_HYST_HZ: the play's half-width "
+                    "hyst_halfwidth_degc (assumed) times the frequency's df/dT against the part thermocouple",
+                    when=_hyst_trimming, when_doc="hyst_halfwidth_degc > 0"),
+        Measurement("thermal_bias_hyst_dph", "deg/h", "thermal hysteresis trim TRIM_BIAS_HYST_DPH: "
+                    "bias_hysteresis_dph (heating minus cooling), the play's state times half of it comes off",
+                    when=_hyst_trimming, when_doc="hyst_halfwidth_degc > 0"),
+        Measurement("thermal_sf_hyst_ppm", "ppm", "thermal hysteresis trim TRIM_SF_HYST_PPM: sf_hysteresis_ppm",
+                    when=_hyst_trimming_sf, when_doc="hyst_halfwidth_degc > 0, rate_dps > 0 and hyst_sf_trim"),
         Measurement("verify_noise_dph", "deg/h", "rms of the verification records' own bias standard errors "
                     "(what the unit's noise allows a residual)", no_interval="a noise level", when=_verifying,
                     when_doc="verify_points > 0"),
@@ -201,7 +246,8 @@ class ThermalRamp(ThermalChamber, Procedure):
                     "the same temperature (frequency thermometer), fitted beside the PLL's trail on the moving "
                     "frequency (bench.analysis.thermal_ramp.branch_hysteresis)", truth=_bias_hyst_truth),
         Measurement("bias_per_freq_rate_dph_s_per_hz", "deg/h/(Hz/s)", "the bias the frequency's rate of change "
-                    "adds (forces trailing a moving frequency's phase), fitted with the hysteresis"),
+                    "adds (forces trailing a moving frequency's phase), fitted with the hysteresis",
+                    when=lambda p: bool(p.hyst_rate_term), when_doc="hyst_rate_term"),
         Measurement("thermal_sf_ppm", "ppm", "thermal trim TRIM_SF_PPM: the scale factor's error (against the "
                     "nominal scale factor) at the FPGA's REF_FREQ_HZ, from the +-rate_dps pairs", when=_rotating,
                     when_doc="rate_dps > 0"),
@@ -308,16 +354,20 @@ class ThermalRamp(ThermalChamber, Procedure):
         ref_hz = float(fpga.read_register("REF_FREQ_HZ"))
         ctx.shared(lambda: chamber.set_ramp_rate(self.ramp_degc_per_min), "verification ramp rate")
         code, sf = MODES.index(self._mode), self._scale_factor(ctx)
-        trim, sf_trim = (0.0, 0.0), (0.0, 0.0)
+        trim, sf_trim, hyst = (0.0, 0.0), (0.0, 0.0), (0.0, 0.0, 0.0)
         table = ctx.devices.table if self.rate_dps > 0 else None
         if self.compensate:
-            p = self.points_table(ctx.data())
+            if self.hyst_halfwidth_degc > 0:  # the hysteresis fit wants the frequency thermometer's points
+                p, bias, _, f_line = self.fits(ctx.data())
+                hyst = self.hyst_trim(p, bias["frequency"].order, f_line)
+            else:
+                p = self.points_table(ctx.data())
             line = self.trim_line(p)
             trim = (float(line.coeffs[0]), float(line.coeffs[1]))
             if "sf" in p:
                 sf_line = self.sf_trim_line(p)
                 sf_trim = (float(sf_line.coeffs[0]), float(sf_line.coeffs[1]))
-            self._write_trim(ctx, trim, sf_trim)
+            self._write_trim(ctx, trim, sf_trim, hyst)
         sps = list(self.verify_setpoints_c())
         visits = [(float(sp), 0) for sp in sps]  # the cycle ended at t_low: each point from below
         if self.verify_both_branches:  # then each from above, highest first, after settling over it
@@ -327,32 +377,38 @@ class ThermalRamp(ThermalChamber, Procedure):
                 self._settle_at(ctx, sp + float(self.hyst_guard_degc), ref_hz)
             settle_s = self._settle_at(ctx, sp, ref_hz)
             s0 = self._chamber_status(ctx)
+            h0 = float(fpga.read_register("HYST_STATE"))
             side = ("from below", "from above")[approach]
             t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC record ({side})")
             s1 = self._chamber_status(ctx)
+            h = 0.5 * (h0 + float(fpga.read_register("HYST_STATE")))
             row = [t0, t1, sp, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), settle_s, ref_hz, code, sf,
-                   *trim, approach, *sf_trim]
+                   *trim, approach, *sf_trim, *hyst, h]
             ctx.record(VERIFY, VERIFY.names, np.array([row]))
             if table is not None and approach == 0:  # the scale factor there: a +-rate pair, from below
                 for rate in (self.rate_dps, -self.rate_dps):
                     self._table_at(ctx, table, rate)
                     ctx.sleep(self._settle_s(ctx))
                     s0 = self._chamber_status(ctx)
+                    h0 = float(fpga.read_register("HYST_STATE"))
                     t0, t1 = self._record_window(ctx, self.record_s, f"verification {sp:g} degC at {rate:+g} deg/s")
                     s1 = self._chamber_status(ctx)
+                    h = 0.5 * (h0 + float(fpga.read_register("HYST_STATE")))
                     row = [t0, t1, sp, rate, 0.5 * (s0.air_c + s1.air_c), 0.5 * (s0.part_c + s1.part_c), ref_hz,
-                           code, sf, *sf_trim]
+                           code, sf, *sf_trim, *hyst, h]
                     ctx.record(VERIFY_SF, VERIFY_SF.names, np.array([row]))
                 self._table_at(ctx, table, 0.0)
 
-    def _write_trim(self, ctx, trim: tuple[float, float], sf_trim: tuple[float, float] = (0.0, 0.0)) -> None:
-        """The thermal trim (bias and scale factor) into the FPGA's registers and TRIM_EN's TRIM_THERMAL
-        bit (RAM only: the line commits trims to NVM for PASS units); the registers before are restored
-        at the end."""
+    def _write_trim(self, ctx, trim: tuple[float, float], sf_trim: tuple[float, float] = (0.0, 0.0),
+                    hyst: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        """The thermal trim (bias, scale factor and the hysteresis trim: TRIM_HYST_HZ, TRIM_BIAS_HYST_DPH,
+        TRIM_SF_HYST_PPM) into the FPGA's registers and TRIM_EN's TRIM_THERMAL bit (RAM only: the line
+        commits trims to NVM for PASS units); the registers before are restored at the end."""
         from drivers.fpga import protocol as fp
 
         fpga = ctx.devices.fpga
-        names = ("TRIM_EN", "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ", "TRIM_SF_PPM", "TRIM_SF_PPM_PER_HZ")
+        names = ("TRIM_EN", "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ", "TRIM_SF_PPM", "TRIM_SF_PPM_PER_HZ",
+                 "TRIM_HYST_HZ", "TRIM_BIAS_HYST_DPH", "TRIM_SF_HYST_PPM")
         before = {n: fpga.read_register(n) for n in names}
 
         def restore() -> None:
@@ -365,9 +421,26 @@ class ThermalRamp(ThermalChamber, Procedure):
         fpga.write_register("TRIM_BIAS_DPH_PER_HZ", trim[1])
         fpga.write_register("TRIM_SF_PPM", sf_trim[0])
         fpga.write_register("TRIM_SF_PPM_PER_HZ", sf_trim[1])
+        fpga.write_register("TRIM_HYST_HZ", hyst[0])
+        fpga.write_register("TRIM_BIAS_HYST_DPH", hyst[1])
+        fpga.write_register("TRIM_SF_HYST_PPM", hyst[2])
         fpga.write_register("TRIM_EN", int(before["TRIM_EN"]) | fp.TRIM_THERMAL)
         ctx.log.info(f"thermal trim on: {trim[0]:.4g} deg/h at REF_FREQ_HZ, {trim[1]:.4g} deg/h/Hz; scale factor "
-                     f"{sf_trim[0]:.4g} ppm, {sf_trim[1]:.4g} ppm/Hz")
+                     f"{sf_trim[0]:.4g} ppm, {sf_trim[1]:.4g} ppm/Hz; hysteresis {hyst[1]:.4g} deg/h, "
+                     f"{hyst[2]:.4g} ppm over a play of {hyst[0]:.4g} Hz")
+
+    def hyst_trim(self, p: dict[str, np.ndarray], bias_order: int, f_line: ThermalFit) -> tuple[float, float, float]:
+        """The hysteresis trim (TRIM_HYST_HZ, TRIM_BIAS_HYST_DPH, TRIM_SF_HYST_PPM) from the cycle's points:
+        the assumed half-width hyst_halfwidth_degc times df/dT (f_line: frequency against the part
+        thermocouple, Hz/K) and the fitted heating-minus-cooling gaps (0 where the fit could not be made)."""
+        if not self.hyst_halfwidth_degc > 0:
+            return (0.0, 0.0, 0.0)
+        fits = self._hyst_fits(p, min(max(bias_order, 1), 2))
+        if fits is None:
+            return (0.0, 0.0, 0.0)
+        hb, sf_gap_ppm = fits
+        h_hz = float(self.hyst_halfwidth_degc) * float(f_line.coeffs[1])
+        return (h_hz, float(hb.gap), float(sf_gap_ppm[0]) if sf_gap_ppm is not None and self.hyst_sf_trim else 0.0)
 
     @step("Fits against temperature", uses=())
     def estimate(self, ctx):
@@ -410,10 +483,17 @@ class ThermalRamp(ThermalChamber, Procedure):
         v = self.points_table(data, VERIFY)
         vt = data.table(VERIFY.name)
         n = len(v["bias_dph"])  # the firmware took the bias trim off, then divided by 1 + the scale factor trim
-        sf_ppm = (np.asarray(vt.get("trim_sf_ppm", np.zeros(n))) + np.asarray(vt.get("trim_sf_ppm_per_hz", np.zeros(n)))
-                  * v["f_offset_hz"])
+        zero = np.zeros(n)
+        s = np.asarray(vt.get("hyst_state", zero))  # the play's state (its trims' halves times it)
+        sf_ppm = (np.asarray(vt.get("trim_sf_ppm", zero)) + np.asarray(vt.get("trim_sf_ppm_per_hz", zero))
+                  * v["f_offset_hz"] + 0.5 * np.asarray(vt.get("trim_sf_hyst_ppm", zero)) * s)
         v["raw_bias_dph"] = (v["bias_dph"] * (1.0 + 1e-6 * sf_ppm) + vt["trim_bias_dph"]
-                             + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"])
+                             + vt["trim_bias_dph_per_hz"] * v["f_offset_hz"]
+                             + 0.5 * np.asarray(vt.get("trim_bias_hyst_dph", zero)) * s)
+        # the branch each record is on: the FPGA's play where it ran, else the side it was settled from
+        approach = np.asarray(vt.get("approach", zero))
+        ran = np.asarray(vt.get("trim_hyst_hz", zero)) != 0.0
+        v["branch_state"] = np.where(ran, s, np.where(approach == 1, -1.0, 1.0))
         return v
 
     def trim_line(self, p: dict[str, np.ndarray]) -> ThermalFit:
@@ -442,6 +522,9 @@ class ThermalRamp(ThermalChamber, Procedure):
         plus = np.flatnonzero(np.asarray(vt["rate_dps"]) > 0)
         plus = plus[plus + 1 < len(vt["rate_dps"])]
         trim_ppm = np.asarray(vt["trim_sf_ppm"])[plus] + np.asarray(vt["trim_sf_ppm_per_hz"])[plus] * v["f_offset_hz"]
+        if "trim_sf_hyst_ppm" in vt:  # the hysteresis trim's half times the play's state (the pair's mean)
+            s = 0.5 * (np.asarray(vt["hyst_state"])[plus] + np.asarray(vt["hyst_state"])[plus + 1])
+            trim_ppm = trim_ppm + 0.5 * np.asarray(vt["trim_sf_hyst_ppm"])[plus] * s
         nominal = float(np.median(v["sf_nominal"]))
         v["err_ppm"] = 1e6 * (v["sf"] / nominal - 1.0)
         v["err_raw_ppm"] = 1e6 * (v["sf"] * (1.0 + 1e-6 * trim_ppm) / nominal - 1.0)
@@ -500,12 +583,24 @@ class ThermalRamp(ThermalChamber, Procedure):
                     Result("thermal_sf_ppm_per_hz", float(sf_trim.coeffs[1]), ci95=_pair(sf_trim.ci95[1]))]
         out += [Result("thermal_bias_dph", float(trim.coeffs[0]), ci95=_pair(trim.ci95[0])),
                Result("thermal_bias_dph_per_hz", float(trim.coeffs[1]), ci95=_pair(trim.ci95[1]))]
-        out += self._hysteresis(p, min(max(fb.order, 1), 2))
+        hyst = self._hyst_fits(p, min(max(fb.order, 1), 2))
+        out += self._hysteresis(hyst)
+        if self.hyst_halfwidth_degc > 0 and hyst is not None:
+            h_lo, h_hi = sorted(float(self.hyst_halfwidth_degc) * np.asarray(line.ci95[1], dtype=float))
+            out.append(Result("thermal_hyst_hz", float(self.hyst_halfwidth_degc * line.coeffs[1]), ci95=(h_lo, h_hi)))
+            out.append(Result("thermal_bias_hyst_dph", hyst[0].gap, ci95=hyst[0].gap_ci95))
+            if hyst[1] is not None and self.hyst_sf_trim:
+                out.append(Result("thermal_sf_hyst_ppm", float(hyst[1][0]),
+                                  ci95=(float(hyst[1][1][0]), float(hyst[1][1][1]))))
         if self.verify_points:
             v = self.verification(data)
             raw = v["raw_bias_dph"]
+            left = raw - trim(v["f_offset_hz"])
+            if hyst is not None and self.hyst_halfwidth_degc > 0:  # the branch-aware trim's residual
+                out.append(Result("verify_residual_hyst_dph",
+                                  float(np.sqrt(np.mean((left - 0.5 * hyst[0].gap * v["branch_state"]) ** 2)))))
             out += [
-                Result("verify_residual_dph", float(np.sqrt(np.mean((raw - trim(v["f_offset_hz"])) ** 2)))),
+                Result("verify_residual_dph", float(np.sqrt(np.mean(left**2)))),
                 Result("verify_residual_part_dph", float(np.sqrt(np.mean((raw - bias["part"](v["part_c"])) ** 2)))),
                 Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2)))),
             ]
@@ -550,23 +645,34 @@ class ThermalRamp(ThermalChamber, Procedure):
         half = 1.959963984540054 / math.sqrt(float(np.sum(w)))
         return [Result("verify_hysteresis_dph", gap, ci95=(gap - half, gap + half))]
 
-    def _hysteresis(self, p: dict[str, np.ndarray], order: int) -> list[Result]:
+    def _hyst_fits(self, p: dict[str, np.ndarray], order: int):
         """Heating minus cooling at the same temperature, of the bias and (with the table turning) of
-        the scale factor, each beside its PLL-trail term (bench.analysis.thermal_ramp.branch_hysteresis)."""
+        the scale factor, each beside its PLL-trail term (bench.analysis.thermal_ramp.branch_hysteresis):
+        (the bias's Hysteresis, (sf gap ppm, its interval) or None), or None when the cycle is too short."""
         heating = p["branch"] == 0
         kw = dict(t_ref_c=REF_TEMPERATURE_C, guard_c=float(self.hyst_guard_degc))
+        rate = p["f_rate_hz_s"] if self.hyst_rate_term else None
         try:
-            hb = branch_hysteresis(p["frequency_c"], p["bias_dph"], p["bias_se_dph"], heating, p["f_rate_hz_s"],
-                                   order=order, **kw)
+            hb = branch_hysteresis(p["frequency_c"], p["bias_dph"], p["bias_se_dph"], heating, rate, order=order, **kw)
         except ValueError:  # too few points beyond the guard (a short cycle): recorded NOT_MEASURED
-            return []
-        out = [Result("bias_hysteresis_dph", hb.gap, ci95=hb.gap_ci95),
-               Result("bias_per_freq_rate_dph_s_per_hz", hb.rate_coeff, ci95=hb.rate_coeff_ci95)]
+            return None
+        sf_gap = None
         if "sf" in p and len(p["sf"]) == len(heating):
-            hs = branch_hysteresis(p["frequency_c"], p["sf"], p["sf_se"], heating, p["f_rate_hz_s"], order=1, **kw)
+            hs = branch_hysteresis(p["frequency_c"], p["sf"], p["sf_se"], heating, rate, order=1, **kw)
             sf25 = float(np.mean(p["sf"]))
-            out.append(Result("sf_hysteresis_ppm", hs.gap / sf25 * 1e6,
-                              ci95=(hs.gap_ci95[0] / sf25 * 1e6, hs.gap_ci95[1] / sf25 * 1e6)))
+            sf_gap = (hs.gap / sf25 * 1e6, (hs.gap_ci95[0] / sf25 * 1e6, hs.gap_ci95[1] / sf25 * 1e6))
+        return hb, sf_gap
+
+    def _hysteresis(self, fits) -> list[Result]:
+        """The hysteresis fits' results (_hyst_fits; none for a cycle too short)."""
+        if fits is None:
+            return []
+        hb, sf_gap = fits
+        out = [Result("bias_hysteresis_dph", hb.gap, ci95=hb.gap_ci95)]
+        if self.hyst_rate_term:
+            out.append(Result("bias_per_freq_rate_dph_s_per_hz", hb.rate_coeff, ci95=hb.rate_coeff_ci95))
+        if sf_gap is not None:
+            out.append(Result("sf_hysteresis_ppm", float(sf_gap[0]), ci95=(float(sf_gap[1][0]), float(sf_gap[1][1]))))
         return out
 
     def figures(self, data) -> list:

@@ -6,6 +6,7 @@ into NVM) passes on sim-mems-thermal; sim-mems-thermal-4 takes the sequence as a
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
@@ -138,6 +139,13 @@ def test_line_run_eol_mems_thermal_leaves_the_thermal_trim_in_nvm(tmp_path, caps
     assert back["TRIM_BIAS_DPH_PER_HZ"] == pytest.approx(m["thermal_bias_dph_per_hz"]["value"], rel=1e-6)
     assert back["TRIM_SF_PPM"] == pytest.approx(m["thermal_sf_ppm"]["value"], rel=1e-6)  # the scale factor trim too
     assert back["TRIM_SF_PPM_PER_HZ"] == pytest.approx(m["thermal_sf_ppm_per_hz"]["value"], rel=1e-6)
+    # the branch-aware trim (hyst_halfwidth_degc 0.5 in the sequence): the play's half-width is 0.5 K through the
+    # ring's df/dT (-0.41 Hz/K), the gaps the ramp's hysteresis fit; into NVM with the rest
+    assert m["thermal_hyst_hz"]["value"] == pytest.approx(0.5 * tc["value"] * 1e-6 * f25["value"], rel=0.01)
+    assert back["TRIM_HYST_HZ"] == pytest.approx(m["thermal_hyst_hz"]["value"], rel=1e-6)
+    assert back["TRIM_BIAS_HYST_DPH"] == pytest.approx(m["thermal_bias_hyst_dph"]["value"], rel=1e-6)
+    assert back["TRIM_SF_HYST_PPM"] == 0.0  # hyst_sf_trim off: the ramp's scale factor gap is noise (+-15 000 ppm)
+    assert m["verify_residual_hyst_dph"]["value"] < 4.0 * m["verify_noise_dph"]["value"]
     # the verification's +-10 deg/s pair through the trimmed output: ~0.35 % left (noise ~0.22 %), 2.2 % untrimmed
     assert m["verify_sf_error_ppm"]["value"] < 3.0 * m["verify_sf_noise_ppm"]["value"]
     assert m["verify_sf_error_raw_ppm"]["value"] > 3.0 * m["verify_sf_error_ppm"]["value"]
@@ -161,3 +169,36 @@ def test_the_mems_sequence_runs_as_a_batch_on_the_four_slot_station():
     finally:
         station.close()
     assert len(set(f0)) == 4  # four rings drawn from the lot's spread
+
+
+def test_the_branch_aware_trim_leaves_less_at_the_verification(tmp_path, capsys):
+    """thermal-ramp on the MEMS ring (seed 0, 25..31 degC at 4 degC/min, 5 s segments at rest, 60 s tails) with
+    the branch-aware trim (a 0.5 K play through the ring's df/dT, the hysteresis fitted without the rate term)
+    in the FPGA, verified at 26.5 and 29.5 degC settled from below and from above (60 s records): the single-valued
+    trim leaves the hysteresis's half at each point (142 deg/h rms against a noise of 44), the branch-aware one
+    half that (72), within 1.2 of what the noise and the hysteresis fit's interval allow (74)."""
+    from pathlib import Path
+
+    from bench.cli import main
+
+    station = tmp_path / "st.toml"
+    station.write_text(Path("bench/stations/sim-mems-thermal.toml").read_text()
+                       .replace('id = "sim-mems-thermal"', 'id = "mems-hyst-trim-test"')
+                       .replace("case_tau_s = 60.0", "case_tau_s = 15.0"))
+    sets = {"t_low_degc": 25, "t_high_degc": 31, "cycle_degc_per_min": 4, "segment_s": 5, "rate_dps": 0,
+            "tail_s": 60, "settle_window_s": 5, "settle_ppm_per_min": 6, "verify_points": 2, "record_s": 60,
+            "verify_both_branches": "true", "stream_hz": 10, "hyst_halfwidth_degc": 0.5, "hyst_rate_term": "false"}
+    args = ["run", "thermal-ramp", "--station", str(station), "--seed", "0", "--json",
+            "--runs-dir", str(tmp_path / "runs"), "--results", str(tmp_path / "r.sqlite")]
+    for k, v in sets.items():
+        args += ["--set", f"{k}={v}"]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    m = {k: v["value"] for k, v in out["measurements"].items()}
+    gap = out["measurements"]["bias_hysteresis_dph"]
+    assert gap["ci95"][0] <= -216.0 <= gap["ci95"][1]  # the unit's -0.06 deg/s
+    assert m["thermal_hyst_hz"] == pytest.approx(0.5 * -30e-6 * 13647.0, rel=0.02)  # 0.5 K through -0.41 Hz/K
+    before, after, noise = m["verify_residual_dph"], m["verify_residual_hyst_dph"], m["verify_noise_dph"]
+    assert after < 0.6 * before
+    allowed = math.hypot(noise, 0.5 * (gap["ci95"][1] - gap["ci95"][0]) / (2 * 1.96))  # the gap's se over 2
+    assert after < 1.2 * allowed, (after, allowed)

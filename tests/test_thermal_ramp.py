@@ -186,3 +186,23 @@ def test_branch_hysteresis_separates_the_gap_from_a_rate_term():
     assert abs(branch_gap(naive, heating, 3.0).gap - -2.0) > 1.0  # the rate term taken for hysteresis
     with pytest.raises(ValueError, match="guard"):
         branch_hysteresis(t, y, np.full(2 * n, 0.05), heating, rate, guard_c=20.0)
+
+
+def test_branch_hysteresis_without_the_rate_term_is_narrower_where_there_is_none():
+    """The same cycle with no rate term in y (a drive that does not trail): rate None fits the gap alone,
+    its interval holding the truth -2 and narrower than the fit that also carries a rate coefficient."""
+    from bench.analysis.thermal_ramp import branch_hysteresis
+
+    rng = np.random.default_rng(6)
+    n = 30
+    up = 25.0 + 10.0 * np.linspace(0.0, 1.0, n) ** 1.5
+    t = np.concatenate([up, up[::-1]])
+    heating = np.arange(2 * n) < n
+    rate = np.concatenate([np.gradient(up), -np.gradient(up)[::-1]])
+    y = 3.0 * (t - 25.0) + np.where(heating, -1.0, 1.0) + rng.normal(0.0, 0.05, 2 * n)
+    sigma = np.full(2 * n, 0.05)
+    alone = branch_hysteresis(t, y, sigma, heating, None, order=1, guard_c=1.0)
+    both = branch_hysteresis(t, y, sigma, heating, rate, order=1, guard_c=1.0)
+    assert alone.gap_ci95[0] <= -2.0 <= alone.gap_ci95[1]
+    assert alone.rate_coeff == 0.0 and alone.rate_coeff_ci95 == (0.0, 0.0) and alone.dof == both.dof + 1
+    assert alone.gap_ci95[1] - alone.gap_ci95[0] < both.gap_ci95[1] - both.gap_ci95[0]

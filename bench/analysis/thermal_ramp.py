@@ -103,12 +103,15 @@ def branch_hysteresis(temperature_c, y, sigma, heating, rate, *, order: int = 1,
     where `rate` is each point's rate regressor (the resonator frequency's rate: forces that trail a
     moving frequency's phase by a part proportional to it make a bias of opposite sign on the two branches that would
     otherwise be taken for hysteresis; the tails and the ramp's start, where the rate changes within a
-    branch, separate the two).  Each branch's points within guard_c of its turning point (heating: its
-    lowest temperature, cooling: its highest) are left out (a hysteresis loop's corner there is on
+    branch, separate the two; rate None: no rate term, for a thermometer and drive known not to trail,
+    when rate_coeff is 0 and its interval (0, 0)).  Each branch's points within guard_c of its turning
+    point (heating: its lowest temperature, cooling: its highest) are left out (a hysteresis loop's corner there is on
     neither branch yet: the guard must exceed the loop's width).  Intervals: the weights' covariance
     widened by the Birge ratio, Student's t on dof."""
     t = np.asarray(temperature_c, dtype=float)
-    yv, s, r = (np.asarray(v, dtype=float) for v in (y, sigma, rate))
+    with_rate = rate is not None
+    yv, s = np.asarray(y, dtype=float), np.asarray(sigma, dtype=float)
+    r = np.asarray(rate, dtype=float) if with_rate else np.zeros_like(t)
     h = np.asarray(heating, dtype=bool)
     if not (t.shape == yv.shape == s.shape == r.shape == h.shape):
         raise ValueError("temperature, y, sigma, heating and rate must have one length")
@@ -119,12 +122,13 @@ def branch_hysteresis(temperature_c, y, sigma, heating, rate, *, order: int = 1,
             start = t[idx].min() if branch else t[idx].max()
             keep[idx] = np.abs(t[idx] - start) >= guard_c
     n_up, n_down = int(np.sum(keep & h)), int(np.sum(keep & ~h))
-    n_par = order + 3
+    n_par = order + 2 + int(with_rate)
     if n_up < 2 or n_down < 2 or n_up + n_down <= n_par:
         raise ValueError(f"{n_up} heating and {n_down} cooling points beyond the {guard_c:g} degC guard: "
                          f"2 or more of each and more than {n_par} in all are needed")
     x = t[keep] - t_ref_c
-    a = np.column_stack([np.vander(x, order + 1, increasing=True), r[keep], np.where(h[keep], 0.5, -0.5)])
+    cols = [np.vander(x, order + 1, increasing=True)] + ([r[keep]] if with_rate else [])
+    a = np.column_stack([*cols, np.where(h[keep], 0.5, -0.5)])
     sw = 1.0 / s[keep]
     aw, yw = a * sw[:, None], yv[keep] * sw
     coeffs, *_ = np.linalg.lstsq(aw, yw, rcond=None)
@@ -132,6 +136,6 @@ def branch_hysteresis(temperature_c, y, sigma, heating, rate, *, order: int = 1,
     dof = len(x) - n_par
     chi2 = float(np.sum((yw - aw @ coeffs) ** 2))
     half, _ = birge_half_widths(cov, chi2, dof)
-    gap, c = float(coeffs[-1]), float(coeffs[-2])
-    return Hysteresis(gap, (gap - float(half[-1]), gap + float(half[-1])), c,
-                      (c - float(half[-2]), c + float(half[-2])), len(x), dof)
+    gap = float(coeffs[-1])
+    c, c_half = (float(coeffs[-2]), float(half[-2])) if with_rate else (0.0, 0.0)
+    return Hysteresis(gap, (gap - float(half[-1]), gap + float(half[-1])), c, (c - c_half, c + c_half), len(x), dof)

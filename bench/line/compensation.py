@@ -55,6 +55,12 @@ COEFFICIENTS: dict[str, CoefficientSpec] = {
                         "scale factor's error against the nominal at the FPGA's REF_FREQ_HZ (thermal trim)"),
         CoefficientSpec("thermal_sf_ppm_per_hz", "ppm/Hz", "TRIM_SF_PPM_PER_HZ", ("thermal-ramp",), -1e5, 1e5,
                         "scale factor error's slope against the PLL frequency's offset (thermal trim)"),
+        CoefficientSpec("thermal_hyst_hz", "Hz", "TRIM_HYST_HZ", ("thermal-ramp",), -1e3, 1e3,
+                        "the hysteresis play's half-width on the PLL frequency, signed as df/dT (hysteresis trim)"),
+        CoefficientSpec("thermal_bias_hyst_dph", "deg/h", "TRIM_BIAS_HYST_DPH", ("thermal-ramp",), -1e6, 1e6,
+                        "bias on heating minus bias on cooling (hysteresis trim: state x half of it)"),
+        CoefficientSpec("thermal_sf_hyst_ppm", "ppm", "TRIM_SF_HYST_PPM", ("thermal-ramp",), -1e5, 1e5,
+                        "scale factor error on heating minus on cooling (hysteresis trim)"),
         CoefficientSpec("gain_x", "", "TRIM_GAIN_X", (), 0.5, 2.0, "pickoff x gain trim"),
         CoefficientSpec("gain_y", "", "TRIM_GAIN_Y", (), 0.5, 2.0, "pickoff y gain trim"),
     )
@@ -62,7 +68,8 @@ COEFFICIENTS: dict[str, CoefficientSpec] = {
 # TRIM_EN bits (drivers.fpga.protocol) a set of coefficients switches on
 _TRIM_GROUPS = ((0x01, ("delta_inv_tau_per_s", "theta_tau_deg")), (0x02, ("split_hz", "theta_w_deg")),
                 (0x04, ("gain_x", "gain_y")), (0x08, ("thermal_bias_dph", "thermal_bias_dph_per_hz")),
-                (0x08, ("thermal_sf_ppm", "thermal_sf_ppm_per_hz")))  # fmt: skip
+                (0x08, ("thermal_sf_ppm", "thermal_sf_ppm_per_hz")),
+                (0x08, ("thermal_hyst_hz", "thermal_bias_hyst_dph")))  # fmt: skip
 
 
 class CompensationError(ValueError):

@@ -157,7 +157,7 @@ REGISTERS: tuple[Register, ...] = (
              "rate output gain G: rate_out_dps = G degrees(F_p / (4 AGC_SETPOINT))"),
 )
 
-# --- trims held in non-volatile memory (0x40-0x4F, 0x50-0x53; docs/fpga_link.md "Trims in NVM") -
+# --- trims held in non-volatile memory (0x40-0x4F, 0x50-0x56; docs/fpga_link.md "Trims in NVM") -
 NVM_COMMIT, NVM_RELOAD, NVM_ERASE = 1, 2, 3  # NVM_CMD values
 NVM_VALID, NVM_MATCH, NVM_CRC_BAD = 0x01, 0x02, 0x04  # NVM_STATUS bits
 TRIM_DRIFT, TRIM_SPLIT, TRIM_GAIN, TRIM_THERMAL = 0x01, 0x02, 0x04, 0x08  # TRIM_EN bits: the trims applied
@@ -196,8 +196,23 @@ TRIM_REGISTERS: tuple[Register, ...] = (
              "the bias trim) divided by 1 + it"),
     Register("TRIM_SF_PPM_PER_HZ", 0x53, "f", "rw", -1e5, 1e5, "ppm/Hz", 0.0,
              "thermal trim: the scale factor error's slope against the PLL frequency's offset from REF_FREQ_HZ"),
+    # the branch-aware (hysteresis) trim: docs/fpga_link.md "Thermal hysteresis trim"
+    Register("TRIM_HYST_HZ", 0x54, "f", "rw", -1e3, 1e3, "Hz", 0.0,
+             "thermal hysteresis trim: the half-width of a play (backlash) on the PLL frequency, signed as the "
+             "frequency's temperature coefficient (the play's half-width in K times df/dT, negative for a "
+             "resonator that slows when heated), so its state HYST_STATE is +1 after heating, -1 after cooling "
+             "(0: no play, HYST_STATE 0)"),
+    Register("TRIM_BIAS_HYST_DPH", 0x55, "f", "rw", -1e6, 1e6, "deg/h", 0.0,
+             "thermal hysteresis trim: the bias on heating minus that on cooling; the rate output less "
+             "HYST_STATE times half of it (with TRIM_THERMAL)"),
+    Register("TRIM_SF_HYST_PPM", 0x56, "f", "rw", -1e5, 1e5, "ppm", 0.0,
+             "thermal hysteresis trim: the scale factor error on heating minus that on cooling; HYST_STATE "
+             "times half of it joins the scale factor trim's error (with TRIM_THERMAL)"),
+    Register("HYST_STATE", 0x57, "f", "ro", unit="",
+             doc="the hysteresis play's normalised state in [-1, +1]: (PLL frequency - play output) / "
+                 "TRIM_HYST_HZ; +1 after heating, -1 after cooling by more than the play's width"),
 )
-TRIM_BLOCK_SIZES = (96, 112, 128)  # the block's bytes as the layouts grew (phase trims, scale factor trim): older load
+TRIM_BLOCK_SIZES = (96, 112, 128, 152)  # the block's bytes as the layouts grew (phase, scale factor, hysteresis)
 TRIM_BLOCK = tuple(r.name for r in TRIM_REGISTERS if r.access == "rw")  # what NVM holds, in address order
 REGISTERS = REGISTERS + TRIM_REGISTERS
 

@@ -116,6 +116,8 @@ class FpgaFirmware:
                 return self.nvm.crc
             if reg.name == "NVM_COMMITS":
                 return self.nvm.commits
+            if reg.name == "HYST_STATE":
+                return float(self._st[k.S_HYST])
             return self.regs[reg.name]
 
     def write(self, reg: p.Register, value: float) -> float:
@@ -139,6 +141,8 @@ class FpgaFirmware:
                 self._dec_sum, self._dec_n = np.zeros(4), 0
             if reg.name == "OUTPUT_MODE":  # the rebalance loop starts afresh in its mode
                 self._st[k.S_FTR_INT] = 0.0
+            if reg.name == "TRIM_HYST_HZ":  # a new play starts on the next block's frequency (state 0)
+                self._st[k.S_PLAY_OK] = self._st[k.S_HYST] = 0.0
             if reg.name == "REF_FREQ_HZ" and not int(self.regs["CTRL"]) & p.PLL_EN:
                 self.regs["PLL_FREQ_HZ"] = float(value)
             return self.regs[reg.name]
@@ -172,6 +176,8 @@ class FpgaFirmware:
         """Trim registers from NVM (power-up, NVM_CMD=RELOAD); defaults, trims off, when NVM is not valid."""
         block = self.nvm.block()
         values = decode_block(block) if block is not None else {n: p.BY_NAME[n].default for n in p.TRIM_BLOCK}
+        if float(values["TRIM_HYST_HZ"]) != float(self.regs["TRIM_HYST_HZ"]):
+            self._st[k.S_PLAY_OK] = self._st[k.S_HYST] = 0.0  # another play: it starts afresh
         for name, value in values.items():
             self.regs[name] = int(value) if p.BY_NAME[name].kind == "u" else float(value)
         self._prm = None
@@ -266,6 +272,7 @@ class FpgaFirmware:
             if not int(self.regs["TRIM_EN"]) & p.TRIM_THERMAL:
                 prm[k.P_TRIM_BIAS_DPH] = prm[k.P_TRIM_BIAS_DPH_PER_HZ] = 0.0
                 prm[k.P_TRIM_SF_PPM] = prm[k.P_TRIM_SF_PPM_PER_HZ] = 0.0
+                prm[k.P_TRIM_BIAS_HYST_DPH] = prm[k.P_TRIM_SF_HYST_PPM] = 0.0  # the play itself still tracks
             self._hot = self._hot_values()
         return prm
 

@@ -49,11 +49,15 @@ P_OUTPUT_MODE, P_FTR_ANGLE_DEG, P_FTR_KP, P_FTR_KI, P_FTR_GAIN = range(12, 17)
 P_FM_FORCE_HZ, P_FM_RATE_HZ = range(17, 19)
 P_TRIM_BIAS_DPH, P_TRIM_BIAS_DPH_PER_HZ = 19, 20  # the thermal trim (0, 0 unless TRIM_EN has TRIM_THERMAL)
 P_TRIM_SF_PPM, P_TRIM_SF_PPM_PER_HZ = 21, 22  # its scale factor part (0, 0 likewise)
+# the hysteresis trim: the play's signed half-width (Hz; always in force: the play tracks), and the
+# heating-minus-cooling bias and scale factor error its state multiplies (0, 0 unless TRIM_THERMAL)
+P_TRIM_HYST_HZ, P_TRIM_BIAS_HYST_DPH, P_TRIM_SF_HYST_PPM = 23, 24, 25
 PARAM_REGS = (
     "AGC_SETPOINT", "PLL_KI", "PLL_KP", "FORCE_LIMIT", "AGC_KP", "AGC_KI", "DRIVE_FORCE",
     "QUAD_KP", "QUAD_KI", "PRECESSION_RATE_DPS", "DRIFT_D_PER_S", "DRIFT_THETA_TAU_DEG",
     "OUTPUT_MODE", "FTR_ANGLE_DEG", "FTR_KP", "FTR_KI", "FTR_GAIN", "FM_FORCE_HZ", "FM_RATE_HZ",
     "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ", "TRIM_SF_PPM", "TRIM_SF_PPM_PER_HZ",
+    "TRIM_HYST_HZ", "TRIM_BIAS_HYST_DPH", "TRIM_SF_HYST_PPM",
 )  # fmt: skip
 # loop state
 S_AGC_INT, S_QUAD_INT, S_PLL_INT_HZ, S_A, S_PHASE_ERR, S_PLL_FREQ_HZ = range(6)
@@ -79,7 +83,10 @@ S_FW, S_FW_PREV = 45, 46  # the frequency-control force held over the last block
 # the wave's phase acceleration (rad/s^2: 2 pi times its frequency's rate, e.g. on a temperature
 # ramp) less the split pattern's, smoothed over CHI_ACC_TAU_S (wave_force's phase prediction)
 S_CHI_ACC = 47
-N_STATE = 48
+# the hysteresis play on the PLL frequency (update_play): its output (Hz, offset from REF_FREQ_HZ),
+# whether it has one (0: it starts on the next frequency) and its normalised state s in [-1, +1]
+S_PLAY_HZ, S_PLAY_OK, S_HYST = 48, 49, 50
+N_STATE = 51
 MODE_FTR = 1  # OUTPUT_MODE's force-to-rebalance (drivers.fpga.protocol.MODE_FORCE_TO_REBALANCE)
 OBS_MEMORY_S = 100.0  # the observer forgets data older than this (exponential weight)
 AGC_SETTLED_REL = 0.01  # the amplitude's band around the setpoint in which the split observer learns
@@ -309,6 +316,27 @@ def split_phase(st: np.ndarray, t_mid: float) -> float:
 
 
 @njit(cache=True)
+def update_play(prm: np.ndarray, st: np.ndarray) -> None:
+    """The hysteresis trim's play (backlash) on the PLL frequency's offset f (st[S_OUT + 1]): its output
+    y moves only when |f - y| would exceed the half-width |h| (h = P_TRIM_HYST_HZ, signed as the
+    frequency's temperature coefficient); S_HYST = (f - y) / h, +1 after heating, -1 after cooling, 0
+    at the start (y = f) and with h = 0.  The frequency lags the resonator's temperature by nothing, so
+    this is the package's play in temperature seen through df/dT (docs/fpga_link.md)."""
+    h = prm[P_TRIM_HYST_HZ]
+    f = st[S_OUT + 1]
+    if h == 0.0:
+        st[S_PLAY_OK] = 0.0
+        st[S_HYST] = 0.0
+        return
+    if st[S_PLAY_OK] <= 0.0:
+        st[S_PLAY_HZ] = f
+        st[S_PLAY_OK] = 1.0
+    w = abs(h)
+    st[S_PLAY_HZ] = min(max(st[S_PLAY_HZ], f - w), f + w)
+    st[S_HYST] = (f - st[S_PLAY_HZ]) / h
+
+
+@njit(cache=True)
 def wave_force(
     t_start_s: float, n: int, dt_s: float, ref_hz: float, ctrl: int, prm: np.ndarray, st: np.ndarray
 ) -> None:
@@ -316,6 +344,7 @@ def wave_force(
     reference at ref_hz: the wave-frame forces of the last update along the wave as predicted at
     the block's middle (angle and phase extrapolated at their measured rates), the drift
     compensation evaluated there too; the outputs amp, quad, prec (S_OUT) are these forces."""
+    update_play(prm, st)
     limit = prm[P_FORCE_LIMIT]
     f_a, f_q, f_p = st[S_F_A], st[S_F_Q_P], st[S_F_P]
     f_w = 0.0
@@ -403,10 +432,13 @@ def wave_force(
     st[S_OUT + 3] = f_p
     if ftr and prm[P_AGC_SETPOINT] > 0:  # the rate output: G degrees(F_p / (4 a_set)), ratiometric,
         # less the thermal trim's bias at the PLL frequency (st[S_OUT + 1]: its offset from REF_FREQ_HZ),
-        # over 1 + the thermal trim's scale factor error there (ppm; 0 off: the same numbers)
-        trim_dph = prm[P_TRIM_BIAS_DPH] + prm[P_TRIM_BIAS_DPH_PER_HZ] * st[S_OUT + 1]
+        # over 1 + the thermal trim's scale factor error there (ppm; 0 off: the same numbers); the
+        # hysteresis trim's halves times the play's state join both (heating minus cooling: s = +1 heating)
+        trim_dph = (prm[P_TRIM_BIAS_DPH] + prm[P_TRIM_BIAS_DPH_PER_HZ] * st[S_OUT + 1]
+                    + 0.5 * prm[P_TRIM_BIAS_HYST_DPH] * st[S_HYST])
         rate = prm[P_FTR_GAIN] * math.degrees(f_p / (4.0 * prm[P_AGC_SETPOINT])) - trim_dph / 3600.0
-        sf_ppm = prm[P_TRIM_SF_PPM] + prm[P_TRIM_SF_PPM_PER_HZ] * st[S_OUT + 1]
+        sf_ppm = (prm[P_TRIM_SF_PPM] + prm[P_TRIM_SF_PPM_PER_HZ] * st[S_OUT + 1]
+                  + 0.5 * prm[P_TRIM_SF_HYST_PPM] * st[S_HYST])
         if sf_ppm != 0.0:
             rate = rate / (1.0 + 1e-6 * sf_ppm)
         st[S_RATE_OUT] = rate
