@@ -119,7 +119,8 @@ def scale_factor_truth(truth: dict[str, float], at_reference: bool = False) -> f
         else:
             f_hz = truth["f0_at_temperature_hz"]
         f_hz += truth.get("drive_freq_offset_hz", 0.0)
-        sf /= 1.0 + 1e-6 * (truth["trim_sf_ppm"] + truth.get("trim_sf_ppm_per_hz", 0.0) * (f_hz - truth["ref_freq_hz"]))
+        sf /= 1.0 + 1e-6 * (truth["trim_sf_ppm"] + truth.get("trim_sf_ppm_per_hz", 0.0) * (f_hz - truth["ref_freq_hz"])
+                            + 0.5 * truth.get("trim_sf_hyst_ppm", 0.0) * truth.get("hyst_state", 0.0))
     return sf
 
 

@@ -97,6 +97,9 @@ class FpgaFirmware:
                 out["trim_sf_ppm"] = float(self.regs["TRIM_SF_PPM"])
                 out["trim_sf_ppm_per_hz"] = float(self.regs["TRIM_SF_PPM_PER_HZ"])
                 out["ref_freq_hz"] = float(self.regs["REF_FREQ_HZ"])
+                # the hysteresis trim's scale-factor share, at the play's state when the truth is read
+                out["trim_sf_hyst_ppm"] = float(self.regs["TRIM_SF_HYST_PPM"])
+                out["hyst_state"] = float(self._st[k.S_HYST])
             params = getattr(self.world, "params", None)
             if params is not None and self.regs["AGC_SETPOINT"] > 0:
                 out["drive_freq_offset_hz"] = drive_frequency_offset_hz(
