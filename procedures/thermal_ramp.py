@@ -237,6 +237,11 @@ class ThermalRamp(ThermalChamber, Procedure):
         Measurement("verify_noise_dph", "deg/h", "rms of the verification records' own bias standard errors "
                     "(what the unit's noise allows a residual)", no_interval="a noise level", when=_verifying,
                     when_doc="verify_points > 0"),
+        Measurement("verify_allowed_dph", "deg/h", "what the unit's noise and the trim fit's interval allow the "
+                    "compensated residual: rms over the verification points of the record's bias standard error, "
+                    "the thermal trim line's standard error at the point's frequency and, with the branch-aware "
+                    "trim, the hysteresis gap's standard error times the play's state over 2, in quadrature",
+                    no_interval="a noise level", when=_verifying, when_doc="verify_points > 0"),
         Measurement("sf_at_25c", "", "scale factor (output per input rate) at 25 degC against the frequency "
                     "thermometer, from the +-rate_dps pairs", truth=scale_factor_at_25c_truth, when=_rotating,
                     when_doc="rate_dps > 0"),
@@ -599,7 +604,12 @@ class ThermalRamp(ThermalChamber, Procedure):
             if hyst is not None and self.hyst_halfwidth_degc > 0:  # the branch-aware trim's residual
                 out.append(Result("verify_residual_hyst_dph",
                                   float(np.sqrt(np.mean((left - 0.5 * hyst[0].gap * v["branch_state"]) ** 2)))))
+            allowed_var = v["bias_se_dph"] ** 2 + trim.se_at(v["f_offset_hz"]) ** 2
+            if hyst is not None and self.hyst_halfwidth_degc > 0:
+                gap_se = (hyst[0].gap_ci95[1] - hyst[0].gap_ci95[0]) / (2.0 * 1.959964)
+                allowed_var = allowed_var + (0.5 * gap_se * v["branch_state"]) ** 2
             out += [
+                Result("verify_allowed_dph", float(np.sqrt(np.mean(allowed_var)))),
                 Result("verify_residual_dph", float(np.sqrt(np.mean(left**2)))),
                 Result("verify_residual_part_dph", float(np.sqrt(np.mean((raw - bias["part"](v["part_c"])) ** 2)))),
                 Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2)))),

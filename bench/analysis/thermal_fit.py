@@ -37,10 +37,21 @@ class ThermalFit:
     birge: float
     dof: int
     residuals: np.ndarray
+    #: the coefficients' covariance, scaled by birge**2 where the scatter exceeds the stated errors
+    cov: np.ndarray | None = None
 
     def __call__(self, temperature_c) -> np.ndarray:
         x = np.asarray(temperature_c, dtype=float) - self.t_ref_c
         return np.polynomial.polynomial.polyval(x, self.coeffs)
+
+    def se_at(self, temperature_c) -> np.ndarray:
+        """Standard error of the fitted curve at temperature_c (the coefficients' covariance carried):
+        what the fit's own uncertainty leaves in a compensation made from it."""
+        if self.cov is None:
+            raise ValueError("this fit carries no covariance")
+        x = np.atleast_1d(np.asarray(temperature_c, dtype=float)) - self.t_ref_c
+        basis = np.vander(x, self.order + 1, increasing=True)
+        return np.sqrt(np.einsum("ij,jk,ik->i", basis, self.cov, basis))
 
     def slope_at(self, temperature_c: float) -> float:
         """dy/dT at a temperature."""
@@ -112,7 +123,7 @@ def fit_temperature_polynomial(
     half, birge = birge_half_widths(cov, chi2, dof)
     ci = np.column_stack([coeffs - half, coeffs + half])
     resid = yv - np.polynomial.polynomial.polyval(x, coeffs)
-    return ThermalFit(order, coeffs, ci, float(t_ref_c), bic, birge, dof, resid)
+    return ThermalFit(order, coeffs, ci, float(t_ref_c), bic, birge, dof, resid, cov * max(birge, 1.0) ** 2)
 
 
 def batch_mean(values, n_batches: int = 10) -> tuple[float, float]:
