@@ -60,3 +60,27 @@ def test_a_steep_line_read_by_a_coarse_thermometer_stays_a_line():
         lines += fit.order == 1
         slope_hits += bool(fit.ci95[1][0] <= 0.3 <= fit.ci95[1][1])
     assert naive_lines < 50 and lines > 70 and slope_hits > 90, (naive_lines, lines, slope_hits)
+
+
+def test_the_curves_standard_error_is_the_closed_form_and_covers():
+    """se_at: a straight line's sqrt(var a + 2 x cov ab + x^2 var b) (closed form of weighted least squares
+    with equal errors: var a = s^2 / n at the mean, var b = s^2 / Sxx); at t_ref it is coefficient 0's
+    interval over 1.96, and over 400 seeded draws the curve at 40 degC lies within 1.96 se of the truth
+    in ~95 % of them (binomial band 364-396)."""
+    t = np.linspace(-20.0, 60.0, 9)
+    s = 0.5
+    fit = fit_temperature_polynomial(t, 3.0 + 0.1 * t, np.full(t.size, s), max_order=1, min_order=1, t_ref_c=25.0)
+    x = t - 25.0
+    sxx = np.sum((x - x.mean()) ** 2)
+    for temp in (-20.0, 25.0, 40.0, 85.0):
+        dx = temp - 25.0 - x.mean()
+        expected = s * np.sqrt(1.0 / t.size + dx**2 / sxx)
+        assert fit.se_at(temp)[0] == pytest.approx(expected, rel=1e-9)
+    assert 1.959964 * fit.se_at(25.0)[0] == pytest.approx(fit.ci95[0][1] - fit.coeffs[0], rel=1e-6)
+    rng = np.random.default_rng(7)
+    inside = 0
+    for _ in range(400):
+        y = 3.0 + 0.1 * t + rng.normal(0.0, s, t.size)
+        f = fit_temperature_polynomial(t, y, np.full(t.size, s), max_order=1, min_order=1, t_ref_c=25.0)
+        inside += abs(f(40.0) - (3.0 + 0.1 * 40.0)) <= 1.959964 * f.se_at(40.0)[0]
+    assert 364 <= inside <= 396
