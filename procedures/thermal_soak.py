@@ -232,6 +232,10 @@ class ThermalSoak(ThermalChamber, Procedure):
         Measurement("verify_noise_dph", "deg/h", "rms of the verification records' own bias standard errors "
                     "(what the unit's noise allows a residual)", no_interval="a noise level", when=_verifying,
                     when_doc="verify_points > 0"),
+        Measurement("verify_allowed_dph", "deg/h", "what the unit's noise and the trim fit's interval allow the "
+                    "compensated residual: rms over the verification points of the record's bias standard error "
+                    "and the trim line's standard error at the point's frequency, in quadrature",
+                    no_interval="a noise level", when=_verifying, when_doc="verify_points > 0"),
     )
 
     def setpoints_c(self) -> np.ndarray:
@@ -394,7 +398,9 @@ class ThermalSoak(ThermalChamber, Procedure):
                 v = self.verification(data)
                 out += [Result("verify_residual_dph",
                                float(np.sqrt(np.mean((v["raw_bias_dph"] - trim(v["f_offset_hz"])) ** 2)))),
-                        Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2))))]
+                        Result("verify_noise_dph", float(np.sqrt(np.mean(v["bias_se_dph"] ** 2)))),
+                        Result("verify_allowed_dph", float(np.sqrt(np.mean(
+                            v["bias_se_dph"] ** 2 + trim.se_at(v["f_offset_hz"]) ** 2))))]
         return out
 
     def figures(self, data) -> list:

@@ -111,6 +111,9 @@ def test_line_run_eol_hrg_thermal_soak_leaves_the_soaks_trim_in_nvm(tmp_path, ca
     assert tc["interval"][0] <= tc["truth"] <= tc["interval"][1], tc
     # the trim held the verification's bias to the record's noise (untrimmed it is the bias itself)
     assert m["verify_residual_dph"]["value"] < 4.0 * m["verify_noise_dph"]["value"], m["verify_residual_dph"]
+    # and within 1.2 of what the noise and the trim line's interval allow (the target)
+    assert m["verify_allowed_dph"]["value"] >= m["verify_noise_dph"]["value"]
+    assert m["verify_residual_dph"]["value"] < 1.2 * m["verify_allowed_dph"]["value"]
     back = rec["trims"]["read_back"]
     assert rec["trims"]["written"] and int(back["TRIM_EN"]) == 0x08
     assert back["TRIM_BIAS_DPH"] == pytest.approx(m["thermal_bias_dph"]["value"], rel=1e-6)
