@@ -34,13 +34,13 @@ run: $(STAMP)
 # and without it each compiles every module of ours it imports, and pytest rewrites every test module, again)
 # (the serial pass collects only the files that mark a test serial: tests/conftest.py refuses a run
 # where a serial test sits in a file this grep would miss)
-# (--dist loadfile: each test file on one worker, so its module fixtures are set up once, the files
-# costliest first from tests/costs_s.tsv - see tests/xdist_units.py; 4 workers on 2 cores: a test
-# waiting on a subprocess, a socket or a poll leaves its core to another - benchmarks/suite_pass.py)
-TEST_WORKERS ?= 4
+# (--dist worksteal on 3 workers: measured on the same tree, idle, against --dist loadfile on 4 with the
+# files costliest first (tests/xdist_units.py, used when a run asks loadfile): 348 s against 428 s;
+# why loadfile lost here is not established: module fixtures set up once, but the pass took longer)
+TEST_WORKERS ?= 3
 SERIAL_FILES = $(shell grep -l 'mark\.serial' tests/test_*.py)
 test: $(STAMP)
-	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial"
+	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m "not serial"
 	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -m serial $(SERIAL_FILES)
 	$(BIN)/ruff check .
 

@@ -18,6 +18,8 @@ load average sampled every 10 s includes the pass's own workers):
   loadfile  -n 3 (14:34):         1496 passed, 472 s, CPU 614 s, 129 %, load mean 7.3 (1.3-11.0)
   loadfile  -n 4 (14:45):         1496 passed, 372 s, CPU 630 s, 169 %, load mean 5.9 (1.4-8.2);
                                   the four workers' last tests ended within 0.1 s of each other
+  at the end, idle (load ~1 before), the same tree (1525 tests): loadfile -n 4 428 s (in .ci/run),
+                                  worksteal -n 3 348 s: `make test` keeps worksteal -n 3
 Profile that chose the changes (the CPU log, per test and file): the pass is CPU-bound (~600 CPU s,
 ~210-237 s of it in the subprocesses tests start, waited for); under worksteal a module's fixture (a
 simulated run of 10-22 s) was set up again on each worker that stole some of its tests
