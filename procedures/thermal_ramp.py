@@ -27,7 +27,15 @@ from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 
 from .cvg_output import MODES, UNSTATED_BIAS_NO_TRUTH, scale_factor_at_25c_truth, static_bias_truth
-from .thermal_soak import REF_TEMPERATURE_C, ThermalChamber, _f0_at_25c_truth, _f0_tc_truth, _pair
+from .thermal_soak import (
+    BIAS_TRIM_COLUMNS,
+    REF_TEMPERATURE_C,
+    SETTLED_RECORD_COLUMNS,
+    ThermalChamber,
+    _f0_at_25c_truth,
+    _f0_tc_truth,
+    _pair,
+)
 
 BRANCHES = ("heating", "cooling")
 
@@ -42,45 +50,32 @@ SEGMENTS = declare(StreamSchema("thermal_ramp_segments", "thermal-ramp", (
     Column("scale_factor", "1"),
 )))
 
-VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", (
-    Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
-    Column("air_c", "degC", doc="chamber air at the record's start and end (mean)"),
-    Column("part_c", "degC", doc="the part thermocouple on the unit's case (mean of start and end)"),
-    Column("settle_s", "s", doc="time from the set point to the record's start"),
-    Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
-    Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
-    Column("scale_factor", "1"),
-    Column("trim_bias_dph", "deg/h", doc="TRIM_BIAS_DPH in force during the record (0: no thermal trim)"),
-    Column("trim_bias_dph_per_hz", "deg/h/Hz", doc="TRIM_BIAS_DPH_PER_HZ in force during the record"),
+#: the scale factor trim in force during a verification record
+SF_TRIM_COLUMNS = (
+    Column("trim_sf_ppm", "ppm", doc="TRIM_SF_PPM in force during the record (0: no scale factor trim)"),
+    Column("trim_sf_ppm_per_hz", "ppm/Hz", doc="TRIM_SF_PPM_PER_HZ in force during the record"),
+)
+#: the hysteresis trim in force during a verification record, and the play's state
+HYST_TRIM_COLUMNS = (
+    Column("trim_hyst_hz", "Hz", doc="TRIM_HYST_HZ in force during the record (the hysteresis play's signed "
+           "half-width; 0: no play)"),
+    Column("trim_bias_hyst_dph", "deg/h", doc="TRIM_BIAS_HYST_DPH in force during the record"),
+    Column("trim_sf_hyst_ppm", "ppm", doc="TRIM_SF_HYST_PPM in force during the record"),
+    Column("hyst_state", "1", doc="the FPGA's HYST_STATE (the play's state, +1 after heating), mean of the "
+           "record's start and end reads (0 without a play)"),
+)
+
+VERIFY = declare(StreamSchema("thermal_ramp_verify", "thermal-ramp", SETTLED_RECORD_COLUMNS + BIAS_TRIM_COLUMNS + (
     Column("approach", "1", "i8", legend={0: "from below (heating)", 1: "from above (cooling)"},
            doc="the side the set point was settled from (verify_both_branches: each point from both)"),
-    Column("trim_sf_ppm", "ppm", doc="TRIM_SF_PPM in force during the record (0: no scale factor trim)"),
-    Column("trim_sf_ppm_per_hz", "ppm/Hz", doc="TRIM_SF_PPM_PER_HZ in force during the record"),
-    Column("trim_hyst_hz", "Hz", doc="TRIM_HYST_HZ in force during the record (the hysteresis play's signed "
-           "half-width; 0: no play)"),
-    Column("trim_bias_hyst_dph", "deg/h", doc="TRIM_BIAS_HYST_DPH in force during the record"),
-    Column("trim_sf_hyst_ppm", "ppm", doc="TRIM_SF_HYST_PPM in force during the record"),
-    Column("hyst_state", "1", doc="the FPGA's HYST_STATE (the play's state, +1 after heating), mean of the "
-           "record's start and end reads (0 without a play)"),
-)))
+) + SF_TRIM_COLUMNS + HYST_TRIM_COLUMNS))
 
+_BY_NAME = {c.name: c for c in SETTLED_RECORD_COLUMNS}
 VERIFY_SF = declare(StreamSchema("thermal_ramp_verify_sf", "thermal-ramp", (
-    Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
+    *(_BY_NAME[n] for n in ("t_start_s", "t_end_s", "setpoint_c")),
     Column("rate_dps", "deg/s", doc="the table's rate during the record (+-rate_dps pairs)"),
-    Column("air_c", "degC", doc="chamber air at the record's start and end (mean)"),
-    Column("part_c", "degC", doc="the part thermocouple on the unit's case (mean of start and end)"),
-    Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
-    Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
-    Column("scale_factor", "1"),
-    Column("trim_sf_ppm", "ppm", doc="TRIM_SF_PPM in force during the record (0: no scale factor trim)"),
-    Column("trim_sf_ppm_per_hz", "ppm/Hz", doc="TRIM_SF_PPM_PER_HZ in force during the record"),
-    Column("trim_hyst_hz", "Hz", doc="TRIM_HYST_HZ in force during the record (the hysteresis play's signed "
-           "half-width; 0: no play)"),
-    Column("trim_bias_hyst_dph", "deg/h", doc="TRIM_BIAS_HYST_DPH in force during the record"),
-    Column("trim_sf_hyst_ppm", "ppm", doc="TRIM_SF_HYST_PPM in force during the record"),
-    Column("hyst_state", "1", doc="the FPGA's HYST_STATE (the play's state, +1 after heating), mean of the "
-           "record's start and end reads (0 without a play)"),
-)))
+    *(_BY_NAME[n] for n in ("air_c", "part_c", "ref_freq_hz", "mode", "scale_factor")),
+) + SF_TRIM_COLUMNS + HYST_TRIM_COLUMNS))
 
 
 def _pairs(p: dict[str, np.ndarray], rate_dps: np.ndarray, sf: np.ndarray) -> dict[str, np.ndarray]:

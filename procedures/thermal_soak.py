@@ -29,7 +29,8 @@ from drivers.fpga.stream import STREAM_SCHEMA as FPGA
 
 from .cvg_output import MODES, UNSTATED_BIAS_NO_TRUTH, CvgOutput, static_bias_truth
 
-WINDOWS = declare(StreamSchema("thermal_soak_windows", "thermal-soak", (
+#: a settled record's columns, shared by the soak's windows and both procedures' verification records
+SETTLED_RECORD_COLUMNS = (
     Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
     Column("air_c", "degC", doc="chamber air at the record's start and end (mean)"),
     Column("part_c", "degC", doc="the part thermocouple on the unit's case (mean of start and end)"),
@@ -37,19 +38,16 @@ WINDOWS = declare(StreamSchema("thermal_soak_windows", "thermal-soak", (
     Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
     Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
     Column("scale_factor", "1"),
-)))
-
-VERIFY = declare(StreamSchema("thermal_soak_verify", "thermal-soak", (
-    Column("t_start_s", "s"), Column("t_end_s", "s"), Column("setpoint_c", "degC"),
-    Column("air_c", "degC", doc="chamber air at the record's start and end (mean)"),
-    Column("part_c", "degC", doc="the part thermocouple on the unit's case (mean of start and end)"),
-    Column("settle_s", "s", doc="time from the set point to the record's start"),
-    Column("ref_freq_hz", "Hz", doc="the FPGA's REF_FREQ_HZ (the stream's freq_ctrl is relative to it)"),
-    Column("mode", "1", "i8", legend={0: "whole-angle", 1: "force-to-rebalance"}),
-    Column("scale_factor", "1"),
+)
+#: the bias trim in force during a verification record
+BIAS_TRIM_COLUMNS = (
     Column("trim_bias_dph", "deg/h", doc="TRIM_BIAS_DPH in force during the record (0: no thermal trim)"),
     Column("trim_bias_dph_per_hz", "deg/h/Hz", doc="TRIM_BIAS_DPH_PER_HZ in force during the record"),
-)))
+)
+
+WINDOWS = declare(StreamSchema("thermal_soak_windows", "thermal-soak", SETTLED_RECORD_COLUMNS))
+
+VERIFY = declare(StreamSchema("thermal_soak_verify", "thermal-soak", SETTLED_RECORD_COLUMNS + BIAS_TRIM_COLUMNS))
 
 REF_TEMPERATURE_C = 25.0
 
