@@ -34,23 +34,8 @@ fixed cost of any process that runs a kernel; loading all the simulators' cached
 driving the warm-up worlds after that costs ~0.09 s CPU (simulators/warm.py), so loading only a
 run's kernels, lazily, would gain <0.1 s and give up the guarantee that a run loads no kernel
 under the world lock (tests/test_warm_kernels.py).
-Then (2026-11-28 15:14-15:20, load average 5-9), /work/main at 5c8bec1 (before) against
-wave3f/runcmd2, interleaved, medians: startup_cpu.py 3 rounds, CPU s: run hrg-damping 3.70 -> 3.57,
-run table-spin 1.52 -> 1.23, runs 0.27 -> 0.23, --help 0.06 -> 0.05, report 1.90 -> 1.99 (untouched);
-run_end_to_end.py 5 rounds: the command's CPU 3.76 -> 3.57 s (wall ratio 1.66 -> 1.72 at that load:
-the run's own wall and the command's both follow the other jobs; CPU is the figure).  Profile that
-chose it (an import hook printing the stack of chosen imports, -X importtime, cProfile of
-SimStation.open): numba's first cached-kernel load (Dispatcher -> load_overload -> the target
-context's refresh) imports numba.np.arraymath, whose module-level BLAS check does
-`import scipy.linalg.cython_blas`, running scipy.linalg's whole package (~0.18 s CPU quiet; no
-kernel of ours calls BLAS, and the main process imports no other part of scipy.linalg: the
-estimators run in the compute workers) -> bench.kernel_cache loads that one extension module
-(0.003 s) so the check finds it (tests/test_kernel_cache.py); seeded runs bit-identical
-(sim_identical.py: damping, allan, selfcal).  Looked at and left: pyvisa (~0.16 s) and pymodbus
-(~0.08 s) are used by the sim station itself (pyvisa-py sessions to the lock-ins, pymodbus's
-client and simulator), so importing them lazily moves them, it does not cut them; numba's typing
-registries import cffi (~0.05 s) when it is installed; the rest of the station's opening is numba's
-registries and its NRT functions, compiled per process.
+Then (2026-11-28 15:14-15:20, load average 5-9): scipy.linalg's package no longer imported by numba's BLAS
+check; the figures and the profile that chose it are in benchmarks/run_end_to_end.py's docstring.
 """
 
 from __future__ import annotations

@@ -35,6 +35,7 @@ from .thermal_soak import (
     _f0_at_25c_truth,
     _f0_tc_truth,
     _pair,
+    write_thermal_trim,
 )
 
 BRANCHES = ("heating", "cooling")
@@ -404,27 +405,9 @@ class ThermalRamp(ThermalChamber, Procedure):
         """The thermal trim (bias, scale factor and the hysteresis trim: TRIM_HYST_HZ, TRIM_BIAS_HYST_DPH,
         TRIM_SF_HYST_PPM) into the FPGA's registers and TRIM_EN's TRIM_THERMAL bit (RAM only: the line
         commits trims to NVM for PASS units); the registers before are restored at the end."""
-        from drivers.fpga import protocol as fp
-
-        fpga = ctx.devices.fpga
-        names = ("TRIM_EN", "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ", "TRIM_SF_PPM", "TRIM_SF_PPM_PER_HZ",
-                 "TRIM_HYST_HZ", "TRIM_BIAS_HYST_DPH", "TRIM_SF_HYST_PPM")
-        before = {n: fpga.read_register(n) for n in names}
-
-        def restore() -> None:
-            if fpga.connected:
-                for n in names[::-1]:
-                    fpga.write_register(n, before[n])
-
-        ctx.defer(restore, "restore the thermal trim registers")
-        fpga.write_register("TRIM_BIAS_DPH", trim[0])
-        fpga.write_register("TRIM_BIAS_DPH_PER_HZ", trim[1])
-        fpga.write_register("TRIM_SF_PPM", sf_trim[0])
-        fpga.write_register("TRIM_SF_PPM_PER_HZ", sf_trim[1])
-        fpga.write_register("TRIM_HYST_HZ", hyst[0])
-        fpga.write_register("TRIM_BIAS_HYST_DPH", hyst[1])
-        fpga.write_register("TRIM_SF_HYST_PPM", hyst[2])
-        fpga.write_register("TRIM_EN", int(before["TRIM_EN"]) | fp.TRIM_THERMAL)
+        write_thermal_trim(ctx, {"TRIM_BIAS_DPH": trim[0], "TRIM_BIAS_DPH_PER_HZ": trim[1],
+                                 "TRIM_SF_PPM": sf_trim[0], "TRIM_SF_PPM_PER_HZ": sf_trim[1],
+                                 "TRIM_HYST_HZ": hyst[0], "TRIM_BIAS_HYST_DPH": hyst[1], "TRIM_SF_HYST_PPM": hyst[2]})
         ctx.log.info(f"thermal trim on: {trim[0]:.4g} deg/h at REF_FREQ_HZ, {trim[1]:.4g} deg/h/Hz; scale factor "
                      f"{sf_trim[0]:.4g} ppm, {sf_trim[1]:.4g} ppm/Hz; hysteresis {hyst[1]:.4g} deg/h, "
                      f"{hyst[2]:.4g} ppm over a play of {hyst[0]:.4g} Hz")

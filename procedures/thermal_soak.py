@@ -52,6 +52,27 @@ VERIFY = declare(StreamSchema("thermal_soak_verify", "thermal-soak", SETTLED_REC
 REF_TEMPERATURE_C = 25.0
 
 
+def write_thermal_trim(ctx, registers: dict[str, float]) -> None:
+    """The thermal trim registers (in the order given) into the FPGA, then TRIM_EN's TRIM_THERMAL bit (RAM
+    only: the line commits trims to NVM for PASS units); the registers as they were before, TRIM_EN with
+    them, are restored at the run's end (in reverse order)."""
+    from drivers.fpga import protocol as fp
+
+    fpga = ctx.devices.fpga
+    names = ("TRIM_EN", *registers)
+    before = {n: fpga.read_register(n) for n in names}
+
+    def restore() -> None:
+        if fpga.connected:
+            for n in names[::-1]:
+                fpga.write_register(n, before[n])
+
+    ctx.defer(restore, "restore the thermal trim registers")
+    for name, value in registers.items():
+        fpga.write_register(name, value)
+    fpga.write_register("TRIM_EN", int(before["TRIM_EN"]) | fp.TRIM_THERMAL)
+
+
 def _verifying(proc) -> bool:
     return proc.verify_points > 0
 
@@ -291,23 +312,9 @@ class ThermalSoak(ThermalChamber, Procedure):
     def _write_trim(self, ctx, trim: tuple[float, float]) -> None:
         """The bias trim into the FPGA's registers and TRIM_EN's TRIM_THERMAL bit (RAM only: the line
         commits trims to NVM for PASS units); the registers before are restored at the end."""
-        from drivers.fpga import protocol as fp
-
-        fpga = ctx.devices.fpga
-        names = ("TRIM_EN", "TRIM_BIAS_DPH", "TRIM_BIAS_DPH_PER_HZ", "TRIM_SF_PPM", "TRIM_SF_PPM_PER_HZ")
-        before = {n: fpga.read_register(n) for n in names}
-
-        def restore() -> None:
-            if fpga.connected:
-                for n in names[::-1]:
-                    fpga.write_register(n, before[n])
-
-        ctx.defer(restore, "restore the thermal trim registers")
-        fpga.write_register("TRIM_BIAS_DPH", trim[0])
-        fpga.write_register("TRIM_BIAS_DPH_PER_HZ", trim[1])
-        fpga.write_register("TRIM_SF_PPM", 0.0)  # the soak measures no scale factor: no trim of it
-        fpga.write_register("TRIM_SF_PPM_PER_HZ", 0.0)
-        fpga.write_register("TRIM_EN", int(before["TRIM_EN"]) | fp.TRIM_THERMAL)
+        write_thermal_trim(ctx, {"TRIM_BIAS_DPH": trim[0], "TRIM_BIAS_DPH_PER_HZ": trim[1],
+                                 # the soak measures no scale factor: no trim of it
+                                 "TRIM_SF_PPM": 0.0, "TRIM_SF_PPM_PER_HZ": 0.0})
         ctx.log.info(f"thermal trim on: {trim[0]:.4g} deg/h at REF_FREQ_HZ, {trim[1]:.4g} deg/h/Hz")
 
     def trim_line(self, p: dict[str, np.ndarray]) -> ThermalFit:
