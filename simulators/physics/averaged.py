@@ -1,5 +1,5 @@
 """Integrate the averaged slow-variable model: exact matrix-exponential steps when it is linear,
-an adaptive Runge-Kutta integrator when the resonator has cubic or quintic nonlinearity.
+an adaptive Runge-Kutta integrator (DOP853, compiled) when the resonator has cubic or quintic nonlinearity.
 
 Inputs are held constant over a block of samples (piecewise-constant case rate, forcing and
 reference frequency); a whole block of samples comes out of one compiled call (kernels.py), which
@@ -16,14 +16,14 @@ import math
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from bench.analysis.slow_model import k_cubic, k_quintic, linear_matrix
+from bench.analysis.slow_model import linear_matrix
 
+from .dop853 import integrate_block
 from .kernels import linear_block
 from .normals import NormalBuffer
 from .params import TWO_PI, ResonatorParams
 
 _blas_limiter: object | None = None
-_scipy_limiter: object | None = None
 _ZERO4 = np.zeros(4)
 _EMPTY = np.empty(0)
 _EMPTY_ROWS = np.empty((0, 4))
@@ -32,23 +32,10 @@ _EMPTY_ROWS = np.empty((0, 4))
 def use_single_thread_blas() -> None:
     """Run BLAS single-threaded in this process.  The simulator's matrices are 4x4 and 5x5, where
     threaded BLAS only adds hand-offs: one 5x5 expm took 850 us with two OpenBLAS threads on this
-    busy 2-core machine and 35-100 us with one.  Called when a World is built; a BLAS loaded later
-    (scipy's, by a nonlinear resonator's first block) is limited when it loads (_solve_ivp)."""
+    busy 2-core machine and 35-100 us with one.  Called when a World is built."""
     global _blas_limiter
     if _blas_limiter is None:
         _blas_limiter = threadpool_limits(limits=1, user_api="blas")
-
-
-def _solve_ivp():
-    """scipy's solve_ivp, imported on the first nonlinear block (a linear resonator never needs
-    scipy: its import was ~0.3-0.5 s of every simulated run's start; issue 36), with the BLAS scipy
-    brings along limited to one thread as numpy's is (use_single_thread_blas)."""
-    global _scipy_limiter
-    from scipy.integrate import solve_ivp
-
-    if _scipy_limiter is None:
-        _scipy_limiter = threadpool_limits(limits=1, user_api="blas")
-    return solve_ivp
 
 
 def rotate_wave(q: np.ndarray, psi_rad: np.ndarray | float) -> np.ndarray:
@@ -224,35 +211,11 @@ class Resonator:
         return out, q_meas
 
     def _nonlinear_block(self, n: int, dt: float, zg: np.ndarray, u: np.ndarray, lam: float) -> np.ndarray:
-        a = linear_matrix(zg, lam)
-        xi, kappa = self.coeffs.xi, self.coeffs.kappa
-        half_u = 0.5 * u
-        half_xi = 0.5 * xi
-
-        def rhs(_t: float, q: np.ndarray) -> np.ndarray:
-            out = a @ q + half_u
-            if kappa:
-                if xi:
-                    out = out + half_xi * k_cubic(q)
-                return out + 0.5 * kappa * k_quintic(q)
-            if xi:  # k_cubic on one state in scalar arithmetic: the same operations, a fraction of the time
-                q1, p1, q2, p2 = q.tolist()
-                e = 0.75 * (q1 * q1 + p1 * p1 + q2 * q2 + p2 * p2)
-                x = 0.5 * (p2 * q1 - p1 * q2)
-                out = out + half_xi * np.array((-p1 * e - q2 * x, q1 * e - p2 * x, -p2 * e + q1 * x, q2 * e + p1 * x))
-            return out
-
+        """n samples of dt of the nonlinear model from the state now: scipy's DOP853 (rtol 1e-9,
+        atol 1e-12, first step dt), compiled (simulators.physics.dop853)."""
         if not np.any(self._q) and not np.any(u):
             return np.zeros((n, 4))  # at rest and unforced: stays at rest (and spares the solver a 0/0)
-        t_eval = dt * np.arange(1, n + 1)
-        # a given first step skips scipy's initial-step heuristic, which divides 0/0 on a state
-        # that is exactly at rest and then never ends its loop on a NaN step
-        sol = _solve_ivp()(
-            rhs, (0.0, n * dt), self._q, t_eval=t_eval, method="DOP853", rtol=1e-9, atol=1e-12, first_step=dt
-        )
-        if not sol.success or not np.all(np.isfinite(sol.y)):  # pragma: no cover - the model is smooth
-            raise RuntimeError(f"resonator integration failed: {sol.message}")
-        return sol.y.T.copy()
+        return integrate_block(linear_matrix(zg, lam), u, self.coeffs.xi, self.coeffs.kappa, self._q, dt, n)
 
     # --- measurement -------------------------------------------------------------------------
     def measure(self, q_true: np.ndarray) -> np.ndarray:
