@@ -24,6 +24,7 @@ KERNEL_SOURCES = (
     "simulators/fpga/kernels.py",
     "simulators/frontend/kernels.py",
     "simulators/fused_kernel.py",
+    "simulators/physics/errors_kernel.py",
     "simulators/physics/kernels.py",
     "simulators/physics/params.py",
     "simulators/rate_table/kernels.py",
