@@ -25,6 +25,7 @@ KERNEL_SOURCES = (
     "simulators/frontend/kernels.py",
     "simulators/fused_kernel.py",
     "simulators/physics/dop853.py",
+    "simulators/physics/errors_kernel.py",
     "simulators/physics/kernels.py",
     "simulators/physics/params.py",
     "simulators/rate_table/kernels.py",

@@ -2,12 +2,14 @@
 must not change a single result (issue 14 item 6: "seeded runs bit-identical").
 
 Runs, through the `gyrobench` CLI (real transports, lockstep): hrg-damping on sim-hrg, a short
-cvg-allan on sim-hrg-wa and a short hrg-selfcal on sim-hrg-selfcal, seed 3 each; digests the
+cvg-allan on sim-hrg-wa, a short hrg-selfcal on sim-hrg-selfcal, and a short thermal-soak and
+thermal-ramp on sim-hrg-thermal-quick (the thermal tests' settings) and tests/test_readout_phase.py's
+hrg-selfcal on sim-hrg-realistic (every error source, the readout phase trim), seed 3 each; digests the
 JSON result (all but run id, wall time and file name) and every dataset of the raw HDF5 file
 (dtype, shape and bytes; datasets of wall-clock times are left out), and compares them with
 benchmarks/sim_identical_ref.json.  Takes ~1-2 min of one core.
 
-Run: .venv/bin/python benchmarks/sim_identical.py [--write] [--only damping,allan,selfcal]
+Run: .venv/bin/python benchmarks/sim_identical.py [--write] [--only damping,allan,selfcal,soak,ramp,selfcal_realistic]
 (--write stores the digests of this tree as the reference: do it only on a tree whose results are
 the reference, e.g. main before a change meant to keep them.)
 """
@@ -31,6 +33,13 @@ RUNS = {
     "damping": ("hrg-damping", "sim-hrg", []),
     "allan": ("cvg-allan", "sim-hrg-wa", ["record_s=600"]),
     "selfcal": ("hrg-selfcal", "sim-hrg-selfcal", ["cycles=3", "precession_dps=0.25", "settle_s=10"]),
+    "soak": ("thermal-soak", "sim-hrg-thermal-quick", ["t_low_degc=15", "t_high_degc=35", "points=3",
+             "ramp_degc_per_min=30", "settle_window_s=30", "settle_ppm_per_min=0.2", "record_s=60"]),
+    "ramp": ("thermal-ramp", "sim-hrg-thermal-quick", ["t_low_degc=25", "t_high_degc=35",
+             "cycle_degc_per_min=5", "segment_s=20", "tail_s=60", "settle_window_s=20",
+             "settle_ppm_per_min=1", "verify_points=1", "record_s=60", "rate_dps=10"]),
+    "selfcal_realistic": ("hrg-selfcal", "sim-hrg-realistic", ["cycles=3", "precession_dps=0.25", "settle_s=10",
+                          "phase_cal=3"]),
 }
 SEED = 3
 

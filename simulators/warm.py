@@ -55,8 +55,12 @@ def warm_kernels(*, verbose: bool | None = None, on_compile: Callable[[str], Non
 
 
 def _warm_devices() -> None:
+    import numpy as np
+
     from drivers.fpga import protocol as p
 
+    from .fpga.firmware import _turn_back
+    from .physics.errors import ERROR_PRESETS
     from .physics.noise import NOISE_PRESETS
     from .physics.params import preset
     from .world import World
@@ -65,6 +69,8 @@ def _warm_devices() -> None:
                   World(preset("hrg"), seed=0)):  # with and without the noise model's inputs
         frames = _drive(world)
     p.FrameParser().feed(b"".join(frames[-4:]))
+    ERROR_PRESETS["hrg-realistic"].measure(np.zeros((2, 4)), 0.0)  # the pickoff chains' kernel (realistic units)
+    _turn_back(np.zeros((2, 4)), (1.0, 0.0, 1.0, 0.0))  # the FPGA's readout phase trim
 
 
 @contextmanager

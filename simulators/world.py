@@ -28,6 +28,20 @@ from .world_block import WorldBlock
 TURN_ON_SOURCE = "fpga"
 
 
+_fused: Any = None  # simulators.fused, imported at the first advance that may use it
+
+
+def _fused_module() -> Any:
+    """simulators.fused (imported once, not per block: an import statement in the block loop went
+    through the import machinery, and PySide's import hook, every time)."""
+    global _fused
+    if _fused is None:
+        from . import fused
+
+        _fused = fused
+    return _fused
+
+
 class WorldDevice(Protocol):
     """What a simulated device implements to take part in the world's advance."""
 
@@ -165,14 +179,14 @@ class World:
             n_total = int(math.floor(self._pending_s / self.sample_period_s + 1e-9))
             self._pending_s = max(0.0, self._pending_s - n_total * self.sample_period_s)
             done = 0
+            # error sources take the per-block path (fused_blocks_possible says no to them at once)
+            fused = _fused_module() if self.fused and self.errors is None else None
             while done < n_total:
                 left = n_total - done
                 n = min(left, self._block_limit())
-                if self.fused and left >= 2 * n:  # a run of steady blocks: one compiled call (simulators.fused)
-                    from .fused import MAX_FUSED_BLOCKS, fused_blocks_possible, run_fused_blocks
-
-                    k = min(left // n, MAX_FUSED_BLOCKS)
-                    if fused_blocks_possible(self, n, k) and run_fused_blocks(self, n, k):
+                if fused is not None and left >= 2 * n:  # a run of steady blocks: one compiled call
+                    k = min(left // n, fused.MAX_FUSED_BLOCKS)
+                    if fused.fused_blocks_possible(self, n, k) and fused.run_fused_blocks(self, n, k):
                         done += k * n
                         continue
                 self._run_block(n)

@@ -278,3 +278,48 @@ def test_a_rig_of_several_gyros_carries_the_error_sources():
     rig = Rig([IDEAL, IDEAL], seeds=[1, 2], errors=ERROR_PRESETS["hrg-realistic"])
     assert all(w.errors is ERROR_PRESETS["hrg-realistic"] for w in rig.worlds)
     assert all(w.errors is None for w in Rig([IDEAL], seeds=[1]).worlds)
+
+
+def _measure_numpy(e: ErrorSources, q: np.ndarray, t_s: float, temperature_c: float, stress_c: float) -> np.ndarray:
+    """ErrorSources.measure as it was written in numpy before its compiled kernel (the reference)."""
+    cx, sx, cy, sy = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    ax, ay = 2.0 * math.radians(e.pickoff_angle_x_deg), 2.0 * math.radians(e.pickoff_angle_y_deg)
+    if ax or ay:
+        cx, cy = math.cos(ax) * cx + math.sin(ax) * cy, -math.sin(ay) * cx + math.cos(ay) * cy
+        sx, sy = math.cos(ax) * sx + math.sin(ax) * sy, -math.sin(ay) * sx + math.cos(ay) * sy
+    if e.pickoff_cubic:
+        fx = 1.0 + 0.75 * e.pickoff_cubic * (cx * cx + sx * sx)
+        fy = 1.0 + 0.75 * e.pickoff_cubic * (cy * cy + sy * sy)
+        cx, sx, cy, sy = cx * fx, sx * fx, cy * fy, sy * fy
+    px, py = math.radians(e.pickoff_phase_x_deg), math.radians(e.pickoff_phase_y_deg)
+    if px:
+        cx, sx = cx * math.cos(px) - sx * math.sin(px), cx * math.sin(px) + sx * math.cos(px)
+    if py:
+        cy, sy = cy * math.cos(py) - sy * math.sin(py), cy * math.sin(py) + sy * math.cos(py)
+    gx, gy = e.pickoff_gains(t_s, temperature_c, stress_c)
+    return np.stack([gx * cx, gx * sx, gy * cy, gy * sy], axis=1)
+
+
+def _force_numpy(e: ErrorSources, u: np.ndarray) -> np.ndarray:
+    """ErrorSources.force as it was written before its constants were worked out once (the reference)."""
+    gx, gy = 1.0 + 1e-6 * e.forcer_gain_x_ppm, 1.0 + 1e-6 * e.forcer_gain_y_ppm
+    ax, ay = 2.0 * math.radians(e.forcer_angle_x_deg), 2.0 * math.radians(e.forcer_angle_y_deg)
+    fx1, fx2, fy1, fy2 = gx * u[0], gx * u[1], gy * u[2], gy * u[3]
+    c_x, s_x, c_y, s_y = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay)
+    return np.array([c_x * fx1 - s_y * fy1, c_x * fx2 - s_y * fy2, s_x * fx1 + c_y * fy1, s_x * fx2 + c_y * fy2])
+
+
+@pytest.mark.parametrize("sources", [*ERROR_PRESETS.values(), ErrorSources(pickoff_angle_y_deg=0.3),
+                                     ErrorSources(pickoff_phase_y_deg=3.0, pickoff_cubic=0.02),
+                                     ErrorSources(pickoff_gain_cm_ppm=5.0)])  # fmt: skip
+def test_the_compiled_pickoff_chains_give_the_numpy_forms_numbers_bit_for_bit(sources):
+    """The pickoff kernel (simulators.physics.errors_kernel) and the forcers' constants worked out
+    once: every value the very bits of the numpy form's (seeded runs stay bit-identical)."""
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        q = rng.normal(0.0, rng.uniform(0.01, 3.0), (int(rng.integers(1, 300)), 4))
+        t_s, temp_c = rng.uniform(0.0, 1e5), rng.uniform(-40.0, 85.0)
+        got, want = sources.measure(q, t_s, temp_c, temp_c - 0.3), _measure_numpy(sources, q, t_s, temp_c, temp_c - 0.3)
+        assert got.tobytes() == want.tobytes()
+        u = rng.normal(0.0, 1.0, 4)
+        assert sources.force(u).tobytes() == _force_numpy(sources, u).tobytes()

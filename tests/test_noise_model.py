@@ -291,3 +291,17 @@ def test_hrg_selfcal_floor_is_the_papers_figures():
     nz = NOISE_PRESETS["hrg-selfcal"]
     assert float(nz.average_sd_dph(100.0)) == pytest.approx(0.52, abs=0.002)
     assert 3.0 * float(nz.average_sd_dph(36000.0)) < 0.018
+
+
+@pytest.mark.parametrize("preset_name", sorted(NOISE_PRESETS))
+def test_one_blocks_rate_is_the_bits_of_the_fused_paths_rate_of_one(preset_name):
+    """block_rate_rad_s (the per-block path, in scalar arithmetic) against block_rates_rad_s(n, 1)
+    on twin environments, with the angle wander on too: the very same bits, block after block, across
+    chunk boundaries (seeded runs are bit-identical whichever form a block takes)."""
+    nz = dataclasses.replace(NOISE_PRESETS[preset_name], angle_wander_deg=0.03, angle_wander_tau_s=300.0)
+    a = Environment(nz, seed=5, sample_period_s=1e-3, earth_rate_dph=10.0)
+    b = Environment(nz, seed=5, sample_period_s=1e-3, earth_rate_dph=10.0)
+    for n in [50] * 300 + [1, 7, 4999, 20000, 3] * 4:
+        got, want = a.block_rate_rad_s(n), b.block_rates_rad_s(n, 1)[0]
+        assert type(got) is float and np.float64(got).tobytes() == want.tobytes(), n
+    assert a.wander_angle_rad == b.wander_angle_rad

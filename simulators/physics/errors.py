@@ -17,8 +17,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, fields, replace
+from functools import cached_property
 
 import numpy as np
+
+from .errors_kernel import pickoff_block
 
 TWO_PI = 2.0 * math.pi
 #: the temperature a unit's f0 and Q are given at (deg C)
@@ -122,41 +125,41 @@ class ErrorSources:
         diff = self.pickoff_gain_diff_ppm + self.pickoff_gain_diff_drift_ppm_h * h
         return 1.0 + 1e-6 * (cm + diff), 1.0 + 1e-6 * (cm - diff)
 
+    @cached_property
+    def _pickoff_constants(self) -> tuple:
+        """The pickoff kernel's constants (errors_kernel.pickoff_block), worked out once: the
+        electrodes' angles, the cubic term and the chains' phases as their sines and cosines."""
+        ax, ay = 2.0 * math.radians(self.pickoff_angle_x_deg), 2.0 * math.radians(self.pickoff_angle_y_deg)
+        px, py = math.radians(self.pickoff_phase_x_deg), math.radians(self.pickoff_phase_y_deg)
+        return (bool(ax or ay), math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay), float(self.pickoff_cubic),
+                bool(px), math.cos(px), math.sin(px), bool(py), math.cos(py), math.sin(py))  # fmt: skip
+
     def measure(self, q: np.ndarray, t_s: float, temperature_c: float = REFERENCE_TEMPERATURE_C,
                 stress_c: float | None = None) -> np.ndarray:
         """The states (n, 4) as the pickoff chains read them (a new array): the electrodes'
-        projection, their cubic nonlinearity, each chain's phase delay and gain."""
+        projection, their cubic nonlinearity, each chain's phase delay and gain (one compiled
+        loop, simulators.physics.errors_kernel)."""
         q = np.asarray(q, dtype=float)
-        cx, sx, cy, sy = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-        ax, ay = 2.0 * math.radians(self.pickoff_angle_x_deg), 2.0 * math.radians(self.pickoff_angle_y_deg)
-        if ax or ay:  # X at ex reads x cos 2ex + y sin 2ex; Y at 45 deg + ey reads -x sin 2ey + y cos 2ey
-            cx, cy = math.cos(ax) * cx + math.sin(ax) * cy, -math.sin(ay) * cx + math.cos(ay) * cy
-            sx, sy = math.cos(ax) * sx + math.sin(ax) * sy, -math.sin(ay) * sx + math.cos(ay) * sy
-        e3 = self.pickoff_cubic
-        if e3:  # the fundamental of (x + e3 x^3): x (1 + (3/4) e3 |x|^2) on each channel
-            fx = 1.0 + 0.75 * e3 * (cx * cx + sx * sx)
-            fy = 1.0 + 0.75 * e3 * (cy * cy + sy * sy)
-            cx, sx, cy, sy = cx * fx, sx * fx, cy * fy, sy * fy
-        px, py = math.radians(self.pickoff_phase_x_deg), math.radians(self.pickoff_phase_y_deg)
-        if px:  # x(t - d) = (c cos p - s sin p) cos wt + (c sin p + s cos p) sin wt, p = w d
-            cx, sx = cx * math.cos(px) - sx * math.sin(px), cx * math.sin(px) + sx * math.cos(px)
-        if py:
-            cy, sy = cy * math.cos(py) - sy * math.sin(py), cy * math.sin(py) + sy * math.cos(py)
         gx, gy = self.pickoff_gains(t_s, temperature_c, stress_c)
         out = np.empty_like(q)
-        out[:, 0], out[:, 1], out[:, 2], out[:, 3] = gx * cx, gx * sx, gy * cy, gy * sy
+        pickoff_block(q, *self._pickoff_constants, gx, gy, out)
         return out
 
     # --- forcers -----------------------------------------------------------------------------
+    @cached_property
+    def _forcer_constants(self) -> tuple[float, float, float, float, float, float]:
+        """The forcers' gains and their electrodes' cosines and sines, worked out once."""
+        gx, gy = 1.0 + 1e-6 * self.forcer_gain_x_ppm, 1.0 + 1e-6 * self.forcer_gain_y_ppm
+        ax, ay = 2.0 * math.radians(self.forcer_angle_x_deg), 2.0 * math.radians(self.forcer_angle_y_deg)
+        return gx, gy, math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay)
+
     def force(self, u: np.ndarray) -> np.ndarray:
         """The force the modes receive (4,) for a commanded one (u1, u2 on X; u3, u4 on Y): each
         forcer's gain, and its electrode's angle (X at fx pushes along (cos 2fx, sin 2fx), Y at
         45 deg + fy along (-sin 2fy, cos 2fy))."""
-        u = np.asarray(u, dtype=float)
-        gx, gy = 1.0 + 1e-6 * self.forcer_gain_x_ppm, 1.0 + 1e-6 * self.forcer_gain_y_ppm
-        ax, ay = 2.0 * math.radians(self.forcer_angle_x_deg), 2.0 * math.radians(self.forcer_angle_y_deg)
-        fx1, fx2, fy1, fy2 = gx * u[0], gx * u[1], gy * u[2], gy * u[3]
-        c_x, s_x, c_y, s_y = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay)
+        u1, u2, u3, u4 = np.asarray(u, dtype=float).tolist()
+        gx, gy, c_x, s_x, c_y, s_y = self._forcer_constants
+        fx1, fx2, fy1, fy2 = gx * u1, gx * u2, gy * u3, gy * u4
         return np.array([c_x * fx1 - s_y * fy1, c_x * fx2 - s_y * fy2, s_x * fx1 + c_y * fy1, s_x * fx2 + c_y * fy2])
 
     # --- resonator ---------------------------------------------------------------------------

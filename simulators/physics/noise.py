@@ -217,8 +217,28 @@ class Environment:
 
     def block_rate_rad_s(self, n: int) -> float:
         """The equivalent input rate over the next block of n samples: Earth's rate, the turn-on
-        bias and the mean of the drift-rate noise over the block."""
-        return float(self.block_rates_rad_s(n, 1)[0])
+        bias and the mean of the drift-rate noise over the block: `block_rates_rad_s(n, 1)` in
+        scalar arithmetic (the same operations in the same order, without its arrays of one)."""
+        rate = dph_to_rad_s(self.earth_rate_dph + self.turn_on_bias_dph)
+        if self._noisy:
+            pos = self._pos
+            if pos + n <= len(self._chunk):  # inside the current chunk
+                cum = self._cum
+                total = cum[pos + n] - cum[pos]
+                self._pos = pos + n
+            else:
+                total = self._noise_sum(n)
+            rate = rate + total / n
+        if self._wander_sd:
+            h = n * self._dt
+            r = math.exp(-h / self._wander_tau_s)
+            scale = self._wander_sd * math.sqrt(1.0 - r * r)
+            z = self._wander_normals.take(1)
+            before = self._wander_phi
+            phi = r * before + scale * float(z[0])
+            self._wander_phi_before, self._wander_phi = before, phi
+            rate = rate + (phi - before) / h
+        return float(rate)
 
     def block_rates_rad_s(self, n: int, k: int) -> np.ndarray:
         """`block_rate_rad_s(n)` for k consecutive blocks at once (the world's fused path), each
