@@ -48,19 +48,15 @@ def warm_kernels(*, verbose: bool | None = None, on_compile: Callable[[str], Non
             _warm_devices()
             if cold:  # compiled once, for the run's analysis process to load from the same cache; a filled
                 warm_analysis()  # cache holds it already, and this process never calls it (~0.03 s, issue 36)
-                warm_nonlinear()  # likewise the nonlinear resonator's integrator: an HRG never loads it
+                warm_unit_kernels()  # likewise the kernels only some units call (MEMS, realistic, thermal)
         if cold:
             kernel_cache.mark_filled()
         _done = True
 
 
 def _warm_devices() -> None:
-    import numpy as np
-
     from drivers.fpga import protocol as p
 
-    from .fpga.firmware import _turn_back
-    from .physics.errors import ERROR_PRESETS
     from .physics.noise import NOISE_PRESETS
     from .physics.params import preset
     from .world import World
@@ -69,8 +65,6 @@ def _warm_devices() -> None:
                   World(preset("hrg"), seed=0)):  # with and without the noise model's inputs
         frames = _drive(world)
     p.FrameParser().feed(b"".join(frames[-4:]))
-    ERROR_PRESETS["hrg-realistic"].measure(np.zeros((2, 4)), 0.0)  # the pickoff chains' kernel (realistic units)
-    _turn_back(np.zeros((2, 4)), (1.0, 0.0, 1.0, 0.0))  # the FPGA's readout phase trim
 
 
 @contextmanager
@@ -113,13 +107,20 @@ def warm_analysis() -> None:
     rk4_sensitivities(np.zeros((4, 4)), np.zeros((8, 4, 4)), 0.0, 0.0, False, np.ones(4), 3, 0.01, 1, True)
 
 
-def warm_nonlinear() -> None:
-    """Compile (or load) the nonlinear resonator's DOP853 kernel (a MEMS ring's blocks) with a run's types."""
+def warm_unit_kernels() -> None:
+    """Compile (or load) the kernels only some units call, with a run's types: the nonlinear
+    resonator's DOP853 (a MEMS ring's blocks), the pickoff chains' errors (realistic and thermal
+    units) and the FPGA's readout phase trim.  A run of such a unit loads them at its first block
+    (~0.05 s each from the cache); every other station's process is spared the loads."""
     import numpy as np
 
+    from .fpga.firmware import _turn_back
     from .physics.dop853 import integrate_block
+    from .physics.errors import ERROR_PRESETS
 
     integrate_block(-np.eye(4), np.ones(4), 1.0, 0.1, np.ones(4), 1e-3, 2)
+    ERROR_PRESETS["hrg-realistic"].measure(np.zeros((2, 4)), 0.0)
+    _turn_back(np.zeros((2, 4)), (1.0, 0.0, 1.0, 0.0))
 
 
 def _drive(world: Any) -> list[bytes]:
