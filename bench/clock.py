@@ -88,6 +88,8 @@ class SimClock(_PollingWait):
         self._stop = threading.Event()
         self._thread_error: BaseException | None = None
         self._dropped_s = 0.0
+        self._owed_s = 0.0  # simulated s the real-time thread owes the wall clock (<= MAX_OWED_WALL_S x speed)
+        self._owed_at = time.monotonic()  # the wall time _owed_s was counted to
         world.add_listener(self._on_world_advanced, each_block=False)  # waits need only know it moved
         self.set_speed(speed)
 
@@ -172,7 +174,7 @@ class SimClock(_PollingWait):
         speed the simulated clock falls behind (`achieved_speed` says by how much) instead of a
         link timing out."""
         last = time.monotonic()
-        owed_s = 0.0
+        self._owed_s, self._owed_at = 0.0, last
         pause_s = self._tick_s
         while not self._stop.is_set():
             time.sleep(pause_s)  # a tick less the time the last advance took (the lock is free meanwhile)
@@ -180,18 +182,19 @@ class SimClock(_PollingWait):
             wall = now - last
             last = now
             if self.lockstep:
-                owed_s = 0.0
+                self._owed_s, self._owed_at = 0.0, now
                 continue
-            owed_s += wall * self._speed
+            owed_s = self._owed_s + wall * self._speed
             cap_s = self.MAX_OWED_WALL_S * self._speed
             if owed_s > cap_s:
                 self._dropped_s += owed_s - cap_s
                 owed_s = cap_s
             chunk_s = max(self.MAX_ADVANCE_TICKS * self._tick_s * self._speed, self.world.sample_period_s)
             step = math.floor(min(owed_s, chunk_s) / self.world.sample_period_s) * self.world.sample_period_s
+            self._owed_s, self._owed_at = owed_s, now  # (_due_s reads them from other threads: s before t)
             if step > 0:
                 self.world.advance(step)
-                owed_s -= step
+                self._owed_s = owed_s - step
             pause_s = max(self.MIN_PAUSE_S, self._tick_s - (time.monotonic() - now))
 
     @property
@@ -199,13 +202,24 @@ class SimClock(_PollingWait):
         """Simulated seconds the real-time thread could not keep up with (0 when it kept pace)."""
         return self._dropped_s
 
+    def _due_s(self) -> float:
+        """The simulated time the wall clock has paid for: the world's time and what the real-time
+        thread owes it (at most MAX_OWED_WALL_S at the asked speed; what it dropped is not owed)."""
+        if self.lockstep:
+            return self.world.t_s
+        owed_s = self._owed_s + (time.monotonic() - self._owed_at) * self._speed  # to now (a stalled thread too)
+        return self.world.t_s + min(owed_s, self.MAX_OWED_WALL_S * self._speed)
+
     def mark(self) -> tuple[float, float]:
-        """(simulated s, wall s) now: give it to `achieved_speed` to measure a stretch of a run."""
-        return (self.world.t_s, time.monotonic())
+        """(simulated s due, wall s) now: give it to `achieved_speed` to measure a stretch of a run."""
+        return (self._due_s(), time.monotonic())
 
     def achieved_speed(self, since: tuple[float, float]) -> float:
-        """Simulated seconds per wall second since a `mark()` (nan before any wall time passed)."""
-        sim_s, wall_s = self.world.t_s - since[0], time.monotonic() - since[1]
+        """Simulated seconds per wall second since a `mark()` (nan before any wall time passed),
+        counted on the time due, not the world's: a stretch that begins with the thread behind
+        (a stall it then catches up) is not read faster than asked, nor one ending behind slower
+        than it ran; dropped time (a machine that cannot keep up) lowers it."""
+        sim_s, wall_s = self._due_s() - since[0], time.monotonic() - since[1]
         return sim_s / wall_s if wall_s > 0 else math.nan
 
 

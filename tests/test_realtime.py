@@ -115,3 +115,23 @@ def test_a_table_down_between_runs_is_named_before_any_step(tmp_path):
         station.close()
     assert rec.outcome == "ERROR" and rec.end_reason.startswith("link lost: table is down:")
     assert rec.failed_step == ""  # refused before the first step
+
+
+@pytest.mark.serial  # wall-clock pacing: run alone
+def test_a_stall_caught_up_is_not_read_as_more_speed_than_asked():
+    """The real-time thread catches up to MAX_OWED_WALL_S of a stall, so a stretch measured from
+    just after one (a run started then) covered more world time than speed x wall: 113x was
+    reported at 100x on a loaded machine.  Counted on the time due, it reads the asked speed at
+    most (a slow machine reads less)."""
+    world = World(preset("hrg"), seed=0)
+    clock = SimClock(world, speed=100.0)
+    try:
+        time.sleep(0.05)
+        with world.lock:  # the thread stalls: it owes the cap (25 simulated s) and drops the rest
+            time.sleep(0.4)
+        mark = clock.mark()
+        time.sleep(1.0)
+        achieved = clock.achieved_speed(mark)
+    finally:
+        clock.close()
+    assert achieved <= 100.0 * 1.05  # the two ends each within one advance (2 ticks) of the time due

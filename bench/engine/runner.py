@@ -263,6 +263,7 @@ class Runner:
         self.record = rec
         steps = proc.step_specs()
         t0_sim, t0_wall = clock.now(), time.monotonic()
+        speed_mark = clock.mark() if not getattr(clock, "lockstep", True) else None  # real time: _report_speed
 
         recorder = writer = None
         unsubscribe_rec = None
@@ -370,7 +371,7 @@ class Runner:
             rec.outcome = outcome
             rec.simulated_s = clock.now() - t0_sim
             rec.wall_s = time.monotonic() - t0_wall
-            self._report_speed(ctx, rec, clock)
+            self._report_speed(ctx, rec, clock, speed_mark)
             rec.finished_at = _dt.datetime.now(_dt.UTC).isoformat()
             if writer is not None and writer.overflow_blocks:  # real time only: counted, never silent
                 rec.stream_overflow_blocks = writer.overflow_blocks
@@ -400,13 +401,13 @@ class Runner:
             )
         return rec
 
-    def _report_speed(self, ctx: RunContext, rec: RunRecord, clock: Any) -> None:
+    def _report_speed(self, ctx: RunContext, rec: RunRecord, clock: Any, mark: tuple[float, float] | None) -> None:
         """Real time at a speed factor: say the speed achieved (the clock falls behind, rather
         than a link timing out, when the machine cannot keep up)."""
         asked = getattr(clock, "speed", None)
-        if getattr(clock, "lockstep", True) or not asked or rec.wall_s <= 0:
+        if mark is None or getattr(clock, "lockstep", True) or not asked or rec.wall_s <= 0:
             return
-        rec.speed_achieved = rec.simulated_s / rec.wall_s
+        rec.speed_achieved = clock.achieved_speed(mark)  # on the time due: a catch-up is not read as speed
         slow = rec.speed_achieved < 0.9 * asked
         ctx.publish(
             ev.Log,
