@@ -11,6 +11,7 @@ CPU log to `python tests/xdist_units.py LOG...` to refresh tests/costs_s.tsv (th
 A pass takes 6-8 min on the shared 2 cores: run it rarely, never beside another suite.
 
 Run: .venv/bin/python benchmarks/suite_pass.py [--workers 4] [--dist loadfile] [--log FILE]
+(--dist worksteal and 3 workers, `make test`'s, by default; the FAILED and ERROR lines are printed)
 
 Measured 2026-11-28 on the 2 shared cores, one pass each (CPU: user + system of the whole pass; the
 load average sampled every 10 s includes the pass's own workers):
@@ -65,7 +66,7 @@ def worker_ends(log: Path) -> dict[str, tuple[int, float, float]]:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--workers", type=int, default=3)
-    p.add_argument("--dist", default="loadfile")
+    p.add_argument("--dist", default="worksteal")  # make test's
     p.add_argument("--log", type=Path, default=None, help="keep the CPU log here")
     args = p.parse_args()
     log = args.log or Path(tempfile.mkdtemp()) / "cpu.log"
@@ -81,7 +82,11 @@ def main() -> int:
     wall_s = time.monotonic() - t0
     stop.set()
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    print((r.stdout.strip().splitlines() or [""])[-1])
+    lines = r.stdout.strip().splitlines() or [""]
+    for line in lines:  # what failed or errored (its setup or teardown too), with pytest's one-line reason
+        if line.startswith(("FAILED ", "ERROR ")):
+            print(line)
+    print(lines[-1])
     print(f"-n {args.workers} --dist {args.dist}: wall {wall_s:.0f} s, CPU {kids.ru_utime + kids.ru_stime:.0f} s, "
           f"load average {min(samples):.1f}-{max(samples):.1f} (mean {sum(samples) / len(samples):.1f})")
     for w, (n, busy_s, end_s) in worker_ends(log).items():
