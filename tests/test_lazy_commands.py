@@ -2,7 +2,8 @@
 line station processes on 2 cores): `gyrobench list` (every driver's and procedure's entry) imports
 no driver's library (pyvisa, pymodbus, pyserial) nor numba, the simulators take the rate table's and
 the front end's protocol modules without their drivers, and a line station that opens a line
-database already at the newest migration does not import alembic.  Checked in a fresh
+database already at the newest migration does not import alembic; `gyrobench show RUN` asks the
+results store without h5py (the raw file's library, for `show FILE.h5` only).  Checked in a fresh
 interpreter's sys.modules."""
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import sys
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 #: imported only by a process that builds the device (or compiled kernel, or migration) needing it
-HEAVY = ("pyvisa", "pymodbus", "serial", "numba", "alembic")
+HEAVY = ("pyvisa", "pymodbus", "serial", "numba", "alembic", "h5py")
 
 
 def _heavy_after(code: str, cwd: str | None = None) -> list[str]:
@@ -59,3 +60,11 @@ def test_the_line_heads_read_from_the_files_are_alembics():
     from bench.results.store import head_revision
 
     assert head_revision(MIGRATIONS / "versions") == ScriptDirectory.from_config(_alembic_config()).get_current_head()
+
+
+def test_show_asks_the_store_without_the_raw_files_library(tmp_path):
+    code = ("import contextlib, io\nfrom bench.cli import main\nerr = io.StringIO()\n"
+            "with contextlib.redirect_stderr(err):\n"
+            f"    assert main(['show', 'no-such-run', '--results', {str(tmp_path / 'results.sqlite')!r}]) == 2\n"
+            "assert 'no-such-run' in err.getvalue()\n")
+    assert _heavy_after(code, cwd=str(tmp_path)) == []
