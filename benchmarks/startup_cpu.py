@@ -1,14 +1,16 @@
 """Benchmark: the CPU a `gyrobench` process pays, command by command, this tree against another
 (issue 36: the suite starts ~200 such processes; `run hrg-damping` <= 1.5x the run's own wall).
 
-Each round runs, in fresh processes, `gyrobench --help`, `run table-spin --set hold_s=0.1`,
-`run hrg-damping` (seed 0, record_s default), `runs` and `report RUN` (HTML of that hrg-damping
-run) once per tree, the trees alternating (interleaved, so a busy machine weighs on both alike),
-and prints per command the median CPU (user + system of the process and the children it waited
-for: what a shared 2-core machine pays) and wall.  Both trees use this checkout's compiled-kernel
-cache (NUMBA_CACHE_DIR) and a bytecode cache of their own (PYTHONPYCACHEPREFIX, as `make test`
-writes bytecode), so neither compiles.  The `run`s write into a results store made by a first
-run (the stores users have), so the store's opening is the everyday one.
+Each round runs, in fresh processes, `gyrobench --help`, `run table-spin --set hold_s=0.1`, `run
+hrg-damping` (seed 0, record_s default), `runs`, `report RUN` (HTML of that hrg-damping run), `list`
+and a line station (`python -m bench.line.stations`, one unit of ci-spin, --no-pdf, on a line
+database made by a first station) once per tree, the trees alternating (interleaved, so a busy
+machine weighs on both alike), and prints per command the median CPU (user + system of the process
+and the children it waited for: what a shared 2-core machine pays) and wall. Both trees use this
+checkout's compiled-kernel cache (NUMBA_CACHE_DIR) and a bytecode cache of their own
+(PYTHONPYCACHEPREFIX, as `make test` writes bytecode), so neither compiles. The `run`s write into a
+results store made by a first run (the stores users have), so the store's opening is the everyday
+one.
 
 Run: .venv/bin/python benchmarks/startup_cpu.py --against TREE [--rounds 5]
 
@@ -61,10 +63,10 @@ def _env(tree: Path, tmp: str) -> dict[str, str]:
     return env
 
 
-def timed(args: list[str], tree: Path, cwd: str, tmp: str) -> tuple[float, float, str]:
-    """(CPU s, wall s, stdout) of `gyrobench ARGS` in a fresh process."""
+def timed(args: list[str], tree: Path, cwd: str, tmp: str, module: str = "bench.cli") -> tuple[float, float, str]:
+    """(CPU s, wall s, stdout) of `python -m MODULE ARGS` (`gyrobench ARGS`) in a fresh process."""
     t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
-    out = subprocess.run([sys.executable, "-m", "bench.cli", *args], check=True, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-m", module, *args], check=True, capture_output=True, text=True,
                          env=_env(tree, tmp), cwd=cwd).stdout
     wall = time.perf_counter() - t0
     r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -87,6 +89,13 @@ def one_round(tree: Path, tmp: str, work: str) -> dict[str, tuple[float, float]]
     got["runs"] = (cpu, wall)
     cpu, wall, _ = timed(["report", run_id, "--results", f"{work}/results.sqlite"], tree, work, tmp)
     got["report RUN (HTML)"] = (cpu, wall)
+    cpu, wall, _ = timed(["list"], tree, work, tmp)
+    got["list"] = (cpu, wall)
+    # one unit of ci-spin, as each of tests/test_line_db.py's eight stations runs (the database at the head)
+    station = [f"sqlite:///{work}/line.sqlite", f"{work}/line", str(len(list(Path(work).glob("line/st*")))), "1",
+               "--no-pdf"]
+    cpu, wall, _ = timed(station, tree, work, tmp, module="bench.line.stations")
+    got["line station, 1 unit"] = (cpu, wall)
     return got
 
 
@@ -97,9 +106,11 @@ def main() -> None:
     trees = [("before", before), ("after", ROOT)]
     tmp = tempfile.mkdtemp(prefix="gyrobench-startup-")
     works = {label: tempfile.mkdtemp(dir=tmp) for label, _ in trees}
-    for label, tree in trees:  # untimed: bytecode written, the results store made
+    for label, tree in trees:  # untimed: bytecode written, the results store and the line database made
         timed(["run", "table-spin", "--set", "hold_s=0.1", "--runs-dir", f"{works[label]}/runs",
                "--results", f"{works[label]}/results.sqlite"], tree, works[label], tmp)
+        timed([f"sqlite:///{works[label]}/line.sqlite", f"{works[label]}/line", "0", "1", "--no-pdf"], tree,
+              works[label], tmp, module="bench.line.stations")
     rows: dict[str, list[dict[str, tuple[float, float]]]] = {label: [] for label, _ in trees}
     for _ in range(rounds):
         for label, tree in trees:
