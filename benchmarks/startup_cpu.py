@@ -38,6 +38,18 @@ run's kernels, lazily, would gain <0.1 s and give up the guarantee that a run lo
 under the world lock (tests/test_warm_kernels.py).
 Then (2026-11-28 15:14-15:20, load average 5-9): scipy.linalg's package no longer imported by numba's BLAS
 check; the figures and the profile that chose it are in benchmarks/run_end_to_end.py's docstring.
+Then (2026-11-28 17:30-17:55, load average 3-9; `python -X importtime` of each command, and which of
+pyvisa, pymodbus, numba, alembic, h5py its process had in sys.modules), 8d98427 against wave3h/startup,
+CPU medians: this script, 5 rounds: `list` 0.48 -> 0.22 s (no numba, pyvisa, pymodbus: the drivers'
+packages import their drivers on first use, fpga-link's entry takes the output modes from
+drivers.fpga.stream, hrg-selfcal the TRIM_EN bits when it runs); by hand, interleaved: a line station
+(one unit, the line database at the head) 2.15 -> 1.96 s (6 each: no alembic), `show RUN` 0.53 ->
+0.36 s (3 each: no h5py), `sim --duration-s 1` 0.98 -> 0.81 s (4 each: the simulators' protocol
+modules without pymodbus, pyserial, pyvisa); `run hrg-damping` 3.38 -> 3.33 s (6 each) and `run
+table-spin` (1.30 -> 1.19 s here, noise) unchanged: every library they import they use.  Left as it
+is: table-spin's t quantile (scipy.special.stdtrit; importing scipy.special costs ~0.18 s of CPU, most
+of it scipy's array-API layer cloning numpy, which imports numpy.f2py and numpy.testing; no other
+import path gives the same ufunc: scipy.special.cython_special imports the package too).
 """
 
 from __future__ import annotations
