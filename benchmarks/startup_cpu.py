@@ -1,14 +1,16 @@
 """Benchmark: the CPU a `gyrobench` process pays, command by command, this tree against another
 (issue 36: the suite starts ~200 such processes; `run hrg-damping` <= 1.5x the run's own wall).
 
-Each round runs, in fresh processes, `gyrobench --help`, `run table-spin --set hold_s=0.1`,
-`run hrg-damping` (seed 0, record_s default), `runs` and `report RUN` (HTML of that hrg-damping
-run) once per tree, the trees alternating (interleaved, so a busy machine weighs on both alike),
-and prints per command the median CPU (user + system of the process and the children it waited
-for: what a shared 2-core machine pays) and wall.  Both trees use this checkout's compiled-kernel
-cache (NUMBA_CACHE_DIR) and a bytecode cache of their own (PYTHONPYCACHEPREFIX, as `make test`
-writes bytecode), so neither compiles.  The `run`s write into a results store made by a first
-run (the stores users have), so the store's opening is the everyday one.
+Each round runs, in fresh processes, `gyrobench --help`, `run table-spin --set hold_s=0.1`, `run
+hrg-damping` (seed 0, record_s default), `runs`, `report RUN` (HTML of that hrg-damping run), `list`
+and a line station (`python -m bench.line.stations`, one unit of ci-spin, --no-pdf, on a line
+database made by a first station) once per tree, the trees alternating (interleaved, so a busy
+machine weighs on both alike), and prints per command the median CPU (user + system of the process
+and the children it waited for: what a shared 2-core machine pays) and wall. Both trees use this
+checkout's compiled-kernel cache (NUMBA_CACHE_DIR) and a bytecode cache of their own
+(PYTHONPYCACHEPREFIX, as `make test` writes bytecode), so neither compiles. The `run`s write into a
+results store made by a first run (the stores users have), so the store's opening is the everyday
+one.
 
 Run: .venv/bin/python benchmarks/startup_cpu.py --against TREE [--rounds 5]
 
@@ -36,6 +38,18 @@ run's kernels, lazily, would gain <0.1 s and give up the guarantee that a run lo
 under the world lock (tests/test_warm_kernels.py).
 Then (2026-11-28 15:14-15:20, load average 5-9): scipy.linalg's package no longer imported by numba's BLAS
 check; the figures and the profile that chose it are in benchmarks/run_end_to_end.py's docstring.
+Then (2026-11-28 17:30-17:55, load average 3-9; `python -X importtime` of each command, and which of
+pyvisa, pymodbus, numba, alembic, h5py its process had in sys.modules), 8d98427 against wave3h/startup,
+CPU medians: this script, 5 rounds: `list` 0.48 -> 0.22 s (no numba, pyvisa, pymodbus: the drivers'
+packages import their drivers on first use, fpga-link's entry takes the output modes from
+drivers.fpga.stream, hrg-selfcal the TRIM_EN bits when it runs); by hand, interleaved: a line station
+(one unit, the line database at the head) 2.15 -> 1.96 s (6 each: no alembic), `show RUN` 0.53 ->
+0.36 s (3 each: no h5py), `sim --duration-s 1` 0.98 -> 0.81 s (4 each: the simulators' protocol
+modules without pymodbus, pyserial, pyvisa); `run hrg-damping` 3.38 -> 3.33 s (6 each) and `run
+table-spin` (1.30 -> 1.19 s here, noise) unchanged: every library they import they use.  Left as it
+is: table-spin's t quantile (scipy.special.stdtrit; importing scipy.special costs ~0.18 s of CPU, most
+of it scipy's array-API layer cloning numpy, which imports numpy.f2py and numpy.testing; no other
+import path gives the same ufunc: scipy.special.cython_special imports the package too).
 """
 
 from __future__ import annotations
@@ -61,10 +75,10 @@ def _env(tree: Path, tmp: str) -> dict[str, str]:
     return env
 
 
-def timed(args: list[str], tree: Path, cwd: str, tmp: str) -> tuple[float, float, str]:
-    """(CPU s, wall s, stdout) of `gyrobench ARGS` in a fresh process."""
+def timed(args: list[str], tree: Path, cwd: str, tmp: str, module: str = "bench.cli") -> tuple[float, float, str]:
+    """(CPU s, wall s, stdout) of `python -m MODULE ARGS` (`gyrobench ARGS`) in a fresh process."""
     t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
-    out = subprocess.run([sys.executable, "-m", "bench.cli", *args], check=True, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-m", module, *args], check=True, capture_output=True, text=True,
                          env=_env(tree, tmp), cwd=cwd).stdout
     wall = time.perf_counter() - t0
     r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -87,6 +101,13 @@ def one_round(tree: Path, tmp: str, work: str) -> dict[str, tuple[float, float]]
     got["runs"] = (cpu, wall)
     cpu, wall, _ = timed(["report", run_id, "--results", f"{work}/results.sqlite"], tree, work, tmp)
     got["report RUN (HTML)"] = (cpu, wall)
+    cpu, wall, _ = timed(["list"], tree, work, tmp)
+    got["list"] = (cpu, wall)
+    # one unit of ci-spin, as each of tests/test_line_db.py's eight stations runs (the database at the head)
+    station = [f"sqlite:///{work}/line.sqlite", f"{work}/line", str(len(list(Path(work).glob("line/st*")))), "1",
+               "--no-pdf"]
+    cpu, wall, _ = timed(station, tree, work, tmp, module="bench.line.stations")
+    got["line station, 1 unit"] = (cpu, wall)
     return got
 
 
@@ -97,9 +118,11 @@ def main() -> None:
     trees = [("before", before), ("after", ROOT)]
     tmp = tempfile.mkdtemp(prefix="gyrobench-startup-")
     works = {label: tempfile.mkdtemp(dir=tmp) for label, _ in trees}
-    for label, tree in trees:  # untimed: bytecode written, the results store made
+    for label, tree in trees:  # untimed: bytecode written, the results store and the line database made
         timed(["run", "table-spin", "--set", "hold_s=0.1", "--runs-dir", f"{works[label]}/runs",
                "--results", f"{works[label]}/results.sqlite"], tree, works[label], tmp)
+        timed([f"sqlite:///{works[label]}/line.sqlite", f"{works[label]}/line", "0", "1", "--no-pdf"], tree,
+              works[label], tmp, module="bench.line.stations")
     rows: dict[str, list[dict[str, tuple[float, float]]]] = {label: [] for label, _ in trees}
     for _ in range(rounds):
         for label, tree in trees:

@@ -21,7 +21,6 @@ from bench.analysis.axes import AXIS_PERIOD_DEG
 from bench.engine import Measurement, Param, Procedure, Result, recorded_text, step
 from bench.engine.recording import window_end
 from bench.streams import Column, StreamSchema, declare
-from drivers.fpga import protocol as fp
 
 from .forcer_rotation import ROTATION, ROTATION_COLUMNS, calibrate_forcer_rotation
 from .hrg_damping import _StreamTap
@@ -317,7 +316,9 @@ class HrgSelfcal(HrgExcitation, Procedure):
             move_dps=self.phase_cal_move_dps, amplitude=self.amplitude, fm_force_hz=self.fm_force_hz,
             fm_rate_hz=self.fm_rate_hz, fm_amplitude_hz=self.fm_amplitude_hz)
         self._tap.on = False
-        self._trim_en |= fp.TRIM_PHASE
+        from drivers.fpga.protocol import TRIM_PHASE  # the frame codec's numba on a run, not on loading
+
+        self._trim_en |= TRIM_PHASE
         ctx.record(PHASES, PHASE_COLUMNS, self._phase.rows)
 
     @step("Forcers' rotation against the pickoffs: amplitude steps")
@@ -373,6 +374,8 @@ class HrgSelfcal(HrgExcitation, Procedure):
 
     @step("Forced-precession cycles: identify, trim, compensate")
     def run_cycles(self, ctx):
+        from drivers.fpga.protocol import TRIM_GAIN  # the frame codec's numba on a run, not on loading
+
         fpga = ctx.devices.fpga
         half_s = 90.0 / self.precession_dps
         w = math.radians(self.precession_dps)
@@ -424,7 +427,7 @@ class HrgSelfcal(HrgExcitation, Procedure):
                 trim_dg += g.value
                 fpga.write_register("TRIM_GAIN_X", 1.0 / (1.0 + trim_dg / 2.0))
                 fpga.write_register("TRIM_GAIN_Y", 1.0 / (1.0 - trim_dg / 2.0))
-                fpga.write_register("TRIM_EN", self._trim_en | fp.TRIM_GAIN)
+                fpga.write_register("TRIM_EN", self._trim_en | TRIM_GAIN)
             prev = fit
             ctx.record(CYCLES, CYCLE_COLUMNS, np.array([cyc_rows[-1]]))
             ctx.record(RATES, RATE_COLUMNS, rate_rows[-1])

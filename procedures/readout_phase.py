@@ -15,7 +15,6 @@ import numpy as np
 
 from bench.analysis import readout_phase as rp
 from bench.streams import Column, StreamSchema, declare
-from drivers.fpga import protocol as fp
 
 PHASES = "readout_phase_passes"
 PHASE_COLUMNS = declare(StreamSchema(PHASES, "readout-phase", (
@@ -81,7 +80,9 @@ def calibrate_readout_phase(ctx, fpga, tap, columns: tuple[str, ...], *, passes:
     chains, add them to the trims (TRIM_EN's TRIM_PHASE on).  The wave is in whole-angle mode with
     the frequency-control force on and the stream tap (t_s, angle_out_deg, amp_ctrl, freq_ctrl
     among `columns`) on.  Starts from the trims in place when TRIM_PHASE is on."""
-    on = int(fpga.read_register("TRIM_EN")) & fp.TRIM_PHASE
+    from drivers.fpga.protocol import TRIM_PHASE  # the frame codec's numba on a run, not on loading
+
+    on = int(fpga.read_register("TRIM_EN")) & TRIM_PHASE
     trim = np.array([float(fpga.read_register(n)) if on else 0.0 for n in ("TRIM_PHASE_X_DEG", "TRIM_PHASE_Y_DEG")])
     rows = []
     sign = 1.0

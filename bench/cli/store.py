@@ -96,19 +96,21 @@ def _run_from_file(path: str) -> dict:
 def cmd_show(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from bench.recorder import NotARunFile
     from bench.results import StoreError
 
     try:
         if args.run.endswith(".h5") and Path(args.run).is_file():  # a raw file: no store needed
-            run = _run_from_file(args.run)
+            from bench.recorder import NotARunFile  # h5py and numpy only for a raw file (issue 36)
+
+            try:
+                run = _run_from_file(args.run)
+            except NotARunFile as exc:
+                _err(str(exc))
+                return EXIT_USAGE
         else:
             run = _store(args.results).get_run(args.run)
     except KeyError as exc:
         _err(str(exc.args[0]))
-        return EXIT_USAGE
-    except NotARunFile as exc:
-        _err(str(exc))
         return EXIT_USAGE
     except StoreError as exc:
         _err(str(exc))

@@ -27,7 +27,10 @@ import numpy as np
 
 from bench.kernel_cache import njit  # NUMBA_CACHE_DIR keyed on the kernels' sources
 
-from .stream import (  # noqa: F401 - the stream's layout and saturation bits, without numba (procedures)
+from .stream import (  # noqa: F401 - the stream's layout, saturation bits and output modes, without numba
+    MODE_FORCE_TO_REBALANCE,
+    MODE_WHOLE_ANGLE,
+    OUTPUT_MODES,
     SAT_AMP,
     SAT_FTR,
     SAT_NAMES,
@@ -85,11 +88,6 @@ FPGA_ID = 0x46504741  # "FPGA"
 #: 2: the stream frame gained the gyro's outputs (angle_out_deg, rate_out_dps); 72 bytes (was 60)
 #: 3: a stream frame's address field carries the loops' saturation bits (SAT_*)
 PROTOCOL_VERSION = 3
-
-# --- output modes (register OUTPUT_MODE, docs/fpga_link.md "Output modes") --------------------
-MODE_WHOLE_ANGLE = 0  # rate-integrating: the wave turns freely (WHOLE_ANGLE adds a precession command)
-MODE_FORCE_TO_REBALANCE = 1  # rate: a rebalance loop holds the wave at FTR_ANGLE_DEG; its force is the output
-OUTPUT_MODES = {"whole-angle": MODE_WHOLE_ANGLE, "force-to-rebalance": MODE_FORCE_TO_REBALANCE}
 
 
 @dataclass(frozen=True)

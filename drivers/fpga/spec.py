@@ -9,7 +9,7 @@ from typing import Any
 from bench.devices import DriverSpec, Key, StreamSpec, register_driver
 from drivers.errors import DeviceError, LinkLostError
 
-from .protocol import OUTPUT_MODES, STREAM_COLUMNS
+from .stream import OUTPUT_MODES, STREAM_COLUMNS  # not .protocol: its frame kernels import numba
 
 
 def _build(cfg: dict[str, Any], clock: Any) -> Any:

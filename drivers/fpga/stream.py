@@ -1,10 +1,16 @@
-"""The FPGA stream's declared columns and the loops' saturation bits: what procedures and reports
-read of the FPGA (docs/fpga_link.md), without the frame codec's compiled kernels (numba), so a
-report does not import numba (issue 36).  drivers.fpga.protocol re-exports every name here."""
+"""The FPGA stream's declared columns, the loops' saturation bits and the output modes: what
+procedures, reports and the station entry read of the FPGA (docs/fpga_link.md), without the frame
+codec's compiled kernels (numba), so a report, `gyrobench list` or a station check does not import
+numba (issue 36).  drivers.fpga.protocol re-exports every name here."""
 
 from __future__ import annotations
 
 from bench.streams import Column, StreamSchema, declare
+
+# --- output modes (register OUTPUT_MODE, docs/fpga_link.md "Output modes") --------------------
+MODE_WHOLE_ANGLE = 0  # rate-integrating: the wave turns freely (WHOLE_ANGLE adds a precession command)
+MODE_FORCE_TO_REBALANCE = 1  # rate: a rebalance loop holds the wave at FTR_ANGLE_DEG; its force is the output
+OUTPUT_MODES = {"whole-angle": MODE_WHOLE_ANGLE, "force-to-rebalance": MODE_FORCE_TO_REBALANCE}
 
 # --- loop saturation bits (a stream frame's address field; the stream's sat_flags column) -----
 #: a loop force held at FORCE_LIMIT over the frame's block: the loop is not doing what it is asked
