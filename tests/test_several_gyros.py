@@ -88,8 +88,10 @@ def line_batch(tmp_path_factory):
     (tmp / "limits.toml").write_text(LIMITS)
     url = str(tmp / "results.sqlite")
     store, db = ResultsStore(url, offline_ok=True, spool_dir=tmp / "spool"), LineDB(url)
+    # no certificate PDFs (LineContext.pdf): no test here reads them (tests/test_certificate.py and
+    # test_line_cli.py do); WeasyPrint took ~3 s of CPU for the four
     ctx = LineContext(load_sequence(seq_file), load_limits(tmp / "limits.toml"), "sim-hrg-4", "tester", tmp,
-                      store=store, db=db)
+                      store=store, db=db, pdf=False)
     station = load_station("sim-hrg-4", seed=0).open()  # slots in spec: 1, 2 and 4 must PASS
     try:
         station.schedule_fault("link-drop", 150.0, slot=3)
