@@ -161,6 +161,19 @@ def _start(cmd, env, log):
     return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
 
 
+def _stop(procs) -> None:
+    """SIGTERM to each process group, then wait for them (SIGKILL after 20 s)."""
+    for p in procs:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGTERM)
+    for p in procs:
+        try:
+            p.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait(timeout=10)
+
+
 def test_separate_scheduler_gives_the_same_summary(local_summary, tmp_path):
     env = _env()
     from distributed import Client
@@ -184,16 +197,9 @@ def test_separate_scheduler_gives_the_same_summary(local_summary, tmp_path):
             path, opts = _campaign(tmp_path, "small")
             proc = _cli([str(path), *opts, "--scheduler", address], env=env)
             assert proc.returncode == 0, proc.stderr[-2000:]
-        finally:
-            for p in procs:
-                if p.poll() is None:
-                    os.killpg(p.pid, signal.SIGTERM)
-            for p in procs:
-                try:
-                    p.wait(timeout=20)
-                except subprocess.TimeoutExpired:
-                    os.killpg(p.pid, signal.SIGKILL)
-                    p.wait(timeout=10)
+        finally:  # the workers first, then the scheduler (a worker stopping as its scheduler goes may hang)
+            _stop(procs[1:])
+            _stop(procs[:1])
     out, folder = local_summary
     assert json.loads(proc.stdout)["summary"] == out["summary"]
     separate = tmp_path / "runs" / "campaigns" / "small" / "summary.json"
