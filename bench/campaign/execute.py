@@ -65,6 +65,17 @@ def _bounds(proc: Any, truth: dict[str, float] | None) -> dict[str, float]:
         return {}
 
 
+def _in_dask_worker() -> bool:
+    """Whether this is a Dask worker (not a caller's own process, whose computations stay apart)."""
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return False
+    return True
+
+
 def execute_run(run: dict[str, Any], runs_dir: str, results_url: str | None, operator: str = "") -> dict[str, Any]:
     """Make one run of a campaign (a RunSpec as a dict); its campaign result, never raising."""
     t0 = time.monotonic()
@@ -75,8 +86,11 @@ def execute_run(run: dict[str, Any], runs_dir: str, results_url: str | None, ope
     try:
         from bench.composition import load_station
         from bench.engine import Runner, check_station
+        from bench.engine.compute import compute_in_process
         from procedures import find_procedure
 
+        if _in_dask_worker():  # the worker process is the run's isolation: no forkserver of its own
+            compute_in_process()
         proc = find_procedure(run["procedure"])(dict(run["params"]))
         overrides: dict[str, Any] = {"seed": run["seed"], "speed": 0.0}
         if run.get("preset"):

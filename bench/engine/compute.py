@@ -39,6 +39,21 @@ _context_lock = threading.Lock()
 _context: Any = None
 
 
+#: computations on a thread of this process (see `compute_in_process`)
+_in_process = False
+
+
+def compute_in_process() -> None:
+    """From now on, this process's computations run on a thread of its own instead of a worker
+    process: for a process that is itself a disposable worker (a campaign's Dask worker, which
+    nobody aborts mid-run), where a forkserver of its own costs ~1 s of CPU a process and a fork
+    a computation for nothing.  BLAS on one thread, as in a worker process (same numbers)."""
+    global _in_process
+    if not _in_process:
+        _single_thread_blas()
+        _in_process = True
+
+
 #: starters of workers abandoned by an abort while still starting (see `_finish_starts`)
 _starting: set[threading.Thread] = set()
 
@@ -67,7 +82,10 @@ def _mp_context() -> Any:
 
 def warm() -> None:
     """Start the forkserver (and its imports) now, on a thread, so that the run's first
-    computation does not wait ~0.5 s for it: called when a run starts; idempotent."""
+    computation does not wait ~0.5 s for it: called when a run starts; idempotent (and nothing
+    to do when computations run in this process)."""
+    if _in_process:
+        return
 
     def start() -> None:
         with contextlib.suppress(Exception):  # the computation itself reports a failure to start
@@ -123,7 +141,7 @@ def importable(fn: Callable) -> bool:
 def run_in_worker(fn: Callable, args: tuple, kwargs: dict, checkpoint: Callable[[], None]) -> Any:
     """fn(*args, **kwargs) in a worker process; `checkpoint()` every POLL_S while it runs.  If the
     checkpoint raises (an abort) the worker is killed at once and the exception goes on."""
-    if not importable(fn):
+    if _in_process or not importable(fn):
         return _run_on_thread(fn, args, kwargs, checkpoint)
     ctx = _mp_context()
     receiver, sender = ctx.Pipe(duplex=False)
