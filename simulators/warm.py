@@ -12,8 +12,8 @@ types a run uses.  Its random generators are its own: no run's draws change.
 On a cache that does not hold this source's kernels yet (bench.kernel_cache keys it on their
 sources), a line on stderr says so at once and one more names each kernel as numba starts it, so a
 first run is never a minute of nothing on screen; `make install` fills the cache ahead
-(`python -m simulators.warm`).  The damping fit's model kernel and the nonlinear (MEMS) resonator's
-integrator are compiled here too (on a cold cache only: a run loads them, ~0.05 s, where it uses them)."""
+(`python -m simulators.warm`).  The damping fit's model kernel and the kernels only some units call
+(warm_unit_kernels) are compiled here too, on a cold cache only: a run loads them (~0.05 s) where it uses them."""
 
 from __future__ import annotations
 

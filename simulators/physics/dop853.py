@@ -217,6 +217,7 @@ def integrate_block(a: np.ndarray, u: np.ndarray, xi: float, kappa: float, q0: n
     steps = nonlinear_block(np.ascontiguousarray(a, dtype=float), 0.5 * np.asarray(u, dtype=float), 0.5 * xi,
                             0.5 * kappa, np.asarray(q0, dtype=float), float(dt), int(n), float(rtol), float(atol),
                             tab_a, tab_b, e3, e5, tab_d, out)
-    if steps == TOO_SMALL_STEP:  # pragma: no cover - the model is smooth
-        raise RuntimeError("resonator integration failed: the required step fell under its minimum")
+    if steps == TOO_SMALL_STEP or not np.all(np.isfinite(out)):  # the old solve_ivp path's two checks
+        raise RuntimeError("resonator integration failed: the required step fell under its minimum"
+                           if steps == TOO_SMALL_STEP else "resonator integration failed: a state is not finite")
     return out
