@@ -71,7 +71,7 @@ def _run(args, cwd, timeout=180, env=None):
     return subprocess.run(GYROBENCH + args, cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
 
 
-@pytest.mark.serial  # a run's end bounded in wall time (its store bound 2 s, three waits): run alone
+# in the parallel pass: its bound (90 s) is far from the ~8 s it takes, and a late notice still says "1 s"
 def test_black_holed_server_a_run_ends_soon_with_its_record_spooled_and_one_line(server, url, tmp_path):
     """Before: 395 s with nothing printed (three 130 s connect timeouts).  The store's bound is
     shortened to 2 s ($GYROBENCH_STORE_WAIT_S; 10 s by default): the same rules, in less time."""
@@ -109,7 +109,7 @@ def test_the_default_bound_is_10_s_and_the_setting_shortens_it(monkeypatch, tmp_
             ResultsStore(tmp_path / "c.sqlite")
 
 
-@pytest.mark.serial  # a wait bounded in wall time (its bound 4 s: 3.6-8 s): run alone
+# in the parallel pass: a bounded wait that only sleeps (4 s asked, 4 s of slack above it)
 def test_server_black_holed_mid_run_the_end_waits_at_most_its_bound_then_spools(server, url, tmp_path):
     """A pooled connection to a stopped server: no connect timeout can help; the caller's bound does
     (4 s here, 10 s by default: the same rule in less time)."""

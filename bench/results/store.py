@@ -328,7 +328,8 @@ class ResultsStore:
                 return
             self._told = True
             tail = f", {then}" if then else ""
-            self.notify(f"results store at {self.host}: no answer for {elapsed_s:.0f} s, waiting up to "
+            # whole seconds gone by, rounded down: "1 s" stays true of a notice a loaded machine wakes late
+            self.notify(f"results store at {self.host}: no answer for {math.floor(elapsed_s)} s, waiting up to "
                         f"{budget:.0f} s{tail}")
 
         try:
