@@ -21,7 +21,10 @@ TAU_S = 0.02  # the simulator's rate-loop lag (TableMechanics default)
 MODELS = ["modbus-tcp", "modbus-rtu", "ascii-tcp", "ascii-pty"]
 
 
-def make_bench(model: str, *, watchdog_s: float = 2.0, timeout_s: float = 0.3):
+#: the drivers' own reply timeout (1 s): with 0.3 s a reply delayed by a loaded machine (the parallel
+#: pass, load 4-7 on two cores) timed out three times and its late line spoiled the retries
+#: ("more than one reply line to 'STAT?'" in a position move that is not about timeouts)
+def make_bench(model: str, *, watchdog_s: float = 2.0, timeout_s: float = 1.0):
     world = World(preset("hrg"), seed=3)
     clock = SimClock(world)
     kw = dict(limits=LIMITS, clock=clock, timeout_s=timeout_s, watchdog_s=watchdog_s)
