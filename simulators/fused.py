@@ -9,7 +9,11 @@ table's and the environment's inputs for all K at once (they do not depend on th
 step, block by block), then per block in Python what stays there (the stream frames to the link,
 the front end's lock-in, the world's listeners).  Every value and every random draw is the one the
 per-block path makes, in the same order, so seeded runs are bit-identical either way
-(tests/test_world_fused.py, benchmarks/sim_identical.py).  Anything else takes the per-block path.
+(tests/test_world_fused.py, benchmarks/sim_identical.py).  A unit's error sources (World.errors)
+ride along: each block's temperature (a thermal chamber stepped block by block, as its before_block
+does), its bias, gamma and c_m, and the pickoff chains' gains are worked out in Python first; the
+forcers' and pickoff chains' errors are applied in the compiled loop.  Anything else (a rig's
+shared chamber, the readout phase trim, FM, a fault due) takes the per-block path.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import numpy as np
 
 from drivers.fpga import protocol as p
 
+from .chamber.thermal import ChamberThermal
 from .faults import FaultScheduler
 from .fpga.firmware import FpgaFirmware
 from .frontend.model import FrontEndModel
@@ -41,15 +46,17 @@ _NONE = np.empty(0)  # an absent per-block input or gain trim
 class _Parts:
     """The devices of a world the fused path knows, found once per device list."""
 
-    __slots__ = ("devices", "table", "frontend", "firmware", "faults", "ok")
+    __slots__ = ("devices", "table", "frontend", "firmware", "chamber", "faults", "ok")
 
     def __init__(self, devices: list[Any]) -> None:
         self.devices = list(devices)
         self.table: TableMechanics | None = None
         self.frontend: FrontEndModel | None = None
         self.firmware: FpgaFirmware | None = None
+        self.chamber: ChamberThermal | None = None
         self.faults: list[FaultScheduler] = []
-        kinds = {TableMechanics: "table", FrontEndModel: "frontend", FpgaFirmware: "firmware"}
+        kinds = {TableMechanics: "table", FrontEndModel: "frontend", FpgaFirmware: "firmware",
+                 ChamberThermal: "chamber"}  # fmt: skip
         self.ok = True
         for dev in devices:
             if type(dev) is FaultScheduler:
@@ -73,7 +80,10 @@ def _parts(world: World) -> _Parts:
 def fused_blocks_possible(world: World, n: int, k: int) -> bool:
     """True when the next k blocks of n samples may take the fused path (module docstring)."""
     parts = _parts(world)
-    if not parts.ok or world.case_source is not None or world.errors is not None:  # error sources: per block
+    if not parts.ok or world.case_source is not None:
+        return False
+    ch = parts.chamber
+    if ch is not None and any(unit is not world for unit in ch.units):  # a rig's chamber: per block
         return False
     res = world.resonator
     if not res._linear:
@@ -101,6 +111,32 @@ def _firmware_steady(world: World, fw: FpgaFirmware) -> bool:
     return not fw._u_on and not forces  # the drive off and cut: no force at all
 
 
+def _error_inputs(
+    world: World, chamber: ChamberThermal | None, errs: Any, n: int, k: int, rate_rad_s: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Each block's input rate with the temperature's bias, gamma and c_m at the temperature (or
+    (0,) when f0 and Q do not move) and the pickoff chains' gains: World._run_block's values, the
+    chamber stepped (and the unit's temperature set) before each block as its before_block does."""
+    dt = world.sample_period_s
+    i0 = world.sample_index
+    thermal = errs.thermal_active
+    c = world.resonator.coeffs
+    f0_hz = world.params.f0_hz
+    bias = np.empty(k)
+    zg0, zg4 = (np.empty(k), np.empty(k)) if thermal else (_NONE, _NONE)
+    pick_gx, pick_gy = np.empty(k), np.empty(k)
+    for j in range(k):
+        if chamber is not None:
+            chamber.step(n * dt)
+            world.set_temperature(chamber.resonator_c)
+        temp_c, stress_c = world.temperature_c, world.stress_c
+        if thermal:
+            zg0[j], zg4[j] = errs.thermal(c.gamma, c.c_m, f0_hz, temp_c)
+        bias[j] = math.radians(errs.thermal_bias_dps(temp_c, stress_c))
+        pick_gx[j], pick_gy[j] = errs.pickoff_gains((i0 + j * n) * dt, temp_c, stress_c)
+    return rate_rad_s + bias, zg0, zg4, pick_gx, pick_gy
+
+
 def run_fused_blocks(world: World, n: int, k: int) -> bool:
     """Advance the world by k blocks of n samples (`fused_blocks_possible` said so); False (and
     nothing done) if the table turned out not settled or a register was written since the check."""
@@ -119,6 +155,12 @@ def run_fused_blocks(world: World, n: int, k: int) -> bool:
         mean_rates, ripple = inputs
         rate_rad_s = np.array([math.radians(r) for r in mean_rates])
         res = world.resonator
+        errs = world.errors
+        zg0 = zg4 = pick_gx = pick_gy = forcer = pickoff = _NONE
+        if errs is not None:  # World._run_block's error sources at each block's temperature
+            rate_rad_s, zg0, zg4, pick_gx, pick_gy = _error_inputs(world, parts.chamber, errs, n, k, rate_rad_s)
+            forcer = np.array(errs._forcer_constants, dtype=float)
+            pickoff = np.array(errs._pickoff_constants, dtype=float)
         env = world.environment
         slow = env is not None and env.has_slow_drifts
         zg2 = zg3 = gain_x = gain_y = _NONE
@@ -146,13 +188,16 @@ def run_fused_blocks(world: World, n: int, k: int) -> bool:
         force = np.zeros(4)
         pll, fw._dec_n, seq_end = closed_loop_blocks(
             n, i0, dt, rate_rad_s, ripple, res._zg, res._four_k, res._nu_offset, res._w0, res._q,
-            res._psi_per_rad, sigma, slow, zg2, zg3, gain_x, gain_y, q_true, q_meas,
+            res._psi_per_rad, sigma, slow, zg2, zg3, gain_x, gain_y,
+            errs is not None, zg0, zg4, forcer, pickoff, pick_gx, pick_gy, q_true, q_meas,
             drive, active or fw._owns_ref, float(world.ref_freq_hz), float(regs["PLL_FREQ_HZ"]),
             float(regs["REF_FREQ_HZ"]), active, stream, ctrl, prm, fw._st,
             _NONE if gains is None else gains, dec, fw._dec_sum, fw._dec_n, fw._stream_seq, frames,
             p.STREAM_CRC_TABLE, p.STREAM_CRC_ZEROS, frame_counts, ref_hz, force,
         )  # fmt: skip
         res._psi = float(res._psi_per_rad * ripple[-1, -1])
+        if zg0.shape[0]:
+            res.set_thermal(float(zg0[-1]), float(zg4[-1]))  # the last block's, as set_thermal left it
         if active:
             regs["PLL_FREQ_HZ"] = float(pll)
         fw._owns_ref = active

@@ -13,6 +13,7 @@ import numpy as np
 
 from bench.kernel_cache import njit  # NUMBA_CACHE_DIR keyed on the kernels' sources
 from simulators.fpga import kernels as fk
+from simulators.physics.errors_kernel import pickoff_block
 from simulators.physics.kernels import linear_block
 from simulators.physics.params import TWO_PI
 
@@ -38,6 +39,13 @@ def closed_loop_blocks(
     zg3: np.ndarray,
     gain_x: np.ndarray,
     gain_y: np.ndarray,
+    errs: bool,  # error sources (World.errors): the forcers' and the pickoff chains' below
+    zg0: np.ndarray,  # (K,) per block zg[0], zg[4] at the unit's temperature, or (0,) for none
+    zg4: np.ndarray,
+    forcer: np.ndarray,  # (6,) ErrorSources._forcer_constants
+    pickoff: np.ndarray,  # (12,) ErrorSources._pickoff_constants (flags as 0.0 / 1.0)
+    pick_gx: np.ndarray,  # (K,) per block the pickoff chains' gains (ErrorSources.pickoff_gains)
+    pick_gy: np.ndarray,
     q_true: np.ndarray,  # (K n, 4) out: true states
     q_meas: np.ndarray,  # (K n, 4) in: standard normals (sigma != 0); out: measured states
     drive: bool,  # DRIVE_EN: wave_force each block (else no force: the drive is off and cut)
@@ -70,6 +78,8 @@ def closed_loop_blocks(
     off = 0
     scaled = np.empty((n, 4)) if gains.shape[0] > 0 else np.empty((0, 4))
     no_noise = np.empty((0, 4))
+    uf = np.zeros(4)  # the force the modes receive (ErrorSources.force of u)
+    thermal = zg0.shape[0] > 0
     for j in range(k_blocks):
         a = j * n
         t0 = (i0 + a) * dt
@@ -81,6 +91,17 @@ def closed_loop_blocks(
             fk.wave_force(t0, n, dt, ref, ctrl, prm, st)
             for i in range(4):
                 u[i] = st[fk.S_U + i]
+        uk = u
+        if errs:  # ErrorSources.force, the same operations in the same order
+            fgx, fgy, c_x, s_x, c_y, s_y = forcer[0], forcer[1], forcer[2], forcer[3], forcer[4], forcer[5]
+            fx1, fx2, fy1, fy2 = fgx * u[0], fgx * u[1], fgy * u[2], fgy * u[3]
+            uf[0] = c_x * fx1 - s_y * fy1
+            uf[1] = c_x * fx2 - s_y * fy2
+            uf[2] = s_x * fx1 + c_y * fy1
+            uf[3] = s_x * fx2 + c_y * fy2
+            uk = uf
+        if thermal:  # Resonator.set_thermal
+            zg[0], zg[4] = zg0[j], zg4[j]
         # the resonator's block (Resonator._linear_block)
         gx, gy = 1.0, 1.0
         if slow:
@@ -91,9 +112,9 @@ def closed_loop_blocks(
         out = q_true[a : a + n]
         meas = q_meas[a : a + n]
         if sigma != 0.0:
-            linear_block(zg, lam, dt, q, u, ripple[j], psi_per_rad, out, meas, sigma, gx, gy)
+            linear_block(zg, lam, dt, q, uk, ripple[j], psi_per_rad, out, meas, sigma, gx, gy)
         else:
-            linear_block(zg, lam, dt, q, u, ripple[j], psi_per_rad, out, no_noise, sigma, 1.0, 1.0)
+            linear_block(zg, lam, dt, q, uk, ripple[j], psi_per_rad, out, no_noise, sigma, 1.0, 1.0)
             for r in range(n):  # meas[:, :] = out, without the array assignment's compiled shape check
                 for c in range(4):
                     meas[r, c] = out[r, c]
@@ -103,6 +124,12 @@ def closed_loop_blocks(
                     meas[r, 1] *= gx
                     meas[r, 2] *= gy
                     meas[r, 3] *= gy
+        if errs:  # ErrorSources.measure (in place: each row is read before it is written)
+            pickoff_block(
+                meas, pickoff[0] != 0.0, pickoff[1], pickoff[2], pickoff[3], pickoff[4], pickoff[5],
+                pickoff[6] != 0.0, pickoff[7], pickoff[8], pickoff[9] != 0.0, pickoff[10], pickoff[11],
+                pick_gx[j], pick_gy[j], meas,
+            )  # fmt: skip
         # firmware after_block
         fw_meas = meas
         if gains.shape[0] > 0:

@@ -98,7 +98,7 @@ class World:
                 noise, seed=seed, sample_period_s=self.sample_period_s, earth_rate_dph=earth_rate_dph
             )
         #: the unit's error sources (simulators.physics.errors), None when all are off: the world then
-        #: computes what it did before they existed; they take the per-block path (not simulators.fused)
+        #: computes what it did before they existed (simulators.fused applies them as the per-block path)
         self.errors = errors if errors is not None and errors.active else None
         #: the unit's temperature (deg C): an input, constant unless a chamber (or a test) sets it
         self.temperature_c = float(temperature_c)
@@ -179,8 +179,7 @@ class World:
             n_total = int(math.floor(self._pending_s / self.sample_period_s + 1e-9))
             self._pending_s = max(0.0, self._pending_s - n_total * self.sample_period_s)
             done = 0
-            # error sources take the per-block path (fused_blocks_possible says no to them at once)
-            fused = _fused_module() if self.fused and self.errors is None else None
+            fused = _fused_module() if self.fused else None
             while done < n_total:
                 left = n_total - done
                 n = min(left, self._block_limit())

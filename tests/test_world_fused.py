@@ -11,9 +11,11 @@ import pytest
 
 from drivers.fpga import protocol as p
 from drivers.rate_table import modbus_protocol as mp
+from simulators.chamber.thermal import ChamberThermal
 from simulators.faults import FaultScheduler
 from simulators.fpga.firmware import FpgaFirmware
 from simulators.frontend.model import FrontEndModel
+from simulators.physics.errors import ERROR_PRESETS, ErrorSources
 from simulators.physics.noise import NOISE_PRESETS, earth_rate_dph
 from simulators.physics.params import preset
 from simulators.rate_table.mechanics import TableMechanics
@@ -25,9 +27,10 @@ WA = p.DRIVE_EN | p.AGC_EN | p.PLL_EN | p.QUAD_EN | p.WHOLE_ANGLE | p.STREAM_EN
 class Rig:
     """A world with the four simulated devices and what they hand out, recorded."""
 
-    def __init__(self, name: str, fused: bool, seed: int = 7) -> None:
+    def __init__(self, name: str, fused: bool, seed: int = 7, errors: ErrorSources | None = None) -> None:
         params = preset(name)
-        self.world = World(params, seed=seed, noise=NOISE_PRESETS.get(name), earth_rate_dph=earth_rate_dph(48.0))
+        self.world = World(params, seed=seed, noise=NOISE_PRESETS.get(name), earth_rate_dph=earth_rate_dph(48.0),
+                           errors=errors)  # fmt: skip
         self.world.fused = fused
         self.stream: list[bytes] = []
         self.fired: list[tuple[float, str]] = []
@@ -94,6 +97,7 @@ class Rig:
             "env": None if env is None else (env._pos, env._wander_phi, env.turn_on_count),
             "fired": list(self.fired), "blocks_seen": list(self.blocks_seen),
             "normals": w.resonator._normals.take(3).copy(),
+            "thermal": (w.temperature_c, w.stress_c, w.resonator._thermal),
         }
 
 
@@ -150,3 +154,33 @@ def test_the_fused_path_stands_aside_for_what_it_does_not_model():
     rig.world.attach(Other())
     rig.world.advance(2.0)
     assert rig.world.blocks_fused == done
+
+
+#: the realistic HRG's error sources with a temperature bias and thermal hysteresis as well
+THERMAL_ERRORS = ERROR_PRESETS["hrg-realistic"].with_(
+    bias_tc_dps_k=0.002, bias_tc2_dps_k2=1e-4, hyst_halfwidth_k=0.5, bias_hyst_dps=-0.01, sf_hyst_ppm=-200.0
+)
+
+
+@pytest.mark.parametrize("name", ["hrg-wa", "hrg"])
+def test_fused_blocks_with_error_sources_in_a_moving_chamber_give_the_per_block_numbers(name):
+    """A unit with every error source in a chamber whose temperature changes every block (heating,
+    then cooling through the hysteresis's play): the fused path's samples are the per-block ones."""
+    rigs = []
+    for fused in (False, True):
+        rig = Rig(name, fused=fused, errors=THERMAL_ERRORS)
+        chamber = ChamberThermal(setpoint_c=35.0, ramp_c_per_min=300.0, case_tau_s=2.0, resonator_tau_s=1.0)
+        rig.world.attach(chamber)
+        rig.script()
+        with rig.world.lock:
+            chamber.setpoint_c = 20.0
+        peak_c = rig.world.temperature_c
+        rig.world.advance(6.0)
+        rigs.append(rig)
+    plain, fused = rigs
+    _same(plain.state(), fused.state())
+    assert plain.world.blocks_fused == 0
+    n_blocks = len(fused.blocks_seen)
+    assert fused.world.blocks_fused > 0.5 * n_blocks, (fused.world.blocks_fused, n_blocks)
+    assert peak_c > 30.0 and fused.world.temperature_c < peak_c - 2.0  # heated, then cooled on its branch
+    assert fused.world.stress_c == fused.world.temperature_c + 0.5
