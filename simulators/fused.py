@@ -85,6 +85,8 @@ def fused_blocks_possible(world: World, n: int, k: int) -> bool:
     ch = parts.chamber
     if ch is not None and any(unit is not world for unit in ch.units):  # a rig's chamber: per block
         return False
+    if ch is not None and world.errors is None:  # the chamber is stepped with the error sources' inputs only
+        return False
     res = world.resonator
     if not res._linear:
         return False

@@ -184,3 +184,15 @@ def test_fused_blocks_with_error_sources_in_a_moving_chamber_give_the_per_block_
     assert fused.world.blocks_fused > 0.5 * n_blocks, (fused.world.blocks_fused, n_blocks)
     assert peak_c > 30.0 and fused.world.temperature_c < peak_c - 2.0  # heated, then cooled on its branch
     assert fused.world.stress_c == fused.world.temperature_c + 0.5
+
+
+def test_a_chamber_on_a_unit_without_error_sources_keeps_the_per_block_path():
+    """The fused path steps a chamber with the error sources' inputs only: without error sources
+    the chamber still moves the unit's temperature, block by block."""
+    rig = Rig("hrg-wa", fused=True)
+    chamber = ChamberThermal(setpoint_c=35.0, ramp_c_per_min=300.0, case_tau_s=2.0, resonator_tau_s=1.0)
+    rig.world.attach(chamber)
+    t0_c = rig.world.temperature_c
+    rig.script()
+    assert rig.world.blocks_fused == 0
+    assert rig.world.temperature_c > t0_c + 5.0
