@@ -50,6 +50,21 @@ table-spin` (1.30 -> 1.19 s here, noise) unchanged: every library they import th
 is: table-spin's t quantile (scipy.special.stdtrit; importing scipy.special costs ~0.18 s of CPU, most
 of it scipy's array-API layer cloning numpy, which imports numpy.f2py and numpy.testing; no other
 import path gives the same ufunc: scipy.special.cython_special imports the package too).
+Then (2026-11-28 21:25-21:30, load average ~5; wave3j/startup, no code changed): a line station
+(one unit of ci-spin, --no-pdf, sqlite line database at the head) profiled again with -X importtime
+and cProfile of its main. Profile with bytecode written, as `make test` does (env -u
+PYTHONDONTWRITEBYTECODE): 1.53-1.68 s CPU (3 runs); without bytecode 1.8-2.0 s, of it ~0.43 s
+compiling our own 150 modules (a profile taken under PYTHONDONTWRITEBYTECODE overstates import costs,
+e.g. pydoc under scipy._lib._docscrape: 77 ms there, 3 ms with bytecode). Import wall under that load:
+numba 385 ms (numba.np.linalg 89 ms self, loaded by numba's registries), sqlalchemy 254 ms (the line
+database and the results store), scipy.special 205 ms (table-spin's t quantile, as above), h5py 113 ms
+(bench.recorder: the station writes the unit's raw .h5), every procedure and bench.analysis module
+61 ms self (bench.line.limits.declared_measurements imports all procedures to check the limits file's
+measurement names, procedures and units), jinja2 18 ms (the HTML certificate is written under --no-pdf
+too), pyvisa_py through pyvisa's open_visa_library (the @py backend the front end opens). Each is
+used by the unit; left as they are. A candidate not taken: checking a limits file against the
+sequence's own procedures only (~35-60 ms a station) would reject a limit on a measurement only
+other procedures declare and check units against fewer procedures: a change of behaviour.
 """
 
 from __future__ import annotations
