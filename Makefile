@@ -36,8 +36,11 @@ run: $(STAMP)
 # where a serial test sits in a file this grep would miss)
 # (--dist worksteal on 3 workers: measured on the same tree, idle, against --dist loadfile on 4 with the
 # files costliest first (tests/xdist_units.py, used when a run asks loadfile): 348 s against 428 s;
-# why loadfile lost here is not established: module fixtures set up once, but the pass took longer)
-TEST_WORKERS ?= 3
+# why loadfile lost here is not established: module fixtures set up once, but the pass took longer;
+# then worksteal on 4 against 3, interleaved on one tree: 275 s and 285 s against 332 s and 402 s, the
+# wall per CPU second 0.56 against 0.62-0.80: a fourth worker fills the cores while tests wait on
+# sleeps, subprocesses and sockets; benchmarks/suite_pass.py)
+TEST_WORKERS ?= 4
 SERIAL_FILES = $(shell grep -l 'mark\.serial' tests/test_*.py)
 test: $(STAMP)
 	env -u PYTHONDONTWRITEBYTECODE QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m "not serial"
