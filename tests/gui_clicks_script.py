@@ -102,6 +102,7 @@ def main(shot: str) -> int:
         seen["aborted"] = wait(lambda: win.last_finished is not None)
         fin = win.last_finished
         seen["outcome"], seen["safe_state"] = fin.outcome, fin.safe_state
+        seen["end_reason"] = fin.end_reason
         seen["panel_at_rest"] = wait(lambda: win.station.value("table", "rate_dps") is not None
                                      and abs(float(win.station.value("table", "rate_dps"))) < 0.1
                                      and win.station.value("frontend", "drive") == "off")

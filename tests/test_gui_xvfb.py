@@ -23,7 +23,7 @@ def test_clicks_on_a_real_x_server(tmp_path):
     assert seen["idle_rate"] is not None and abs(float(seen["idle_rate"])) < 0.1  # filled before any run
     assert seen["started"] and seen["shot"] and shot.stat().st_size > 10_000
     assert seen["pause_text"] == "Paused \u2014 the table keeps its rate" and seen["resumed"]
-    assert seen["aborted"] and seen["outcome"] == "ABORTED" and seen["safe_state"]
+    assert seen["aborted"] and seen["outcome"] == "ABORTED" and seen["safe_state"], seen.get("end_reason")
     assert seen["panel_at_rest"] and abs(seen["sim_rate"]) < 0.1 and not seen["sim_drive"]  # panel == simulator
     assert abs(seen["panel_rate"] - seen["sim_rate"]) < 0.1
     assert seen["completed"] == "COMPLETE" and "1a6b1a" in seen["status_style"]  # green only when complete
