@@ -64,9 +64,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     for name in STATION_MODULES:  # before any fork, in this single-threaded process
         importlib.import_module(name)
-    from simulators.warm import warm_kernels
+    from bench.composition import warm_simulators
 
-    warm_kernels()  # the compiled kernels loaded once (a station calls it before it serves: a no-op then)
+    warm_simulators()  # the compiled kernels loaded once (a station warms them before it serves: a no-op then)
     first = args.station
     children = {}
     for k in range(args.stations):
