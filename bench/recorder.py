@@ -12,6 +12,13 @@ flushed whenever a second of data (bench-clock time; and a quarter of a wall sec
 rows) or a second of wall time has passed since the last flush, so a process killed mid-run
 leaves a readable file with all but the last second (in lockstep: the last quarter wall second).
 
+Each stream, `/log` and `/measurements` carry `rows_flushed`: how many of their rows a completed
+flush put on disk, written (and flushed) after that flush.  HDF5 writes a flush's metadata in turn
+(the dataset's header with its new extent, then its chunk index, then the superblock), so a process
+killed between two of those writes leaves a dataset longer than its data: rows past the extent
+the index covers read as zeros.  Rows past `rows_flushed` are never data the run wrote; `RunData`
+reads up to it (and says so in its notes); a closed file has it equal to every dataset's length.
+
 While the run goes on the streams are stored uncompressed: fixed-size chunks never move, so the
 index on disk after any flush points at valid data whatever happens next (a compressed chunk
 that grows is moved at every flush and its old place reused, so a kill between the two could
@@ -47,6 +54,8 @@ from bench.results.redact import redact
 from bench.streams import StreamSchema, schema_of, unit_from_name
 
 CHUNK_ROWS = 4096
+#: each dataset's count of rows a completed flush put on disk (rows past it are not data: module docstring)
+ROWS_FLUSHED = "rows_flushed"
 #: the file is flushed after each second of bench time (and each wall second): a killed process or a
 #: full disk loses at most the last second of data, in lockstep as in real time (a lockstep run makes a
 #: bench second in a few wall ms; benchmarks/flush_cadence.py measured no cost in wall time)
@@ -160,6 +169,7 @@ class Recorder:
         # what is rewritten from memory when a failed write may have left that chunk unreadable
         self._tail: dict[str, tuple[int, list[np.ndarray]]] = {}
         self._flushed_rows: dict[str, int] = {"log": 0, "measurements": 0}
+        self._marked: dict[str, int] = {"log": 0, "measurements": 0}  # rows_flushed as written
         self._flushed_t: float | None = None
         self._last_t: float | None = None
         self._last_flush_sim: float | None = None
@@ -218,7 +228,23 @@ class Recorder:
         return cls(Path(runs_dir) / f"{record.run_id}.h5", attrs, param_units)
 
     def _text_dataset(self, name: str) -> h5py.Dataset:
-        return self._f.create_dataset(name, shape=(0,), maxshape=(None,), dtype=_STR, chunks=(256,))
+        ds = self._f.create_dataset(name, shape=(0,), maxshape=(None,), dtype=_STR, chunks=(256,))
+        ds.attrs[ROWS_FLUSHED] = np.int64(0)
+        return ds
+
+    def _mark_flushed(self) -> None:
+        """Each dataset's `rows_flushed` to what the last completed flush put on disk, then flushed
+        itself: only ever a count of rows whose data and index are already on disk."""
+        marked = self._marked
+        changed = False
+        for name, ds in (*self._datasets.items(), ("log", self._log), ("measurements", self._meas)):
+            n = self._flushed_rows.get(name, 0)
+            if marked.get(name) != n:
+                h5py.h5a.open(ds.id, ROWS_FLUSHED.encode()).write(np.array(n, dtype=np.int64))
+                marked[name] = n
+                changed = True
+        if changed:
+            self._f.flush()
 
     # --- writing -------------------------------------------------------------------------
     def on_event(self, event: ev.Event) -> None:
@@ -279,6 +305,7 @@ class Recorder:
                     chunks=(CHUNK_ROWS, arr.shape[1]),
                 )
                 self._describe(ds, stream, tuple(columns))
+                ds.attrs[ROWS_FLUSHED] = np.int64(0)
                 self._datasets[stream] = ds
                 self._pending[stream] = []
                 self._ncols[stream] = arr.shape[1]
@@ -398,6 +425,7 @@ class Recorder:
             rows = np.concatenate(blocks) if len(blocks) > 1 else (blocks[0] if blocks else np.empty((0, 0)))
             self._tail[stream] = (keep_from, [rows[keep_from - start : n - start]] if n > keep_from else [])
         self._flushed_t = self._last_t
+        self._mark_flushed()
 
     def flush(self) -> None:
         """Write the buffered rows and flush the file to disk (RawDataError if that fails)."""
@@ -475,6 +503,9 @@ class Recorder:
             pend.clear()
         self._log_row(self._last_t or 0.0, "ERROR", self.failure)
         self._f.flush()
+        for ds in (*self._datasets.values(), self._log, self._meas):
+            ds.attrs[ROWS_FLUSHED] = np.int64(ds.shape[0])  # what is kept, all of it on disk now
+        self._f.flush()
 
     def data(self) -> RunData:
         """What is recorded so far, through the open file (RawDataError once a write failed)."""
@@ -506,6 +537,11 @@ class Recorder:
                     a["stream_overflow_blocks"] = int(getattr(record, "stream_overflow_blocks", 0))
                     if self.failure is not None:
                         a["incomplete"] = self.failure
+                if self.failure is None:  # every row on disk, then said so (a kill in between: the last count)
+                    self._f.flush()
+                    for name, ds in (*self._datasets.items(), ("log", self._log), ("measurements", self._meas)):
+                        self._flushed_rows[name] = ds.shape[0]
+                    self._mark_flushed()
             except (OSError, RuntimeError) as exc:
                 failed_now = self.failure is None
                 with contextlib.suppress(RawDataError):
@@ -710,6 +746,21 @@ class RunData:
         """The coded columns' legends (code -> meaning), from the stream's declaration."""
         return stored_legends(self.f, stream, self._stream(stream).attrs)
 
+    def _rows(self, name: str, ds: h5py.Dataset) -> np.ndarray:
+        """A dataset's rows that are data: in a file read from disk, up to its `rows_flushed`
+        when a writer killed mid-flush left it longer (the module's docstring), said in `notes`.
+        The recorder's own open file (a run's ctx.data()) holds every row it wrote."""
+        n = ds.shape[0]
+        if self._own and ROWS_FLUSHED in ds.attrs:
+            kept = int(ds.attrs[ROWS_FLUSHED])
+            if kept < n:
+                note = (f"{name}: its last {n - kept} of {n} rows are past the last flush that completed "
+                        f"(the writer was stopped mid-flush): not read, they may not be data")
+                if note not in self.notes:
+                    self.notes.append(note)
+                return ds[:kept]
+        return ds[...]
+
     def array(self, stream: str) -> np.ndarray:
         """The stream's rows (a copy the caller may change).  A file this object opened read-only
         is read and decompressed once per stream: a report's figures read the FPGA stream twice."""
@@ -717,7 +768,7 @@ class RunData:
             return self._stream(stream)[...]
         cached = self._arrays.get(stream)
         if cached is None:
-            cached = self._arrays[stream] = self._stream(stream)[...]
+            cached = self._arrays[stream] = self._rows(stream, self._stream(stream))
         return cached.copy()
 
     def read_streams(self) -> None:
@@ -726,7 +777,7 @@ class RunData:
         if self._own:
             for stream in self.streams():
                 if stream not in self._arrays:
-                    self._arrays[stream] = self._stream(stream)[...]
+                    self._arrays[stream] = self._rows(stream, self._stream(stream))
 
     def reopen(self) -> None:
         """A handle of this process's own on the same file (in a forked process: HDF5's state and
@@ -743,10 +794,13 @@ class RunData:
         return stream in self.f["streams"]
 
     def log(self) -> list[dict[str, Any]]:
-        return [json.loads(x) for x in self.f["log"].asstr()[...]]
+        return [json.loads(x) for x in self._text("log")]
 
     def measurements(self) -> list[dict[str, Any]]:
-        return [json.loads(x) for x in self.f["measurements"].asstr()[...]]
+        return [json.loads(x) for x in self._text("measurements")]
+
+    def _text(self, name: str) -> list[str]:
+        return [x.decode() if isinstance(x, bytes) else x for x in self._rows(name, self.f[name])]
 
     def fits(self) -> dict[str, dict[str, np.ndarray]]:
         return {k: {c: g[c][...] for c in g} for k, g in self.f["fits"].items()}

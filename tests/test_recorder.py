@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from bench.engine import events as ev
-from bench.recorder import Recorder, open_run
+from bench.recorder import ROWS_FLUSHED, Recorder, open_run
 
 
 def test_streams_log_measurements_roundtrip(tmp_path):
@@ -78,12 +78,77 @@ def test_sigkilled_writer_leaves_a_readable_file(tmp_path):
     finally:
         proc.wait(timeout=30)
     assert proc.returncode == -signal.SIGKILL
-    with h5py.File(path, "r") as f:
-        data = f["streams/fpga"][...]
+    with h5py.File(path, "r") as f:  # a stock reader opens it; the rows that are data are counted
+        ds = f["streams/fpga"]
+        assert 0 < ds.attrs[ROWS_FLUSHED] <= ds.shape[0]
+    with open_run(path) as d:  # and the bench's reader reads exactly those
+        data = d.array("fpga")
     # flushed every second of data: at least the first 4 s of the 5 s written before "ready"
     assert data.shape[0] >= 4000
     np.testing.assert_allclose(data[:, 0], np.arange(data.shape[0]) * 1e-3)
     np.testing.assert_allclose(data[:, 1], 2 * data[:, 0])
+
+
+# HDF5 writes a flush's metadata in turn: the dataset's header (its new extent), then the chunk
+# index, then the superblock.  This writer's file object ends the process at the chunk index's
+# write of a flush that opens a new chunk: a SIGKILL between those two writes, made certain.
+_TORN = textwrap.dedent(
+    """
+    import io, os, sys
+    import h5py, numpy as np
+    from bench.recorder import Recorder
+    armed = False
+    class Torn(io.FileIO):
+        def write(self, b):
+            if armed and bytes(b[:4]) == b"TREE":  # a v1 B-tree node: the chunk index
+                os._exit(9)
+            return super().write(b)
+    h5_file = h5py.File
+    h5py.File = lambda name, mode="r", **kw: h5_file(Torn(name, "w+") if mode == "w" else name, mode, **kw)
+    rec = Recorder(sys.argv[1], {"params": {"x": 1}})
+    t = np.arange(5000) * 1e-3
+    rec.append("fpga", ("t_s", "v"), np.column_stack([t, 2 * t])[:4000])
+    rec.on_event(__import__("bench.engine.events", fromlist=["Log"]).Log(run_id="r", t_sim_s=4.0, message="4 s"))
+    rec.flush()
+    armed = True
+    rec.append("fpga", ("t_s", "v"), np.column_stack([t, 2 * t])[4000:])  # rows 4096.. open chunk 2
+    rec.flush()
+    print("the flush was not torn")
+    """
+)
+
+
+def test_a_writer_killed_mid_flush_leaves_no_row_it_did_not_write(tmp_path):
+    path = tmp_path / "torn.h5"
+    proc = subprocess.run([sys.executable, "-c", _TORN, str(path)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 9, proc.stdout + proc.stderr[-2000:]
+    with h5py.File(path, "r") as f:  # the stock view: the extent of 5000 rows reached the disk, its index did not
+        ds = f["streams/fpga"]
+        assert ds.shape[0] == 5000 and ds.attrs[ROWS_FLUSHED] == 4000
+        assert not ds[4096:, 0].any()  # rows the writer never wrote: HDF5's fill value
+    with open_run(path) as d:
+        data = d.array("fpga")
+        np.testing.assert_array_equal(data[:, 0], np.arange(4000) * 1e-3)  # every row as written, none more
+        np.testing.assert_array_equal(data[:, 1], 2 * data[:, 0])
+        assert [r["msg"] for r in d.log()] == ["4 s"]
+        assert any("fpga: its last 1000 of 5000 rows are past the last flush that completed" in n for n in d.notes)
+        assert d.incomplete.startswith("the run did not finish")
+
+
+def test_a_closed_file_counts_every_row_as_flushed(tmp_path):
+    rec = Recorder(tmp_path / "r.h5", {"params": {"x": 1}})
+    for k in range(30):  # across chunks, with flushes between
+        t = (np.arange(500) + 500 * k) * 1e-3
+        rec.on_event(ev.SampleBlock(run_id="r", t_sim_s=float(t[-1]), stream="fpga", columns=("t_s", "v"),
+                                    data=np.column_stack([t, t])))
+        rec.on_event(ev.Log(run_id="r", t_sim_s=float(t[-1]), message=f"block {k}"))
+    rec.close()  # compressed into a new file: the counts go with the datasets
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        for name in ("streams/fpga", "log", "measurements"):
+            assert f[name].attrs[ROWS_FLUSHED] == f[name].shape[0], name
+        assert f["streams/fpga"].shape[0] == 15000 and f["streams/fpga"].compression == "gzip"
+    with open_run(tmp_path / "r.h5") as d:
+        assert d.array("fpga").shape == (15000, 2) and len(d.log()) == 30 and not d.notes
 
 
 # --- a disk that fills (issue 13, item 1) --------------------------------------------------------
