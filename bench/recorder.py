@@ -620,6 +620,17 @@ def annotate(path: str | Path, key: str, value: Any) -> None:
         f.attrs[key] = value if isinstance(value, (str, int, float, bool)) else _json(value)
 
 
+def data_rows(ds: h5py.Dataset) -> tuple[np.ndarray, int]:
+    """(the rows of a dataset that are data, how many rows past them were left out): up to its
+    `rows_flushed` where a writer stopped mid-flush left it longer (the module's docstring); all of
+    it in a file written before the attribute or held open by its writer."""
+    n = ds.shape[0]
+    kept = int(ds.attrs[ROWS_FLUSHED]) if ROWS_FLUSHED in ds.attrs else n
+    if kept < n:
+        return ds[:kept], n - kept
+    return ds[()], 0
+
+
 class MissingStream(KeyError):
     """A stream the analysis needs is not in the raw file (the run ended before writing it)."""
 
@@ -750,16 +761,15 @@ class RunData:
         """A dataset's rows that are data: in a file read from disk, up to its `rows_flushed`
         when a writer killed mid-flush left it longer (the module's docstring), said in `notes`.
         The recorder's own open file (a run's ctx.data()) holds every row it wrote."""
-        n = ds.shape[0]
-        if self._own and ROWS_FLUSHED in ds.attrs:
-            kept = int(ds.attrs[ROWS_FLUSHED])
-            if kept < n:
-                note = (f"{name}: its last {n - kept} of {n} rows are past the last flush that completed "
-                        f"(the writer was stopped mid-flush): not read, they may not be data")
-                if note not in self.notes:
-                    self.notes.append(note)
-                return ds[:kept]
-        return ds[...]
+        if not self._own:
+            return ds[...]
+        rows, left_out = data_rows(ds)
+        if left_out:
+            note = (f"{name}: its last {left_out} of {ds.shape[0]} rows are past the last flush that completed "
+                    f"(the writer was stopped mid-flush): not read, they may not be data")
+            if note not in self.notes:
+                self.notes.append(note)
+        return rows
 
     def array(self, stream: str) -> np.ndarray:
         """The stream's rows (a copy the caller may change).  A file this object opened read-only

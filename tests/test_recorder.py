@@ -133,6 +133,10 @@ def test_a_writer_killed_mid_flush_leaves_no_row_it_did_not_write(tmp_path):
         assert [r["msg"] for r in d.log()] == ["4 s"]
         assert any("fpga: its last 1000 of 5000 rows are past the last flush that completed" in n for n in d.notes)
         assert d.incomplete.startswith("the run did not finish")
+    from bench.gui.replay import replay_events  # the window's replay reads the same rows
+
+    replayed = [e for e in replay_events(path) if isinstance(e, ev.SampleBlock) and e.stream == "fpga"]
+    np.testing.assert_array_equal(np.concatenate([e.data for e in replayed])[:, 0], np.arange(4000) * 1e-3)
 
 
 def test_a_closed_file_counts_every_row_as_flushed(tmp_path):

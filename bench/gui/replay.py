@@ -18,7 +18,7 @@ import numpy as np
 
 from bench.analysis.slow_model import orbit_elements
 from bench.engine import events as ev
-from bench.recorder import stored_legends
+from bench.recorder import data_rows, stored_legends
 from bench.streams import StreamSchema, schema_from_attrs
 
 CHUNK_ROWS = 20_000
@@ -65,7 +65,7 @@ def _streams(f: h5py.File) -> list[tuple[str, tuple[str, ...], np.ndarray, Strea
         cols = _columns(obj)
         if cols is None:
             return
-        data = obj[()]
+        data = data_rows(obj)[0]  # a writer stopped mid-flush: only the rows it wrote
         if data.dtype.names:
             data = np.column_stack([data[c].astype(float) for c in data.dtype.names]) if len(data) else \
                 np.empty((0, len(cols)))
@@ -119,7 +119,7 @@ def replay_events(path: str | Path) -> list[ev.Event]:
             params = {"params": _text(params_raw)}
         streams = _streams(f)
         fits = _stored_fits(f)
-        rows = {k: [_json_row(r) for r in f[k][()]] for k in ("measurements", "log") if k in f}
+        rows = {k: [_json_row(r) for r in data_rows(f[k])[0]] for k in ("measurements", "log") if k in f}
     if not streams:
         raise ValueError(f"{path} has no stream with a 'columns' attribute")
     t_start = run_start_s(attrs, streams, rows.get("log", []))
