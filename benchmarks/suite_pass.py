@@ -91,6 +91,8 @@ def main() -> int:
     wall_s = time.monotonic() - t0
     stop.set()
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    out = log.with_suffix(".out")  # pytest's whole report: a failure's traceback is read there
+    out.write_text(r.stdout + r.stderr, encoding="utf-8")
     lines = r.stdout.strip().splitlines() or [""]
     for line in lines:  # what failed or errored (its setup or teardown too), with pytest's one-line reason
         if line.startswith(("FAILED ", "ERROR ")):
@@ -100,7 +102,7 @@ def main() -> int:
           f"load average {min(samples):.1f}-{max(samples):.1f} (mean {sum(samples) / len(samples):.1f})")
     for w, (n, busy_s, end_s) in worker_ends(log).items():
         print(f"  {w}: {n} tests, busy {busy_s:.0f} s, last test ended at {end_s:.0f} s")
-    print(f"CPU log: {log}")
+    print(f"CPU log: {log}; pytest's report: {out}")
     return r.returncode
 
 
