@@ -14,6 +14,24 @@ from PySide6.QtCore import Qt  # noqa: E402
 WAIT_MS = 120_000
 
 
+def _wait(qtbot, win, cond) -> None:
+    """qtbot.waitUntil(cond), and on a timeout what the window showed and where the unit's thread was."""
+    import sys
+    import traceback
+
+    from pytestqt.exceptions import TimeoutError as QtTimeout
+
+    try:
+        qtbot.waitUntil(cond, timeout=WAIT_MS)
+    except QtTimeout:
+        th = getattr(win, "_thread", None)
+        frame = sys._current_frames().get(th.ident) if th is not None and th.is_alive() else None
+        where = "".join(traceback.format_stack(frame)) if frame is not None else "no unit thread alive"
+        raise AssertionError(f"{WAIT_MS / 1000:g} s: verdict {win.verdict.text()!r}, reason {win.reason.text()!r}, "
+                             f"prompt {win.prompt.text()!r}, message {win.message.text()!r}, waiting "
+                             f"{win.waiting()}, units done {win.units_done}; the unit's thread:\n{where}") from None
+
+
 @pytest.fixture
 def station(qtbot, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -36,9 +54,9 @@ def test_a_scanned_unit_runs_the_line_sequence_and_is_recorded(station, qtbot, t
     qtbot.keyClicks(win.serial_field, "ln-0001")  # a keyboard-wedge scanner: the serial, then Enter
     qtbot.keyClick(win.serial_field, Qt.Key.Key_Return)
     for _ in range(2):  # the fixture, then the table spin
-        qtbot.waitUntil(win.waiting, timeout=WAIT_MS)
+        _wait(qtbot, win, win.waiting)
         qtbot.mouseClick(win.yes_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: bool(win.units_done), timeout=WAIT_MS)
+    _wait(qtbot, win, lambda: bool(win.units_done))
     assert win.units_done == [("LN-0001", "PASS")]
     assert win.verdict.text() == "PASS" and "limit(s) met" in win.reason.text()
     rec = win.records[-1]
@@ -60,9 +78,9 @@ def test_no_fixture_means_no_run(station, qtbot):
     assert win.log_in()
     qtbot.keyClicks(win.serial_field, "LN-0002")
     qtbot.keyClick(win.serial_field, Qt.Key.Key_Return)
-    qtbot.waitUntil(win.waiting, timeout=WAIT_MS)
+    _wait(qtbot, win, win.waiting)
     qtbot.mouseClick(win.no_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: bool(win.units_done), timeout=WAIT_MS)
+    _wait(qtbot, win, lambda: bool(win.units_done))
     assert win.verdict.text() == "NOT RUN" and "fixture was not confirmed" in win.reason.text()
 
 
@@ -101,15 +119,15 @@ def test_a_retest_after_fail_needs_a_rework_code(station, qtbot):
                  "ended_at": now_iso(), "outcome": "FAIL", "measurements": [], "runs": []})
     qtbot.keyClicks(win.serial_field, "LN-0003")
     qtbot.keyClick(win.serial_field, Qt.Key.Key_Return)
-    qtbot.waitUntil(lambda: bool(win.units_done), timeout=WAIT_MS)
+    _wait(qtbot, win, lambda: bool(win.units_done))
     assert win.verdict.text() == "NOT RUN" and "needs --rework CODE" in win.reason.text()
     win.retest.setText("RW-12")
     qtbot.keyClicks(win.serial_field, "LN-0003")
     qtbot.keyClick(win.serial_field, Qt.Key.Key_Return)
     for _ in range(2):
-        qtbot.waitUntil(win.waiting, timeout=WAIT_MS)
+        _wait(qtbot, win, win.waiting)
         qtbot.mouseClick(win.yes_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: len(win.units_done) == 2, timeout=WAIT_MS)
+    _wait(qtbot, win, lambda: len(win.units_done) == 2)
     assert win.records[-1]["routing"]["rework"] == "RW-12" and win.verdict.text() == "PASS"
 
 
