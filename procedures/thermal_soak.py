@@ -188,8 +188,9 @@ class ThermalChamber(CvgOutput):
         from drivers.fpga import protocol as fp
 
         prev, quiet, unlocked = None, 0, 0
+        paused0 = getattr(ctx.clock, "paused_s", 0.0)  # a pause (real time) is not the chamber's settling time
         while min(ctx.gather(quiet, f"settled at {setpoint_c:g}")) < self.settle_windows:
-            if ctx.clock.now() - t_set > self.settle_timeout_s:
+            if ctx.clock.now() - t_set - (getattr(ctx.clock, "paused_s", 0.0) - paused0) > self.settle_timeout_s:
                 raise TimeoutError(f"set point {setpoint_c:g} degC: the frequency still drifts after "
                                    f"{self.settle_timeout_s:g} s (threshold {self.settle_ppm_per_min:g} ppm/min)")
             f = self._window_freq(ctx, self.settle_window_s)

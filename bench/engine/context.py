@@ -40,6 +40,10 @@ class GuardedClock:
     def __init__(self, base: Any) -> None:
         self.base = base
         self.guard: Callable[[], None] | None = None
+        #: bench seconds the run was held paused so far (a real-time station's clock runs on while
+        #: paused): a wait's timeout leaves them out (wait_until, the rate table's waits), so a pause
+        #: longer than a timeout does not end the run when it resumes
+        self.paused_s = 0.0
 
     def _check(self) -> None:
         guard = self.guard
@@ -79,14 +83,16 @@ class GuardedClock:
             self._check()
 
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
+        """Poll condition until it holds (True) or timeout_s of bench time, paused time left out, passed."""
         if not timeout_s >= 0 or poll_s <= 0:
             raise ValueError(f"wait_until(timeout_s={timeout_s!r}, poll_s={poll_s!r}): bad arguments")
         deadline = self.now() + timeout_s
+        paused0 = self.paused_s
         while True:
             self._check()
             if condition():
                 return True
-            remaining = deadline - self.now()
+            remaining = deadline + (self.paused_s - paused0) - self.now()
             if remaining <= 1e-12:
                 return bool(condition())
             self.sleep(min(poll_s, remaining))
@@ -282,6 +288,8 @@ class RunContext:
                 return
             t1 = self.clock.now()
             self.pauses.spans.append((t0, t1))
+            if isinstance(self.clock, GuardedClock):
+                self.clock.paused_s += t1 - t0
         self.bus.publish(ev.Resumed(run_id=self.run_id, t_sim_s=t1, paused_from_s=t0,
                                     message=f"resumed at t = {t1:.3f} s after {t1 - t0:.3f} s of bench time paused"))
 
