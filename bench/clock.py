@@ -13,7 +13,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 
 @runtime_checkable
@@ -35,6 +35,13 @@ def _check_dt(dt_s: float) -> float:
     if not math.isfinite(dt_s) or dt_s < 0:
         raise ValueError(f"clock wait dt_s={dt_s!r} must be finite and >= 0")
     return float(dt_s)
+
+
+def paused_s(clock: Any) -> float:
+    """Bench seconds a run has been held paused so far on this clock (the engine's GuardedClock counts
+    them: a real-time station's clock runs on while paused); 0 on a clock outside a run.  A wait's
+    timeout leaves them out: a pause longer than the timeout must not end the run at the resume."""
+    return float(getattr(clock, "paused_s", 0.0))
 
 
 class _PollingWait:

@@ -232,12 +232,16 @@ class Recorder:
         ds.attrs[ROWS_FLUSHED] = np.int64(0)
         return ds
 
+    def _named_datasets(self) -> tuple[tuple[str, h5py.Dataset], ...]:
+        """Every dataset that grows during the run, by the name `_flushed_rows` keeps it under."""
+        return (*self._datasets.items(), ("log", self._log), ("measurements", self._meas))
+
     def _mark_flushed(self) -> None:
         """Each dataset's `rows_flushed` to what the last completed flush put on disk, then flushed
         itself: only ever a count of rows whose data and index are already on disk."""
         marked = self._marked
         changed = False
-        for name, ds in (*self._datasets.items(), ("log", self._log), ("measurements", self._meas)):
+        for name, ds in self._named_datasets():
             n = self._flushed_rows.get(name, 0)
             if marked.get(name) != n:
                 h5py.h5a.open(ds.id, ROWS_FLUSHED.encode()).write(np.array(n, dtype=np.int64))
@@ -417,7 +421,7 @@ class Recorder:
             self._write_pending(stream)
         self._f.flush()
         # what is on disk now: a failure later cuts the file back to this
-        for name, ds in (*self._datasets.items(), ("log", self._log), ("measurements", self._meas)):
+        for name, ds in self._named_datasets():
             self._flushed_rows[name] = ds.shape[0]
         for stream, (start, blocks) in self._tail.items():
             n = self._flushed_rows[stream]
@@ -491,7 +495,7 @@ class Recorder:
         """Each stream, the log and the measurements back to the last flush (rows after it may
         never have reached the disk), the last flushed chunk rewritten from memory, the failure
         logged, then flushed."""
-        for name, ds in (*self._datasets.items(), ("log", self._log), ("measurements", self._meas)):
+        for name, ds in self._named_datasets():
             n = min(ds.shape[0], self._flushed_rows.get(name, 0))
             if ds.shape[0] != n:
                 ds.resize(n, axis=0)
@@ -503,7 +507,7 @@ class Recorder:
             pend.clear()
         self._log_row(self._last_t or 0.0, "ERROR", self.failure)
         self._f.flush()
-        for ds in (*self._datasets.values(), self._log, self._meas):
+        for _name, ds in self._named_datasets():
             ds.attrs[ROWS_FLUSHED] = np.int64(ds.shape[0])  # what is kept, all of it on disk now
         self._f.flush()
 
@@ -539,7 +543,7 @@ class Recorder:
                         a["incomplete"] = self.failure
                 if self.failure is None:  # every row on disk, then said so (a kill in between: the last count)
                     self._f.flush()
-                    for name, ds in (*self._datasets.items(), ("log", self._log), ("measurements", self._meas)):
+                    for name, ds in self._named_datasets():
                         self._flushed_rows[name] = ds.shape[0]
                     self._mark_flushed()
             except (OSError, RuntimeError) as exc:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
+from bench.clock import paused_s
 from bench.streams import Column, StreamSchema, declare
 from bench.validation import check_limit
 from drivers.errors import DeviceError, LinkLostError, SafetyTripError
@@ -157,9 +158,7 @@ class RateTable(ABC):
         return st
 
     def _paused_s(self) -> float:
-        """Bench seconds the run has been held paused so far (the engine's clock counts them; a
-        real-time station's clock runs on while paused): the waits' timeouts leave them out."""
-        return float(getattr(self.clock, "paused_s", 0.0))
+        return paused_s(self.clock)
 
     def _paused_text(self, paused0: float) -> str:
         paused = self._paused_s() - paused0
