@@ -33,28 +33,7 @@ from bench.analysis.maslov_result import (
     t_quantile,
 )
 from bench.analysis.maslov_terms import check_model, free_param_names, nonlinear_columns
-from bench.analysis.slow_model import linear_matrix
-
-# Dg(q)[a, c] = _DG_SIGN[a, c] * q[_DG_INDEX[a, c]] (slow_model.regressor_linear, by table lookup)
-_DG_INDEX = np.array(
-    [[0, 2, 0, 2, 1, 3, 1, 3], [1, 3, 1, 3, 0, 2, 0, 2], [2, 0, 2, 0, 3, 1, 3, 1], [3, 1, 3, 1, 2, 0, 2, 0]]
-)
-_DG_SIGN = np.array(
-    [
-        [-1, 1, -1, -1, 1, 1, 1, 1],
-        [-1, 1, -1, -1, -1, -1, -1, -1],
-        [-1, -1, 1, -1, 1, -1, -1, 1],
-        [-1, -1, 1, -1, -1, 1, 1, -1],
-    ],
-    dtype=float,
-)
-#: B_m = dDg/dq_m, shape (4, 4, 8): Dg(q) = sum_m q_m B_m
-_DG_BASIS = np.stack([_DG_SIGN * (_DG_INDEX == m) for m in range(4)])
-
-
-def dg_fast(q: np.ndarray) -> np.ndarray:
-    """Dg(q), shape (..., 4, 8), equal to slow_model.regressor_linear but by one gather."""
-    return np.asarray(q, dtype=float)[..., _DG_INDEX] * _DG_SIGN
+from bench.analysis.slow_model import DG_BASIS, linear_matrix, regressor_linear
 
 
 def simpson_states(q: np.ndarray, dt_s: float) -> np.ndarray:
@@ -67,7 +46,7 @@ def simpson_regressors(q: np.ndarray, dt_s: float, model: str) -> tuple[np.ndarr
 
     Dg is linear in q, so its Simpson sum is Dg of the Simpson-weighted states (one regressor
     evaluation instead of three)."""
-    parts = [dg_fast(simpson_states(q, dt_s))]
+    parts = [regressor_linear(simpson_states(q, dt_s))]
     if model != "linear":
         nl = nonlinear_columns(q, model)
         parts.append((dt_s / 6.0) * (nl[:-2] + 4.0 * nl[1:-1] + nl[2:]))
@@ -97,8 +76,8 @@ def _linear_fit(q: np.ndarray, dt_s: float) -> dict[str, np.ndarray | float]:
     """Batch fit and sandwich of the linear model from 4x4 and 8x8 moments (no N x 4 x 8 array)."""
     qs = simpson_states(q, dt_s)
     y = q[2:] - q[:-2]
-    xtx = np.einsum("mn,mak,nal->kl", qs.T @ qs, _DG_BASIS, _DG_BASIS)
-    xty = np.einsum("ma,mak->k", qs.T @ y, _DG_BASIS)
+    xtx = np.einsum("mn,mak,nal->kl", qs.T @ qs, DG_BASIS, DG_BASIS)
+    xty = np.einsum("ma,mak->k", qs.T @ y, DG_BASIS)
     c = np.linalg.inv(xtx)
     z = np.linalg.solve(xtx, xty)
     a = linear_matrix(z)
@@ -109,7 +88,7 @@ def _linear_fit(q: np.ndarray, dt_s: float) -> dict[str, np.ndarray | float]:
     qd = qp[0:-2] - qp[2:]
     qsum = qp[0:-2] + 4.0 * qp[1:-1] + qp[2:]
     w = np.hstack([qd, qsum])
-    basis = np.concatenate([_DG_BASIS, -h3 * np.einsum("ba,mbk->mak", a, _DG_BASIS)])
+    basis = np.concatenate([DG_BASIS, -h3 * np.einsum("ba,mbk->mak", a, DG_BASIS)])
     meat = np.einsum("ab,aik,bil->kl", w.T @ w, basis, basis)
     return {"z": z, "c": c, "resid": resid, "meat": meat, "lnorm": _error_map_norm(a, h3, qs.shape[0])}
 
@@ -190,10 +169,10 @@ def _moments(qs: np.ndarray, ns: np.ndarray, y: np.ndarray) -> tuple[np.ndarray,
     m = ns.shape[-1]
     ns2 = ns.reshape(4 * ns.shape[0], m)
     ns_rows = ns.reshape(ns.shape[0], 4 * m)  # (n, 4 m), [a * m + c]
-    gg = np.einsum("mn,mak,nal->kl", qs.T @ qs, _DG_BASIS, _DG_BASIS)
-    gn = np.einsum("mac,mak->kc", (qs.T @ ns_rows).reshape(4, 4, m), _DG_BASIS)
+    gg = np.einsum("mn,mak,nal->kl", qs.T @ qs, DG_BASIS, DG_BASIS)
+    gn = np.einsum("mac,mak->kc", (qs.T @ ns_rows).reshape(4, 4, m), DG_BASIS)
     xtx = np.block([[gg, gn], [gn.T, ns2.T @ ns2]])
-    xty = np.concatenate([np.einsum("ma,mak->k", qs.T @ y, _DG_BASIS), ns2.T @ y.reshape(-1)])
+    xty = np.concatenate([np.einsum("ma,mak->k", qs.T @ y, DG_BASIS), ns2.T @ y.reshape(-1)])
     return xtx, xty
 
 
@@ -204,7 +183,7 @@ def _window_maps(m: int) -> tuple[np.ndarray, np.ndarray]:
     mq = np.zeros((3, 4, 2, 4, k))
     mn = np.zeros((3, 4, m, 2, 4, k))
     for w, (wd, ws) in enumerate(((1.0, 1.0), (0.0, 4.0), (-1.0, 1.0))):
-        mq[w, :, 0, :, :8], mq[w, :, 1, :, :8] = wd * _DG_BASIS, ws * _DG_BASIS
+        mq[w, :, 0, :, :8], mq[w, :, 1, :, :8] = wd * DG_BASIS, ws * DG_BASIS
         for a in range(4):
             for c in range(m):
                 mn[w, a, c, 0, a, 8 + c], mn[w, a, c, 1, a, 8 + c] = wd, ws

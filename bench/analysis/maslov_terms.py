@@ -107,15 +107,18 @@ def forced_rhs(q: np.ndarray, z: np.ndarray, lam_rad_s: np.ndarray | float, mode
     return forced_regressor(q, model, mu) @ np.asarray(z, dtype=float) - 2.0 * lam * detuning_term(q)
 
 
+#: the central differences' eight displacements, +e_m then -e_m (unit steps), one per leading row
+_STEPS = np.concatenate([np.eye(4), -np.eye(4)])
+
+
 def numeric_jacobian(fun, q: np.ndarray, step: float = 1e-6) -> np.ndarray:
-    """d fun / d q by central differences for states q (..., 4) -> (..., 4, 4); fun is vectorised."""
+    """d fun / d q by central differences for states q (..., 4) -> (..., 4, 4); fun is vectorised.
+    The eight displaced states go to fun in one call (shape (8, ..., 4)): a Newton step of the
+    forced model's steady states on one state was eight calls of small-array overhead (issue 36)."""
     q = np.asarray(q, dtype=float)
-    cols = []
-    for m in range(4):
-        dq = np.zeros(4)
-        dq[m] = step
-        cols.append((fun(q + dq) - fun(q - dq)) / (2.0 * step))
-    return np.stack(cols, axis=-1)
+    shifted = q + (step * _STEPS).reshape((8,) + (1,) * (q.ndim - 1) + (4,))
+    f = np.asarray(fun(shifted))
+    return np.stack([(f[m] - f[4 + m]) / (2.0 * step) for m in range(4)], axis=-1)
 
 
 # ----------------------------------------------------------------------------------------------

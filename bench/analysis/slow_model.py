@@ -15,23 +15,39 @@ import numpy as np
 LINEAR_PARAM_NAMES = ("gamma", "nu", "b_c", "b_s", "c_m", "n", "h_c", "h_s")
 
 
+#: Dg(q)[a, c] = DG_SIGN[a, c] * q[DG_INDEX[a, c]]: every entry of Dg is + or - one state variable,
+#: (q1, p1, q2, p2) = indices (0, 1, 2, 3); the rows, written out:
+#:     [-q1, q2, -q1, -q2, p1, p2, p1, p2],
+#:     [-p1, p2, -p1, -p2, -q1, -q2, -q1, -q2],
+#:     [-q2, -q1, q2, -q1, p2, -p1, -p2, p1],
+#:     [-p2, -p1, p2, -p1, -q2, q1, q2, -q1]
+DG_INDEX = np.array(
+    [[0, 2, 0, 2, 1, 3, 1, 3], [1, 3, 1, 3, 0, 2, 0, 2], [2, 0, 2, 0, 3, 1, 3, 1], [3, 1, 3, 1, 2, 0, 2, 0]]
+)
+DG_SIGN = np.array(
+    [
+        [-1, 1, -1, -1, 1, 1, 1, 1],
+        [-1, 1, -1, -1, -1, -1, -1, -1],
+        [-1, -1, 1, -1, 1, -1, -1, 1],
+        [-1, -1, 1, -1, -1, 1, 1, -1],
+    ],
+    dtype=float,
+)
+#: B_m = dDg/dq_m, shape (4, 4, 8): Dg(q) = sum_m q_m B_m
+DG_BASIS = np.stack([DG_SIGN * (DG_INDEX == m) for m in range(4)])
+_J_INDEX, _J_SIGN = np.array([1, 0, 3, 2]), np.array([1.0, -1.0, 1.0, -1.0])
+
+
 def regressor_linear(q: np.ndarray) -> np.ndarray:
-    """Dg(q): shape (..., 4, 8), so that Dg(q) @ zg is the linear part of 2 dq/dt."""
-    q = np.asarray(q, dtype=float)
-    q1, p1, q2, p2 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    rows = [
-        [-q1, q2, -q1, -q2, p1, p2, p1, p2],
-        [-p1, p2, -p1, -p2, -q1, -q2, -q1, -q2],
-        [-q2, -q1, q2, -q1, p2, -p1, -p2, p1],
-        [-p2, -p1, p2, -p1, -q2, q1, q2, -q1],
-    ]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+    """Dg(q): shape (..., 4, 8), so that Dg(q) @ zg is the linear part of 2 dq/dt.  One gather and
+    a sign (the same numbers as writing the rows out, C-ordered as the stack of them was), not 32
+    small arrays stacked (issue 36: the forced model's Newton steps called it ~10^5 times a sweep)."""
+    return np.ascontiguousarray(np.asarray(q, dtype=float)[..., DG_INDEX] * DG_SIGN)
 
 
 def detuning_term(q: np.ndarray) -> np.ndarray:
     """J q = (p1, -q1, p2, -q2): the term multiplied by -2 lam in 2 dq/dt."""
-    q = np.asarray(q, dtype=float)
-    return np.stack([q[..., 1], -q[..., 0], q[..., 3], -q[..., 2]], axis=-1)
+    return np.ascontiguousarray(np.asarray(q, dtype=float)[..., _J_INDEX] * _J_SIGN)
 
 
 def _invariant_parts(q: np.ndarray) -> tuple[np.ndarray, ...]:
