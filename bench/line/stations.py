@@ -25,9 +25,15 @@ import time
 from pathlib import Path
 
 #: what a station imports, imported once before `--stations` forks (the fork starts with them)
+#: (the front end's driver and pyvisa's Python backend, which its first connect loads, and scipy.special,
+#: table-spin's analysis: a suite pass's py-spy profile found each forked station importing them, ~0.9 s
+#: of CPU apiece; the sequence's procedures and every procedure the limits check are imported by
+#: loading both, below)
 STATION_MODULES = ("bench.line.db", "bench.line.run", "bench.line.limits", "bench.line.sequence",
                    "bench.line.certificate", "bench.composition", "bench.results", "bench.recorder",
-                   "procedures", "simulators.world", "h5py", "numba", "jinja2", "sqlalchemy", "psycopg")
+                   "procedures", "simulators.world", "h5py", "numba", "jinja2", "sqlalchemy", "psycopg",
+                   "drivers.frontend.driver", "drivers.rate_table.modbus_driver", "drivers.fpga.link",
+                   "pyvisa_py", "scipy.special")
 
 
 class _Yes:
@@ -64,6 +70,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     for name in STATION_MODULES:  # before any fork, in this single-threaded process
         importlib.import_module(name)
+    if not args.synthetic:  # the sequence's procedures, and the limits' check imports every procedure
+        from .limits import load_limits
+        from .sequence import load_sequence
+
+        load_limits(load_sequence(args.sequence).limits)
     from bench.composition import warm_simulators
 
     warm_simulators()  # the compiled kernels loaded once (a station warms them before it serves: a no-op then)
