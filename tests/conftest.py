@@ -160,8 +160,9 @@ def plots(qtbot):
 def pytest_collection_finish(session):
     """Once the tests are collected (every module of ours, numpy, numba, Qt imported: ~280 000
     objects), collect once and freeze what is left: the collector then never walks those objects
-    again.  A full collection (the one after each Qt test below, and the collector's own every so
-    often) cost ~0.1-0.2 s each in a worker before; objects a test creates are collected as ever."""
+    again (until the first Qt test's collection below puts them back).  A full collection (the
+    collector's own every so often) cost ~0.1-0.2 s each in a worker before; objects a test creates
+    are collected as ever."""
     import gc
 
     gc.collect()
@@ -172,9 +173,17 @@ def pytest_collection_finish(session):
 def _qt_garbage_collected_in_the_gui_thread(request):
     """After a test that used Qt, its cyclic garbage is collected here, in the GUI thread: left to the
     collector, Qt objects were freed from whatever thread allocated next (a station's server threads
-    in the next test), and pytest-qt's event processing then crashed the worker (CI, twice)."""
-    yield
-    if {"qtbot", "qapp"} & set(request.fixturenames):
+    in the next test), and pytest-qt's event processing then crashed the worker (CI, twice).
+    What existed before the test is set aside (gc.freeze) while the objects the test made are
+    collected, then put back: a full collection walked a late worker's ~250 000 older objects,
+    0.15-0.4 s after every Qt test (py-spy of a suite pass: ~3 % of it); garbage among the older
+    objects is the collector's as ever (it is not Qt's: the test made the Qt objects)."""
+    qt = bool({"qtbot", "qapp"} & set(request.fixturenames))
+    if qt:
         import gc
 
+        gc.freeze()
+    yield
+    if qt:
         gc.collect()
+        gc.unfreeze()
