@@ -193,3 +193,24 @@ def test_a_held_wave_puts_e_on_a_linear_axis_despite_its_climb_from_nothing(plot
     plots.add_samples("fpga", cols, np.column_stack((t2, np.exp(-(t2 - 100.0) / 300.0), 0 * t2, 0 * t2, 0 * t2)))
     plots.refresh(force=True)
     assert plots.e_log  # E falls 400x in the decay
+
+
+def test_the_wave_tests_running_mean_is_the_one_pole_filter_across_blocks():
+    """exponential_mean (the wave test's mean step, carried from block to block) against scipy's
+    lfilter of the same one-pole filter and its recurrence written out, for blocks shorter and
+    longer than its chunk."""
+    from scipy.signal import lfilter
+
+    from bench.gui.plots import exponential_mean
+
+    rng = np.random.default_rng(5)
+    alpha, carry, direct = 0.03, 0.25 - 0.5j, 0.25 - 0.5j
+    for n in (1, 7, 63, 64, 65, 130, 1000):
+        x = np.exp(1j * rng.uniform(0.0, 2 * np.pi, n))
+        got = exponential_mean(x, alpha, carry)
+        ref = lfilter([alpha], [1.0, alpha - 1.0], x, zi=[(1.0 - alpha) * carry])[0]
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-14)
+        for v in x:
+            direct = alpha * v + (1.0 - alpha) * direct
+        assert abs(got[-1] - direct) < 1e-13
+        carry = complex(got[-1])
