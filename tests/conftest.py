@@ -176,7 +176,7 @@ def _qt_garbage_collected_in_the_gui_thread(request):
     in the next test), and pytest-qt's event processing then crashed the worker (CI, twice).
     What existed before the test is set aside (gc.freeze) while the objects the test made are
     collected, then put back: a full collection walked a late worker's ~250 000 older objects,
-    0.15-0.4 s after every Qt test (py-spy of a suite pass: ~3 % of it); garbage among the older
+    0.15-0.4 s after every Qt test (py-spy of a suite pass: ~2 % of it); garbage among the older
     objects is the collector's as ever (it is not Qt's: the test made the Qt objects)."""
     qt = bool({"qtbot", "qapp"} & set(request.fixturenames))
     if qt:

@@ -41,7 +41,7 @@ _J_INDEX, _J_SIGN = np.array([1, 0, 3, 2]), np.array([1.0, -1.0, 1.0, -1.0])
 def regressor_linear(q: np.ndarray) -> np.ndarray:
     """Dg(q): shape (..., 4, 8), so that Dg(q) @ zg is the linear part of 2 dq/dt.  One gather and
     a sign (the same numbers as writing the rows out, C-ordered as the stack of them was), not 32
-    small arrays stacked (issue 36: the forced model's Newton steps called it ~10^5 times a sweep)."""
+    small arrays stacked (issue 36: a sweep's model curves call it ~6,000 times)."""
     return np.ascontiguousarray(np.asarray(q, dtype=float)[..., DG_INDEX] * DG_SIGN)
 
 
