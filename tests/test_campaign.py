@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from computed_once import computed_once
 from needs import need
 
 from bench.campaign.spec import CampaignError, parse_campaign
@@ -132,8 +133,12 @@ def _campaign(tmp: Path, cid: str) -> tuple[Path, list[str]]:
 
 @pytest.fixture(scope="module")
 def local_summary(tmp_path_factory):
-    """The small campaign on a LocalCluster of one worker process (2 run in the tests below): its JSON and folder."""
-    tmp = tmp_path_factory.mktemp("local")
+    """The small campaign on a LocalCluster of one worker process (2 run in the tests below): its JSON
+    and folder; once a session (tests/computed_once.py: the tests only read them)."""
+    return computed_once(tmp_path_factory, "campaign-local", lambda: _local_summary(tmp_path_factory.mktemp("local")))
+
+
+def _local_summary(tmp: Path) -> tuple[dict, Path]:
     path, opts = _campaign(tmp, "small")
     proc = _cli([str(path), *opts, "--workers", "1"], env=_env())
     assert proc.returncode == 0, proc.stderr[-2000:]

@@ -9,6 +9,7 @@ import pytest
 
 from bench.composition import load_station
 from drivers.fpga import protocol as fp
+from tests.computed_once import computed_once
 
 SERIALS = {1: "HRG-000701", 2: "HRG-000702", 3: "HRG-000703", 4: "HRG-000704"}
 #: the shipped limits plus the frequency at 25 degC (judged wide), so each record carries it with its truth
@@ -31,7 +32,13 @@ class _Yes:
 @pytest.fixture(scope="module")
 def thermal_batch(tmp_path_factory):
     """eol-hrg-thermal through the line's batch attempt on sim-hrg-thermal-4 (seed 0), the
-    chamber's set-point writes counted at its driver."""
+    chamber's set-point writes counted at its driver; once a session (tests/computed_once.py)."""
+    return computed_once(tmp_path_factory, "thermal-batch",
+                         lambda: _thermal_batch(tmp_path_factory.mktemp("thermal-batch")))
+
+
+def _thermal_batch(tmp) -> dict:
+    """The batch's records, each slot's truth, the chamber's set-point writes and the state after."""
     from pathlib import Path
 
     from bench.line.batch_run import check_batch_sequence, run_batch_attempt
@@ -41,7 +48,6 @@ def thermal_batch(tmp_path_factory):
     from bench.line.sequence import load_sequence
     from bench.results import ResultsStore
 
-    tmp = tmp_path_factory.mktemp("thermal-batch")
     limits_file = tmp / "limits.toml"
     limits_file.write_text(Path("bench/line/limits/hrg-thermal.toml").read_text() + EXTRA_LIMITS)
     url = str(tmp / "results.sqlite")
@@ -69,7 +75,7 @@ def thermal_batch(tmp_path_factory):
             "chamber_setpoint_c": chamber.setpoint_c(),
             "chamber_profile": chamber.status().profile_status,
         }
-        yield {"records": records, "truths": truths, "writes": writes, "after": after}
+        return {"records": records, "truths": truths, "writes": writes, "after": after}
     finally:
         station.close()
         store.close()
