@@ -30,6 +30,12 @@ load average sampled every 10 s includes the pass's own workers):
                                   reply timeout in test_rate_table (now the drivers' 1 s) and a
                                   SIGKILLed recorder's file with rows not as written (not reproduced
                                   in 160 kills since: left open, see the stop's note)
+  2026-11-29, e9d8406 (before) against this stop's trees, interleaved, two rounds (benchmarks/
+                                  suite_profile.py's profile chose the changes): before 260 s (CPU 458),
+                                  241 s (424), 244 s (430), 250 s (434); after 242 s (435), 225 s (404),
+                                  233 s (417), 230 s (407). In the VM's slow hour (02:40-02:55, the
+                                  simulators' compute at 65 % of its usual speed) the before tree took
+                                  324-345 s (CPU 562-608): compare passes of one hour only
 Profile that chose the changes (the CPU log, per test and file): the pass is CPU-bound (~600 CPU s,
 ~210-237 s of it in the subprocesses tests start, waited for); under worksteal a module's fixture (a
 simulated run of 10-22 s) was set up again on each worker that stole some of its tests
