@@ -39,9 +39,32 @@ def _check_dt(dt_s: float) -> float:
 
 def paused_s(clock: Any) -> float:
     """Bench seconds a run has been held paused so far on this clock (the engine's GuardedClock counts
-    them: a real-time station's clock runs on while paused); 0 on a clock outside a run.  A wait's
-    timeout leaves them out: a pause longer than the timeout must not end the run at the resume."""
+    them: a real-time station's clock runs on while paused); 0 on a clock outside a run."""
     return float(getattr(clock, "paused_s", 0.0))
+
+
+class Deadline:
+    """A timeout in bench time from now that leaves out the time the run is held paused meanwhile:
+    a pause longer than a wait's timeout must not end the run at the resume (ctx.wait_until, the
+    rate table's waits and a soak's settling use it)."""
+
+    def __init__(self, clock: Any, timeout_s: float) -> None:
+        self.clock = clock
+        self.end_s = clock.now() + timeout_s
+        self._paused0 = paused_s(clock)
+
+    def paused_since_s(self) -> float:
+        """Bench seconds paused since the deadline was set."""
+        return paused_s(self.clock) - self._paused0
+
+    def remaining_s(self, now_s: float | None = None) -> float:
+        """Bench seconds left (<= 0: passed), paused time not counted."""
+        return self.end_s + self.paused_since_s() - (self.clock.now() if now_s is None else now_s)
+
+    def paused_note(self) -> str:
+        """' (and X s paused, not counted)' for a timeout's message when a pause came in between."""
+        paused = self.paused_since_s()
+        return f" (and {paused:.1f} s paused, not counted)" if paused > 0 else ""
 
 
 class _PollingWait:

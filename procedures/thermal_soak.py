@@ -23,7 +23,7 @@ import numpy as np
 
 from bench.analysis.cvg_rate import static_bias
 from bench.analysis.thermal_fit import ThermalFit, batch_mean, fit_temperature_polynomial
-from bench.clock import paused_s
+from bench.clock import Deadline
 from bench.engine import Demand, Measurement, Param, Procedure, Result, step
 from bench.streams import Column, StreamSchema, declare
 from drivers.fpga.stream import STREAM_SCHEMA as FPGA
@@ -189,9 +189,9 @@ class ThermalChamber(CvgOutput):
         from drivers.fpga import protocol as fp
 
         prev, quiet, unlocked = None, 0, 0
-        paused0 = paused_s(ctx.clock)  # a pause (real time) is not the chamber's settling time
+        pauses = Deadline(ctx.clock, self.settle_timeout_s)  # a pause (real time) is not settling time
         while min(ctx.gather(quiet, f"settled at {setpoint_c:g}")) < self.settle_windows:
-            if ctx.clock.now() - t_set - (paused_s(ctx.clock) - paused0) > self.settle_timeout_s:
+            if ctx.clock.now() - t_set - pauses.paused_since_s() > self.settle_timeout_s:
                 raise TimeoutError(f"set point {setpoint_c:g} degC: the frequency still drifts after "
                                    f"{self.settle_timeout_s:g} s (threshold {self.settle_ppm_per_min:g} ppm/min)")
             f = self._window_freq(ctx, self.settle_window_s)

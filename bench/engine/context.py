@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.clock import Deadline
 from bench.streams import StreamSchema, schema_of
 
 from . import events as ev
@@ -86,13 +87,12 @@ class GuardedClock:
         """Poll condition until it holds (True) or timeout_s of bench time, paused time left out, passed."""
         if not timeout_s >= 0 or poll_s <= 0:
             raise ValueError(f"wait_until(timeout_s={timeout_s!r}, poll_s={poll_s!r}): bad arguments")
-        deadline = self.now() + timeout_s
-        paused0 = self.paused_s
+        deadline = Deadline(self, timeout_s)
         while True:
             self._check()
             if condition():
                 return True
-            remaining = deadline + (self.paused_s - paused0) - self.now()
+            remaining = deadline.remaining_s()
             if remaining <= 1e-12:
                 return bool(condition())
             self.sleep(min(poll_s, remaining))

@@ -6,7 +6,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
-from bench.clock import paused_s
+from bench.clock import Deadline
 from bench.streams import Column, StreamSchema, declare
 from bench.validation import check_limit
 from drivers.errors import DeviceError, LinkLostError, SafetyTripError
@@ -157,20 +157,12 @@ class RateTable(ABC):
             raise SafetyTripError(f"rate table tripped: {st.trip_reason()}, rate={st.rate_dps:.3f} deg/s")
         return st
 
-    def _paused_s(self) -> float:
-        return paused_s(self.clock)
-
-    def _paused_text(self, paused0: float) -> str:
-        paused = self._paused_s() - paused0
-        return f" (and {paused:.1f} s paused, not counted)" if paused > 0 else ""
-
     def wait_at_rate(self, tolerance_dps: float, stable_for_s: float, timeout_s: float) -> TableStatus:
         """Wait (bench clock) until |rate - commanded| <= tolerance_dps holds for stable_for_s.
         Raises SafetyTripError on a trip bit, TimeoutError after timeout_s."""
         if not (tolerance_dps > 0 and stable_for_s >= 0 and timeout_s >= 0):
             raise ValueError(f"wait_at_rate({tolerance_dps!r}, {stable_for_s!r}, {timeout_s!r}): bad arguments")
-        deadline = self.clock.now() + timeout_s
-        paused0 = self._paused_s()
+        deadline = Deadline(self.clock, timeout_s)
         since: float | None = None
         while True:
             st = self._checked_status()
@@ -181,13 +173,13 @@ class RateTable(ABC):
                     return st
             else:
                 since = None
-            end = deadline + self._paused_s() - paused0
-            if now >= end:
+            remaining = deadline.remaining_s(now)
+            if remaining <= 0:
                 raise TimeoutError(
                     f"table not at {self.commanded_rate_dps} +/- {tolerance_dps} deg/s for {stable_for_s} s "
-                    f"within {timeout_s} s{self._paused_text(paused0)} (rate={st.rate_dps:.4f} deg/s)"
+                    f"within {timeout_s} s{deadline.paused_note()} (rate={st.rate_dps:.4f} deg/s)"
                 )
-            self.clock.sleep(min(self.poll_s, max(end - now, 0.0)) or self.poll_s)
+            self.clock.sleep(min(self.poll_s, remaining) or self.poll_s)
 
     def wait_in_position(self, tolerance_deg: float, timeout_s: float) -> TableStatus:
         """Wait (bench clock) for the in-position bit and |angle - target| <= tolerance_deg."""
@@ -195,20 +187,19 @@ class RateTable(ABC):
             raise DeviceError("wait_in_position without a move_to")
         if not (tolerance_deg > 0 and timeout_s >= 0):
             raise ValueError(f"wait_in_position({tolerance_deg!r}, {timeout_s!r}): bad arguments")
-        deadline = self.clock.now() + timeout_s
-        paused0 = self._paused_s()
+        deadline = Deadline(self.clock, timeout_s)
         while True:
             st = self._checked_status()
             if st.in_position and abs(angle_error_deg(st.angle_deg, self.commanded_angle_deg)) <= tolerance_deg:
                 return st
             now = self.clock.now()
-            end = deadline + self._paused_s() - paused0
-            if now >= end:
+            remaining = deadline.remaining_s(now)
+            if remaining <= 0:
                 raise TimeoutError(
                     f"table not at {self.commanded_angle_deg} +/- {tolerance_deg} deg within {timeout_s} s"
-                    f"{self._paused_text(paused0)} (angle={st.angle_deg:.4f} deg)"
+                    f"{deadline.paused_note()} (angle={st.angle_deg:.4f} deg)"
                 )
-            self.clock.sleep(min(self.poll_s, max(end - now, 0.0)) or self.poll_s)
+            self.clock.sleep(min(self.poll_s, remaining) or self.poll_s)
 
     def wait_at_rest(self, timeout_s: float, rest_dps: float = REST_RATE_DPS) -> TableStatus | None:
         """Wait (bench clock) until |rate| <= rest_dps, ignoring trip bits; None on timeout."""
